@@ -1,0 +1,489 @@
+"""Declare a mechanism in natural and mixed coordinates; compile it into a `Model`.
+
+Coordinates are the Cartesian components of basic points and unit vectors (natural coordinates) plus
+optional scalar relative angles and distances (mixed coordinates). Rigid bodies are declared by an
+origin point and directions (a difference of two points, or a unit vector); the builder derives their
+constant mass matrix, their gravity force and their rigid-body constraints. Joints are topology: two
+bodies sharing a point form a spherical (3D) or revolute (2D) joint, sharing a point and a unit vector
+forms a 3D revolute joint. Ground points and fixed directions are constants, not coordinates.
+
+    b = MechanismBuilder(dim=2)
+    o = b.fixed_point((0, 0))
+    p = b.point("P1", (1, 0))
+    b.point_mass(p, 1.0)
+    b.distance(o, p)
+    b.gravity((0, -9.81))
+    mech = b.compile()
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rtsim.errors import ModelError
+
+from . import envelope
+from .model import (
+    CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
+    FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
+    FS_TOL_VEL_FAIL, IS_MAX_ITER,
+    IS_MAX_PROJ, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
+)
+
+
+@dataclass(frozen=True)
+class Ref:
+    """A vector reference: component c is q[idx[c]] (if idx[c] >= 0) plus cst[c]."""
+    name: str
+    idx: tuple[int, int, int]
+    cst: tuple[float, float, float]
+
+    @property
+    def is_fixed(self) -> bool:
+        return all(i < 0 for i in self.idx)
+
+
+@dataclass(frozen=True)
+class Scalar:
+    """A scalar coordinate (relative angle in rad or relative distance in m)."""
+    name: str
+    index: int
+
+
+ZERO = Ref("zero", (-1, -1, -1), (0.0, 0.0, 0.0))
+Direction = Ref | tuple[Ref, Ref]  # a unit-vector ref, or (head, tail) points: head - tail
+
+
+@dataclass
+class Settings:
+    """Integrator settings (SI units; tolerances in coordinate units)."""
+    max_iter: int = 30
+    max_proj_iter: int = 100
+    tol_dq: float = 1e-8             # relative to max(1, max|q|)
+    tol_phi: float = 1e-10
+    tol_vel: float = 1e-10
+    tol_acc: float = 1e-8
+    tol_vel_fail: float = 1e-6
+    tol_acc_fail: float = np.inf
+    reuse_rate: float = 0.2
+    penalty_ratio: float = 1e4
+    reuse_across_steps: bool = False
+
+
+@dataclass
+class Mechanism:
+    """A compiled mechanism: the model arrays plus the names and initial guesses that go with them."""
+    name: str
+    model: Model
+    q0: np.ndarray
+    qd0: np.ndarray
+    qd_given: np.ndarray          # bool mask: prescribed initial velocity components
+    coordinate_names: list[str]
+    constraint_names: list[str]
+    force_names: list[str]
+    mass_dense: np.ndarray
+    settings: Settings
+    conservative: bool
+
+    def coordinate(self, name: str) -> int:
+        try:
+            return self.coordinate_names.index(name)
+        except ValueError:
+            raise ModelError(f"{self.name}: no coordinate named {name!r}") from None
+
+
+@dataclass
+class _Body:
+    name: str
+    origin: Ref
+    directions: list[Direction]
+    mass: float
+    cg: np.ndarray
+    inertia: np.ndarray
+
+
+@dataclass
+class MechanismBuilder:
+    dim: int = 3
+    name: str = "mechanism"
+    settings: Settings = field(default_factory=Settings)
+
+    def __post_init__(self):
+        if self.dim not in (2, 3):
+            raise ModelError(f"{self.name}: dim must be 2 or 3, got {self.dim}")
+        self._names: list[str] = []
+        self._q0: list[float] = []
+        self._qd0: list[float] = []
+        self._qd_given: list[bool] = []
+        self._bodies: list[_Body] = []
+        self._point_masses: list[tuple[Ref, float]] = []
+        self._cons: list[dict] = []
+        self._con_keys: set = set()
+        self._drivers: list[tuple[int, tuple[float, ...]]] = []
+        self._forces: list[dict] = []
+        self._gravity = np.zeros(3)
+        self._conservative = True
+
+    # ---- coordinates ---------------------------------------------------------------------------
+    def _coord(self, name: str, value: float, velocity: float | None) -> int:
+        if name in self._names:
+            raise ModelError(f"{self.name}: coordinate {name!r} declared twice")
+        self._names.append(name)
+        self._q0.append(float(value))
+        self._qd0.append(0.0 if velocity is None else float(velocity))
+        self._qd_given.append(velocity is not None)
+        return len(self._names) - 1
+
+    def _vec(self, value) -> np.ndarray:
+        v = np.zeros(3)
+        value = np.asarray(value, dtype=float).ravel()
+        if value.size != self.dim:
+            raise ModelError(f"{self.name}: expected {self.dim} components, got {value.size}")
+        v[: self.dim] = value
+        return v
+
+    def point(self, name: str, position, velocity=None) -> Ref:
+        """A moving basic point (m); `velocity` prescribes initial velocity components (m/s, None = free)."""
+        p = self._vec(position)
+        vel = [None] * self.dim if velocity is None else list(velocity)
+        axes = "xyz"
+        idx = [-1, -1, -1]
+        for c in range(self.dim):
+            idx[c] = self._coord(f"{name}.{axes[c]}", p[c], vel[c])
+        return Ref(name, tuple(idx), (0.0, 0.0, 0.0))
+
+    def unit_vector(self, name: str, direction, velocity=None) -> Ref:
+        """A moving unit vector (normalised here); its |u| = 1 constraint comes with the body using it."""
+        u = self._vec(direction)
+        u = u / np.linalg.norm(u)
+        return self.point(name, u[: self.dim], velocity)
+
+    def fixed_point(self, position, name: str = "ground") -> Ref:
+        return Ref(name, (-1, -1, -1), tuple(self._vec(position)))
+
+    def angle(self, name: str, value: float, velocity: float | None = None) -> Scalar:
+        """A relative angle coordinate (rad); tie it to the points with angle2d/angle3d."""
+        return Scalar(name, self._coord(name, value, velocity))
+
+    def length(self, name: str, value: float, velocity: float | None = None) -> Scalar:
+        """A relative distance coordinate (m)."""
+        return Scalar(name, self._coord(name, value, velocity))
+
+    # ---- inertia ---------------------------------------------------------------------------------
+    def point_mass(self, p: Ref, mass: float) -> None:
+        self._point_masses.append((p, float(mass)))
+
+    def body(self, name: str, origin: Ref, directions: list[Direction], mass: float, cg,
+             inertia, rigid: bool = True) -> None:
+        """A rigid body: origin point plus directions (2D: one; 3D: three independent), all at their
+        initial values; `cg` (m) in global coordinates and `inertia` (kg m^2) about the centre of mass
+        in global axes (3D: 3x3 tensor; 2D: the polar moment I_zz) at that configuration.
+        With rigid=True the constant-dot-product constraints between the directions are added."""
+        need = 1 if self.dim == 2 else 3
+        if len(directions) != need:
+            raise ModelError(f"{self.name}: body {name!r} needs {need} directions in {self.dim}D")
+        cg = self._vec(cg)
+        inertia = np.atleast_2d(np.asarray(inertia, dtype=float))
+        self._bodies.append(_Body(name, origin, list(directions), float(mass), cg, inertia))
+        if rigid:
+            for k in range(need):
+                for l in range(k, need):
+                    self.dot(directions[k], directions[l], name=f"{name}: rigid d{k + 1}.d{l + 1}")
+
+    def rod(self, name: str, a: Ref, b: Ref, mass: float) -> None:
+        """A slender uniform rod between points a and b (2D only: the planar bar)."""
+        if self.dim != 2:
+            raise ModelError(f"{self.name}: rod() is planar; use body() in 3D")
+        pa, pb = self._value(a), self._value(b)
+        length = np.linalg.norm(pb - pa)
+        self.body(name, a, [(b, a)], mass, 0.5 * (pa + pb)[:2], mass * length ** 2 / 12.0)
+
+    # ---- constraints -----------------------------------------------------------------------------
+    def _value(self, r: Ref) -> np.ndarray:
+        v = np.array(r.cst, dtype=float)
+        for c in range(3):
+            if r.idx[c] >= 0:
+                v[c] += self._q0[r.idx[c]]
+        return v
+
+    def _dir_value(self, d: Direction) -> np.ndarray:
+        if isinstance(d, tuple):
+            return self._value(d[0]) - self._value(d[1])
+        return self._value(d)
+
+    @staticmethod
+    def _dir_refs(d: Direction) -> tuple[Ref, Ref]:
+        return d if isinstance(d, tuple) else (d, ZERO)
+
+    def _add_con(self, kind, refs, scalar, par, name, drv=-1, key=None):
+        if key is not None:
+            if key in self._con_keys:
+                return
+            self._con_keys.add(key)
+        self._cons.append(dict(kind=kind, refs=refs, scalar=scalar, par=par, name=name, drv=drv))
+
+    def dot(self, a: Direction, b: Direction, value: float | None = None, name: str | None = None,
+            scalar: Scalar | None = None, linear: float = 0.0, quadratic: float = 0.0) -> None:
+        """(a).(b) = value + linear * s + quadratic * s^2 (value defaults to the initial one).
+        Identical constraints declared twice (shared joints) are kept once."""
+        ra, rb = self._dir_refs(a)
+        rc, rd = self._dir_refs(b)
+        if value is None:
+            value = float(self._dir_value(a) @ self._dir_value(b))
+            if scalar is not None:
+                s = self._q0[scalar.index]
+                value -= linear * s + quadratic * s * s
+        key = (CON_DOT, frozenset([(ra, rb), (rc, rd)]), None if scalar is None else scalar.index,
+               round(value, 12), linear, quadratic)
+        nm = name or f"dot({ra.name}-{rb.name}, {rc.name}-{rd.name})"
+        self._add_con(CON_DOT, (ra, rb, rc, rd), scalar, (value, linear, quadratic, 0.0), nm, key=key)
+
+    def distance(self, a: Ref, b: Ref, length: float | None = None, name: str | None = None) -> None:
+        """|a - b| = length (m; default: the initial distance)."""
+        value = None if length is None else length ** 2
+        self.dot((a, b), (a, b), value, name=name or f"distance({a.name}, {b.name})")
+
+    def distance_coordinate(self, a: Ref, b: Ref, s: Scalar, name: str | None = None) -> None:
+        """|a - b| = s, with s a distance coordinate."""
+        self.dot((a, b), (a, b), 0.0, scalar=s, quadratic=1.0, name=name or f"distance({a.name}, {b.name}) = {s.name}")
+
+    def linear(self, terms: list[tuple[float, Ref | Scalar, int]], const: float = 0.0,
+               name: str = "linear", driver: int = -1) -> None:
+        """sum coeff * component + const = f(t): terms are (coeff, ref, component) or (coeff, scalar, 0)."""
+        self._add_con(CON_LINEAR, terms, None, (const, 0.0, 0.0, 0.0), name, drv=driver)
+
+    def angle2d(self, theta: Scalar, head: Ref, tail: Ref, name: str | None = None) -> None:
+        """theta is the angle of (head - tail) from the x axis (planar, rad)."""
+        if self.dim != 2:
+            raise ModelError(f"{self.name}: angle2d() is planar")
+        self._add_con(CON_ANGLE2D, (head, tail, ZERO, ZERO), theta, (0.0,) * 4,
+                      name or f"angle({theta.name})")
+
+    def angle3d(self, theta: Scalar, u: Ref, v: Ref, axis: Ref, name: str | None = None) -> None:
+        """theta is the angle from u to v about `axis` (all unit vectors, u and v normal to axis)."""
+        self._add_con(CON_ANGLE3D, (u, v, axis, ZERO), theta, (0.0,) * 4, name or f"angle({theta.name})")
+
+    def body_point(self, name: str, origin: Ref, directions: list[Direction], p: Ref) -> None:
+        """Tie point p rigidly to a body given by origin and directions (linear constraints)."""
+        self._body_member(name, origin, directions, p, is_point=True)
+
+    def body_vector(self, name: str, directions: list[Direction], u: Ref) -> None:
+        """Tie unit vector u rigidly to a body given by its directions (linear constraints)."""
+        self._body_member(name, ZERO, directions, u, is_point=False)
+
+    def _body_member(self, name, origin, directions, p, is_point):
+        x = self._basis_values(origin if is_point else ZERO, directions)
+        rel = self._value(p) - (self._value(origin) if is_point else 0.0)
+        coeff = np.linalg.solve(x, rel[: self.dim])
+        for c in range(self.dim):
+            terms = [(1.0, p, c)]
+            if is_point:
+                terms.append((-1.0, origin, c))
+            for k, ck in enumerate(coeff):
+                for sign, r, comp in self._basis_component(directions, k, c):
+                    terms.append((-ck * sign, r, comp))
+            self.linear(terms, 0.0, name=f"{name}: {p.name}.{'xyz'[c]}")
+
+    def _basis_values(self, origin, directions) -> np.ndarray:
+        cols = [self._dir_value(d)[: self.dim] for d in directions]
+        if self.dim == 2:
+            d1 = cols[0]
+            cols.append(np.array([-d1[1], d1[0]]))
+        x = np.column_stack(cols)
+        if abs(np.linalg.det(x)) < 1e-12:
+            raise ModelError(f"{self.name}: body directions are not independent")
+        return x
+
+    def _basis_component(self, directions, k, c):
+        """Terms (sign, ref, comp) of component c of basis direction k (2D: k = 1 is R90 d1)."""
+        if self.dim == 2 and k == 1:
+            head, tail = self._dir_refs(directions[0])
+            comp, sign = (1, -1.0) if c == 0 else (0, 1.0)   # (R d)_x = -d_y, (R d)_y = d_x
+            return [(sign, head, comp), (-sign, tail, comp)]
+        head, tail = self._dir_refs(directions[k])
+        return [(1.0, head, c), (-1.0, tail, c)]
+
+    def drive(self, s: Scalar | tuple[Ref, int], poly=None, sine=None, external: bool = False,
+              name: str | None = None) -> int:
+        """Rheonomic constraint coordinate = f(t): poly=(c0, c1, c2, c3), sine=(offset, amplitude,
+        omega, phase) or external (value, rate, acceleration written into data.drv_ext). Returns the
+        driver index."""
+        if poly is not None:
+            kind, par = DRV_POLY, tuple(poly) + (0.0,) * (4 - len(poly))
+        elif sine is not None:
+            kind, par = DRV_SINE, tuple(sine)
+        elif external:
+            kind, par = DRV_EXTERNAL, (0.0,) * 4
+        else:
+            raise ModelError(f"{self.name}: drive() needs poly, sine or external")
+        self._drivers.append((kind, par))
+        k = len(self._drivers) - 1
+        term = (1.0, s, 0) if isinstance(s, Scalar) else (1.0, s[0], s[1])
+        self.linear([term], 0.0, name=name or f"drive {k}", driver=k)
+        self._conservative = False
+        return k
+
+    # ---- forces ----------------------------------------------------------------------------------
+    def gravity(self, g) -> None:
+        self._gravity = self._vec(g)
+
+    def spring(self, a: Ref, b: Ref, stiffness: float, damping: float = 0.0, rest_length: float | None = None,
+               preload: float = 0.0, name: str | None = None) -> None:
+        """Point-to-point spring-damper: tension = k (L - L0) + c L' + F0 (N)."""
+        if rest_length is None:
+            rest_length = float(np.linalg.norm(self._value(a) - self._value(b)))
+        if damping:
+            self._conservative = False
+        self._forces.append(dict(kind=FRC_SPRING, refs=(a, b), scalar=None, drv=-1,
+                                 par=(stiffness, damping, rest_length, preload, 0.0, 0.0),
+                                 name=name or f"spring({a.name}, {b.name})"))
+
+    def coordinate_force(self, s: Scalar, constant: float = 0.0, stiffness: float = 0.0, rest: float = 0.0,
+                         damping: float = 0.0, name: str | None = None) -> None:
+        """Generalized force on a scalar coordinate: F = constant - k (s - rest) - c s' (N or N m)."""
+        if damping or constant:
+            self._conservative = False
+        self._forces.append(dict(kind=FRC_COORD, refs=(ZERO, ZERO), scalar=s, drv=-1,
+                                 par=(constant, stiffness, rest, damping, 0.0, 0.0),
+                                 name=name or f"force({s.name})"))
+
+    # ---- compilation -----------------------------------------------------------------------------
+    def _affine(self, r: Ref, nq: int) -> tuple[np.ndarray, np.ndarray]:
+        p = np.zeros((self.dim, nq))
+        for c in range(self.dim):
+            if r.idx[c] >= 0:
+                p[c, r.idx[c]] = 1.0
+        return p, np.array(r.cst[: self.dim])
+
+    def _mass_and_gravity(self, nq: int) -> tuple[np.ndarray, np.ndarray]:
+        mass = np.zeros((nq, nq))
+        qg = np.zeros(nq)
+        g = self._gravity[: self.dim]
+        for p, mp in self._point_masses:
+            a, _ = self._affine(p, nq)
+            mass += mp * a.T @ a
+            qg += mp * a.T @ g
+        for b in self._bodies:
+            x = self._basis_values(b.origin, b.directions)
+            r0 = self._value(b.origin)[: self.dim]
+            cbar = np.linalg.solve(x, b.cg[: self.dim] - r0)
+            rel = b.cg[: self.dim] - r0
+            if self.dim == 3:
+                i_g = b.inertia.reshape(3, 3)
+                j_g = 0.5 * np.trace(i_g) * np.eye(3) - i_g
+            else:
+                j_g = 0.5 * float(b.inertia.ravel()[0]) * np.eye(2)
+            j0 = j_g + b.mass * np.outer(rel, rel)
+            xi = np.linalg.inv(x)
+            jc = xi @ j0 @ xi.T
+            mbar = np.zeros((self.dim + 1, self.dim + 1))
+            mbar[0, 0] = b.mass
+            mbar[0, 1:] = mbar[1:, 0] = b.mass * cbar
+            mbar[1:, 1:] = jc
+            maps = [self._affine(b.origin, nq)[0]]
+            for k in range(self.dim):
+                if self.dim == 2 and k == 1:
+                    d1 = maps[1]
+                    maps.append(np.vstack([-d1[1], d1[0]]))
+                else:
+                    h, t = self._dir_refs(b.directions[k])
+                    maps.append(self._affine(h, nq)[0] - self._affine(t, nq)[0])
+            for a in range(self.dim + 1):
+                qg += mbar[0, a] * maps[a].T @ g
+                for c in range(self.dim + 1):
+                    mass += mbar[a, c] * maps[a].T @ maps[c]
+        return 0.5 * (mass + mass.T), qg
+
+    def _row_slots(self, kind, refs, scalar, terms=None):
+        idx = -np.ones(NSLOT, dtype=np.int64)
+        cst = np.zeros(NSLOT - 1)
+        if kind == CON_LINEAR:
+            coeffs: dict[int, float] = {}
+            const = 0.0
+            for coeff, r, comp in terms:
+                if isinstance(r, Scalar):
+                    coeffs[r.index] = coeffs.get(r.index, 0.0) + coeff
+                else:
+                    const += coeff * r.cst[comp]
+                    if r.idx[comp] >= 0:
+                        coeffs[r.idx[comp]] = coeffs.get(r.idx[comp], 0.0) + coeff
+            items = [(k, v) for k, v in coeffs.items() if v != 0.0]
+            if len(items) > NSLOT - 1:
+                raise ModelError(f"{self.name}: a linear constraint has more than {NSLOT - 1} terms")
+            for s, (k, v) in enumerate(items):
+                idx[s] = k
+                cst[s] = v
+            return idx, cst, const
+        for s, r in enumerate(refs):
+            for c in range(3):
+                idx[3 * s + c] = r.idx[c] if c < self.dim else -1
+                cst[3 * s + c] = r.cst[c]
+        if scalar is not None:
+            idx[SCALAR] = scalar.index
+        return idx, cst, 0.0
+
+    def compile(self) -> Mechanism:
+        nq = len(self._names)
+        if nq == 0:
+            raise ModelError(f"{self.name}: no coordinates")
+        nc = len(self._cons)
+        mass, qg = self._mass_and_gravity(nq)
+        con_kind = np.zeros(nc, dtype=np.int64)
+        con_idx = -np.ones((nc, NSLOT), dtype=np.int64)
+        con_cst = np.zeros((nc, NSLOT - 1))
+        con_par = np.zeros((nc, 4))
+        con_drv = -np.ones(nc, dtype=np.int64)
+        pairs = [np.array(np.nonzero(mass)).T]
+        for i, con in enumerate(self._cons):
+            idx, cst, const = self._row_slots(con["kind"], con["refs"], con["scalar"],
+                                              con["refs"] if con["kind"] == CON_LINEAR else None)
+            con_kind[i] = con["kind"]
+            con_idx[i], con_cst[i] = idx, cst
+            con_par[i] = con["par"]
+            if con["kind"] == CON_LINEAR:
+                con_par[i, 0] = const
+            con_drv[i] = con["drv"]
+            used = np.unique(idx[idx >= 0])
+            pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
+        nf = len(self._forces)
+        frc_kind = np.zeros(nf, dtype=np.int64)
+        frc_idx = -np.ones((nf, NSLOT), dtype=np.int64)
+        frc_cst = np.zeros((nf, NSLOT - 1))
+        frc_par = np.zeros((nf, 6))
+        tangent = 0
+        for f, frc in enumerate(self._forces):
+            refs = tuple(frc["refs"]) + (ZERO, ZERO)
+            idx, cst, _ = self._row_slots(frc["kind"], refs, frc["scalar"])
+            frc_kind[f], frc_idx[f], frc_cst[f], frc_par[f] = frc["kind"], idx, cst, frc["par"]
+            used = np.unique(idx[idx >= 0])
+            pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
+            tangent = 1
+        perm, pinv, first, ptr = envelope.symbolic(nq, np.vstack(pairs))
+        nd = len(self._drivers)
+        drv_kind = np.array([k for k, _ in self._drivers], dtype=np.int64)
+        drv_par = np.array([p for _, p in self._drivers], dtype=float).reshape(nd, 4)
+        s = self.settings
+        iset = np.array([s.max_iter, s.max_proj_iter, tangent, int(s.reuse_across_steps)], dtype=np.int64)
+        fset = np.zeros(7)
+        fset[FS_TOL_VEL_FAIL], fset[FS_TOL_ACC_FAIL] = s.tol_vel_fail, s.tol_acc_fail
+        fset[FS_TOL_DQ], fset[FS_TOL_PHI], fset[FS_TOL_VEL], fset[FS_TOL_ACC] = s.tol_dq, s.tol_phi, s.tol_vel, s.tol_acc
+        fset[FS_REUSE_RATE] = s.reuse_rate
+        assert iset[IS_MAX_ITER] == s.max_iter and iset[IS_MAX_PROJ] == s.max_proj_iter
+        assert iset[IS_TANGENT_FORCES] == tangent
+        model = Model(
+            nq=nq, nc=nc, dim=self.dim,
+            con_kind=con_kind, con_idx=con_idx, con_cst=con_cst, con_par=con_par, con_drv=con_drv,
+            drv_kind=drv_kind, drv_par=drv_par,
+            frc_kind=frc_kind, frc_idx=frc_idx, frc_cst=frc_cst, frc_par=frc_par,
+            frc_drv=-np.ones(nf, dtype=np.int64),
+            q_grav=qg, perm=perm, pinv=pinv, first=first, ptr=ptr,
+            m_env=envelope.to_envelope(mass, first, ptr, perm),
+            iset=iset, fset=fset,
+        )
+        return Mechanism(
+            name=self.name, model=model, q0=np.array(self._q0), qd0=np.array(self._qd0),
+            qd_given=np.array(self._qd_given), coordinate_names=list(self._names),
+            constraint_names=[c["name"] for c in self._cons], force_names=[f["name"] for f in self._forces],
+            mass_dense=mass, settings=s, conservative=self._conservative,
+        )

@@ -1,0 +1,238 @@
+"""Constraint kernels: Phi(q, t), its Jacobian Phi_q (row-sparse, NSLOT entries per row), Phi_t,
+and the velocity-quadratic term (Phi_q)' qd needed by the acceleration projection.
+
+Natural-coordinate constraints are at most quadratic in q (constant distances, unit vectors, constant
+dot products, linear combinations), so their second derivatives are exact and cheap. Relative angle
+coordinates add one smooth trigonometric equation each, written so that it never needs switching.
+"""
+from __future__ import annotations
+
+import numpy as np
+import numba as nb
+
+from .model import CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, DRV_EXTERNAL, DRV_POLY, DRV_SINE, SCALAR
+
+
+@nb.njit(cache=True, inline="always")
+def ref(idx, cst, v, row, slot, comp):
+    """Component `comp` of vector reference `slot` of row `row`: coordinate value plus constant."""
+    k = idx[row, 3 * slot + comp]
+    x = cst[row, 3 * slot + comp]
+    if k >= 0:
+        x += v[k]
+    return x
+
+
+@nb.njit(cache=True, inline="always")
+def refd(idx, v, row, slot, comp):
+    """Rate of a vector reference (constants have zero rate)."""
+    k = idx[row, 3 * slot + comp]
+    if k >= 0:
+        return v[k]
+    return 0.0
+
+
+@nb.njit(cache=True)
+def eval_drivers(m, d, t):
+    """Fill d.drv[k] = (f, f', f'') of every driver at time t."""
+    for k in range(m.drv_kind.shape[0]):
+        kind = m.drv_kind[k]
+        p = m.drv_par[k]
+        if kind == DRV_POLY:
+            d.drv[k, 0] = p[0] + t * (p[1] + t * (p[2] + t * p[3]))
+            d.drv[k, 1] = p[1] + t * (2.0 * p[2] + 3.0 * t * p[3])
+            d.drv[k, 2] = 2.0 * p[2] + 6.0 * t * p[3]
+        elif kind == DRV_SINE:
+            s = np.sin(p[2] * t + p[3])
+            c = np.cos(p[2] * t + p[3])
+            d.drv[k, 0] = p[0] + p[1] * s
+            d.drv[k, 1] = p[1] * p[2] * c
+            d.drv[k, 2] = -p[1] * p[2] * p[2] * s
+        else:  # DRV_EXTERNAL
+            d.drv[k, 0] = d.drv_ext[k, 0]
+            d.drv[k, 1] = d.drv_ext[k, 1]
+            d.drv[k, 2] = d.drv_ext[k, 2]
+
+
+@nb.njit(cache=True)
+def eval_constraints(m, d, q):
+    """Phi, Jacobian values (d.jac, positions m.con_idx), Phi_t and Phi_tt at q and the drivers
+    already evaluated in d.drv."""
+    idx = m.con_idx
+    cst = m.con_cst
+    for i in range(m.nc):
+        kind = m.con_kind[i]
+        par = m.con_par[i]
+        jac = d.jac[i]
+        drv = m.con_drv[i]
+        f = 0.0
+        if drv >= 0:
+            f = d.drv[drv, 0]
+            d.phit[i] = -d.drv[drv, 1]
+            d.phitt[i] = -d.drv[drv, 2]
+        else:
+            d.phit[i] = 0.0
+            d.phitt[i] = 0.0
+        if kind == CON_LINEAR:
+            val = par[0]
+            for s in range(SCALAR):
+                k = idx[i, s]
+                if k >= 0:
+                    val += cst[i, s] * q[k]
+                    jac[s] = cst[i, s]
+                else:
+                    jac[s] = 0.0
+            jac[SCALAR] = 0.0
+            d.phi[i] = val - f
+        elif kind == CON_DOT:
+            val = -par[0]
+            for c in range(3):
+                a = ref(idx, cst, q, i, 0, c) - ref(idx, cst, q, i, 1, c)
+                b = ref(idx, cst, q, i, 2, c) - ref(idx, cst, q, i, 3, c)
+                val += a * b
+                jac[c] = b
+                jac[3 + c] = -b
+                jac[6 + c] = a
+                jac[9 + c] = -a
+            k = idx[i, SCALAR]
+            if k >= 0:
+                s = q[k]
+                val -= par[1] * s + par[2] * s * s
+                jac[SCALAR] = -par[1] - 2.0 * par[2] * s
+            else:
+                jac[SCALAR] = 0.0
+            d.phi[i] = val - f
+        elif kind == CON_ANGLE2D:
+            th = q[idx[i, SCALAR]]
+            sn = np.sin(th)
+            cs = np.cos(th)
+            dx = ref(idx, cst, q, i, 0, 0) - ref(idx, cst, q, i, 1, 0)
+            dy = ref(idx, cst, q, i, 0, 1) - ref(idx, cst, q, i, 1, 1)
+            d.phi[i] = dx * sn - dy * cs - f
+            for s in range(SCALAR):
+                jac[s] = 0.0
+            jac[0] = sn
+            jac[1] = -cs
+            jac[3] = -sn
+            jac[4] = cs
+            jac[SCALAR] = dx * cs + dy * sn
+        else:  # CON_ANGLE3D: u = A, v = B, w = C
+            th = q[idx[i, SCALAR]]
+            sn = np.sin(th)
+            cs = np.cos(th)
+            u0 = ref(idx, cst, q, i, 0, 0)
+            u1 = ref(idx, cst, q, i, 0, 1)
+            u2 = ref(idx, cst, q, i, 0, 2)
+            v0 = ref(idx, cst, q, i, 1, 0)
+            v1 = ref(idx, cst, q, i, 1, 1)
+            v2 = ref(idx, cst, q, i, 1, 2)
+            w0 = ref(idx, cst, q, i, 2, 0)
+            w1 = ref(idx, cst, q, i, 2, 1)
+            w2 = ref(idx, cst, q, i, 2, 2)
+            # g1 = (u x v).w, g2 = u.v
+            g1 = (u1 * v2 - u2 * v1) * w0 + (u2 * v0 - u0 * v2) * w1 + (u0 * v1 - u1 * v0) * w2
+            g2 = u0 * v0 + u1 * v1 + u2 * v2
+            d.phi[i] = g1 * cs - g2 * sn - f
+            # d g1/du = v x w, d g1/dv = w x u, d g1/dw = u x v
+            jac[0] = (v1 * w2 - v2 * w1) * cs - v0 * sn
+            jac[1] = (v2 * w0 - v0 * w2) * cs - v1 * sn
+            jac[2] = (v0 * w1 - v1 * w0) * cs - v2 * sn
+            jac[3] = (w1 * u2 - w2 * u1) * cs - u0 * sn
+            jac[4] = (w2 * u0 - w0 * u2) * cs - u1 * sn
+            jac[5] = (w0 * u1 - w1 * u0) * cs - u2 * sn
+            jac[6] = (u1 * v2 - u2 * v1) * cs
+            jac[7] = (u2 * v0 - u0 * v2) * cs
+            jac[8] = (u0 * v1 - u1 * v0) * cs
+            for s in range(9, SCALAR):
+                jac[s] = 0.0
+            jac[SCALAR] = -g1 * sn - g2 * cs
+
+
+@nb.njit(cache=True, inline="always")
+def _triple(a0, a1, a2, b0, b1, b2, c0, c1, c2):
+    return (a1 * b2 - a2 * b1) * c0 + (a2 * b0 - a0 * b2) * c1 + (a0 * b1 - a1 * b0) * c2
+
+
+@nb.njit(cache=True)
+def eval_hqd(m, d, q, qd):
+    """d.hqd = (d/dt Phi_q) qd, the velocity-quadratic part of Phi'' = Phi_q qdd + hqd + Phi_tt."""
+    idx = m.con_idx
+    cst = m.con_cst
+    for i in range(m.nc):
+        kind = m.con_kind[i]
+        if kind == CON_LINEAR:
+            d.hqd[i] = 0.0
+        elif kind == CON_DOT:
+            h = 0.0
+            for c in range(3):
+                ad = refd(idx, qd, i, 0, c) - refd(idx, qd, i, 1, c)
+                bd = refd(idx, qd, i, 2, c) - refd(idx, qd, i, 3, c)
+                h += ad * bd
+            h *= 2.0
+            k = idx[i, SCALAR]
+            if k >= 0:
+                h -= 2.0 * m.con_par[i, 2] * qd[k] * qd[k]
+            d.hqd[i] = h
+        elif kind == CON_ANGLE2D:
+            k = idx[i, SCALAR]
+            th = q[k]
+            thd = qd[k]
+            sn = np.sin(th)
+            cs = np.cos(th)
+            dx = ref(idx, cst, q, i, 0, 0) - ref(idx, cst, q, i, 1, 0)
+            dy = ref(idx, cst, q, i, 0, 1) - ref(idx, cst, q, i, 1, 1)
+            dxd = refd(idx, qd, i, 0, 0) - refd(idx, qd, i, 1, 0)
+            dyd = refd(idx, qd, i, 0, 1) - refd(idx, qd, i, 1, 1)
+            d.hqd[i] = 2.0 * (dxd * cs + dyd * sn) * thd + (-dx * sn + dy * cs) * thd * thd
+        else:  # CON_ANGLE3D
+            k = idx[i, SCALAR]
+            th = q[k]
+            thd = qd[k]
+            sn = np.sin(th)
+            cs = np.cos(th)
+            u = (ref(idx, cst, q, i, 0, 0), ref(idx, cst, q, i, 0, 1), ref(idx, cst, q, i, 0, 2))
+            v = (ref(idx, cst, q, i, 1, 0), ref(idx, cst, q, i, 1, 1), ref(idx, cst, q, i, 1, 2))
+            w = (ref(idx, cst, q, i, 2, 0), ref(idx, cst, q, i, 2, 1), ref(idx, cst, q, i, 2, 2))
+            ud = (refd(idx, qd, i, 0, 0), refd(idx, qd, i, 0, 1), refd(idx, qd, i, 0, 2))
+            vd = (refd(idx, qd, i, 1, 0), refd(idx, qd, i, 1, 1), refd(idx, qd, i, 1, 2))
+            wd = (refd(idx, qd, i, 2, 0), refd(idx, qd, i, 2, 1), refd(idx, qd, i, 2, 2))
+            g1 = _triple(u[0], u[1], u[2], v[0], v[1], v[2], w[0], w[1], w[2])
+            g2 = u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+            # first and second time derivatives of g1 = (u x v).w and g2 = u.v, with qdd = 0
+            g1d = (_triple(ud[0], ud[1], ud[2], v[0], v[1], v[2], w[0], w[1], w[2])
+                   + _triple(u[0], u[1], u[2], vd[0], vd[1], vd[2], w[0], w[1], w[2])
+                   + _triple(u[0], u[1], u[2], v[0], v[1], v[2], wd[0], wd[1], wd[2]))
+            g1dd = 2.0 * (_triple(ud[0], ud[1], ud[2], vd[0], vd[1], vd[2], w[0], w[1], w[2])
+                          + _triple(ud[0], ud[1], ud[2], v[0], v[1], v[2], wd[0], wd[1], wd[2])
+                          + _triple(u[0], u[1], u[2], vd[0], vd[1], vd[2], wd[0], wd[1], wd[2]))
+            g2d = ud[0] * v[0] + ud[1] * v[1] + ud[2] * v[2] + u[0] * vd[0] + u[1] * vd[1] + u[2] * vd[2]
+            g2dd = 2.0 * (ud[0] * vd[0] + ud[1] * vd[1] + ud[2] * vd[2])
+            # Phi = g1 cos - g2 sin; Phi'' (qdd = 0, theta'' = 0)
+            d.hqd[i] = (g1dd * cs - 2.0 * g1d * sn * thd - g1 * cs * thd * thd
+                        - g2dd * sn - 2.0 * g2d * cs * thd + g2 * sn * thd * thd)
+
+
+@nb.njit(cache=True)
+def jac_matvec(m, d, x, out):
+    """out[i] = (Phi_q x)_i."""
+    idx = m.con_idx
+    for i in range(m.nc):
+        s = 0.0
+        for k in range(13):
+            j = idx[i, k]
+            if j >= 0:
+                s += d.jac[i, k] * x[j]
+        out[i] = s
+
+
+@nb.njit(cache=True)
+def jac_t_matvec_add(m, d, v, out, scale):
+    """out += scale * Phi_q^T v."""
+    idx = m.con_idx
+    for i in range(m.nc):
+        vi = scale * v[i]
+        if vi != 0.0:
+            for k in range(13):
+                j = idx[i, k]
+                if j >= 0:
+                    out[j] += d.jac[i, k] * vi

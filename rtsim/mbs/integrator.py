@@ -1,0 +1,331 @@
+"""The ALI3-P integrator: index-3 augmented Lagrangian with mass-damping-stiffness-orthogonal
+projections, trapezoidal rule (seed paper, section 3.1, eqs. 1-4).
+
+One step from t_n to t_{n+1} = t_n + h:
+1. Predict q from (q_n, qd_n, qdd_n); the trapezoidal rule ties velocities and accelerations to q:
+   qd = (2/h) q + qhd,  qdd = (4/h^2) q + qhdd  (eqs. 3, 4).
+2. Newton-Raphson on the discretized equations of motion, scaled by h^2/4:
+   f(q) = (h^2/4) [M qdd + Phi_q^T (alpha Phi + lambda*) - Q] = 0  (eq. 1),
+   tangent  A = M + (h/2) C + (h^2/4) (Phi_q^T alpha Phi_q + K),
+   with the multiplier iteration lambda* <- lambda* + alpha Phi after every update (eq. 2).
+   The envelope Cholesky factor of A is reused across iterations and steps while Newton contracts
+   fast enough; it is refreshed when it does not (a modified Newton method with a fallback).
+3. Projections of velocities and accelerations onto Phi' = 0 and Phi'' = 0 in the metric
+   W = M + (h/2) C + (h^2/4) K:  A qd = W qd* - (h^2/4) Phi_q^T alpha Phi_t, and the same for qdd with
+   (Phi_q)' qd + Phi_tt. Both are iterated augmented-Lagrangian projections that reuse the factor of
+   A (and correct for it being stale), so the constraint rates are met to tolerance.
+
+alpha is diagonal: one penalty factor per constraint, scaled to the mass matrix and the step (see
+rtsim.mbs.simulation.penalty_factors). Kernels return a status code; they never raise.
+"""
+from __future__ import annotations
+
+import numpy as np
+import numba as nb
+
+from .constraints import eval_constraints, eval_drivers, eval_hqd, jac_matvec, jac_t_matvec_add
+from .envelope import add_entry, cholesky, matvec_add, solve
+from .forces import eval_forces
+from .model import (
+    ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION,
+    FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
+    IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
+    ST_LAST_RESIDUAL, ST_MAX_PHI, ST_MAX_PHID, ST_MAX_PHIDD, ST_PROJ_ITER, ST_STEPS,
+)
+
+HAVE_FACTOR = 0
+NEED_FACTOR = 1
+
+
+@nb.njit(cache=True)
+def factorize(m, d, bq):
+    """a_env = w_env + bq Phi_q^T alpha Phi_q, then l_env = chol(a_env). Returns the failing row or -1."""
+    for k in range(d.w_env.shape[0]):
+        d.a_env[k] = d.w_env[k]
+    idx = m.con_idx
+    for i in range(m.nc):
+        ai = bq * d.alpha[i]
+        for s in range(NSLOT):
+            js = idx[i, s]
+            vs = d.jac[i, s]
+            if js < 0 or vs == 0.0:
+                continue
+            for u in range(s, NSLOT):
+                ju = idx[i, u]
+                if ju < 0:
+                    continue
+                val = ai * vs * d.jac[i, u]
+                if u != s and ju == js:
+                    val *= 2.0
+                add_entry(d.a_env, m.first, m.ptr, m.pinv, js, ju, val)
+    return cholesky(d.a_env, m.first, m.ptr, d.l_env)
+
+
+@nb.njit(cache=True)
+def _dot_alpha(d, a, b, nc):
+    s = 0.0
+    for i in range(nc):
+        s += a[i] * d.alpha[i] * b[i]
+    return s
+
+
+@nb.njit(cache=True)
+def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
+    """x = A^-1 (b - bq Phi_q^T (alpha c + mu)) with the multipliers mu chosen so that
+    g = Phi_q x + c = 0 (mu is left in d.mu).
+
+    mu solves S mu = g(0), S = bq Phi_q A^-1 Phi_q^T, by conjugate gradients preconditioned with
+    alpha (S ~ alpha^-1 where the penalty dominates), one back-substitution per iteration. With
+    mu = 0 this is the classical one-solve penalty step of ALI3-P; CG then removes what is left, also
+    along nearly singular directions of Phi_q at bifurcations, where the plain multiplier update
+    (mu += alpha g) contracts only at the rate 1 / (1 + p s^2). Returns (iterations, max|g|),
+    iterations < 0 if max|g| is still above tol_fail."""
+    nq = m.nq
+    nc = m.nc
+    for i in range(nc):
+        d.z[i] = d.alpha[i] * c[i]
+        d.mu[i] = 0.0
+    jac_t_matvec_add(m, d, d.z, b, -bq)
+    solve(d.l_env, m.first, m.ptr, m.perm, m.pinv, b, x, d.work)
+    r = d.g           # CG residual = g(mu)
+    p = d.sig         # search direction
+    sp = d.sp         # S p
+    jac_matvec(m, d, x, r)
+    gmax = 0.0
+    for i in range(nc):
+        r[i] += c[i]
+        if abs(r[i]) > gmax:
+            gmax = abs(r[i])
+    for i in range(nc):
+        p[i] = d.alpha[i] * r[i]
+    rz = _dot_alpha(d, r, r, nc)
+    k = 0
+    while gmax > tol and k < m.iset[IS_MAX_PROJ]:
+        k += 1
+        for i in range(nq):
+            d.r[i] = 0.0
+        jac_t_matvec_add(m, d, p, d.r, bq)
+        solve(d.l_env, m.first, m.ptr, m.perm, m.pinv, d.r, d.x, d.work)
+        jac_matvec(m, d, d.x, sp)
+        psp = 0.0
+        for i in range(nc):
+            psp += p[i] * sp[i]
+        if not (psp > 0.0):
+            break
+        a = rz / psp
+        for i in range(nq):
+            x[i] -= a * d.x[i]
+        gmax = 0.0
+        for i in range(nc):
+            d.mu[i] += a * p[i]
+            r[i] -= a * sp[i]
+            if abs(r[i]) > gmax:
+                gmax = abs(r[i])
+        rz_new = _dot_alpha(d, r, r, nc)
+        beta = rz_new / rz
+        rz = rz_new
+        for i in range(nc):
+            p[i] = d.alpha[i] * r[i] + beta * p[i]
+    # the true residual, not the recursively updated one
+    jac_matvec(m, d, x, r)
+    gmax = 0.0
+    for i in range(nc):
+        a = abs(r[i] + c[i])
+        if a > gmax:
+            gmax = a
+    if gmax <= tol_fail:
+        return k, gmax
+    return -1, gmax
+
+
+@nb.njit(cache=True)
+def project(m, d, x, c, bq, tol, tol_fail):
+    """Projection of x (in place) onto Phi_q x + c = 0 in the metric W, minimising
+    (x - x*)^T W (x - x*) / 2: x = A^-1 (W x* - bq Phi_q^T (alpha c + mu)) (see solve_constrained)."""
+    y = d.y
+    for i in range(m.nq):
+        y[i] = 0.0
+    matvec_add(d.w_env, m.first, m.ptr, m.perm, m.pinv, x, y, 1.0)
+    return solve_constrained(m, d, y, c, bq, x, tol, tol_fail)
+
+
+@nb.njit(cache=True)
+def step(m, d, h):
+    """Advance d by one ALI3-P step of h seconds. Returns a status code (model.OK on success)."""
+    nq = m.nq
+    nc = m.nc
+    st = d.stats
+    if d.dt[0] != h or m.iset[IS_REUSE_STEPS] == 0:
+        d.dt[0] = h
+        d.flags[NEED_FACTOR] = 1
+    t1 = d.t[0] + h
+    eval_drivers(m, d, t1)
+    bq = 0.25 * h * h
+    c1 = 2.0 / h
+    c2 = 4.0 / (h * h)
+    tangent = m.iset[IS_TANGENT_FORCES] == 1
+    q = d.q
+    qd = d.qd
+    qdd = d.qdd
+    for i in range(nq):
+        qn = q[i]
+        d.qhd[i] = -(c1 * qn + qd[i])
+        d.qhdd[i] = -(c2 * qn + 4.0 / h * qd[i] + qdd[i])
+        q[i] = qn + h * qd[i] + 0.5 * h * h * qdd[i]
+    tol_dq = m.fset[FS_TOL_DQ]
+    tol_phi = m.fset[FS_TOL_PHI]
+    rate_max = m.fset[FS_REUSE_RATE]
+    prev = np.inf
+    fresh = False
+    converged = False
+    nrm = np.inf
+    it = 0
+    for it in range(m.iset[IS_MAX_ITER]):
+        for i in range(nq):
+            qd[i] = c1 * q[i] + d.qhd[i]
+            qdd[i] = c2 * q[i] + d.qhdd[i]
+        eval_constraints(m, d, q)
+        if it > 0:
+            for i in range(nc):
+                d.lam[i] += d.alpha[i] * d.phi[i]
+        need = d.flags[HAVE_FACTOR] == 0 or d.flags[NEED_FACTOR] == 1
+        bad = eval_forces(m, d, q, qd, need and tangent, bq, 0.5 * h)
+        if bad >= 0:
+            st[ST_FAIL_INDEX] = bad
+            return ERR_NONFINITE_FORCE
+        r = d.r
+        for i in range(nq):
+            r[i] = 0.0
+        matvec_add(m.m_env, m.first, m.ptr, m.perm, m.pinv, qdd, r, 1.0)
+        for i in range(nc):
+            d.z[i] = d.alpha[i] * d.phi[i] + d.lam[i]
+        jac_t_matvec_add(m, d, d.z, r, 1.0)
+        for i in range(nq):
+            r[i] = bq * (r[i] - d.force[i])
+        if need:
+            row = factorize(m, d, bq)
+            st[ST_FACTORIZATIONS] += 1
+            if row >= 0:
+                d.flags[HAVE_FACTOR] = 0
+                st[ST_FAIL_INDEX] = m.perm[row]
+                return ERR_FACTOR
+            d.flags[HAVE_FACTOR] = 1
+            d.flags[NEED_FACTOR] = 0
+            fresh = True
+        # Newton increment dq = -A^-1 f, corrected by multipliers mu so that the linearised
+        # constraints Phi + Phi_q dq = 0 hold (no correction needed away from singular positions)
+        for i in range(nq):
+            r[i] = -r[i]
+        for i in range(nc):
+            d.z[i] = d.alpha[i] * d.phi[i]
+        jac_t_matvec_add(m, d, d.z, r, bq)
+        solve_constrained(m, d, r, d.phi, bq, d.y, 0.1 * tol_phi, np.inf)
+        for i in range(nc):
+            d.lam[i] += d.mu[i]
+        nrm = 0.0
+        for i in range(nq):
+            q[i] += d.y[i]
+            a = abs(d.y[i])
+            if a > nrm:
+                nrm = a
+        if not np.isfinite(nrm):
+            st[ST_LAST_RESIDUAL] = nrm
+            return ERR_NONFINITE_STATE
+        phimax = 0.0
+        for i in range(nc):
+            a = abs(d.phi[i])
+            if a > phimax:
+                phimax = a
+        qmax = 1.0
+        for i in range(nq):
+            a = abs(q[i])
+            if a > qmax:
+                qmax = a
+        if phimax <= tol_phi and nrm <= tol_dq * qmax:
+            converged = True
+            break
+        # A slowly contracting modified Newton means the reused factor is too stale: refresh it.
+        if not fresh and it >= 1 and nrm > rate_max * prev:
+            d.flags[NEED_FACTOR] = 1
+        prev = nrm
+    st[ST_LAST_ITER] = it + 1
+    st[ST_ITER_TOTAL] += it + 1
+    if not converged:
+        st[ST_LAST_RESIDUAL] = nrm
+        d.flags[NEED_FACTOR] = 1
+        return ERR_NEWTON
+    # Final state of the step: trapezoidal velocities and accelerations, constraints, metric W.
+    for i in range(nq):
+        qd[i] = c1 * q[i] + d.qhd[i]
+        qdd[i] = c2 * q[i] + d.qhdd[i]
+    eval_constraints(m, d, q)
+    phimax = 0.0
+    for i in range(nc):
+        d.lam[i] += d.alpha[i] * d.phi[i]
+        a = abs(d.phi[i])
+        if a > phimax:
+            phimax = a
+    if tangent:
+        bad = eval_forces(m, d, q, qd, True, bq, 0.5 * h)
+        if bad >= 0:
+            st[ST_FAIL_INDEX] = bad
+            return ERR_NONFINITE_FORCE
+    # The projections need the tangent at the converged q: the Newton factor was made at an earlier
+    # iterate, and near singular positions the projection is sensitive to that difference.
+    row = factorize(m, d, bq)
+    st[ST_FACTORIZATIONS] += 1
+    if row >= 0:
+        d.flags[HAVE_FACTOR] = 0
+        st[ST_FAIL_INDEX] = m.perm[row]
+        return ERR_FACTOR
+    k1, gv = project(m, d, qd, d.phit, bq, m.fset[FS_TOL_VEL], m.fset[FS_TOL_VEL_FAIL])
+    if k1 < 0:
+        st[ST_LAST_RESIDUAL] = gv
+        d.flags[NEED_FACTOR] = 1
+        return ERR_PROJECTION
+    eval_hqd(m, d, q, qd)
+    for i in range(nc):
+        d.phit[i] = d.hqd[i] + d.phitt[i]  # phit now holds the acceleration right-hand side c
+    k2, ga = project(m, d, qdd, d.phit, bq, m.fset[FS_TOL_ACC], m.fset[FS_TOL_ACC_FAIL])
+    if k2 < 0:
+        st[ST_LAST_RESIDUAL] = ga
+        d.flags[NEED_FACTOR] = 1
+        return ERR_PROJECTION
+    for i in range(nq):
+        if not (np.isfinite(qd[i]) and np.isfinite(qdd[i])):
+            st[ST_FAIL_INDEX] = i
+            return ERR_NONFINITE_STATE
+    d.t[0] = t1
+    st[ST_STEPS] += 1
+    st[ST_PROJ_ITER] += k1 + k2
+    if phimax > st[ST_MAX_PHI]:
+        st[ST_MAX_PHI] = phimax
+    if gv > st[ST_MAX_PHID]:
+        st[ST_MAX_PHID] = gv
+    if ga > st[ST_MAX_PHIDD]:
+        st[ST_MAX_PHIDD] = ga
+    return OK
+
+
+@nb.njit(cache=True)
+def advance(m, d, h, nsteps, stride, out_t, out_q, out_qd):
+    """Run nsteps steps, storing t, q, qd every `stride` steps (row 0 = the initial state) into the
+    preallocated outputs. Returns (status, steps done)."""
+    nrec = out_t.shape[0]
+    if nrec > 0:
+        out_t[0] = d.t[0]
+        for i in range(m.nq):
+            out_q[0, i] = d.q[i]
+            out_qd[0, i] = d.qd[i]
+    rec = 1
+    for n in range(nsteps):
+        status = step(m, d, h)
+        if status != OK:
+            return status, n
+        if (n + 1) % stride == 0 and rec < nrec:
+            out_t[rec] = d.t[0]
+            for i in range(m.nq):
+                out_q[rec, i] = d.q[i]
+                out_qd[rec, i] = d.qd[i]
+            rec += 1
+    return OK, nsteps

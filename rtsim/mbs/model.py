@@ -1,0 +1,124 @@
+"""The compiled multibody model and its state, as plain arrays (MuJoCo-style model/data separation).
+
+`Model` is immutable after compilation: geometry, masses, constraint and force tables, the sparsity
+layout of the tangent matrix. `Data` holds everything that changes: coordinates q, velocities qd,
+accelerations qdd, multipliers, and the preallocated workspaces of the integrator. Several `Data`
+may share one `Model`. Kernels are pure functions of (Model, Data) and never allocate per step.
+
+Every constraint and force row refers to its coordinates through four *vector references* (slots
+A, B, C, D), each three coordinate indices (or -1) plus three constants, so that a fixed ground point
+is a reference with indices -1 and constant components, and a moving point is a reference to its
+coordinates. Slot 12 is an optional scalar coordinate (a relative angle or distance).
+"""
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+
+# Slots of a constraint/force row: 4 vector refs x 3 components + 1 scalar coordinate.
+NSLOT = 13
+SCALAR = 12
+
+# Constraint kinds.
+CON_LINEAR = 0   # sum_s cst[s] * q[idx[s]] + par[0] - f(t) = 0
+CON_DOT = 1      # (A - B).(C - D) - par[0] - par[1] s - par[2] s^2 - f(t) = 0
+CON_ANGLE2D = 2  # (A - B) x e(theta) = dx sin(theta) - dy cos(theta) = 0, theta = q[idx[12]]
+CON_ANGLE3D = 3  # ((A x B).C) cos(theta) - (A.B) sin(theta) = 0: angle from A to B about axis C
+CON_KIND_NAMES = ("linear", "dot", "angle2d", "angle3d")
+
+# Force kinds.
+FRC_SPRING = 0      # point-to-point spring-damper-actuator between A and B: par = k, c, L0, F0
+FRC_COORD = 1       # on scalar coordinate s: par = F0, k, s0, c, driver gain (F = F0 + g f(t) - k(s - s0) - c sdot)
+FRC_KIND_NAMES = ("spring", "coordinate")
+
+# Driver (rheonomic function of time) kinds: f(t), f'(t), f''(t).
+DRV_POLY = 0       # par[0..3]: c0 + c1 t + c2 t^2 + c3 t^3
+DRV_SINE = 1       # par[0..3]: offset + amplitude sin(omega t + phase)
+DRV_EXTERNAL = 2   # value, rate, acceleration set by the caller in data.drv_ext before each step
+
+# Integer settings (Model.iset) and float settings (Model.fset).
+IS_MAX_ITER = 0        # Newton iterations per step before giving up
+IS_MAX_PROJ = 1        # augmented-Lagrangian projection iterations
+IS_TANGENT_FORCES = 2  # 1 if any force contributes stiffness/damping to the tangent
+IS_REUSE_STEPS = 3     # 1: keep the factorization across steps while Newton contracts; 0: refactor each step
+FS_TOL_DQ = 0          # Newton increment tolerance (coordinate units)
+FS_TOL_PHI = 1         # position constraint tolerance
+FS_TOL_VEL = 2         # velocity constraint tolerance
+FS_TOL_ACC = 3         # acceleration constraint tolerance
+FS_REUSE_RATE = 4      # Newton contraction rate above which the factorization is refreshed
+FS_TOL_VEL_FAIL = 5    # velocity constraint residual above which a projection fails
+FS_TOL_ACC_FAIL = 6    # acceleration constraint residual above which a projection fails
+
+# Status codes returned by kernels (mapped to typed exceptions by rtsim.mbs.simulation).
+OK = 0
+ERR_NEWTON = 1
+ERR_NONFINITE_FORCE = 2
+ERR_NONFINITE_STATE = 3
+ERR_FACTOR = 4
+ERR_PROJECTION = 5
+
+# Statistics slots (Data.stats).
+ST_STEPS = 0
+ST_ITER_TOTAL = 1
+ST_FACTORIZATIONS = 2
+ST_LAST_ITER = 3
+ST_LAST_RESIDUAL = 4
+ST_MAX_PHI = 5
+ST_MAX_PHID = 6
+ST_MAX_PHIDD = 7
+ST_PROJ_ITER = 8
+ST_FAIL_INDEX = 9
+NSTATS = 10
+
+Model = namedtuple("Model", [
+    "nq", "nc", "dim",
+    # constraints
+    "con_kind", "con_idx", "con_cst", "con_par", "con_drv",
+    # drivers
+    "drv_kind", "drv_par",
+    # forces
+    "frc_kind", "frc_idx", "frc_cst", "frc_par", "frc_drv",
+    # constant generalized gravity force
+    "q_grav",
+    # tangent-matrix envelope layout and the constant mass matrix in it
+    "perm", "pinv", "first", "ptr", "m_env",
+    # settings
+    "iset", "fset",
+])
+
+Data = namedtuple("Data", [
+    "t",              # (1,) time, s
+    "dt",             # (1,) step the factorization and alpha were made for, s
+    "q", "qd", "qdd",
+    "lam",            # (nc,) augmented-Lagrangian multipliers lambda*
+    "alpha",          # (nc,) penalty factors (diagonal of alpha)
+    "q_ext",          # (nq,) external generalized forces set by the caller (held over a step)
+    "drv_ext",        # (nd, 3) external driver value, rate, acceleration
+    "drv",            # (nd, 3) evaluated drivers at the current time
+    "phi", "jac", "phit", "phitt", "hqd",   # constraint values, Jacobian values, time derivatives, (Phi_q)' qd
+    "force", "w_env", "a_env", "l_env",     # forces, W = M + dt/2 C + dt^2/4 K (= M without K, C), tangent, factor
+    "qn", "qhd", "qhdd", "r", "x", "y", "z", "work", "sig", "g", "sp", "mu",
+    "flags",          # int64 [have_factor, need_factor]
+    "stats",          # float64 (NSTATS,)
+])
+
+
+def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: float = 0.0) -> Data:
+    """Allocate a fresh state for `model` with coordinates q0 (not assembled here)."""
+    nq, nc = model.nq, model.nc
+    nd = model.drv_kind.shape[0]
+    nenv = model.m_env.shape[0]
+    z = lambda n: np.zeros(n)  # noqa: E731
+    return Data(
+        t=np.array([t0]), dt=np.zeros(1),
+        q=np.array(q0, dtype=np.float64).copy(),
+        qd=z(nq) if qd0 is None else np.array(qd0, dtype=np.float64).copy(),
+        qdd=z(nq), lam=z(nc), alpha=z(nc), q_ext=z(nq),
+        drv_ext=np.zeros((nd, 3)), drv=np.zeros((nd, 3)),
+        phi=z(nc), jac=np.zeros((nc, NSLOT)), phit=z(nc), phitt=z(nc), hqd=z(nc),
+        force=z(nq), w_env=model.m_env.copy(), a_env=z(nenv), l_env=z(nenv),
+        qn=z(nq), qhd=z(nq), qhdd=z(nq), r=z(nq), x=z(nq), y=z(nq), z=z(max(nq, nc)), work=z(nq), sig=z(nc), g=z(nc), sp=z(nc), mu=z(nc),
+        flags=np.zeros(2, dtype=np.int64),
+        stats=np.zeros(NSTATS),
+    )
