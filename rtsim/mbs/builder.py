@@ -118,6 +118,7 @@ class MechanismBuilder:
         self._qd_given: list[bool] = []
         self._bodies: list[_Body] = []
         self._point_masses: list[tuple[Ref, float]] = []
+        self._rods: list[tuple[Ref, Ref, float, float]] = []
         self._cons: list[dict] = []
         self._con_keys: set = set()
         self._drivers: list[tuple[int, tuple[float, ...]]] = []
@@ -199,6 +200,18 @@ class MechanismBuilder:
         length = np.linalg.norm(pb - pa)
         self.body(name, a, [(b, a)], mass, 0.5 * (pa + pb)[:2], mass * length ** 2 / 12.0)
 
+    def rod3d(self, name: str, a: Ref, b: Ref, mass: float, transverse_inertia: float | None = None) -> None:
+        """A rod between points a and b in 3D whose spin about its own axis carries no inertia (a slender
+        bar): mass matrix m [[1/3, 1/6], [1/6, 1/3]] (x) I3 for a uniform rod, generalised to a transverse
+        inertia about the centre of mass I_t (default m L^2 / 12), plus |a - b| = L."""
+        if self.dim != 3:
+            raise ModelError(f"{self.name}: rod3d() is for 3D mechanisms")
+        pa, pb = self._value(a), self._value(b)
+        length = float(np.linalg.norm(pb - pa))
+        it = mass * length ** 2 / 12.0 if transverse_inertia is None else float(transverse_inertia)
+        self._rods.append((a, b, float(mass), it / (mass * length ** 2)))
+        self.distance(a, b, name=f"{name}: length")
+
     # ---- constraints -----------------------------------------------------------------------------
     def _value(self, r: Ref) -> np.ndarray:
         v = np.array(r.cst, dtype=float)
@@ -234,6 +247,8 @@ class MechanismBuilder:
             if scalar is not None:
                 s = self._q0[scalar.index]
                 value -= linear * s + quadratic * s * s
+        if all(r.is_fixed for r in (ra, rb, rc, rd)) and scalar is None:
+            return  # a relation between constants (two ground directions): nothing to constrain
         key = (CON_DOT, frozenset([(ra, rb), (rc, rd)]), None if scalar is None else scalar.index,
                round(value, 12), linear, quadratic)
         nm = name or f"dot({ra.name}-{rb.name}, {rc.name}-{rd.name})"
@@ -364,6 +379,14 @@ class MechanismBuilder:
             a, _ = self._affine(p, nq)
             mass += mp * a.T @ a
             qg += mp * a.T @ g
+        for a, b, mr, k in self._rods:
+            # r(xi) = a + xi (b - a), xi in [-1/2, 1/2] about the centre: M from m and k = I_t / (m L^2)
+            pa, _ = self._affine(a, nq)
+            pb, _ = self._affine(b, nq)
+            mid = 0.5 * (pa + pb)
+            dif = pb - pa
+            mass += mr * (mid.T @ mid + k * dif.T @ dif)
+            qg += mr * mid.T @ g
         for b in self._bodies:
             x = self._basis_values(b.origin, b.directions)
             r0 = self._value(b.origin)[: self.dim]
@@ -395,10 +418,11 @@ class MechanismBuilder:
                     mass += mbar[a, c] * maps[a].T @ maps[c]
         return 0.5 * (mass + mass.T), qg
 
-    def _row_slots(self, kind, refs, scalar, terms=None):
+    def _row_slots(self, refs, scalar, terms=None):
+        """Slot indices and constants of a row: from linear `terms`, or from vector refs + scalar."""
         idx = -np.ones(NSLOT, dtype=np.int64)
         cst = np.zeros(NSLOT - 1)
-        if kind == CON_LINEAR:
+        if terms is not None:
             coeffs: dict[int, float] = {}
             const = 0.0
             for coeff, r, comp in terms:
@@ -436,7 +460,7 @@ class MechanismBuilder:
         con_drv = -np.ones(nc, dtype=np.int64)
         pairs = [np.array(np.nonzero(mass)).T]
         for i, con in enumerate(self._cons):
-            idx, cst, const = self._row_slots(con["kind"], con["refs"], con["scalar"],
+            idx, cst, const = self._row_slots(con["refs"], con["scalar"],
                                               con["refs"] if con["kind"] == CON_LINEAR else None)
             con_kind[i] = con["kind"]
             con_idx[i], con_cst[i] = idx, cst
@@ -454,7 +478,7 @@ class MechanismBuilder:
         tangent = 0
         for f, frc in enumerate(self._forces):
             refs = tuple(frc["refs"]) + (ZERO, ZERO)
-            idx, cst, _ = self._row_slots(frc["kind"], refs, frc["scalar"])
+            idx, cst, _ = self._row_slots(refs, frc["scalar"])
             frc_kind[f], frc_idx[f], frc_cst[f], frc_par[f] = frc["kind"], idx, cst, frc["par"]
             used = np.unique(idx[idx >= 0])
             pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
