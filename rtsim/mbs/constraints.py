@@ -8,12 +8,12 @@ coordinates add one smooth trigonometric equation each, written so that it never
 from __future__ import annotations
 
 import numpy as np
-import numba as nb
+from rtsim.jit import inline_kernel, kernel
 
 from .model import CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, DRV_EXTERNAL, DRV_POLY, DRV_SINE, SCALAR
 
 
-@nb.njit(cache=True, inline="always")
+@inline_kernel
 def ref(idx, cst, v, row, slot, comp):
     """Component `comp` of vector reference `slot` of row `row`: coordinate value plus constant."""
     k = idx[row, 3 * slot + comp]
@@ -23,7 +23,7 @@ def ref(idx, cst, v, row, slot, comp):
     return x
 
 
-@nb.njit(cache=True, inline="always")
+@inline_kernel
 def refd(idx, v, row, slot, comp):
     """Rate of a vector reference (constants have zero rate)."""
     k = idx[row, 3 * slot + comp]
@@ -32,7 +32,7 @@ def refd(idx, v, row, slot, comp):
     return 0.0
 
 
-@nb.njit(cache=True)
+@kernel
 def eval_drivers(m, d, t):
     """Fill d.drv[k] = (f, f', f'') of every driver at time t."""
     for k in range(m.drv_kind.shape[0]):
@@ -54,7 +54,7 @@ def eval_drivers(m, d, t):
             d.drv[k, 2] = d.drv_ext[k, 2]
 
 
-@nb.njit(cache=True)
+@kernel
 def eval_constraints(m, d, q):
     """Phi, Jacobian values (d.jac, positions m.con_idx), Phi_t and Phi_tt at q and the drivers
     already evaluated in d.drv."""
@@ -148,12 +148,12 @@ def eval_constraints(m, d, q):
             jac[SCALAR] = -g1 * sn - g2 * cs
 
 
-@nb.njit(cache=True, inline="always")
+@inline_kernel
 def _triple(a0, a1, a2, b0, b1, b2, c0, c1, c2):
     return (a1 * b2 - a2 * b1) * c0 + (a2 * b0 - a0 * b2) * c1 + (a0 * b1 - a1 * b0) * c2
 
 
-@nb.njit(cache=True)
+@kernel
 def eval_hqd(m, d, q, qd):
     """d.hqd = (d/dt Phi_q) qd, the velocity-quadratic part of Phi'' = Phi_q qdd + hqd + Phi_tt."""
     idx = m.con_idx
@@ -212,7 +212,7 @@ def eval_hqd(m, d, q, qd):
                         - g2dd * sn - 2.0 * g2d * cs * thd + g2 * sn * thd * thd)
 
 
-@nb.njit(cache=True)
+@kernel
 def jac_matvec(m, d, x, out):
     """out[i] = (Phi_q x)_i."""
     idx = m.con_idx
@@ -225,7 +225,7 @@ def jac_matvec(m, d, x, out):
         out[i] = s
 
 
-@nb.njit(cache=True)
+@kernel
 def jac_t_matvec_add(m, d, v, out, scale):
     """out += scale * Phi_q^T v."""
     idx = m.con_idx

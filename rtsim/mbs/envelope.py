@@ -13,7 +13,7 @@ All kernels work in *permuted* indices: entry (i, j) of the original matrix live
 from __future__ import annotations
 
 import numpy as np
-import numba as nb
+from rtsim.jit import inline_kernel, kernel
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
@@ -41,13 +41,13 @@ def symbolic(n: int, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     return perm, pinv, first, ptr
 
 
-@nb.njit(cache=True, inline="always")
+@inline_kernel
 def pos(first, ptr, r, c):
     """Storage offset of permuted entry (r, c) with c <= r."""
     return ptr[r] + c - first[r]
 
 
-@nb.njit(cache=True)
+@kernel
 def add_entry(env, first, ptr, pinv, i, j, value):
     """Add value to the symmetric entry (i, j) (original indices). A diagonal entry gets it once;
     an off-diagonal pair (i, j) ~ (j, i) is stored once, so callers add each unordered pair once."""
@@ -58,7 +58,7 @@ def add_entry(env, first, ptr, pinv, i, j, value):
     env[ptr[r] + c - first[r]] += value
 
 
-@nb.njit(cache=True)
+@kernel
 def cholesky(a, first, ptr, out):
     """In-place-safe envelope Cholesky: out = L with L L^T = a. Returns the permuted row of the
     first non-positive pivot, or -1 on success."""
@@ -82,7 +82,7 @@ def cholesky(a, first, ptr, out):
     return -1
 
 
-@nb.njit(cache=True)
+@kernel
 def solve(l, first, ptr, perm, pinv, b, x, work):
     """Solve (L L^T) x = b in original indices; b may alias x. work: length-n scratch."""
     n = first.shape[0]
@@ -108,7 +108,7 @@ def solve(l, first, ptr, perm, pinv, b, x, work):
         x[perm[r]] = work[r]
 
 
-@nb.njit(cache=True)
+@kernel
 def matvec_add(a, first, ptr, perm, pinv, x, y, scale):
     """y += scale * A x for a symmetric A in envelope storage (original indices)."""
     n = first.shape[0]

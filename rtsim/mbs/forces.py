@@ -7,14 +7,14 @@ onto the coordinates), precomputed in the model as `q_grav`.
 from __future__ import annotations
 
 import numpy as np
-import numba as nb
+from rtsim.jit import inline_kernel, kernel
 
 from .constraints import ref, refd
 from .envelope import add_entry
 from .model import FRC_COORD, FRC_SPRING, SCALAR
 
 
-@nb.njit(cache=True)
+@kernel
 def _add_block(m, w, row, ia_slot, ib_slot, kk, cc, e0, e1, e2, cK, cC, geo):
     """Add the 6x6 spring tangent [[K, -K], [-K, K]] with K = kk e e^T + geo (I - e e^T) (stiffness)
     and cc e e^T (damping) between the coordinates of slots A and B of force row `row`."""
@@ -41,7 +41,7 @@ def _add_block(m, w, row, ia_slot, ib_slot, kk, cc, e0, e1, e2, cK, cC, geo):
             add_entry(w, m.first, m.ptr, m.pinv, ia, ib, val)
 
 
-@nb.njit(cache=True)
+@kernel
 def eval_forces(m, d, q, qd, want_tangent, cK, cC):
     """d.force = Q(q, qd, t); if want_tangent, d.w_env = M + cC C + cK K. Returns the index of the
     first non-finite generalized force, or -1."""
@@ -94,7 +94,7 @@ def eval_forces(m, d, q, qd, want_tangent, cK, cC):
     return -1
 
 
-@nb.njit(cache=True)
+@kernel
 def potential_energy(m, q):
     """Potential energy of gravity and of the conservative part of springs, J."""
     e = 0.0

@@ -21,7 +21,7 @@ rtsim.mbs.simulation.penalty_factors). Kernels return a status code; they never 
 from __future__ import annotations
 
 import numpy as np
-import numba as nb
+from rtsim.jit import inline_kernel, kernel
 
 from .constraints import eval_constraints, eval_drivers, eval_hqd, jac_matvec, jac_t_matvec_add
 from .envelope import add_entry, cholesky, matvec_add, solve
@@ -37,7 +37,7 @@ HAVE_FACTOR = 0
 NEED_FACTOR = 1
 
 
-@nb.njit(cache=True)
+@kernel
 def factorize(m, d, bq):
     """a_env = w_env + bq Phi_q^T alpha Phi_q, then l_env = chol(a_env). Returns the failing row or -1."""
     for k in range(d.w_env.shape[0]):
@@ -61,7 +61,7 @@ def factorize(m, d, bq):
     return cholesky(d.a_env, m.first, m.ptr, d.l_env)
 
 
-@nb.njit(cache=True)
+@kernel
 def _dot_alpha(d, a, b, nc):
     s = 0.0
     for i in range(nc):
@@ -69,7 +69,7 @@ def _dot_alpha(d, a, b, nc):
     return s
 
 
-@nb.njit(cache=True)
+@kernel
 def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
     """x = A^-1 (b - bq Phi_q^T (alpha c + mu)) with the multipliers mu chosen so that
     g = Phi_q x + c = 0 (mu is left in d.mu).
@@ -138,7 +138,7 @@ def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
     return -1, gmax
 
 
-@nb.njit(cache=True)
+@kernel
 def project(m, d, x, c, bq, tol, tol_fail):
     """Projection of x (in place) onto Phi_q x + c = 0 in the metric W, minimising
     (x - x*)^T W (x - x*) / 2: x = A^-1 (W x* - bq Phi_q^T (alpha c + mu)) (see solve_constrained)."""
@@ -149,7 +149,7 @@ def project(m, d, x, c, bq, tol, tol_fail):
     return solve_constrained(m, d, y, c, bq, x, tol, tol_fail)
 
 
-@nb.njit(cache=True)
+@kernel
 def step(m, d, h):
     """Advance d by one ALI3-P step of h seconds. Returns a status code (model.OK on success)."""
     nq = m.nq
@@ -307,7 +307,7 @@ def step(m, d, h):
     return OK
 
 
-@nb.njit(cache=True)
+@kernel
 def advance(m, d, h, nsteps, stride, out_t, out_q, out_qd):
     """Run nsteps steps, storing t, q, qd every `stride` steps (row 0 = the initial state) into the
     preallocated outputs. Returns (status, steps done)."""
