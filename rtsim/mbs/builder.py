@@ -59,7 +59,7 @@ Direction = Ref | tuple[Ref, Ref]  # a unit-vector ref, or (head, tail) points: 
 class Settings:
     """Integrator settings (SI units; tolerances in coordinate units)."""
     max_iter: int = 30
-    max_proj_iter: int = 100
+    max_proj_iter: int = 100          # CG (Newton) and multiplier (projection) iterations
     tol_dq: float = 1e-8             # relative to max(1, max|q|)
     tol_phi: float = 1e-10
     tol_vel: float = 1e-10

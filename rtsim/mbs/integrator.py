@@ -141,12 +141,44 @@ def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
 @kernel
 def project(m, d, x, c, bq, tol, tol_fail):
     """Projection of x (in place) onto Phi_q x + c = 0 in the metric W, minimising
-    (x - x*)^T W (x - x*) / 2: x = A^-1 (W x* - bq Phi_q^T (alpha c + mu)) (see solve_constrained)."""
+    (x - x*)^T W (x - x*) / 2 with the factor of A = W + bq Phi_q^T alpha Phi_q at the current q:
+    the penalty projection A x = W x* - bq Phi_q^T (alpha c + sigma) of ALI3-P, repeated with the
+    multiplier update sigma += alpha g (g = Phi_q x + c) until max|g| <= tol.
+
+    Deliberately not solved exactly (no CG here): near a singular position the exact projection
+    divides the small leftover g along the vanishing singular direction by the singular value and
+    throws the velocities off the branch; the penalty form regularises exactly those directions.
+    Returns (iterations, max|g|), iterations < 0 if max|g| is still above tol_fail."""
+    nq = m.nq
+    nc = m.nc
     y = d.y
-    for i in range(m.nq):
+    for i in range(nq):
         y[i] = 0.0
     matvec_add(d.w_env, m.first, m.ptr, m.perm, m.pinv, x, y, 1.0)
-    return solve_constrained(m, d, y, c, bq, x, tol, tol_fail)
+    for i in range(nc):
+        d.sig[i] = 0.0
+    gmax = np.inf
+    k = 0
+    while k < m.iset[IS_MAX_PROJ]:
+        k += 1
+        for i in range(nq):
+            d.r[i] = y[i]
+        for i in range(nc):
+            d.z[i] = d.alpha[i] * c[i] + d.sig[i]
+        jac_t_matvec_add(m, d, d.z, d.r, -bq)
+        solve(d.l_env, m.first, m.ptr, m.perm, m.pinv, d.r, x, d.work)
+        jac_matvec(m, d, x, d.g)
+        gmax = 0.0
+        for i in range(nc):
+            g = d.g[i] + c[i]
+            d.sig[i] += d.alpha[i] * g
+            if abs(g) > gmax:
+                gmax = abs(g)
+        if gmax <= tol:
+            break
+    if gmax <= tol_fail:
+        return k, gmax
+    return -1, gmax
 
 
 @kernel
