@@ -15,7 +15,7 @@ flyball: T + V + dissipated work, both constant in exact arithmetic) and
 coordinates, constraint residuals, ...).
 
 All formulations are minimal / relative-coordinate formulations written
-from scratch for this file (see /tmp/bench_spec.md for the problem data and
+from scratch for this file (see docs/benchmarks.md for the problem data and
 their sources).  Times must be >= 0; they may be unsorted.
 
 Run ``python3 bench_refs.py`` to print the compared quantities at the end

@@ -27,8 +27,7 @@ from . import envelope
 from .model import (
     CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
     FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
-    FS_TOL_VEL_FAIL, IS_MAX_ITER,
-    IS_MAX_PROJ, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
+    FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
 )
 
 
@@ -57,18 +56,19 @@ Direction = Ref | tuple[Ref, Ref]  # a unit-vector ref, or (head, tail) points: 
 
 @dataclass
 class Settings:
-    """Integrator settings (SI units; tolerances in coordinate units)."""
-    max_iter: int = 30
-    max_proj_iter: int = 100          # CG (Newton) and multiplier (projection) iterations
-    tol_dq: float = 1e-8             # relative to max(1, max|q|)
-    tol_phi: float = 1e-10
-    tol_vel: float = 1e-10
-    tol_acc: float = 1e-8
-    tol_vel_fail: float = 1e-6
-    tol_acc_fail: float = np.inf
-    reuse_rate: float = 0.2
-    penalty_ratio: float = 1e4
-    reuse_across_steps: bool = False
+    """Integrator settings. Tolerances are in coordinate units (m, rad) and their rates."""
+    max_iter: int = 30                # Newton iterations per step before ConvergenceError
+    max_proj_iter: int = 100          # CG iterations (Newton multipliers), multiplier iterations (projections)
+    tol_dq: float = 1e-8              # Newton increment, relative to max(1, max|q|)
+    tol_phi: float = 1e-10            # max |Phi| for Newton to stop
+    tol_vel: float = 1e-10            # target max |Phi_q qd + Phi_t| of the velocity projection
+    tol_acc: float = 1e-8             # target max |Phi''| of the acceleration projection
+    tol_vel_fail: float = 1e-6        # velocity projection fails above this (near singular positions
+    #                                   the regularised projection may stop between target and this)
+    tol_acc_fail: float = np.inf      # acceleration consistency is reported (stats), never fatal
+    reuse_rate: float = 0.2           # refresh the Newton factor when |dq| shrinks by less than this
+    penalty_ratio: float = 1e4        # p in alpha_i = p (4/dt^2) m_i / |Phi_q,i|^2
+    reuse_across_steps: bool = False  # keep the factor into the next step (pays off for large dense models)
 
 
 @dataclass
@@ -488,13 +488,13 @@ class MechanismBuilder:
         drv_kind = np.array([k for k, _ in self._drivers], dtype=np.int64)
         drv_par = np.array([p for _, p in self._drivers], dtype=float).reshape(nd, 4)
         s = self.settings
-        iset = np.array([s.max_iter, s.max_proj_iter, tangent, int(s.reuse_across_steps)], dtype=np.int64)
+        iset = np.zeros(4, dtype=np.int64)
+        iset[IS_MAX_ITER], iset[IS_MAX_PROJ] = s.max_iter, s.max_proj_iter
+        iset[IS_TANGENT_FORCES], iset[IS_REUSE_STEPS] = tangent, int(s.reuse_across_steps)
         fset = np.zeros(7)
-        fset[FS_TOL_VEL_FAIL], fset[FS_TOL_ACC_FAIL] = s.tol_vel_fail, s.tol_acc_fail
         fset[FS_TOL_DQ], fset[FS_TOL_PHI], fset[FS_TOL_VEL], fset[FS_TOL_ACC] = s.tol_dq, s.tol_phi, s.tol_vel, s.tol_acc
+        fset[FS_TOL_VEL_FAIL], fset[FS_TOL_ACC_FAIL] = s.tol_vel_fail, s.tol_acc_fail
         fset[FS_REUSE_RATE] = s.reuse_rate
-        assert iset[IS_MAX_ITER] == s.max_iter and iset[IS_MAX_PROJ] == s.max_proj_iter
-        assert iset[IS_TANGENT_FORCES] == tangent
         model = Model(
             nq=nq, nc=nc, dim=self.dim,
             con_kind=con_kind, con_idx=con_idx, con_cst=con_cst, con_par=con_par, con_drv=con_drv,
