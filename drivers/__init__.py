@@ -1,0 +1,1 @@
+"""Virtual drivers and riders: scripted manoeuvres, path and speed followers, replay, live input."""

@@ -208,7 +208,7 @@ def step(m, d, h):
     tol_phi = m.fset[FS_TOL_PHI]
     rate_max = m.fset[FS_REUSE_RATE]
     prev = np.inf
-    fresh = False
+    age = 0  # Newton iterations done on the current factor
     converged = False
     nrm = np.inf
     it = 0
@@ -243,7 +243,7 @@ def step(m, d, h):
                 return ERR_FACTOR
             d.flags[HAVE_FACTOR] = 1
             d.flags[NEED_FACTOR] = 0
-            fresh = True
+            age = 0
         # Newton increment dq = -A^-1 f, corrected by multipliers mu so that the linearised
         # constraints Phi + Phi_q dq = 0 hold (no correction needed away from singular positions)
         for i in range(nq):
@@ -276,8 +276,10 @@ def step(m, d, h):
         if phimax <= tol_phi and nrm <= tol_dq * qmax:
             converged = True
             break
-        # A slowly contracting modified Newton means the reused factor is too stale: refresh it.
-        if not fresh and it >= 1 and nrm > rate_max * prev:
+        # A slowly contracting modified Newton means the reused factor is too stale: refresh it
+        # (not when it was just made: then the slowness is the problem's, not the factor's).
+        age += 1
+        if age >= 2 and it >= 1 and nrm > rate_max * prev:
             d.flags[NEED_FACTOR] = 1
         prev = nrm
     st[ST_LAST_ITER] = it + 1
