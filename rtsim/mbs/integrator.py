@@ -62,6 +62,20 @@ def factorize(m, d, bq):
 
 
 @kernel
+def refresh_factor(m, d, bq):
+    """Factorize the tangent at the current Jacobian and W; ERR_FACTOR (row in stats) if not SPD."""
+    row = factorize(m, d, bq)
+    d.stats[ST_FACTORIZATIONS] += 1
+    if row >= 0:
+        d.flags[HAVE_FACTOR] = 0
+        d.stats[ST_FAIL_INDEX] = m.perm[row]
+        return ERR_FACTOR
+    d.flags[HAVE_FACTOR] = 1
+    d.flags[NEED_FACTOR] = 0
+    return OK
+
+
+@kernel
 def _dot_alpha(d, a, b, nc):
     s = 0.0
     for i in range(nc):
@@ -225,32 +239,21 @@ def step(m, d, h):
         if bad >= 0:
             st[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE
+        # Newton increment dq = -A^-1 f with f = bq [M qdd + Phi_q^T (alpha Phi + lambda*) - Q],
+        # corrected by multipliers mu so that the linearised constraints Phi + Phi_q dq = 0 hold
+        # (mu = 0 away from singular positions). solve_constrained adds the -bq Phi_q^T alpha Phi
+        # part itself, so the right-hand side here is -bq [M qdd + Phi_q^T lambda* - Q].
         r = d.r
         for i in range(nq):
             r[i] = 0.0
         matvec_add(m.m_env, m.first, m.ptr, m.perm, m.pinv, qdd, r, 1.0)
-        for i in range(nc):
-            d.z[i] = d.alpha[i] * d.phi[i] + d.lam[i]
-        jac_t_matvec_add(m, d, d.z, r, 1.0)
+        jac_t_matvec_add(m, d, d.lam, r, 1.0)
         for i in range(nq):
-            r[i] = bq * (r[i] - d.force[i])
+            r[i] = -bq * (r[i] - d.force[i])
         if need:
-            row = factorize(m, d, bq)
-            st[ST_FACTORIZATIONS] += 1
-            if row >= 0:
-                d.flags[HAVE_FACTOR] = 0
-                st[ST_FAIL_INDEX] = m.perm[row]
+            if refresh_factor(m, d, bq) != OK:
                 return ERR_FACTOR
-            d.flags[HAVE_FACTOR] = 1
-            d.flags[NEED_FACTOR] = 0
             age = 0
-        # Newton increment dq = -A^-1 f, corrected by multipliers mu so that the linearised
-        # constraints Phi + Phi_q dq = 0 hold (no correction needed away from singular positions)
-        for i in range(nq):
-            r[i] = -r[i]
-        for i in range(nc):
-            d.z[i] = d.alpha[i] * d.phi[i]
-        jac_t_matvec_add(m, d, d.z, r, bq)
         solve_constrained(m, d, r, d.phi, bq, d.y, 0.1 * tol_phi, np.inf)
         for i in range(nc):
             d.lam[i] += d.mu[i]
@@ -306,11 +309,7 @@ def step(m, d, h):
             return ERR_NONFINITE_FORCE
     # The projections need the tangent at the converged q: the Newton factor was made at an earlier
     # iterate, and near singular positions the projection is sensitive to that difference.
-    row = factorize(m, d, bq)
-    st[ST_FACTORIZATIONS] += 1
-    if row >= 0:
-        d.flags[HAVE_FACTOR] = 0
-        st[ST_FAIL_INDEX] = m.perm[row]
+    if refresh_factor(m, d, bq) != OK:
         return ERR_FACTOR
     k1, gv = project(m, d, qd, d.phit, bq, m.fset[FS_TOL_VEL], m.fset[FS_TOL_VEL_FAIL])
     if k1 < 0:
