@@ -38,3 +38,8 @@ class NonFiniteStateError(SimulationError):
 
 class FactorizationError(SimulationError):
     """The tangent matrix was not positive definite."""
+
+
+class ConfigError(RtsimError):
+    """A configuration or data file is malformed: the message names the file, the key (or line), the
+    offending value and what is allowed."""

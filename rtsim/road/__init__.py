@@ -1,0 +1,1 @@
+"""Roads: plane, constant grade, and triangle meshes built from survey points; tyre contact queries."""

@@ -1,0 +1,1 @@
+"""The vehicle model: configuration, suspension kinematics, tyres, brakes, powertrain, steering, sensors."""
