@@ -421,7 +421,7 @@ class MechanismBuilder:
     def _row_slots(self, refs, scalar, terms=None):
         """Slot indices and constants of a row: from linear `terms`, or from vector refs + scalar."""
         idx = -np.ones(NSLOT, dtype=np.int64)
-        cst = np.zeros(NSLOT - 1)
+        cst = np.zeros(NSLOT)
         if terms is not None:
             coeffs: dict[int, float] = {}
             const = 0.0
@@ -433,8 +433,8 @@ class MechanismBuilder:
                     if r.idx[comp] >= 0:
                         coeffs[r.idx[comp]] = coeffs.get(r.idx[comp], 0.0) + coeff
             items = [(k, v) for k, v in coeffs.items() if v != 0.0]
-            if len(items) > NSLOT - 1:
-                raise ModelError(f"{self.name}: a linear constraint has more than {NSLOT - 1} terms")
+            if len(items) > NSLOT:
+                raise ModelError(f"{self.name}: a linear constraint has more than {NSLOT} terms")
             for s, (k, v) in enumerate(items):
                 idx[s] = k
                 cst[s] = v
@@ -455,7 +455,7 @@ class MechanismBuilder:
         mass, qg = self._mass_and_gravity(nq)
         con_kind = np.zeros(nc, dtype=np.int64)
         con_idx = -np.ones((nc, NSLOT), dtype=np.int64)
-        con_cst = np.zeros((nc, NSLOT - 1))
+        con_cst = np.zeros((nc, NSLOT))
         con_par = np.zeros((nc, 4))
         con_drv = -np.ones(nc, dtype=np.int64)
         pairs = [np.array(np.nonzero(mass)).T]
@@ -473,7 +473,7 @@ class MechanismBuilder:
         nf = len(self._forces)
         frc_kind = np.zeros(nf, dtype=np.int64)
         frc_idx = -np.ones((nf, NSLOT), dtype=np.int64)
-        frc_cst = np.zeros((nf, NSLOT - 1))
+        frc_cst = np.zeros((nf, NSLOT))
         frc_par = np.zeros((nf, 6))
         tangent = 0
         for f, frc in enumerate(self._forces):

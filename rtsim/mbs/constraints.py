@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
-from .model import CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, DRV_EXTERNAL, DRV_POLY, DRV_SINE, SCALAR
+from .model import CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, DRV_EXTERNAL, DRV_POLY, DRV_SINE, NSLOT, SCALAR
 
 
 @inline_kernel
@@ -75,17 +75,18 @@ def eval_constraints(m, d, q):
             d.phitt[i] = 0.0
         if kind == CON_LINEAR:
             val = par[0]
-            for s in range(SCALAR):
+            for s in range(NSLOT):
                 k = idx[i, s]
                 if k >= 0:
                     val += cst[i, s] * q[k]
                     jac[s] = cst[i, s]
                 else:
                     jac[s] = 0.0
-            jac[SCALAR] = 0.0
             d.phi[i] = val - f
         elif kind == CON_DOT:
             val = -par[0]
+            for s in range(12, NSLOT):
+                jac[s] = 0.0
             for c in range(3):
                 a = ref(idx, cst, q, i, 0, c) - ref(idx, cst, q, i, 1, c)
                 b = ref(idx, cst, q, i, 2, c) - ref(idx, cst, q, i, 3, c)
@@ -109,7 +110,7 @@ def eval_constraints(m, d, q):
             dx = ref(idx, cst, q, i, 0, 0) - ref(idx, cst, q, i, 1, 0)
             dy = ref(idx, cst, q, i, 0, 1) - ref(idx, cst, q, i, 1, 1)
             d.phi[i] = dx * sn - dy * cs - f
-            for s in range(SCALAR):
+            for s in range(NSLOT):
                 jac[s] = 0.0
             jac[0] = sn
             jac[1] = -cs
@@ -143,7 +144,7 @@ def eval_constraints(m, d, q):
             jac[6] = (u1 * v2 - u2 * v1) * cs
             jac[7] = (u2 * v0 - u0 * v2) * cs
             jac[8] = (u0 * v1 - u1 * v0) * cs
-            for s in range(9, SCALAR):
+            for s in range(9, NSLOT):
                 jac[s] = 0.0
             jac[SCALAR] = -g1 * sn - g2 * cs
 
@@ -218,7 +219,7 @@ def jac_matvec(m, d, x, out):
     idx = m.con_idx
     for i in range(m.nc):
         s = 0.0
-        for k in range(13):
+        for k in range(NSLOT):
             j = idx[i, k]
             if j >= 0:
                 s += d.jac[i, k] * x[j]
@@ -232,7 +233,7 @@ def jac_t_matvec_add(m, d, v, out, scale):
     for i in range(m.nc):
         vi = scale * v[i]
         if vi != 0.0:
-            for k in range(13):
+            for k in range(NSLOT):
                 j = idx[i, k]
                 if j >= 0:
                     out[j] += d.jac[i, k] * vi

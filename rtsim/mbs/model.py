@@ -5,10 +5,11 @@ layout of the tangent matrix. `Data` holds everything that changes: coordinates 
 accelerations qdd, multipliers, and the preallocated workspaces of the integrator. Several `Data`
 may share one `Model`. Kernels are pure functions of (Model, Data) and never allocate per step.
 
-Every constraint and force row refers to its coordinates through four *vector references* (slots
-A, B, C, D), each three coordinate indices (or -1) plus three constants, so that a fixed ground point
+Every constraint and force row refers to its coordinates through up to five *vector references*
+(slots A..E), each three coordinate indices (or -1) plus three constants, so that a fixed ground point
 is a reference with indices -1 and constant components, and a moving point is a reference to its
-coordinates. Slot 12 is an optional scalar coordinate (a relative angle or distance).
+coordinates. Slots 15-17 are optional scalar coordinates (relative angles or distances). A linear row
+uses all 18 slots as (coordinate index, coefficient) pairs.
 """
 from __future__ import annotations
 
@@ -16,9 +17,12 @@ from collections import namedtuple
 
 import numpy as np
 
-# Slots of a constraint/force row: 4 vector refs x 3 components + 1 scalar coordinate.
-NSLOT = 13
-SCALAR = 12
+# Slots of a constraint/force row: 5 vector refs x 3 components + 3 scalar coordinates.
+NSLOT = 18
+NREF = 5
+SCALAR = 15
+SCALAR2 = 16
+SCALAR3 = 17
 
 # Constraint kinds.
 CON_LINEAR = 0   # sum_s cst[s] * q[idx[s]] + par[0] - f(t) = 0
