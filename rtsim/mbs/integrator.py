@@ -195,149 +195,214 @@ def project(m, d, x, c, bq, tol, tol_fail):
     return -1, gmax
 
 
+# Newton bookkeeping carried between the stages of a step (Data.newton).
+NW_PREV = 0     # previous increment norm
+NW_AGE = 1      # iterations done on the current factor
+NW_NRM = 2      # last increment norm
+NW_IT = 3       # iterations done in this step
+CONVERGED = 1
+CONTINUE = 0
+
+
 @kernel
-def step(m, d, h):
-    """Advance d by one ALI3-P step of h seconds. Returns a status code (model.OK on success)."""
-    nq = m.nq
-    nc = m.nc
-    st = d.stats
+def wants_tangent(m, d):
+    """True when this Newton iteration refactors, so force kernels must add their K and C to W."""
+    return d.flags[HAVE_FACTOR] == 0 or d.flags[NEED_FACTOR] == 1
+
+
+@kernel
+def step_begin(m, d, h):
+    """Stage 1: drivers at t + h, trapezoidal predictor, reset of the Newton bookkeeping."""
     if d.dt[0] != h or m.iset[IS_REUSE_STEPS] == 0:
         d.dt[0] = h
         d.flags[NEED_FACTOR] = 1
-    t1 = d.t[0] + h
-    eval_drivers(m, d, t1)
-    bq = 0.25 * h * h
+    eval_drivers(m, d, d.t[0] + h)
     c1 = 2.0 / h
     c2 = 4.0 / (h * h)
-    tangent = m.iset[IS_TANGENT_FORCES] == 1
-    q = d.q
-    qd = d.qd
-    qdd = d.qdd
+    for i in range(m.nq):
+        qn = d.q[i]
+        d.qhd[i] = -(c1 * qn + d.qd[i])
+        d.qhdd[i] = -(c2 * qn + 4.0 / h * d.qd[i] + d.qdd[i])
+        d.q[i] = qn + h * d.qd[i] + 0.5 * h * h * d.qdd[i]
+    d.newton[NW_PREV] = np.inf
+    d.newton[NW_AGE] = 0.0
+    d.newton[NW_NRM] = np.inf
+    d.newton[NW_IT] = 0.0
+
+
+@kernel
+def newton_prepare(m, d, h):
+    """Stage 2 (each iteration): velocities and accelerations from q, constraints, the multiplier
+    update lambda* += alpha Phi, and the model's own forces (into d.force; with wants_tangent also
+    W = M + h/2 C + h^2/4 K into d.w_env). A caller may add further forces after this stage."""
+    c1 = 2.0 / h
+    c2 = 4.0 / (h * h)
+    for i in range(m.nq):
+        d.qd[i] = c1 * d.q[i] + d.qhd[i]
+        d.qdd[i] = c2 * d.q[i] + d.qhdd[i]
+    eval_constraints(m, d, d.q)
+    if d.newton[NW_IT] > 0:
+        for i in range(m.nc):
+            d.lam[i] += d.alpha[i] * d.phi[i]
+    bad = eval_forces(m, d, d.q, d.qd, wants_tangent(m, d), 0.25 * h * h, 0.5 * h)
+    if bad >= 0:
+        d.stats[ST_FAIL_INDEX] = bad
+        return ERR_NONFINITE_FORCE
+    return OK
+
+
+@kernel
+def newton_update(m, d, h):
+    """Stage 3 (each iteration): the Newton increment and its convergence test. Returns CONVERGED,
+    CONTINUE or an error status (negative codes are never used: errors are > 1)."""
+    nq = m.nq
+    nc = m.nc
+    bq = 0.25 * h * h
+    # Newton increment dq = -A^-1 f with f = bq [M qdd + Phi_q^T (alpha Phi + lambda*) - Q],
+    # corrected by multipliers mu so that the linearised constraints Phi + Phi_q dq = 0 hold
+    # (mu = 0 away from singular positions). solve_constrained adds the -bq Phi_q^T alpha Phi
+    # part itself, so the right-hand side here is -bq [M qdd + Phi_q^T lambda* - Q].
+    r = d.r
     for i in range(nq):
-        qn = q[i]
-        d.qhd[i] = -(c1 * qn + qd[i])
-        d.qhdd[i] = -(c2 * qn + 4.0 / h * qd[i] + qdd[i])
-        q[i] = qn + h * qd[i] + 0.5 * h * h * qdd[i]
-    tol_dq = m.fset[FS_TOL_DQ]
-    tol_phi = m.fset[FS_TOL_PHI]
-    rate_max = m.fset[FS_REUSE_RATE]
-    prev = np.inf
-    age = 0  # Newton iterations done on the current factor
-    converged = False
-    nrm = np.inf
-    it = 0
-    for it in range(m.iset[IS_MAX_ITER]):
-        for i in range(nq):
-            qd[i] = c1 * q[i] + d.qhd[i]
-            qdd[i] = c2 * q[i] + d.qhdd[i]
-        eval_constraints(m, d, q)
-        if it > 0:
-            for i in range(nc):
-                d.lam[i] += d.alpha[i] * d.phi[i]
-        need = d.flags[HAVE_FACTOR] == 0 or d.flags[NEED_FACTOR] == 1
-        bad = eval_forces(m, d, q, qd, need and tangent, bq, 0.5 * h)
-        if bad >= 0:
-            st[ST_FAIL_INDEX] = bad
-            return ERR_NONFINITE_FORCE
-        # Newton increment dq = -A^-1 f with f = bq [M qdd + Phi_q^T (alpha Phi + lambda*) - Q],
-        # corrected by multipliers mu so that the linearised constraints Phi + Phi_q dq = 0 hold
-        # (mu = 0 away from singular positions). solve_constrained adds the -bq Phi_q^T alpha Phi
-        # part itself, so the right-hand side here is -bq [M qdd + Phi_q^T lambda* - Q].
-        r = d.r
-        for i in range(nq):
-            r[i] = 0.0
-        matvec_add(m.m_env, m.first, m.ptr, m.perm, m.pinv, qdd, r, 1.0)
-        jac_t_matvec_add(m, d, d.lam, r, 1.0)
-        for i in range(nq):
-            r[i] = -bq * (r[i] - d.force[i])
-        if need:
-            if refresh_factor(m, d, bq) != OK:
-                return ERR_FACTOR
-            age = 0
-        solve_constrained(m, d, r, d.phi, bq, d.y, 0.1 * tol_phi, np.inf)
-        for i in range(nc):
-            d.lam[i] += d.mu[i]
-        nrm = 0.0
-        for i in range(nq):
-            q[i] += d.y[i]
-            a = abs(d.y[i])
-            if a > nrm:
-                nrm = a
-        if not np.isfinite(nrm):
-            st[ST_LAST_RESIDUAL] = nrm
-            return ERR_NONFINITE_STATE
-        phimax = 0.0
-        for i in range(nc):
-            a = abs(d.phi[i])
-            if a > phimax:
-                phimax = a
-        qmax = 1.0
-        for i in range(nq):
-            a = abs(q[i])
-            if a > qmax:
-                qmax = a
-        if phimax <= tol_phi and nrm <= tol_dq * qmax:
-            converged = True
-            break
-        # A slowly contracting modified Newton means the reused factor is too stale: refresh it
-        # (not when it was just made: then the slowness is the problem's, not the factor's).
-        age += 1
-        if age >= 2 and it >= 1 and nrm > rate_max * prev:
-            d.flags[NEED_FACTOR] = 1
-        prev = nrm
-    st[ST_LAST_ITER] = it + 1
-    st[ST_ITER_TOTAL] += it + 1
-    if not converged:
-        st[ST_LAST_RESIDUAL] = nrm
-        d.flags[NEED_FACTOR] = 1
-        return ERR_NEWTON
-    # Final state of the step: trapezoidal velocities and accelerations, constraints, metric W.
+        r[i] = 0.0
+    matvec_add(m.m_env, m.first, m.ptr, m.perm, m.pinv, d.qdd, r, 1.0)
+    jac_t_matvec_add(m, d, d.lam, r, 1.0)
     for i in range(nq):
-        qd[i] = c1 * q[i] + d.qhd[i]
-        qdd[i] = c2 * q[i] + d.qhdd[i]
-    eval_constraints(m, d, q)
+        r[i] = -bq * (r[i] - d.force[i])
+    if wants_tangent(m, d):
+        if refresh_factor(m, d, bq) != OK:
+            return ERR_FACTOR
+        d.newton[NW_AGE] = 0.0
+    solve_constrained(m, d, r, d.phi, bq, d.y, 0.1 * m.fset[FS_TOL_PHI], np.inf)
+    for i in range(nc):
+        d.lam[i] += d.mu[i]
+    nrm = 0.0
+    qmax = 1.0
+    for i in range(nq):
+        d.q[i] += d.y[i]
+        a = abs(d.y[i])
+        if a > nrm:
+            nrm = a
+        a = abs(d.q[i])
+        if a > qmax:
+            qmax = a
+    d.newton[NW_IT] += 1.0
+    d.newton[NW_NRM] = nrm
+    if not np.isfinite(nrm):
+        d.stats[ST_LAST_RESIDUAL] = nrm
+        return ERR_NONFINITE_STATE
     phimax = 0.0
     for i in range(nc):
+        a = abs(d.phi[i])
+        if a > phimax:
+            phimax = a
+    if phimax <= m.fset[FS_TOL_PHI] and nrm <= m.fset[FS_TOL_DQ] * qmax:
+        return CONVERGED
+    # A slowly contracting modified Newton means the reused factor is too stale: refresh it
+    # (not when it was just made: then the slowness is the problem's, not the factor's).
+    d.newton[NW_AGE] += 1.0
+    if d.newton[NW_AGE] >= 2 and d.newton[NW_IT] >= 2 and nrm > m.fset[FS_REUSE_RATE] * d.newton[NW_PREV]:
+        d.flags[NEED_FACTOR] = 1
+    d.newton[NW_PREV] = nrm
+    return CONTINUE
+
+
+@kernel
+def newton_failed(m, d):
+    """Bookkeeping of a step whose Newton iterations ran out."""
+    d.stats[ST_LAST_RESIDUAL] = d.newton[NW_NRM]
+    d.flags[NEED_FACTOR] = 1
+    d.stats[ST_LAST_ITER] = d.newton[NW_IT]
+    d.stats[ST_ITER_TOTAL] += d.newton[NW_IT]
+    return ERR_NEWTON
+
+
+@kernel
+def finish_prepare(m, d, h):
+    """Stage 4: the converged step's velocities, accelerations, constraints, multipliers, and the
+    model's forces with their tangent (W for the projections). A caller adds its own forces' tangent
+    to d.w_env after this stage."""
+    c1 = 2.0 / h
+    c2 = 4.0 / (h * h)
+    for i in range(m.nq):
+        d.qd[i] = c1 * d.q[i] + d.qhd[i]
+        d.qdd[i] = c2 * d.q[i] + d.qhdd[i]
+    d.stats[ST_LAST_ITER] = d.newton[NW_IT]
+    d.stats[ST_ITER_TOTAL] += d.newton[NW_IT]
+    eval_constraints(m, d, d.q)
+    phimax = 0.0
+    for i in range(m.nc):
         d.lam[i] += d.alpha[i] * d.phi[i]
         a = abs(d.phi[i])
         if a > phimax:
             phimax = a
-    if tangent:
-        bad = eval_forces(m, d, q, qd, True, bq, 0.5 * h)
+    if phimax > d.stats[ST_MAX_PHI]:
+        d.stats[ST_MAX_PHI] = phimax
+    if m.iset[IS_TANGENT_FORCES] == 1:
+        bad = eval_forces(m, d, d.q, d.qd, True, 0.25 * h * h, 0.5 * h)
         if bad >= 0:
-            st[ST_FAIL_INDEX] = bad
+            d.stats[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE
+    return OK
+
+
+@kernel
+def finish_project(m, d, h):
+    """Stage 5: refactor at the converged q, project velocities and accelerations, advance time."""
+    bq = 0.25 * h * h
+    st = d.stats
     # The projections need the tangent at the converged q: the Newton factor was made at an earlier
     # iterate, and near singular positions the projection is sensitive to that difference.
     if refresh_factor(m, d, bq) != OK:
         return ERR_FACTOR
-    k1, gv = project(m, d, qd, d.phit, bq, m.fset[FS_TOL_VEL], m.fset[FS_TOL_VEL_FAIL])
+    k1, gv = project(m, d, d.qd, d.phit, bq, m.fset[FS_TOL_VEL], m.fset[FS_TOL_VEL_FAIL])
     if k1 < 0:
         st[ST_LAST_RESIDUAL] = gv
         d.flags[NEED_FACTOR] = 1
         return ERR_PROJECTION
-    eval_hqd(m, d, q, qd)
-    for i in range(nc):
+    eval_hqd(m, d, d.q, d.qd)
+    for i in range(m.nc):
         d.phit[i] = d.hqd[i] + d.phitt[i]  # phit now holds the acceleration right-hand side c
-    k2, ga = project(m, d, qdd, d.phit, bq, m.fset[FS_TOL_ACC], m.fset[FS_TOL_ACC_FAIL])
+    k2, ga = project(m, d, d.qdd, d.phit, bq, m.fset[FS_TOL_ACC], m.fset[FS_TOL_ACC_FAIL])
     if k2 < 0:
         st[ST_LAST_RESIDUAL] = ga
         d.flags[NEED_FACTOR] = 1
         return ERR_PROJECTION
-    for i in range(nq):
-        if not (np.isfinite(qd[i]) and np.isfinite(qdd[i])):
+    for i in range(m.nq):
+        if not (np.isfinite(d.qd[i]) and np.isfinite(d.qdd[i])):
             st[ST_FAIL_INDEX] = i
             return ERR_NONFINITE_STATE
-    d.t[0] = t1
+    d.t[0] += h
     st[ST_STEPS] += 1
     st[ST_PROJ_ITER] += k1 + k2
-    if phimax > st[ST_MAX_PHI]:
-        st[ST_MAX_PHI] = phimax
     if gv > st[ST_MAX_PHID]:
         st[ST_MAX_PHID] = gv
     if ga > st[ST_MAX_PHIDD]:
         st[ST_MAX_PHIDD] = ga
     return OK
+
+
+@kernel
+def step(m, d, h):
+    """Advance d by one ALI3-P step of h seconds. Returns a status code (model.OK on success).
+    A model with forces of its own (the vehicle) runs the same stages and adds its forces after
+    newton_prepare and its tangent after finish_prepare."""
+    step_begin(m, d, h)
+    for _ in range(m.iset[IS_MAX_ITER]):
+        status = newton_prepare(m, d, h)
+        if status != OK:
+            return status
+        status = newton_update(m, d, h)
+        if status == CONVERGED:
+            break
+        if status != CONTINUE:
+            return status
+    else:
+        return newton_failed(m, d)
+    status = finish_prepare(m, d, h)
+    if status != OK:
+        return status
+    return finish_project(m, d, h)
 
 
 @kernel

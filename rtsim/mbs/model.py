@@ -104,6 +104,7 @@ Data = namedtuple("Data", [
     "force", "w_env", "a_env", "l_env",     # forces, W = M + dt/2 C + dt^2/4 K (= M without K, C), tangent, factor
     "qn", "qhd", "qhdd", "r", "x", "y", "z", "work", "sig", "g", "sp", "mu",
     "flags",          # int64 [have_factor, need_factor]
+    "newton",         # float64 (4,) Newton bookkeeping between the stages of a step
     "stats",          # float64 (NSTATS,)
 ])
 
@@ -124,5 +125,6 @@ def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: f
         force=z(nq), w_env=model.m_env.copy(), a_env=z(nenv), l_env=z(nenv),
         qn=z(nq), qhd=z(nq), qhdd=z(nq), r=z(nq), x=z(nq), y=z(nq), z=z(max(nq, nc)), work=z(nq), sig=z(nc), g=z(nc), sp=z(nc), mu=z(nc),
         flags=np.zeros(2, dtype=np.int64),
+        newton=np.zeros(4),
         stats=np.zeros(NSTATS),
     )
