@@ -25,7 +25,7 @@ from rtsim.errors import ModelError
 
 from . import envelope
 from .model import (
-    CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
+    CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
     FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
     FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
 )
@@ -119,6 +119,10 @@ class MechanismBuilder:
         self._bodies: list[_Body] = []
         self._point_masses: list[tuple[Ref, float]] = []
         self._rods: list[tuple[Ref, Ref, float, float]] = []
+        self._polys: list[np.ndarray] = []
+        self._scalar_inertia: list[tuple[int, float]] = []
+        self._coupled: list[list[int]] = []
+        self._poly_exp = None
         self._cons: list[dict] = []
         self._con_keys: set = set()
         self._drivers: list[tuple[int, tuple[float, ...]]] = []
@@ -174,6 +178,18 @@ class MechanismBuilder:
     # ---- inertia ---------------------------------------------------------------------------------
     def point_mass(self, p: Ref, mass: float) -> None:
         self._point_masses.append((p, float(mass)))
+
+    def scalar_inertia(self, s: Scalar, inertia: float) -> None:
+        """Inertia (kg or kg m^2) on a scalar coordinate, e.g. a wheel's spin angle."""
+        self._scalar_inertia.append((s.index, float(inertia)))
+
+    def couple(self, *coords: Scalar | Ref) -> None:
+        """Declare that forces added outside the builder (a vehicle's tyres) couple these coordinates
+        in the tangent matrix, so its sparsity pattern has room for them."""
+        idx = []
+        for c in coords:
+            idx.extend([c.index] if isinstance(c, Scalar) else [i for i in c.idx if i >= 0])
+        self._coupled.append(sorted(set(idx)))
 
     def body(self, name: str, origin: Ref, directions: list[Direction], mass: float, cg,
              inertia, rigid: bool = True) -> None:
@@ -319,6 +335,27 @@ class MechanismBuilder:
         head, tail = self._dir_refs(directions[k])
         return [(1.0, head, c), (-1.0, tail, c)]
 
+    def poly_point(self, p: Ref, origin: Ref, frame: tuple[Ref, Ref, Ref], path: np.ndarray,
+                   exponents: np.ndarray, z: Scalar, s: Scalar | None = None, name: str = "poly_point") -> None:
+        """p = origin + sum_k path_k(z, s) frame_k: a point moving in a body frame (unit vectors
+        `frame`) along a polynomial path of one or two scalar coordinates; `path` is (3, nterm)
+        coefficients over `exponents` (nterm, 2). Three constraint rows."""
+        exponents = np.asarray(exponents, dtype=np.int64)
+        if self._poly_exp is None:
+            self._poly_exp = exponents
+        elif not np.array_equal(self._poly_exp, exponents):
+            raise ModelError(f"{self.name}: all polynomial paths of a model share one exponent table")
+        self._polys.append(np.asarray(path, dtype=float).reshape(3, -1))
+        k = len(self._polys) - 1
+        for c in range(3):
+            self._add_con(CON_POLY_POINT, (p, origin, frame[0], frame[1], frame[2]), (z, s),
+                          (float(k), float(c), 0.0, 0.0), f"{name}.{'xyz'[c]}")
+
+    def _poly_coef(self) -> np.ndarray:
+        if not self._polys:
+            return np.zeros((0, 3, 1))
+        return np.array(self._polys)
+
     def drive(self, s: Scalar | tuple[Ref, int], poly=None, sine=None, external: bool = False,
               name: str | None = None) -> int:
         """Rheonomic constraint coordinate = f(t): poly=(c0, c1, c2, c3), sine=(offset, amplitude,
@@ -379,6 +416,8 @@ class MechanismBuilder:
             a, _ = self._affine(p, nq)
             mass += mp * a.T @ a
             qg += mp * a.T @ g
+        for k, inertia in self._scalar_inertia:
+            mass[k, k] += inertia
         for a, b, mr, k in self._rods:
             # r(xi) = a + xi (b - a), xi in [-1/2, 1/2] about the centre: M from m and k = I_t / (m L^2)
             pa, _ = self._affine(a, nq)
@@ -443,7 +482,11 @@ class MechanismBuilder:
             for c in range(3):
                 idx[3 * s + c] = r.idx[c] if c < self.dim else -1
                 cst[3 * s + c] = r.cst[c]
-        if scalar is not None:
+        if isinstance(scalar, tuple):
+            for slot, sc in zip((SCALAR, SCALAR2), scalar):
+                if sc is not None:
+                    idx[slot] = sc.index
+        elif scalar is not None:
             idx[SCALAR] = scalar.index
         return idx, cst, 0.0
 
@@ -483,6 +526,8 @@ class MechanismBuilder:
             used = np.unique(idx[idx >= 0])
             pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
             tangent = 1
+        for used in self._coupled:
+            pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
         perm, pinv, first, ptr = envelope.symbolic(nq, np.vstack(pairs))
         nd = len(self._drivers)
         drv_kind = np.array([k for k, _ in self._drivers], dtype=np.int64)
@@ -501,7 +546,9 @@ class MechanismBuilder:
             drv_kind=drv_kind, drv_par=drv_par,
             frc_kind=frc_kind, frc_idx=frc_idx, frc_cst=frc_cst, frc_par=frc_par,
             frc_drv=-np.ones(nf, dtype=np.int64),
-            q_grav=qg, perm=perm, pinv=pinv, first=first, ptr=ptr,
+            q_grav=qg, poly_coef=self._poly_coef(),
+            poly_exp=self._poly_exp if self._poly_exp is not None else np.zeros((1, 2), dtype=np.int64),
+            perm=perm, pinv=pinv, first=first, ptr=ptr,
             m_env=envelope.to_envelope(mass, first, ptr, perm),
             iset=iset, fset=fset,
         )

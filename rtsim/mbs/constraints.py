@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
-from .model import CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, DRV_EXTERNAL, DRV_POLY, DRV_SINE, NSLOT, SCALAR
+from .model import CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, NSLOT, SCALAR
 
 
 @inline_kernel
@@ -30,6 +30,34 @@ def refd(idx, v, row, slot, comp):
     if k >= 0:
         return v[k]
     return 0.0
+
+
+@inline_kernel
+def poly_eval(coef, exps, z, s):
+    """p(z, s) = sum_j coef[j] z^ez_j s^es_j and its first and second derivatives:
+    (p, p_z, p_s, p_zz, p_zs, p_ss)."""
+    p = pz = ps = pzz = pzs = pss = 0.0
+    for j in range(exps.shape[0]):
+        c = coef[j]
+        if c == 0.0:
+            continue
+        a = exps[j, 0]
+        b = exps[j, 1]
+        za = z ** a
+        sb = s ** b
+        p += c * za * sb
+        if a >= 1:
+            za1 = z ** (a - 1)
+            pz += c * a * za1 * sb
+            if b >= 1:
+                pzs += c * a * b * za1 * s ** (b - 1)
+            if a >= 2:
+                pzz += c * a * (a - 1) * z ** (a - 2) * sb
+        if b >= 1:
+            ps += c * b * za * s ** (b - 1)
+            if b >= 2:
+                pss += c * b * (b - 1) * za * s ** (b - 2)
+    return p, pz, ps, pzz, pzs, pss
 
 
 @kernel
@@ -117,6 +145,29 @@ def eval_constraints(m, d, q):
             jac[3] = -sn
             jac[4] = cs
             jac[SCALAR] = dx * cs + dy * sn
+        elif kind == CON_POLY_POINT:
+            k = int(par[0])
+            comp = int(par[1])
+            z = q[idx[i, SCALAR]]
+            ks = idx[i, SCALAR2]
+            s = q[ks] if ks >= 0 else 0.0
+            val = ref(idx, cst, q, i, 0, comp) - ref(idx, cst, q, i, 1, comp)
+            dz = 0.0
+            ds = 0.0
+            for s_ in range(NSLOT):
+                jac[s_] = 0.0
+            jac[comp] = 1.0
+            jac[3 + comp] = -1.0
+            for e in range(3):
+                p, pz, ps, _a, _b, _c = poly_eval(m.poly_coef[k, e], m.poly_exp, z, s)
+                ec = ref(idx, cst, q, i, 2 + e, comp)
+                val -= p * ec
+                jac[3 * (2 + e) + comp] = -p
+                dz -= pz * ec
+                ds -= ps * ec
+            jac[SCALAR] = dz
+            jac[SCALAR2] = ds if ks >= 0 else 0.0
+            d.phi[i] = val - f
         else:  # CON_ANGLE3D: u = A, v = B, w = C
             th = q[idx[i, SCALAR]]
             sn = np.sin(th)
@@ -185,6 +236,22 @@ def eval_hqd(m, d, q, qd):
             dxd = refd(idx, qd, i, 0, 0) - refd(idx, qd, i, 1, 0)
             dyd = refd(idx, qd, i, 0, 1) - refd(idx, qd, i, 1, 1)
             d.hqd[i] = 2.0 * (dxd * cs + dyd * sn) * thd + (-dx * sn + dy * cs) * thd * thd
+        elif kind == CON_POLY_POINT:
+            kp = int(m.con_par[i, 0])
+            comp = int(m.con_par[i, 1])
+            kz = idx[i, SCALAR]
+            ks = idx[i, SCALAR2]
+            z = q[kz]
+            zd = qd[kz]
+            s = q[ks] if ks >= 0 else 0.0
+            sd = qd[ks] if ks >= 0 else 0.0
+            h = 0.0
+            for e in range(3):
+                p, pz, ps, pzz, pzs, pss = poly_eval(m.poly_coef[kp, e], m.poly_exp, z, s)
+                ec = ref(idx, cst, q, i, 2 + e, comp)
+                ecd = refd(idx, qd, i, 2 + e, comp)
+                h -= (pzz * zd * zd + 2.0 * pzs * zd * sd + pss * sd * sd) * ec + 2.0 * (pz * zd + ps * sd) * ecd
+            d.hqd[i] = h
         else:  # CON_ANGLE3D
             k = idx[i, SCALAR]
             th = q[k]

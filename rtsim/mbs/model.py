@@ -29,7 +29,9 @@ CON_LINEAR = 0   # sum_s cst[s] * q[idx[s]] + par[0] - f(t) = 0
 CON_DOT = 1      # (A - B).(C - D) - par[0] - par[1] s - par[2] s^2 - f(t) = 0
 CON_ANGLE2D = 2  # (A - B) x e(theta) = dx sin(theta) - dy cos(theta) = 0, theta = q[idx[12]]
 CON_ANGLE3D = 3  # ((A x B).C) cos(theta) - (A.B) sin(theta) = 0: angle from A to B about axis C
-CON_KIND_NAMES = ("linear", "dot", "angle2d", "angle3d")
+CON_POLY_POINT = 4  # A_c - B_c - sum_k p_k(z, s) E_k,c = 0 with frame vectors E_0..2 = C, D, E,
+#                     z = q[idx[SCALAR]], s = q[idx[SCALAR2]] (or 0), p = polynomial par[0], c = par[1]
+CON_KIND_NAMES = ("linear", "dot", "angle2d", "angle3d", "poly_point")
 
 # Force kinds.
 FRC_SPRING = 0      # point-to-point spring-damper-actuator between A and B: par = k, c, L0, F0
@@ -85,6 +87,8 @@ Model = namedtuple("Model", [
     "frc_kind", "frc_idx", "frc_cst", "frc_par", "frc_drv",
     # constant generalized gravity force
     "q_grav",
+    # polynomial paths p(z, s) of CON_POLY_POINT rows: coefficients (npoly, 3, nterm), exponents (nterm, 2)
+    "poly_coef", "poly_exp",
     # tangent-matrix envelope layout and the constant mass matrix in it
     "perm", "pinv", "first", "ptr", "m_env",
     # settings

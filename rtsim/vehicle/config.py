@@ -1,0 +1,147 @@
+"""The vehicle configuration file (configs/vehicles/*.toml), validated on load.
+
+Frame of all hardpoints and positions: the vehicle's design frame, ISO 8855 (x forward, y left,
+z up), origin on the ground under the front axle centre at design ride height. Hardpoints are given
+for the left corners; the right ones are their mirror images. SI units throughout (the unit is in each
+key's name or comment).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from rtsim.configfile import Strict, load, load_toml, validate
+
+Vec3 = tuple[float, float, float]
+
+
+class Chassis(Strict):
+    mass_kg: float = Field(gt=50, le=5000, description="sprung mass")
+    cg_m: Vec3 = Field(description="centre of mass of the sprung mass, design frame")
+    inertia_kgm2: tuple[float, float, float] = Field(description="Ixx, Iyy, Izz about the sprung CG")
+    ixz_kgm2: float = 0.0
+
+    @model_validator(mode="after")
+    def _positive_inertia(self):
+        ixx, iyy, izz = self.inertia_kgm2
+        if min(ixx, iyy, izz) <= 0 or ixx + iyy < izz or iyy + izz < ixx or izz + ixx < iyy:
+            raise ValueError(f"inertia_kgm2 {self.inertia_kgm2} is not a physical inertia (positive, "
+                             "triangle inequalities)")
+        return self
+
+
+class DoubleWishboneHardpoints(Strict):
+    lower_front: Vec3
+    lower_rear: Vec3
+    upper_front: Vec3
+    upper_rear: Vec3
+    lower_ball: Vec3
+    upper_ball: Vec3
+    tie_outer: Vec3
+    tie_inner: Vec3
+    spring_lower: Vec3
+    spring_upper: Vec3
+    wheel_centre: Vec3
+
+
+class MacPhersonHardpoints(Strict):
+    lower_front: Vec3
+    lower_rear: Vec3
+    lower_ball: Vec3
+    strut_top: Vec3
+    strut_lower: Vec3
+    toe_outer: Vec3
+    toe_inner: Vec3
+    wheel_centre: Vec3
+
+
+class SpringDamper(Strict):
+    """Along the spring/damper element. Force in compression positive."""
+    stiffness_n_per_m: float = Field(gt=0, le=1e6)
+    free_length_m: float | None = Field(default=None, gt=0, le=2.0,
+                                        description="unset: chosen so the car sits at design ride height")
+    bump_stop_clearance_m: float = Field(default=0.05, gt=0, le=0.3)
+    bump_stop_stiffness_n_per_m: float = Field(default=2e5, ge=0, le=1e7)
+    damping_bump_ns_per_m: float = Field(gt=0, le=1e5)
+    damping_rebound_ns_per_m: float = Field(gt=0, le=1e5)
+
+
+class Axle(Strict):
+    suspension: Literal["double_wishbone", "macpherson"]
+    hardpoints: DoubleWishboneHardpoints | MacPhersonHardpoints
+    static_camber_rad: float = Field(default=0.0, ge=-0.1, le=0.1, description="positive: top leans out")
+    static_toe_rad: float = Field(default=0.0, ge=-0.05, le=0.05, description="positive: toe-in")
+    unsprung_mass_kg: float = Field(gt=1, le=200, description="per corner")
+    wheel_spin_inertia_kgm2: float = Field(gt=0.05, le=20, description="per wheel, incl. brake and shaft")
+    spring: SpringDamper
+    anti_roll_bar_n_per_m: float = Field(default=0.0, ge=0, le=1e6,
+                                         description="force per metre of left-right travel difference")
+    travel_m: tuple[float, float] = Field(default=(-0.08, 0.08), description="rebound, bump limits of the fit")
+
+    @model_validator(mode="after")
+    def _hardpoints_match(self):
+        want = DoubleWishboneHardpoints if self.suspension == "double_wishbone" else MacPhersonHardpoints
+        if not isinstance(self.hardpoints, want):
+            raise ValueError(f"hardpoints do not match suspension '{self.suspension}'")
+        return self
+
+
+class Tyres(Strict):
+    property_file: str = Field(description=".tir file, relative to the vehicle file")
+    model: Literal["magic_formula", "linear"] = "magic_formula"
+
+
+class Aero(Strict):
+    drag_area_m2: float = Field(default=0.7, ge=0, le=5, description="Cd * A")
+    air_density_kg_m3: float = Field(default=1.2, gt=0.5, le=1.5)
+
+
+class SensorNoise(Strict):
+    noise_std: float = Field(default=0.0, ge=0)
+    bias: float = 0.0
+    quantum: float = Field(default=0.0, ge=0)
+    delay_s: float = Field(default=0.0, ge=0, le=0.5)
+
+
+class Sensors(Strict):
+    imu_position_m: Vec3 = Field(description="accelerometer/gyro mounting point, design frame")
+    rate_hz: float = Field(default=500.0, gt=0, le=10000)
+    channels: dict[str, SensorNoise] = Field(default_factory=dict,
+                                            description="per channel noise, bias, quantisation, delay (off by default)")
+
+
+class VehicleConfig(Strict):
+    name: str
+    id: str = Field(pattern=r"^[a-z0-9_]+$", description="used in topic names: rtsim/<id>/...")
+    chassis: Chassis
+    front: Axle
+    rear: Axle
+    tyres: Tyres
+    aero: Aero = Aero()
+    sensors: Sensors
+    brakes: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.brake")
+    powertrain: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.powertrain")
+    steering: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.steering")
+
+    @model_validator(mode="after")
+    def _axles(self):
+        if self.front.suspension != "double_wishbone" or self.rear.suspension != "macpherson":
+            raise ValueError("this vehicle template has a double wishbone front and a MacPherson rear")
+        wf = self.front.hardpoints.wheel_centre
+        wr = self.rear.hardpoints.wheel_centre
+        if wf[0] <= wr[0]:
+            raise ValueError("front wheel centre must be ahead of the rear one (x forward)")
+        if wf[1] <= 0 or wr[1] <= 0:
+            raise ValueError("hardpoints are given for the left corners (y > 0)")
+        return self
+
+
+def load_vehicle(path: str | Path) -> tuple[VehicleConfig, Path]:
+    """The validated vehicle config and the folder its relative paths refer to."""
+    path = Path(path)
+    return load(VehicleConfig, path), path.parent
+
+
+__all__ = ["VehicleConfig", "load_vehicle", "validate", "load_toml"]
