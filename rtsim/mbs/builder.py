@@ -341,6 +341,11 @@ class MechanismBuilder:
         `frame`) along a polynomial path of one or two scalar coordinates; `path` is (3, nterm)
         coefficients over `exponents` (nterm, 2). Three constraint rows."""
         exponents = np.asarray(exponents, dtype=np.int64)
+        na, nb = exponents[:, 0].max() + 1, exponents[:, 1].max() + 1
+        grid = np.array([(a, b) for a in range(na) for b in range(nb)], dtype=np.int64)
+        if exponents.shape != grid.shape or not np.array_equal(exponents, grid):
+            raise ModelError(f"{self.name}: polynomial exponents must be the full grid a = 0..{na - 1}, "
+                             f"b = 0..{nb - 1}, a-major")
         if self._poly_exp is None:
             self._poly_exp = exponents
         elif not np.array_equal(self._poly_exp, exponents):

@@ -34,29 +34,39 @@ def refd(idx, v, row, slot, comp):
 
 @inline_kernel
 def poly_eval(coef, exps, z, s):
-    """p(z, s) = sum_j coef[j] z^ez_j s^es_j and its first and second derivatives:
-    (p, p_z, p_s, p_zz, p_zs, p_ss)."""
+    """p(z, s) = sum_j coef[j] z^a_j s^b_j and its first and second derivatives
+    (p, p_z, p_s, p_zz, p_zs, p_ss). The exponents form a full grid, a-major
+    (j = a * nb + b), so the sums nest (Horner-like, no pow calls)."""
+    nterm = exps.shape[0]
+    nb = exps[nterm - 1, 1] + 1
+    na = nterm // nb
     p = pz = ps = pzz = pzs = pss = 0.0
-    for j in range(exps.shape[0]):
-        c = coef[j]
-        if c == 0.0:
-            continue
-        a = exps[j, 0]
-        b = exps[j, 1]
-        za = z ** a
-        sb = s ** b
-        p += c * za * sb
-        if a >= 1:
-            za1 = z ** (a - 1)
-            pz += c * a * za1 * sb
-            if b >= 1:
-                pzs += c * a * b * za1 * s ** (b - 1)
-            if a >= 2:
-                pzz += c * a * (a - 1) * z ** (a - 2) * sb
-        if b >= 1:
-            ps += c * b * za * s ** (b - 1)
-            if b >= 2:
-                pss += c * b * (b - 1) * za * s ** (b - 2)
+    za = 1.0     # z^a
+    za1 = 0.0    # a z^(a-1)
+    za2 = 0.0    # a (a-1) z^(a-2)
+    for a in range(na):
+        qv = qs = qss = 0.0
+        sb = 1.0
+        sb1 = 0.0
+        sb2 = 0.0
+        base = a * nb
+        for b in range(nb):
+            c = coef[base + b]
+            qv += c * sb
+            qs += c * sb1
+            qss += c * sb2
+            sb2 = (b + 1) * sb1
+            sb1 = (b + 1) * sb
+            sb = sb * s
+        p += za * qv
+        ps += za * qs
+        pss += za * qss
+        pz += za1 * qv
+        pzs += za1 * qs
+        pzz += za2 * qv
+        za2 = (a + 1) * za1
+        za1 = (a + 1) * za
+        za = za * z
     return p, pz, ps, pzz, pzs, pss
 
 

@@ -1,0 +1,347 @@
+"""Closed-loop lateral driver: steers along a path of (x, y) points by pure pursuit or Stanley.
+
+Path. A polyline through the points (road frame, m), parametrised by arc length s. An open path is
+extended straight beyond its ends (so a car that overshoots keeps a meaningful error); a closed path
+(`closed=True`, or first point == last point) wraps around. The vertex headings (bisectors of the
+adjacent segments) are interpolated along each segment, so the path heading is continuous.
+
+Nearest point. The driver keeps the index of the segment it was nearest to at the previous call and
+walks from there to the neighbour segments while the distance decreases: O(1) per call amortised,
+and it cannot jump to another branch of a path that crosses itself. The first call searches the
+whole path once.
+
+Laws (rear axle at P_r = position - rear_offset * heading; wheelbase l):
+
+- pure pursuit: the goal is the path point a look-ahead distance L = clip(la_gain v, la_min, la_max)
+  ahead of the rear axle's nearest point (arc length); with (dx, dy) the goal in the car frame,
+  curvature = 2 dy / (dx^2 + dy^2) and road-wheel angle delta = atan(l curvature). On a circle the
+  rear axle's steady error is zero (the circle through the car tangent to its heading and through
+  the goal is the path itself).
+- Stanley: at the front axle P_f = P_r + l heading, with e its signed distance to the path (left
+  positive) and psi_e the path heading minus the car's yaw, delta = psi_e - atan(k e / (v_soft + v)).
+  On a circle the front axle's steady error is zero for a kinematic car.
+
+Output: steering-wheel angle = steering_ratio * delta, with |delta| <= max_wheel_angle and the
+steering-wheel rate limited to max_rate (rad/s) starting from 0 at the first call. ISO 8855: a
+positive angle steers left.
+
+Model/data: `PathFollower` is a named tuple of arrays (path `px, py, ps, hd, seg_len`, parameters
+`par`, mutable state `st`); `path_follower_step` is a compiled kernel that writes
+out[I_STEER] and allocates nothing. The state keeps diagnostics: cross-track error, arc length,
+heading error.
+"""
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+
+from rtsim.jit import inline_kernel, kernel
+
+from .base import I_STEER, S_SPEED, S_X, S_Y, S_YAW
+
+PURE_PURSUIT = 0
+STANLEY = 1
+METHODS = {"pure_pursuit": PURE_PURSUIT, "stanley": STANLEY}
+
+# Parameter indices (par).
+P_METHOD = 0      # PURE_PURSUIT or STANLEY
+P_WB = 1          # m, wheelbase
+P_RATIO = 2       # -, steering ratio (steering-wheel angle / road-wheel angle)
+P_LA_MIN = 3      # m, minimum look-ahead (pure pursuit)
+P_LA_GAIN = 4     # s, look-ahead per unit speed (pure pursuit)
+P_LA_MAX = 5      # m, maximum look-ahead (pure pursuit)
+P_K = 6           # 1/s, Stanley cross-track gain
+P_V_SOFT = 7      # m/s, Stanley softening speed
+P_MAX_WHEEL = 8   # rad, road-wheel angle limit
+P_MAX_RATE = 9    # rad/s, steering-wheel rate limit
+P_REAR = 10       # m, distance from the state's reference point back to the rear axle
+P_CLOSED = 11     # 1 for a closed path
+P_NSEG = 12       # number of segments
+P_LENGTH = 13     # m, total path length
+NPAR = 14
+
+# State indices (st).
+ST_INIT = 0
+ST_IDX = 1    # segment nearest to the reference point at the last call
+ST_T = 2      # time of the last call
+ST_SW = 3     # last steering-wheel output, rad
+ST_E = 4      # diagnostics: signed cross-track error of the reference point (left positive), m
+ST_S = 5      # diagnostics: arc length of the nearest point, m
+ST_HE = 6     # diagnostics: path heading minus yaw, rad
+ST_DELTA = 7  # diagnostics: road-wheel angle before limits, rad
+ST_GX = 8     # diagnostics: goal point x (pure pursuit), m
+ST_GY = 9     # diagnostics: goal point y, m
+NST = 10
+
+PathFollower = namedtuple("PathFollower", ["px", "py", "ps", "hd", "seg_len", "par", "st"])
+
+
+@dataclass(frozen=True)
+class PathFollowerParams:
+    wheelbase: float = 2.6
+    steering_ratio: float = 16.0
+    la_min: float = 3.0
+    la_gain: float = 0.35
+    la_max: float = 30.0
+    k_stanley: float = 2.5
+    v_soft: float = 1.0
+    max_wheel_angle: float = 0.6
+    max_rate: float = 12.0
+    rear_offset: float = 0.0
+
+    def __post_init__(self):
+        for f in fields(self):
+            x = getattr(self, f.name)
+            if not math.isfinite(x):
+                raise ValueError(f"path follower {f.name} = {x} must be finite")
+        for n in ("wheelbase", "steering_ratio", "la_min", "la_max", "max_wheel_angle", "max_rate", "v_soft"):
+            if not getattr(self, n) > 0.0:
+                raise ValueError(f"path follower {n} = {getattr(self, n)} must be > 0")
+        for n in ("la_gain", "k_stanley"):
+            if getattr(self, n) < 0.0:
+                raise ValueError(f"path follower {n} = {getattr(self, n)} must be >= 0")
+        if self.la_max < self.la_min:
+            raise ValueError(f"path follower la_max = {self.la_max} m is below la_min = {self.la_min} m")
+
+
+def path_follower(x, y, method: str = "pure_pursuit", closed: bool = False,
+                  params: PathFollowerParams | None = None, **kw) -> PathFollower:
+    """Build a path follower for the polyline through (x[i], y[i]) (m, road frame)."""
+    if params is None:
+        params = PathFollowerParams(**kw)
+    elif kw:
+        params = PathFollowerParams(**{**asdict(params), **kw})
+    if method not in METHODS:
+        raise ValueError(f"path follower method {method!r}: use one of {', '.join(METHODS)}")
+    px = np.array(x, dtype=np.float64).reshape(-1)
+    py = np.array(y, dtype=np.float64).reshape(-1)
+    if px.shape != py.shape:
+        raise ValueError(f"path has {px.size} x and {py.size} y values")
+    if not (np.all(np.isfinite(px)) and np.all(np.isfinite(py))):
+        raise ValueError("path has non-finite coordinates")
+    if px.size >= 2 and px[0] == px[-1] and py[0] == py[-1]:
+        closed = True
+        px, py = px[:-1], py[:-1]
+    if px.size < 2 or (closed and px.size < 3):
+        raise ValueError(f"path needs at least {3 if closed else 2} distinct points")
+    if closed:
+        px = np.append(px, px[0])
+        py = np.append(py, py[0])
+    seg = np.hypot(np.diff(px), np.diff(py))
+    if np.any(seg <= 0.0):
+        i = int(np.argmin(seg > 0.0))
+        raise ValueError(f"path points {i} and {i + 1} coincide ({px[i]}, {py[i]})")
+    nseg = seg.size
+    ps = np.concatenate(([0.0], np.cumsum(seg)))
+    tx, ty = np.diff(px) / seg, np.diff(py) / seg
+    # vertex headings: bisector of the adjacent segments (ends: the end segment's heading)
+    vx = np.empty(nseg + 1)
+    vy = np.empty(nseg + 1)
+    vx[1:-1] = tx[:-1] + tx[1:]
+    vy[1:-1] = ty[:-1] + ty[1:]
+    if closed:
+        vx[0] = vx[-1] = tx[-1] + tx[0]
+        vy[0] = vy[-1] = ty[-1] + ty[0]
+    else:
+        vx[0], vy[0] = tx[0], ty[0]
+        vx[-1], vy[-1] = tx[-1], ty[-1]
+    hd = np.arctan2(vy, vx)
+    # a U-turn vertex (bisector zero) takes the incoming segment's heading
+    flat = np.hypot(vx, vy) < 1e-9
+    if np.any(flat):
+        seg_h = np.arctan2(ty, tx)
+        idx = np.nonzero(flat)[0]
+        hd[idx] = seg_h[np.maximum(idx - 1, 0)]
+    par = np.zeros(NPAR)
+    par[P_METHOD] = METHODS[method]
+    par[P_WB] = params.wheelbase
+    par[P_RATIO] = params.steering_ratio
+    par[P_LA_MIN] = params.la_min
+    par[P_LA_GAIN] = params.la_gain
+    par[P_LA_MAX] = params.la_max
+    par[P_K] = params.k_stanley
+    par[P_V_SOFT] = params.v_soft
+    par[P_MAX_WHEEL] = params.max_wheel_angle
+    par[P_MAX_RATE] = params.max_rate
+    par[P_REAR] = params.rear_offset
+    par[P_CLOSED] = 1.0 if closed else 0.0
+    par[P_NSEG] = nseg
+    par[P_LENGTH] = ps[-1]
+    return PathFollower(px, py, ps, hd, seg, par, np.zeros(NST))
+
+
+def reset(pf: PathFollower) -> None:
+    pf.st[:] = 0.0
+
+
+def circle_points(radius: float, spacing: float = 0.5, center=(0.0, 0.0), start_angle: float = -0.5 * math.pi,
+                  ccw: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Points of a closed circle (first point not repeated), `spacing` m apart at most. The default
+    start angle puts the first point below the centre, heading +x when counter-clockwise."""
+    n = max(int(math.ceil(2.0 * math.pi * radius / spacing)), 8)
+    a = start_angle + (1.0 if ccw else -1.0) * 2.0 * math.pi * np.arange(n) / n
+    return center[0] + radius * np.cos(a), center[1] + radius * np.sin(a)
+
+
+# --------------------------------------------------------------------------------------------------
+# Kernels
+
+
+@inline_kernel
+def _wrap(a):
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+@inline_kernel
+def _proj(pf, i, x, y):
+    """Parameter u along segment i of the point nearest to (x, y), and the squared distance.
+    u is clipped to [0, 1], except beyond the ends of an open path."""
+    nseg = int(pf.par[P_NSEG])
+    ax = pf.px[i]
+    ay = pf.py[i]
+    dx = pf.px[i + 1] - ax
+    dy = pf.py[i + 1] - ay
+    u = ((x - ax) * dx + (y - ay) * dy) / (dx * dx + dy * dy)
+    if pf.par[P_CLOSED] != 0.0:
+        u = min(max(u, 0.0), 1.0)
+    else:
+        if u < 0.0 and i > 0:
+            u = 0.0
+        if u > 1.0 and i < nseg - 1:
+            u = 1.0
+    qx = ax + u * dx
+    qy = ay + u * dy
+    return u, (x - qx) * (x - qx) + (y - qy) * (y - qy)
+
+
+@inline_kernel
+def _nearest(pf, x, y):
+    """Segment nearest to (x, y), walking from the last one (whole path on the first call)."""
+    nseg = int(pf.par[P_NSEG])
+    closed = pf.par[P_CLOSED] != 0.0
+    if pf.st[ST_INIT] == 0.0:
+        best = 0
+        u, dbest = _proj(pf, 0, x, y)
+        for j in range(1, nseg):
+            u, d = _proj(pf, j, x, y)
+            if d < dbest:
+                dbest = d
+                best = j
+        return best
+    i = int(pf.st[ST_IDX])
+    u, d = _proj(pf, i, x, y)
+    moved = False
+    for _ in range(nseg):
+        j = i + 1
+        if j >= nseg:
+            if not closed:
+                break
+            j = 0
+        u, dj = _proj(pf, j, x, y)
+        if dj < d:
+            i = j
+            d = dj
+            moved = True
+        else:
+            break
+    if not moved:
+        for _ in range(nseg):
+            j = i - 1
+            if j < 0:
+                if not closed:
+                    break
+                j = nseg - 1
+            u, dj = _proj(pf, j, x, y)
+            if dj < d:
+                i = j
+                d = dj
+            else:
+                break
+    return i
+
+
+@inline_kernel
+def _point_ahead(pf, i, u, dist):
+    """Point at arc length `dist` ahead of parameter u on segment i (wraps on a closed path,
+    extends the last segment of an open one)."""
+    nseg = int(pf.par[P_NSEG])
+    closed = pf.par[P_CLOSED] != 0.0
+    rem = u * pf.seg_len[i] + dist
+    for _ in range(4 * nseg + 4):
+        if rem <= pf.seg_len[i]:
+            break
+        if i == nseg - 1 and not closed:
+            break
+        rem -= pf.seg_len[i]
+        i = i + 1
+        if i >= nseg:
+            i = 0
+    f = rem / pf.seg_len[i]
+    return (pf.px[i] + f * (pf.px[i + 1] - pf.px[i]), pf.py[i] + f * (pf.py[i + 1] - pf.py[i]))
+
+
+@kernel
+def path_follower_step(pf, t, state, out):
+    """Write the steering-wheel angle (out[I_STEER], rad) for time t and the vehicle state."""
+    p = pf.par
+    st = pf.st
+    v = max(state[S_SPEED], 0.0)
+    yaw = state[S_YAW]
+    c = math.cos(yaw)
+    s = math.sin(yaw)
+    wb = p[P_WB]
+    rx = state[S_X] - p[P_REAR] * c
+    ry = state[S_Y] - p[P_REAR] * s
+    if p[P_METHOD] == STANLEY:
+        qx = rx + wb * c
+        qy = ry + wb * s
+    else:
+        qx = rx
+        qy = ry
+    if st[ST_INIT] == 0.0 or t < st[ST_T]:
+        st[ST_INIT] = 0.0
+        st[ST_T] = t
+        st[ST_SW] = 0.0
+    i = _nearest(pf, qx, qy)
+    st[ST_INIT] = 1.0
+    st[ST_IDX] = i
+    u, d2 = _proj(pf, i, qx, qy)
+    ax = pf.px[i]
+    ay = pf.py[i]
+    tx = (pf.px[i + 1] - ax) / pf.seg_len[i]
+    ty = (pf.py[i + 1] - ay) / pf.seg_len[i]
+    e = tx * (qy - ay) - ty * (qx - ax)
+    uc = min(max(u, 0.0), 1.0)
+    h = pf.hd[i] + uc * _wrap(pf.hd[i + 1] - pf.hd[i])
+    he = _wrap(h - yaw)
+    st[ST_E] = e
+    st[ST_S] = pf.ps[i] + u * pf.seg_len[i]
+    st[ST_HE] = he
+
+    if p[P_METHOD] == STANLEY:
+        delta = he - math.atan(p[P_K] * e / (p[P_V_SOFT] + v))
+    else:
+        la = min(max(p[P_LA_GAIN] * v, p[P_LA_MIN]), p[P_LA_MAX])
+        gx, gy = _point_ahead(pf, i, u, la)
+        st[ST_GX] = gx
+        st[ST_GY] = gy
+        dx = c * (gx - rx) + s * (gy - ry)
+        dy = -s * (gx - rx) + c * (gy - ry)
+        ld2 = dx * dx + dy * dy
+        delta = 0.0
+        if ld2 > 1e-12:
+            delta = math.atan(wb * 2.0 * dy / ld2)
+    st[ST_DELTA] = delta
+    lim = p[P_MAX_WHEEL]
+    delta = min(max(delta, -lim), lim)
+    sw = p[P_RATIO] * delta
+    dt = t - st[ST_T]
+    step = p[P_MAX_RATE] * dt
+    prev = st[ST_SW]
+    sw = min(max(sw, prev - step), prev + step)
+    st[ST_SW] = sw
+    st[ST_T] = t
+    out[I_STEER] = sw

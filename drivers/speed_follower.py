@@ -1,0 +1,259 @@
+"""Closed-loop longitudinal driver: follows a target speed with the throttle or the brake.
+
+Target. A table of target speed (m/s) over time (s) or over distance travelled (m), piecewise linear,
+end values held. Its slope is the target acceleration and enters as feed-forward (over distance:
+a = v_ref dv_ref/ds). The distance is the driver's own odometer, integrated from the measured speed.
+
+Control law, evaluated once per integrator step from the time t and the measured speed v:
+
+    e = v_ref - v
+    u = ff_gain (a_ref + a_res0 sign(v) + a_res2 v^2) + kp e + I - kd dv/dt_filtered      [m/s^2]
+
+u is a demanded acceleration. A driver either presses the throttle or the brake, so u goes to one
+*side* at a time: on the throttle side, throttle = throttle_gain u clipped to [0, throttle_max] (0 for
+u < 0: coasting); on the brake side, brake = -brake_gain u clipped to [0, brake_max] (0 for u > 0).
+The side changes only when u leaves a dead band: throttle -> brake when u < -band, brake ->
+throttle when u > +band. Within the band the car coasts, so a demand near zero never toggles between
+the pedals. The derivative acts on the measurement (no kick on target steps), filtered with time
+constant tau_d. Anti-windup: the integrator I += ki e dt is frozen while the pedal on the current
+side is at its maximum and the error pushes further, and is clipped to +-i_max.
+
+Standstill. When the target is (nearly) zero (v_ref <= v_eps) and the car has (nearly) stopped
+(|v| <= v_stop), the driver holds the car: throttle 0, brake rising to hold_pressure at hold_rate,
+integrator reset. It lets go as soon as the target rises above v_eps. A car starting at rest with a
+zero target therefore starts held (at the hold pressure from the first step).
+
+Model/data: `SpeedFollower` is a named tuple of arrays (parameters `par`, target table `tab_x`,
+`tab_v`, mutable controller state `st`); `speed_follower_step` is a compiled kernel that writes
+out[I_THROTTLE] and out[I_BRAKE] and allocates nothing. Parameters are indexed by `P_*`; the
+`SpeedFollowerParams` defaults are starting values for a small passenger car, to be tuned against the
+vehicle model (throttle_gain and brake_gain are the inverse of the car's acceleration per radian of
+throttle and per kPa of brake pressure).
+"""
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+
+from rtsim.jit import inline_kernel, kernel
+
+from .base import I_BRAKE, I_THROTTLE, S_SPEED
+
+# Parameter indices (par).
+P_KP = 0          # 1/s, proportional gain (m/s^2 per m/s)
+P_KI = 1          # 1/s^2, integral gain
+P_KD = 2          # -, derivative gain on the measured acceleration
+P_TAU_D = 3       # s, derivative filter time constant
+P_THR_GAIN = 4    # rad per m/s^2 of demand
+P_THR_MAX = 5     # rad, maximum throttle angle
+P_BRK_GAIN = 6    # kPa per m/s^2 of deceleration demand
+P_BRK_MAX = 7     # kPa, maximum brake pressure
+P_BAND = 8        # m/s^2, half width of the dead band between throttle and brake
+P_HOLD_P = 9      # kPa, brake pressure that holds the car at standstill
+P_HOLD_RATE = 10  # kPa/s, rate at which the hold pressure is applied
+P_V_STOP = 11     # m/s, speed below which the car counts as stopped
+P_V_EPS = 12      # m/s, target speed below which the target counts as zero
+P_I_MAX = 13      # m/s^2, integrator clip
+P_BY_DIST = 14    # 0: target over time, 1: over distance
+P_A_RES0 = 15     # m/s^2, road-load feed-forward, constant part (rolling resistance / mass)
+P_A_RES2 = 16     # 1/m, road-load feed-forward, quadratic part (aero drag / mass)
+P_FF_GAIN = 17    # -, weight of the feed-forward
+NPAR = 18
+
+# Controller state indices (st).
+ST_INIT = 0   # 0 until the first call
+ST_T = 1      # time of the previous call
+ST_V = 2      # speed at the previous call
+ST_I = 3      # integrator, m/s^2
+ST_SIDE = 4   # +1 throttle side, -1 brake side
+ST_DVF = 5    # filtered measured acceleration, m/s^2
+ST_DIST = 6   # odometer, m
+ST_HOLD = 7   # 1 while holding at standstill
+ST_BRK = 8    # last brake output, kPa (for the hold ramp)
+ST_VREF = 9   # diagnostics: target speed, m/s
+ST_AREF = 10  # diagnostics: target acceleration, m/s^2
+ST_U = 11     # diagnostics: demand u, m/s^2
+NST = 12
+
+SpeedFollower = namedtuple("SpeedFollower", ["par", "tab_x", "tab_v", "st"])
+
+
+@dataclass(frozen=True)
+class SpeedFollowerParams:
+    kp: float = 0.8
+    ki: float = 0.15
+    kd: float = 0.0
+    tau_d: float = 0.05
+    throttle_gain: float = 0.35
+    throttle_max: float = 1.4
+    brake_gain: float = 800.0
+    brake_max: float = 10000.0
+    band: float = 0.15
+    hold_pressure: float = 2500.0
+    hold_rate: float = 5000.0
+    v_stop: float = 0.1
+    v_eps: float = 0.01
+    i_max: float = 3.0
+    a_res0: float = 0.0
+    a_res2: float = 0.0
+    ff_gain: float = 1.0
+
+    def __post_init__(self):
+        for f in fields(self):
+            x = getattr(self, f.name)
+            if not math.isfinite(x):
+                raise ValueError(f"speed follower {f.name} = {x} must be finite")
+        for n in ("kp", "ki", "kd", "tau_d", "band", "hold_pressure", "v_stop", "v_eps", "i_max",
+                  "a_res0", "a_res2", "ff_gain"):
+            if getattr(self, n) < 0.0:
+                raise ValueError(f"speed follower {n} = {getattr(self, n)} must be >= 0")
+        for n in ("throttle_gain", "throttle_max", "brake_gain", "brake_max", "hold_rate"):
+            if not getattr(self, n) > 0.0:
+                raise ValueError(f"speed follower {n} = {getattr(self, n)} must be > 0")
+
+
+_ORDER = ("kp", "ki", "kd", "tau_d", "throttle_gain", "throttle_max", "brake_gain", "brake_max", "band",
+          "hold_pressure", "hold_rate", "v_stop", "v_eps", "i_max", None, "a_res0", "a_res2", "ff_gain")
+assert len(_ORDER) == NPAR
+
+
+def speed_follower(target_x, target_v, by: str = "time",
+                   params: SpeedFollowerParams | None = None, **kw) -> SpeedFollower:
+    """Build a speed follower for the target table (target_x: times in s or distances in m,
+    strictly increasing; target_v: m/s, >= 0). Parameters: a `SpeedFollowerParams` or keywords."""
+    if params is None:
+        params = SpeedFollowerParams(**kw)
+    elif kw:
+        params = SpeedFollowerParams(**{**asdict(params), **kw})
+    if by not in ("time", "distance"):
+        raise ValueError(f"speed follower target over {by!r}: use 'time' or 'distance'")
+    x = np.array(target_x, dtype=np.float64).reshape(-1)
+    v = np.array(target_v, dtype=np.float64).reshape(-1)
+    if x.size == 0 or x.shape != v.shape:
+        raise ValueError(f"speed follower target table: {x.size} {by} values and {v.size} speeds")
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(v))):
+        raise ValueError("speed follower target table has non-finite entries")
+    if np.any(np.diff(x) <= 0.0):
+        raise ValueError(f"speed follower target {by} values must be strictly increasing")
+    if np.any(v < 0.0):
+        raise ValueError("speed follower target speeds must be >= 0 (no reversing)")
+    par = np.zeros(NPAR)
+    for i, name in enumerate(_ORDER):
+        par[i] = (1.0 if by == "distance" else 0.0) if name is None else getattr(params, name)
+    return SpeedFollower(par, x, v, np.zeros(NST))
+
+
+def reset(sf: SpeedFollower) -> None:
+    sf.st[:] = 0.0
+
+
+@inline_kernel
+def _lookup(x, v, s):
+    """Target value and slope of the piecewise-linear table at s (ends held, slope 0 outside)."""
+    n = x.shape[0]
+    if n == 1 or s <= x[0]:
+        return v[0], 0.0
+    if s >= x[n - 1]:
+        return v[n - 1], 0.0
+    lo = 0
+    hi = n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if x[mid] <= s:
+            lo = mid
+        else:
+            hi = mid
+    slope = (v[hi] - v[lo]) / (x[hi] - x[lo])
+    return v[lo] + slope * (s - x[lo]), slope
+
+
+@kernel
+def speed_follower_step(sf, t, state, out):
+    """Write throttle (out[I_THROTTLE], rad) and brake (out[I_BRAKE], kPa) for time t and the
+    measured state (state[S_SPEED], m/s). Updates the controller state sf.st."""
+    p = sf.par
+    st = sf.st
+    v = state[S_SPEED]
+    if st[ST_INIT] == 0.0 or t < st[ST_T]:
+        st[ST_INIT] = 1.0
+        st[ST_T] = t
+        st[ST_V] = v
+        st[ST_I] = 0.0
+        st[ST_SIDE] = 0.0
+        st[ST_DVF] = 0.0
+        st[ST_DIST] = 0.0
+        st[ST_HOLD] = 0.0
+        st[ST_BRK] = p[P_HOLD_P]  # a car that starts held is held at once, not after a ramp
+    dt = t - st[ST_T]
+    st[ST_DIST] += 0.5 * (v + st[ST_V]) * dt
+    if dt > 0.0:
+        raw = (v - st[ST_V]) / dt
+        st[ST_DVF] += (raw - st[ST_DVF]) * (dt / (p[P_TAU_D] + dt))
+    st[ST_T] = t
+    st[ST_V] = v
+
+    if p[P_BY_DIST] != 0.0:
+        v_ref, slope = _lookup(sf.tab_x, sf.tab_v, st[ST_DIST])
+        a_ref = slope * v_ref
+    else:
+        v_ref, slope = _lookup(sf.tab_x, sf.tab_v, t)
+        a_ref = slope
+    st[ST_VREF] = v_ref
+    st[ST_AREF] = a_ref
+
+    # standstill hold
+    if v_ref <= p[P_V_EPS]:
+        if abs(v) <= p[P_V_STOP]:
+            st[ST_HOLD] = 1.0
+    else:
+        st[ST_HOLD] = 0.0
+    if st[ST_HOLD] != 0.0:
+        brk = min(st[ST_BRK] + p[P_HOLD_RATE] * dt, p[P_HOLD_P])
+        if st[ST_BRK] > p[P_HOLD_P]:
+            brk = max(st[ST_BRK] - p[P_HOLD_RATE] * dt, p[P_HOLD_P])
+        out[I_THROTTLE] = 0.0
+        out[I_BRAKE] = brk
+        st[ST_BRK] = brk
+        st[ST_I] = 0.0
+        st[ST_SIDE] = -1.0
+        st[ST_U] = 0.0
+        return
+
+    e = v_ref - v
+    sgn = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
+    ff = p[P_FF_GAIN] * (a_ref + p[P_A_RES0] * sgn + p[P_A_RES2] * v * abs(v))
+    u = ff + p[P_KP] * e + st[ST_I] - p[P_KD] * st[ST_DVF]
+    st[ST_U] = u
+
+    side = st[ST_SIDE]
+    if side == 0.0:
+        side = 1.0 if u >= 0.0 else -1.0
+    elif side > 0.0 and u < -p[P_BAND]:
+        side = -1.0
+    elif side < 0.0 and u > p[P_BAND]:
+        side = 1.0
+    st[ST_SIDE] = side
+
+    u_hi = p[P_THR_MAX] / p[P_THR_GAIN]
+    u_lo = -p[P_BRK_MAX] / p[P_BRK_GAIN]
+    if side > 0.0:
+        thr = min(max(u, 0.0), u_hi) * p[P_THR_GAIN]
+        brk = 0.0
+    else:
+        thr = 0.0
+        brk = min(max(-u, 0.0), -u_lo) * p[P_BRK_GAIN]
+    out[I_THROTTLE] = thr
+    out[I_BRAKE] = brk
+    st[ST_BRK] = brk
+
+    # anti-windup: conditional integration at the pedal limits, then clip
+    saturated = (side > 0.0 and u >= u_hi and e > 0.0) or (side < 0.0 and u <= u_lo and e < 0.0)
+    if not saturated:
+        st[ST_I] += p[P_KI] * e * dt
+    if st[ST_I] > p[P_I_MAX]:
+        st[ST_I] = p[P_I_MAX]
+    elif st[ST_I] < -p[P_I_MAX]:
+        st[ST_I] = -p[P_I_MAX]

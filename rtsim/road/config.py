@@ -1,0 +1,167 @@
+"""Road configuration files (TOML), validated with pydantic, built into `Road` arrays.
+
+```toml
+type = "flat"                 # z = height everywhere
+height = 0.0                  # m
+mu = 1.0                      # friction scale, (0, 2]
+rolling_resistance = 0.010    # rolling-resistance coefficient, [0, 0.1]
+```
+```toml
+type = "grade"                # plane of constant grade
+grade = 0.05                  # rise over run along the heading, [-0.5, 0.5]; > 0 uphill
+heading_deg = 0.0             # direction of travel the grade refers to, degrees from +x towards +y
+origin = [0.0, 0.0, 0.0]      # a point (x, y, z) of the surface, m
+```
+```toml
+type = "mesh"                 # triangle mesh from a topographic survey (rtsim.road.survey)
+survey = "campus_survey.csv"  # CSV x, y, z [, mu, rolling_resistance]; relative to this file
+grid_spacing = 0.5            # m, [0.05, 10]
+alpha_radius = 3.0            # optional, m: outline radius (default: 2 x median point spacing)
+mu = 1.0                      # per-triangle values when the survey has no such column
+rolling_resistance = 0.010
+```
+Every error is a ConfigError naming the file, the key, the value and what is allowed.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal, Union
+
+import annotated_types as at
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+
+from rtsim.errors import ConfigError
+from rtsim.road.model import MU_RANGE, RR_RANGE, Road, make_grade, make_mesh, make_plane
+from rtsim.road.survey import read_survey, survey_to_mesh
+
+_MU = Field(1.0, gt=MU_RANGE[0], le=MU_RANGE[1], allow_inf_nan=False, strict=True,
+            description="friction scale of the road surface")
+_RR = Field(0.010, ge=RR_RANGE[0], le=RR_RANGE[1], allow_inf_nan=False, strict=True,
+            description="rolling-resistance coefficient")
+
+
+class _Road(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class FlatRoadConfig(_Road):
+    type: Literal["flat"]
+    height: float = Field(0.0, ge=-1e4, le=1e4, allow_inf_nan=False, strict=True,
+                          description="surface height, m")
+    mu: float = _MU
+    rolling_resistance: float = _RR
+
+
+class GradeRoadConfig(_Road):
+    type: Literal["grade"]
+    grade: float = Field(ge=-0.5, le=0.5, allow_inf_nan=False, strict=True,
+                         description="rise over run along the heading, positive uphill")
+    heading_deg: float = Field(0.0, ge=-360.0, le=360.0, allow_inf_nan=False, strict=True,
+                               description="direction of travel, degrees from +x towards +y")
+    origin: tuple[float, float, float] = Field((0.0, 0.0, 0.0),
+                                               description="a point (x, y, z) of the surface, m")
+    mu: float = _MU
+    rolling_resistance: float = _RR
+
+
+class MeshRoadConfig(_Road):
+    type: Literal["mesh"]
+    survey: str = Field(min_length=1, strict=True, description="survey CSV path, relative to the TOML file")
+    grid_spacing: float = Field(ge=0.05, le=10.0, allow_inf_nan=False, strict=True,
+                                description="grid spacing, m")
+    alpha_radius: float | None = Field(None, gt=0.0, le=1e3, allow_inf_nan=False, strict=True,
+                                       description="alpha-shape radius, m (default from point spacing)")
+    mu: float = _MU
+    rolling_resistance: float = _RR
+
+
+RoadConfig = Annotated[Union[FlatRoadConfig, GradeRoadConfig, MeshRoadConfig],
+                       Field(discriminator="type")]
+_ADAPTER = TypeAdapter(RoadConfig)
+_KINDS = {"flat": FlatRoadConfig, "grade": GradeRoadConfig, "mesh": MeshRoadConfig}
+
+
+def _allowed(model, name: str) -> str:
+    """'allowed: lo <= value <= hi; description' for a field of a config model."""
+    field = model.model_fields.get(name)
+    if field is None:
+        return ""
+    bounds = []
+    for m in field.metadata:
+        if isinstance(m, at.Gt):
+            bounds.append(f"> {m.gt:g}")
+        elif isinstance(m, at.Ge):
+            bounds.append(f">= {m.ge:g}")
+        elif isinstance(m, at.Lt):
+            bounds.append(f"< {m.lt:g}")
+        elif isinstance(m, at.Le):
+            bounds.append(f"<= {m.le:g}")
+    parts = []
+    if bounds:
+        parts.append("allowed: " + " and ".join(bounds))
+    if field.description:
+        parts.append(field.description)
+    return f" ({'; '.join(parts)})" if parts else ""
+
+
+def _message(src: str, raw: dict, exc: ValidationError) -> str:
+    errors = exc.errors(include_url=False)
+    e = errors[0]
+    kind = raw.get("type") if isinstance(raw, dict) else None
+    model = _KINDS.get(kind) if isinstance(kind, str) else None
+    loc = list(e["loc"])
+    if model is not None and loc and loc[0] == kind:
+        loc = loc[1:]
+    key = ".".join(str(p) for p in loc)
+    more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
+    etype = e["type"]
+    if etype == "union_tag_not_found":
+        return f"{src}: key 'type' is missing (allowed: 'flat', 'grade', 'mesh'){more}"
+    if etype == "union_tag_invalid":
+        return f"{src}: key 'type' = {kind!r} is not a road type (allowed: 'flat', 'grade', 'mesh'){more}"
+    if etype == "extra_forbidden":
+        allowed = ", ".join(model.model_fields) if model else ""
+        return f"{src}: unknown key '{key}' (allowed keys for type = {kind!r}: {allowed}){more}"
+    name = str(loc[0]) if loc else ""
+    hint = _allowed(model, name) if model else ""
+    if etype == "missing":
+        return f"{src}: key '{key}' is missing{hint}{more}"
+    return f"{src}: key '{key}' = {e.get('input')!r}: {e['msg'].lower()}{hint}{more}"
+
+
+def read_road_config(path) -> FlatRoadConfig | GradeRoadConfig | MeshRoadConfig:
+    """Parse and validate a road TOML file."""
+    path = Path(path)
+    src = str(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{src}: road file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{src}: not valid TOML: {exc}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{src}: cannot read the road file: {exc}") from None
+    try:
+        return _ADAPTER.validate_python(raw)
+    except ValidationError as exc:
+        raise ConfigError(_message(src, raw, exc)) from None
+
+
+def load_road(path) -> Road:
+    """Read a road TOML file and build its arrays (survey paths are relative to the TOML file)."""
+    path = Path(path)
+    cfg = read_road_config(path)
+    if isinstance(cfg, FlatRoadConfig):
+        return make_plane(cfg.height, cfg.mu, cfg.rolling_resistance)
+    if isinstance(cfg, GradeRoadConfig):
+        return make_grade(cfg.grade, math.radians(cfg.heading_deg), cfg.origin, cfg.mu,
+                          cfg.rolling_resistance)
+    survey_path = path.parent / cfg.survey
+    if not survey_path.is_file():
+        raise ConfigError(f"{path}: key 'survey' = {cfg.survey!r}: file not found ({survey_path})")
+    survey = read_survey(survey_path)
+    mesh = survey_to_mesh(survey, cfg.grid_spacing, cfg.alpha_radius, cfg.mu, cfg.rolling_resistance)
+    return make_mesh(mesh.vertices, mesh.triangles, mesh.tri_mu, mesh.tri_rr,
+                     cell_size=cfg.grid_spacing, source=str(survey_path))

@@ -1,0 +1,254 @@
+"""Small kernels shared by the by-wire subsystems (brake pressure, throttle plate, steering motor), and
+the config plumbing those subsystems share.
+
+A *lag block* is the standard actuator element here: an optional transport delay of a whole number of
+steps, then a first-order lag discretised exactly for a held input (zero-order hold), then a rate limit,
+with the command and the output saturated to [min, max]. It lives inside the owner's arrays:
+
+- parameters: ``LAG_NPAR`` floats at an offset ``ip`` of the owner's parameter array
+  (``LAG_TAU`` time constant s, ``LAG_RATE`` rate limit in output units per s, ``LAG_LO``/``LAG_HI``
+  output bounds, ``LAG_DELAY`` transport delay s, used only to size the state);
+- state: ``3 + nbuf`` floats at an offset ``is_`` of the owner's state array (``LAG_Y`` output,
+  ``LAG_HEAD`` ring-buffer read/write position, ``LAG_NBUF`` delay in steps, then the ring buffer).
+
+The delay in steps is fixed when the state is built, as ``round(delay / dt)``; a block with no delay has
+a 3-float state. Because the buffer has variable length, an owner keeps at most one delayed block, at
+the end of its state array.
+
+Step response of the lag alone: y_k = 1 - exp(-k dt / tau), so the output reaches 63.2 % of a step
+exactly at t = tau whatever dt is. A zero time constant makes the lag a pass-through.
+"""
+from __future__ import annotations
+
+import math
+import typing
+from collections.abc import Mapping
+from dataclasses import MISSING, dataclass, fields, is_dataclass
+
+import numpy as np
+
+from rtsim.errors import ConfigError
+from rtsim.jit import inline_kernel, kernel
+
+# Lag block, parameter slots (relative to the block's offset in the owner's parameter array).
+LAG_TAU = 0
+LAG_RATE = 1
+LAG_LO = 2
+LAG_HI = 3
+LAG_DELAY = 4
+LAG_NPAR = 5
+
+# Lag block, state slots (relative to the block's offset in the owner's state array).
+LAG_Y = 0
+LAG_HEAD = 1
+LAG_NBUF = 2
+LAG_BUF = 3
+
+
+# ----------------------------------------------------------------------------------------- kernels
+@inline_kernel
+def saturate(x, lo, hi):
+    """x clipped to [lo, hi]."""
+    if x < lo:
+        return lo
+    if x > hi:
+        return hi
+    return x
+
+
+@inline_kernel
+def rate_limit(y, target, rate, dt):
+    """Move from y towards target by at most rate * dt (rate may be inf)."""
+    step = rate * dt
+    d = target - y
+    if d > step:
+        return y + step
+    if d < -step:
+        return y - step
+    return target
+
+
+@inline_kernel
+def lag_alpha(tau, dt):
+    """Exact zero-order-hold gain of a first-order lag over one step: 1 - exp(-dt / tau)."""
+    if tau <= 0.0:
+        return 1.0
+    return 1.0 - math.exp(-dt / tau)
+
+
+@kernel
+def delay_push(s, is_, u):
+    """Write u into the block's ring buffer and return the value written nbuf steps ago (u itself when
+    the block has no delay)."""
+    n = int(s[is_ + LAG_NBUF])
+    if n <= 0:
+        return u
+    h = int(s[is_ + LAG_HEAD])
+    out = s[is_ + LAG_BUF + h]
+    s[is_ + LAG_BUF + h] = u
+    h += 1
+    if h >= n:
+        h = 0
+    s[is_ + LAG_HEAD] = h
+    return out
+
+
+@kernel
+def lag_step(p, ip, s, is_, u, dt):
+    """Advance the lag block (parameters at p[ip:], state at s[is_:]) by one step with command u;
+    return the new output."""
+    lo = p[ip + LAG_LO]
+    hi = p[ip + LAG_HI]
+    ud = delay_push(s, is_, saturate(u, lo, hi))
+    y = s[is_ + LAG_Y]
+    target = y + (ud - y) * lag_alpha(p[ip + LAG_TAU], dt)
+    y = saturate(rate_limit(y, target, p[ip + LAG_RATE], dt), lo, hi)
+    s[is_ + LAG_Y] = y
+    return y
+
+
+# ------------------------------------------------------------------------------------ python side
+def delay_steps(delay: float, dt: float) -> int:
+    """The transport delay in whole steps: round(delay / dt)."""
+    if dt <= 0.0:
+        raise ValueError(f"time step must be positive, got {dt}")
+    return int(round(max(delay, 0.0) / dt))
+
+
+def lag_params(tau: float = 0.0, rate: float = math.inf, lo: float = -math.inf,
+               hi: float = math.inf, delay: float = 0.0) -> np.ndarray:
+    """A standalone lag-block parameter array (LAG_NPAR floats)."""
+    p = np.empty(LAG_NPAR)
+    p[LAG_TAU], p[LAG_RATE], p[LAG_LO], p[LAG_HI], p[LAG_DELAY] = tau, rate, lo, hi, delay
+    return p
+
+
+def lag_state_size(p: np.ndarray, ip: int, dt: float) -> int:
+    """Number of state floats of the lag block whose parameters sit at p[ip:], for step dt."""
+    return LAG_BUF + delay_steps(float(p[ip + LAG_DELAY]), dt)
+
+
+def lag_init(p: np.ndarray, ip: int, s: np.ndarray, is_: int, dt: float, y0: float) -> None:
+    """Initialise the block's state at rest at output y0 (buffer filled with y0)."""
+    n = delay_steps(float(p[ip + LAG_DELAY]), dt)
+    if s.shape[0] < is_ + LAG_BUF + n:
+        raise ValueError(f"state array too short for a lag block with {n} delay steps")
+    y0 = min(max(y0, float(p[ip + LAG_LO])), float(p[ip + LAG_HI]))
+    s[is_ + LAG_Y] = y0
+    s[is_ + LAG_HEAD] = 0.0
+    s[is_ + LAG_NBUF] = float(n)
+    s[is_ + LAG_BUF:is_ + LAG_BUF + n] = y0
+
+
+def lag_state(p: np.ndarray, dt: float, y0: float = 0.0) -> np.ndarray:
+    """A standalone lag-block state array for the parameters p (from lag_params)."""
+    s = np.zeros(lag_state_size(p, 0, dt))
+    lag_init(p, 0, s, 0, dt, y0)
+    return s
+
+
+# ------------------------------------------------------------------------------------------ config
+def check(ok: bool, where: str, key: str, value, allowed: str) -> None:
+    """Raise ConfigError naming the key, the offending value and what is allowed, unless ok."""
+    if not ok:
+        raise ConfigError(f"{where}.{key} = {value!r}: {allowed}")
+
+
+def _coerce(tp, value, where: str, base=None):
+    origin = typing.get_origin(tp)
+    if is_dataclass(tp):
+        if base is not None and isinstance(value, Mapping):
+            # a partial table overrides the owner's default for this section, key by key
+            merged = {f.name: getattr(base, f.name) for f in fields(base)}
+            merged.update(value)
+            value = merged
+        return from_mapping(tp, value, where)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where} = {value!r}: expected true or false")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise ConfigError(f"{where} = {value!r}: expected an integer")
+        return int(value)
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise ConfigError(f"{where} = {value!r}: expected a number")
+        v = float(value)
+        if math.isnan(v):
+            raise ConfigError(f"{where} = nan: expected a number")
+        return v
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where} = {value!r}: expected a string")
+        return value
+    if origin is typing.Literal:
+        allowed = typing.get_args(tp)
+        if value not in allowed:
+            raise ConfigError(f"{where} = {value!r}: expected one of {list(allowed)}")
+        return value
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+            raise ConfigError(f"{where} = {value!r}: expected a list")
+        items = list(value)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_coerce(args[0], v, f"{where}[{i}]") for i, v in enumerate(items))
+        if len(items) != len(args):
+            raise ConfigError(f"{where} = {value!r}: expected a list of {len(args)} items")
+        return tuple(_coerce(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, items)))
+    raise TypeError(f"{where}: unsupported config field type {tp!r}")
+
+
+def _default_of(f):
+    if f.default is not MISSING:
+        return f.default
+    if f.default_factory is not MISSING:
+        return f.default_factory()
+    return None
+
+
+def from_mapping(cls, data, where: str):
+    """Build the config dataclass `cls` from a mapping (a TOML table), checking key names, types and,
+    through the class's ``validate(where)`` method, values. An instance of `cls` is validated and
+    returned as is; None gives the defaults. Errors are ConfigError naming ``where.key``."""
+    if isinstance(data, cls):
+        obj = data
+    else:
+        if data is None:
+            data = {}
+        if not isinstance(data, Mapping):
+            raise ConfigError(f"{where}: expected a table, got {type(data).__name__}")
+        hints = typing.get_type_hints(cls, include_extras=False)
+        flds = {f.name: f for f in fields(cls)}
+        names = list(flds)
+        unknown = sorted(set(data) - set(names))
+        if unknown:
+            raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: {names}")
+        kw = {k: _coerce(hints[k], v, f"{where}.{k}", _default_of(flds[k])) for k, v in data.items()}
+        obj = cls(**kw)
+    validate = getattr(obj, "validate", None)
+    if validate is not None:
+        validate(where)
+    return obj
+
+
+@dataclass(frozen=True)
+class LagConfig:
+    """A by-wire actuator as a lag block. Units are those of the actuated quantity (kPa for brake
+    pressure, rad for the throttle plate, N*m for a motor torque)."""
+    time_constant: float = 0.0      # s, first-order lag (0: none)
+    rate_limit: float = math.inf    # units/s, largest output rate (inf: none)
+    delay: float = 0.0              # s, pure transport delay, rounded to whole steps
+    min: float = -math.inf          # units, lower bound of command and output
+    max: float = math.inf           # units, upper bound of command and output
+
+    def validate(self, where: str) -> None:
+        check(self.time_constant >= 0.0 and math.isfinite(self.time_constant), where,
+              "time_constant", self.time_constant, "expected a finite time >= 0 s")
+        check(self.rate_limit > 0.0, where, "rate_limit", self.rate_limit, "expected a rate > 0 (inf: none)")
+        check(0.0 <= self.delay <= 1.0, where, "delay", self.delay, "expected 0 <= delay <= 1 s")
+        check(self.min < self.max, where, "max", self.max, f"expected max > min ({self.min})")
+
+    def params(self) -> np.ndarray:
+        return lag_params(self.time_constant, self.rate_limit, self.min, self.max, self.delay)

@@ -1,0 +1,318 @@
+"""The vehicle's forces inside the ALI3-P step, and the vehicle step itself.
+
+`vehicle_forces` runs at every Newton iteration (so tyre, suspension, brake and aero forces are
+implicit in the step) and adds to the generalized forces and, when the iteration refactors, their
+stiffness and damping to W:
+
+- tyres: disc-on-road contact (rtsim.road.query.wheel_contact), vertical force from the radial
+  deflection, transient-slip MF 5.2 (or linear) forces at the contact point P. The force acts on the
+  wheel centre W; its moment about W, (P - W) x F + Mz n + My a, acts on the wheel: its component on
+  the spin axis drives the spin coordinate, and the whole moment reaches the knuckle, i.e. the chassis
+  axes (Q_e += M x e / 2 for e = u, v, w) and the travel and rack coordinates through the knuckle's
+  rotation rates with z and s (the kinematic polynomials);
+- suspension spring (with bump stop) and damper along the element, whose length is a polynomial of
+  (z, s): Q_z = F dL/dz, Q_s = F dL/ds; anti-roll bars on the travel difference;
+- brakes: torque on the spin coordinate with stiction (rtsim.vehicle.brake), reaction on the knuckle;
+- drive torques (set per step by the powertrain) on the spin coordinate, reacting on the chassis;
+- aerodynamic drag at the centre of mass.
+"""
+from __future__ import annotations
+
+from collections import namedtuple
+from math import sqrt
+
+import numpy as np
+
+from rtsim.jit import inline_kernel, kernel
+from rtsim.mbs.constraints import poly_eval
+from rtsim.mbs.envelope import add_entry
+from rtsim.mbs.integrator import (
+    CONTINUE, CONVERGED, finish_prepare, finish_project, newton_failed, newton_prepare, newton_update,
+    step_begin, wants_tangent,
+)
+from rtsim.mbs.model import ERR_NONFINITE_FORCE, IS_MAX_ITER, OK, ST_FAIL_INDEX
+from rtsim.road.query import CT_D, CT_EX, CT_GAMMA, CT_MU, CT_NX, CT_PX, CT_RR, NCONTACT, wheel_contact
+
+from .brake import BI_SIZE, BO_SIZE, brake_commit, brake_step, brake_wheel_torque
+from .model import (
+    CI_PHI, CI_S, CI_WX, CI_Z, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE, SP_K, SP_PARTNER,
+)
+from .tyre.magic_formula import (advance_deflections, effective_rolling_radius, mf52_forces, transient_slip,
+                                 vertical_force)
+from .tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_DAMPING, P_VERTICAL_STIFFNESS
+
+# Per-tyre outputs (VehicleData.tyre[w, :]) for logging and sensors.
+TO_FX, TO_FY, TO_FZ, TO_MZ, TO_KAPPA, TO_ALPHA, TO_PX, TO_PY, TO_PZ, TO_VX, TO_GAMMA, TO_OMEGA, TO_RE, \
+    TO_VSY = range(14)
+NTO = 14
+
+VehicleData = namedtuple("VehicleData", [
+    "slip",        # (4, 2) tyre contact deflections (transient slip states), m
+    "drive",       # (4,) drive torques on the wheels, N m (set per step)
+    "tyre",        # (4, NTO) tyre outputs of the last force evaluation
+    "contact",     # (NCONTACT,) scratch of the contact query
+    "brake_torque",  # (4,) brake torque of the last evaluation, N m
+    "theta", "omega",  # (4,) wheel spin angles and rates handed to the brake commit
+    "brake_in", "brake_out",  # brake kernel input (BI_SIZE) and outputs (BO_SIZE)
+])
+
+
+def make_vehicle_data() -> VehicleData:
+    return VehicleData(slip=np.zeros((4, 2)), drive=np.zeros(4), tyre=np.zeros((4, NTO)),
+                       contact=np.zeros(NCONTACT), brake_torque=np.zeros(4), theta=np.zeros(4),
+                       omega=np.zeros(4), brake_in=np.zeros(BI_SIZE), brake_out=np.zeros(BO_SIZE))
+
+
+@inline_kernel
+def _vec(q, k):
+    return q[k], q[k + 1], q[k + 2]
+
+
+@inline_kernel
+def _cross(a0, a1, a2, b0, b1, b2):
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@inline_kernel
+def _body_to_world(veh, q, x0, x1, x2):
+    """[u v w] x for a body-frame vector x."""
+    ci = veh.chassis_idx
+    return (x0 * q[ci[3]] + x1 * q[ci[6]] + x2 * q[ci[9]],
+            x0 * q[ci[4]] + x1 * q[ci[7]] + x2 * q[ci[10]],
+            x0 * q[ci[5]] + x1 * q[ci[8]] + x2 * q[ci[11]])
+
+
+@inline_kernel
+def chassis_omega(veh, q, qd):
+    """Angular velocity of the chassis frame: omega = (u x u' + v x v' + w x w') / 2."""
+    ci = veh.chassis_idx
+    o0 = o1 = o2 = 0.0
+    for k in (3, 6, 9):
+        c = _cross(q[ci[k]], q[ci[k + 1]], q[ci[k + 2]], qd[ci[k]], qd[ci[k + 1]], qd[ci[k + 2]])
+        o0 += 0.5 * c[0]
+        o1 += 0.5 * c[1]
+        o2 += 0.5 * c[2]
+    return o0, o1, o2
+
+
+@inline_kernel
+def _add_chassis_moment(veh, q, force, m0, m1, m2):
+    """Generalized forces of a moment M on the chassis frame: Q_e += M x e / 2 for e = u, v, w."""
+    ci = veh.chassis_idx
+    for k in (3, 6, 9):
+        c = _cross(m0, m1, m2, q[ci[k]], q[ci[k + 1]], q[ci[k + 2]])
+        force[ci[k]] += 0.5 * c[0]
+        force[ci[k + 1]] += 0.5 * c[1]
+        force[ci[k + 2]] += 0.5 * c[2]
+
+
+@inline_kernel
+def _poly3(coef, exps, z, s):
+    """A body-frame 3-vector polynomial and its z, s derivatives: (v0, v1, v2)."""
+    a = poly_eval(coef[0], exps, z, s)
+    b = poly_eval(coef[1], exps, z, s)
+    c = poly_eval(coef[2], exps, z, s)
+    return a[0], b[0], c[0]
+
+
+@kernel
+def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc):
+    """Add the vehicle's forces to d.force (and with `tangent` their K, C to d.w_env, scaled by
+    bq = h^2/4 and hc = h/2). Returns the index of a non-finite generalized force, or -1."""
+    q = d.q
+    qd = d.qd
+    f = d.force
+    exps = m.poly_exp
+    om = chassis_omega(veh, q, qd)
+    r0 = tp[P_UNLOADED_RADIUS]
+    for i in range(4):
+        ix = veh.corner_idx[i]
+        kz = ix[CI_Z]
+        ks = ix[CI_S]
+        kp = ix[CI_PHI]
+        kw = ix[CI_WX]
+        z = q[kz]
+        zd = qd[kz]
+        s = q[ks] if ks >= 0 else 0.0
+        sd = qd[ks] if ks >= 0 else 0.0
+        # ---- suspension spring, bump stop, damper ------------------------------------------------
+        sp = veh.susp[i]
+        length, lz, ls, _a, _b, _c = poly_eval(veh.spring_coef[i], exps, z, s)
+        ldot = lz * zd + ls * sd
+        k_eff = sp[SP_K]
+        fsp = sp[SP_K] * (sp[SP_FREE] - length)
+        if length < sp[SP_BS_LEN]:
+            fsp += sp[SP_BS_K] * (sp[SP_BS_LEN] - length)
+            k_eff += sp[SP_BS_K]
+        c = sp[SP_C_BUMP] if ldot < 0.0 else sp[SP_C_REB]
+        fsp -= c * ldot
+        f[kz] += fsp * lz
+        if ks >= 0:
+            f[ks] += fsp * ls
+        # anti-roll bar on the travel difference with the other wheel of the axle
+        partner = veh.corner_idx[int(sp[SP_PARTNER]), CI_Z]
+        f[kz] -= sp[SP_ARB] * (z - q[partner])
+        if tangent:
+            add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * (k_eff * lz * lz + sp[SP_ARB]) + hc * c * lz * lz)
+            add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, partner, -0.5 * bq * sp[SP_ARB])
+        # ---- kinematics of the corner ----------------------------------------------------------------
+        ab = _poly3(veh.axis_coef[i], exps, z, s)
+        ax, ay, az = _body_to_world(veh, q, ab[0], ab[1], ab[2])
+        na = sqrt(ax * ax + ay * ay + az * az)
+        ax /= na
+        ay /= na
+        az /= na
+        tz = _poly3(veh.rotz_coef[i], exps, z, s)
+        tzx, tzy, tzz = _body_to_world(veh, q, tz[0], tz[1], tz[2])
+        ts = _poly3(veh.rots_coef[i], exps, z, s)
+        tsx, tsy, tsz = _body_to_world(veh, q, ts[0], ts[1], ts[2])
+        okx = om[0] + tzx * zd + tsx * sd        # knuckle angular velocity
+        oky = om[1] + tzy * zd + tsy * sd
+        okz = om[2] + tzz * zd + tsz * sd
+        wx, wy, wz = _vec(q, kw)
+        vwx, vwy, vwz = _vec(qd, kw)
+        omega = qd[kp] + okx * ax + oky * ay + okz * az      # absolute spin rate about a
+        # ---- brake (implicit, with stiction) and drive torques on the spin coordinate --------------
+        tb, dtdw, dtdth = brake_wheel_torque(bp, bs, i, q[kp], qd[kp])
+        vd.brake_torque[i] = tb
+        f[kp] += tb + vd.drive[i]
+        f[kz] += vd.drive[i] * (ax * tzx + ay * tzy + az * tzz)
+        if tangent:
+            add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, -bq * dtdth - hc * dtdw)
+        # ---- tyre --------------------------------------------------------------------------------
+        ct = vd.contact
+        wheel_contact(road, wx, wy, wz, ax, ay, az, r0, ct)
+        out = vd.tyre[i]
+        defl = ct[CT_D]
+        if not defl > 0.0:
+            for k in range(NTO):
+                out[k] = 0.0
+            continue
+        nx, ny, nz = ct[CT_NX], ct[CT_NX + 1], ct[CT_NX + 2]
+        ex, ey, ez = ct[CT_EX], ct[CT_EX + 1], ct[CT_EX + 2]
+        lyx, lyy, lyz = _cross(nx, ny, nz, ex, ey, ez)
+        px, py, pz = ct[CT_PX] - wx, ct[CT_PX + 1] - wy, ct[CT_PX + 2] - wz     # P - W
+        gamma = ct[CT_GAMMA]
+        rate = -(vwx * nx + vwy * ny + vwz * nz)
+        fz = vertical_force(tp, defl, rate)
+        vx = vwx * ex + vwy * ey + vwz * ez
+        rv = _cross(okx, oky, okz, px, py, pz)
+        vsy = (vwx + rv[0]) * lyx + (vwy + rv[1]) * lyy + (vwz + rv[2]) * lyz
+        re = effective_rolling_radius(tp, fz)
+        kappa, alpha = transient_slip(tp, vd.slip, i, fz, gamma, vx, vsy, omega, re)
+        fx, fy, mz, my = mf52_forces(tp, fz, kappa, alpha, gamma, vx, ct[CT_MU])
+        rr = ct[CT_RR] * fz * re
+        my -= rr if vx > 0.1 else (-rr if vx < -0.1 else rr * vx / 0.1)
+        fvx = fx * ex + fy * lyx + fz * nx
+        fvy = fx * ey + fy * lyy + fz * ny
+        fvz = fx * ez + fy * lyz + fz * nz
+        f[kw] += fvx
+        f[kw + 1] += fvy
+        f[kw + 2] += fvz
+        mm = _cross(px, py, pz, fvx, fvy, fvz)
+        m0 = mm[0] + mz * nx + my * ax
+        m1 = mm[1] + mz * ny + my * ay
+        m2 = mm[2] + mz * nz + my * az
+        f[kp] += m0 * ax + m1 * ay + m2 * az
+        _add_chassis_moment(veh, q, f, m0, m1, m2)
+        f[kz] += m0 * tzx + m1 * tzy + m2 * tzz
+        if ks >= 0:
+            f[ks] += m0 * tsx + m1 * tsy + m2 * tsz
+        out[TO_FX] = fx
+        out[TO_FY] = fy
+        out[TO_FZ] = fz
+        out[TO_MZ] = mz
+        out[TO_KAPPA] = kappa
+        out[TO_ALPHA] = alpha
+        out[TO_PX] = ct[CT_PX]
+        out[TO_PY] = ct[CT_PX + 1]
+        out[TO_PZ] = ct[CT_PX + 2]
+        out[TO_VX] = vx
+        out[TO_GAMMA] = gamma
+        out[TO_OMEGA] = omega
+        out[TO_RE] = re
+        out[TO_VSY] = vsy
+        if tangent:
+            kzt = tp[P_VERTICAL_STIFFNESS]
+            czt = tp[P_VERTICAL_DAMPING]
+            nvec = (nx, ny, nz)
+            for a in range(3):
+                for b in range(a, 3):
+                    val = bq * kzt * nvec[a] * nvec[b] + hc * czt * nvec[a] * nvec[b]
+                    add_entry(d.w_env, m.first, m.ptr, m.pinv, kw + a, kw + b, val)
+    # ---- aerodynamic drag at the centre of mass -------------------------------------------------
+    ci = veh.chassis_idx
+    vx, vy, vz = qd[ci[0]], qd[ci[1]], qd[ci[2]]
+    speed = sqrt(vx * vx + vy * vy + vz * vz)
+    cd = 0.5 * veh.aero[1] * veh.aero[0] * speed
+    f[ci[0]] -= cd * vx
+    f[ci[1]] -= cd * vy
+    f[ci[2]] -= cd * vz
+    if tangent and speed > 0.0:
+        for a in range(3):
+            add_entry(d.w_env, m.first, m.ptr, m.pinv, ci[a], ci[a], hc * 2.0 * cd)
+    for i in range(m.nq):
+        if not np.isfinite(f[i]):
+            return i
+    return -1
+
+
+@kernel
+def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, h):
+    """One ALI3-P step of the vehicle: the multibody stages with the vehicle's forces added."""
+    bq = 0.25 * h * h
+    hc = 0.5 * h
+    step_begin(m, d, h)
+    for _ in range(m.iset[IS_MAX_ITER]):
+        status = newton_prepare(m, d, h)
+        if status != OK:
+            return status
+        tangent = wants_tangent(m, d)
+        bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc)
+        if bad >= 0:
+            d.stats[ST_FAIL_INDEX] = bad
+            return ERR_NONFINITE_FORCE
+        status = newton_update(m, d, h)
+        if status == CONVERGED:
+            break
+        if status != CONTINUE:
+            return status
+    else:
+        return newton_failed(m, d)
+    status = finish_prepare(m, d, h)
+    if status != OK:
+        return status
+    bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, True, bq, hc)
+    if bad >= 0:
+        d.stats[ST_FAIL_INDEX] = bad
+        return ERR_NONFINITE_FORCE
+    return finish_project(m, d, h)
+
+
+@kernel
+def vehicle_step(m, d, veh, vd, road, tp, bp, bs, h):
+    """A full vehicle step: brake pressures to t + h, the multibody step with all forces implicit,
+    then the between-step commits (brake stick/slide modes, tyre contact deflections)."""
+    brake_step(bp, bs, vd.brake_in, h, vd.brake_out)
+    status = vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, h)
+    if status != OK:
+        return status
+    for i in range(4):
+        kp = veh.corner_idx[i, CI_PHI]
+        vd.theta[i] = d.q[kp]
+        vd.omega[i] = d.qd[kp]
+    brake_commit(bp, bs, vd.theta, vd.omega)
+    for i in range(4):
+        t = vd.tyre[i]
+        advance_deflections(tp, vd.slip, i, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY], t[TO_OMEGA], t[TO_RE], h)
+    return OK
+
+
+@kernel
+def vehicle_advance(m, d, veh, vd, road, tp, bp, bs, h, nsteps):
+    """nsteps vehicle steps with the inputs held (benchmarks, settling). Returns (status, steps done)."""
+    for n in range(nsteps):
+        status = vehicle_step(m, d, veh, vd, road, tp, bp, bs, h)
+        if status != OK:
+            return status, n
+    return OK, nsteps

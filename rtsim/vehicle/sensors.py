@@ -1,0 +1,125 @@
+"""The prototype's sensors (the seed's Table 1) as channels in SI units (rtsim.channels.SENSORS), computed
+from the multibody state, and an optional sensor model per channel: bias, white noise, quantisation
+and a transport delay (all off by default).
+
+Inertial channels at the IMU mounting point rho (body frame, from the centre of mass):
+  a = r'' + alpha x rho + omega x (omega x rho),  accel = R^T (a - g)   (specific force, body axes)
+  gyro = R^T omega,  with omega = (u x u' + v x v' + w x w') / 2 and alpha = (u x u'' + ...) / 2
+  for the chassis frame R = [u v w]. Inclinometers: roll = atan2(v_z, w_z) (positive right side
+  down), pitch = asin(-u_z) (positive nose down).
+Steer angles: the heading of each front wheel's spin axis in the body frame, delta = atan2(-a_x, a_y).
+"""
+from __future__ import annotations
+
+from math import asin, atan2, floor
+
+import numpy as np
+
+from rtsim.channels import SENSOR_NAMES
+from rtsim.jit import kernel
+from rtsim.mbs.constraints import poly_eval
+
+from .model import CI_PHI, CI_S, CI_Z
+
+# channel indices, in rtsim.channels.SENSOR_NAMES order
+(S_ACCEL_X, S_ACCEL_Y, S_ACCEL_Z, S_GYRO_X, S_GYRO_Y, S_GYRO_Z, S_ROLL, S_PITCH, S_WHEEL_FL, S_WHEEL_FR,
+ S_WHEEL_RL, S_WHEEL_RR, S_BRAKE_PRESSURE, S_SW_ANGLE, S_STEER_FL, S_STEER_FR, S_ENGINE_SPEED,
+ S_STEERING_TORQUE, S_THROTTLE, S_WHEEL_TORQUE_RL, S_WHEEL_TORQUE_RR) = range(21)
+NSENSOR = 21
+assert len(SENSOR_NAMES) == NSENSOR and SENSOR_NAMES[S_WHEEL_TORQUE_RR] == "wheel_torque_rr"
+
+# subsystem signals handed to the sensors (Signals array)
+SG_BRAKE_PRESSURE, SG_SW_ANGLE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_THROTTLE, SG_TORQUE_RL, SG_TORQUE_RR = range(7)
+NSIGNAL = 7
+
+# sensor model parameters per channel
+SM_BIAS, SM_NOISE, SM_QUANTUM, SM_DELAY_STEPS = range(4)
+NSM = 4
+G_WORLD_Z = -9.81
+
+
+@kernel
+def true_sensors(m, d, veh, signals, out):
+    """Noise-free channel values of the current state into out[0:NSENSOR]."""
+    q, qd, qdd = d.q, d.qd, d.qdd
+    ci = veh.chassis_idx
+    om0 = om1 = om2 = 0.0
+    al0 = al1 = al2 = 0.0
+    for k in (3, 6, 9):
+        e0, e1, e2 = q[ci[k]], q[ci[k + 1]], q[ci[k + 2]]
+        d0, d1, d2 = qd[ci[k]], qd[ci[k + 1]], qd[ci[k + 2]]
+        a0, a1, a2 = qdd[ci[k]], qdd[ci[k + 1]], qdd[ci[k + 2]]
+        om0 += 0.5 * (e1 * d2 - e2 * d1)
+        om1 += 0.5 * (e2 * d0 - e0 * d2)
+        om2 += 0.5 * (e0 * d1 - e1 * d0)
+        al0 += 0.5 * (e1 * a2 - e2 * a1)
+        al1 += 0.5 * (e2 * a0 - e0 * a2)
+        al2 += 0.5 * (e0 * a1 - e1 * a0)
+    ux, uy, uz = q[ci[3]], q[ci[4]], q[ci[5]]
+    vx, vy, vz = q[ci[6]], q[ci[7]], q[ci[8]]
+    wx, wy, wz = q[ci[9]], q[ci[10]], q[ci[11]]
+    lx, ly, lz = veh.imu_local[0], veh.imu_local[1], veh.imu_local[2]
+    rx = lx * ux + ly * vx + lz * wx
+    ry = lx * uy + ly * vy + lz * wy
+    rz = lx * uz + ly * vz + lz * wz
+    # omega x rho, then omega x (omega x rho) and alpha x rho
+    c0 = om1 * rz - om2 * ry
+    c1 = om2 * rx - om0 * rz
+    c2 = om0 * ry - om1 * rx
+    ax = qdd[ci[0]] + (al1 * rz - al2 * ry) + (om1 * c2 - om2 * c1)
+    ay = qdd[ci[1]] + (al2 * rx - al0 * rz) + (om2 * c0 - om0 * c2)
+    az = qdd[ci[2]] + (al0 * ry - al1 * rx) + (om0 * c1 - om1 * c0) - G_WORLD_Z
+    out[S_ACCEL_X] = ax * ux + ay * uy + az * uz
+    out[S_ACCEL_Y] = ax * vx + ay * vy + az * vz
+    out[S_ACCEL_Z] = ax * wx + ay * wy + az * wz
+    out[S_GYRO_X] = om0 * ux + om1 * uy + om2 * uz
+    out[S_GYRO_Y] = om0 * vx + om1 * vy + om2 * vz
+    out[S_GYRO_Z] = om0 * wx + om1 * wy + om2 * wz
+    out[S_ROLL] = atan2(vz, wz)
+    out[S_PITCH] = asin(min(1.0, max(-1.0, -uz)))
+    for i in range(4):
+        out[S_WHEEL_FL + i] = q[veh.corner_idx[i, CI_PHI]]
+    for i in range(2):
+        z = q[veh.corner_idx[i, CI_Z]]
+        s = q[veh.corner_idx[i, CI_S]]
+        a0 = poly_eval(veh.axis_coef[i, 0], m.poly_exp, z, s)[0]
+        a1 = poly_eval(veh.axis_coef[i, 1], m.poly_exp, z, s)[0]
+        out[S_STEER_FL + i] = atan2(-a0, a1)
+    out[S_BRAKE_PRESSURE] = signals[SG_BRAKE_PRESSURE]
+    out[S_SW_ANGLE] = signals[SG_SW_ANGLE]
+    out[S_ENGINE_SPEED] = signals[SG_ENGINE_SPEED]
+    out[S_STEERING_TORQUE] = signals[SG_STEERING_TORQUE]
+    out[S_THROTTLE] = signals[SG_THROTTLE]
+    out[S_WHEEL_TORQUE_RL] = signals[SG_TORQUE_RL]
+    out[S_WHEEL_TORQUE_RR] = signals[SG_TORQUE_RR]
+
+
+@kernel
+def sensor_model(params, buf, head, true_values, out):
+    """Apply bias, noise, quantisation and delay per channel. buf (NSENSOR, nbuf) is a ring buffer of
+    past true values, head the slot to write; returns the next head."""
+    nbuf = buf.shape[1]
+    for c in range(NSENSOR):
+        buf[c, head] = true_values[c]
+        lag = int(params[c, SM_DELAY_STEPS])
+        x = buf[c, (head - lag) % nbuf]
+        x += params[c, SM_BIAS]
+        if params[c, SM_NOISE] > 0.0:
+            x += params[c, SM_NOISE] * np.random.standard_normal()
+        qn = params[c, SM_QUANTUM]
+        if qn > 0.0:
+            x = qn * floor(x / qn + 0.5)
+        out[c] = x
+    return (head + 1) % nbuf
+
+
+def sensor_params(channels: dict, dt: float) -> np.ndarray:
+    """Sensor model parameters from the vehicle config's [sensors.channels] (name -> SensorNoise)."""
+    p = np.zeros((NSENSOR, NSM))
+    for name, spec in channels.items():
+        c = SENSOR_NAMES.index(name) if name in SENSOR_NAMES else -1
+        if c < 0:
+            from rtsim.errors import ConfigError
+            raise ConfigError(f"sensors.channels: unknown channel {name!r}; channels are {', '.join(SENSOR_NAMES)}")
+        p[c] = (spec.bias, spec.noise_std, spec.quantum, round(spec.delay_s / dt))
+    return p
