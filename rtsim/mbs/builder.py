@@ -352,7 +352,7 @@ class MechanismBuilder:
             raise ModelError(f"{self.name}: all polynomial paths of a model share one exponent table")
         self._polys.append(np.asarray(path, dtype=float).reshape(3, -1))
         k = len(self._polys) - 1
-        for c in range(3):
+        for c in range(3):   # consecutive rows, component 0 first: the kernels share p(z, s) among them
             self._add_con(CON_POLY_POINT, (p, origin, frame[0], frame[1], frame[2]), (z, s),
                           (float(k), float(c), 0.0, 0.0), f"{name}.{'xyz'[c]}")
 

@@ -40,6 +40,7 @@ def poly_eval(coef, exps, z, s):
     nterm = exps.shape[0]
     nb = exps[nterm - 1, 1] + 1
     na = nterm // nb
+    nb_used = nb if s != 0.0 else min(nb, 3)   # at s = 0 only s^0..s^2 terms reach p and its derivatives
     p = pz = ps = pzz = pzs = pss = 0.0
     za = 1.0     # z^a
     za1 = 0.0    # a z^(a-1)
@@ -50,7 +51,7 @@ def poly_eval(coef, exps, z, s):
         sb1 = 0.0
         sb2 = 0.0
         base = a * nb
-        for b in range(nb):
+        for b in range(nb_used):
             c = coef[base + b]
             qv += c * sb
             qs += c * sb1
@@ -68,6 +69,26 @@ def poly_eval(coef, exps, z, s):
         za1 = (a + 1) * za
         za = za * z
     return p, pz, ps, pzz, pzs, pss
+
+
+@inline_kernel
+def poly_value(coef, exps, z, s):
+    """p(z, s) alone (see poly_eval)."""
+    nterm = exps.shape[0]
+    nb = exps[nterm - 1, 1] + 1
+    na = nterm // nb
+    p = 0.0
+    za = 1.0
+    for a in range(na):
+        qv = 0.0
+        sb = 1.0
+        base = a * nb
+        for b in range(nb if s != 0.0 else 1):
+            qv += coef[base + b] * sb
+            sb *= s
+        p += za * qv
+        za *= z
+    return p
 
 
 @kernel
@@ -168,8 +189,16 @@ def eval_constraints(m, d, q):
                 jac[s_] = 0.0
             jac[comp] = 1.0
             jac[3 + comp] = -1.0
+            pc = d.poly_cache[k]
+            if comp == 0:   # the three rows of a poly point share p(z, s): evaluate once
+                for e in range(3):
+                    r = poly_eval(m.poly_coef[k, e], m.poly_exp, z, s)
+                    for j in range(6):
+                        pc[e, j] = r[j]
             for e in range(3):
-                p, pz, ps, _a, _b, _c = poly_eval(m.poly_coef[k, e], m.poly_exp, z, s)
+                p = pc[e, 0]
+                pz = pc[e, 1]
+                ps = pc[e, 2]
                 ec = ref(idx, cst, q, i, 2 + e, comp)
                 val -= p * ec
                 jac[3 * (2 + e) + comp] = -p
@@ -256,8 +285,18 @@ def eval_hqd(m, d, q, qd):
             s = q[ks] if ks >= 0 else 0.0
             sd = qd[ks] if ks >= 0 else 0.0
             h = 0.0
+            pc = d.poly_cache[kp]
+            if comp == 0:
+                for e in range(3):
+                    r = poly_eval(m.poly_coef[kp, e], m.poly_exp, z, s)
+                    for j in range(6):
+                        pc[e, j] = r[j]
             for e in range(3):
-                p, pz, ps, pzz, pzs, pss = poly_eval(m.poly_coef[kp, e], m.poly_exp, z, s)
+                pz = pc[e, 1]
+                ps = pc[e, 2]
+                pzz = pc[e, 3]
+                pzs = pc[e, 4]
+                pss = pc[e, 5]
                 ec = ref(idx, cst, q, i, 2 + e, comp)
                 ecd = refd(idx, qd, i, 2 + e, comp)
                 h -= (pzz * zd * zd + 2.0 * pzs * zd * sd + pss * sd * sd) * ec + 2.0 * (pz * zd + ps * sd) * ecd

@@ -109,6 +109,7 @@ Data = namedtuple("Data", [
     "qn", "qhd", "qhdd", "r", "x", "y", "z", "work", "sig", "g", "sp", "mu",
     "flags",          # int64 [have_factor, need_factor]
     "newton",         # float64 (4,) Newton bookkeeping between the stages of a step
+    "poly_cache",     # float64 (npoly, 3, 6) polynomial paths and derivatives shared by a poly point's rows
     "stats",          # float64 (NSTATS,)
 ])
 
@@ -130,5 +131,6 @@ def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: f
         qn=z(nq), qhd=z(nq), qhdd=z(nq), r=z(nq), x=z(nq), y=z(nq), z=z(max(nq, nc)), work=z(nq), sig=z(nc), g=z(nc), sp=z(nc), mu=z(nc),
         flags=np.zeros(2, dtype=np.int64),
         newton=np.zeros(4),
+        poly_cache=np.zeros((model.poly_coef.shape[0], 3, 6)),
         stats=np.zeros(NSTATS),
     )

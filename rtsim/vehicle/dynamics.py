@@ -24,7 +24,7 @@ from math import sqrt
 import numpy as np
 
 from rtsim.jit import inline_kernel, kernel
-from rtsim.mbs.constraints import poly_eval
+from rtsim.mbs.constraints import poly_eval, poly_value
 from rtsim.mbs.envelope import add_entry
 from rtsim.mbs.integrator import (
     CONTINUE, CONVERGED, finish_prepare, finish_project, newton_failed, newton_prepare, newton_update,
@@ -33,7 +33,13 @@ from rtsim.mbs.integrator import (
 from rtsim.mbs.model import ERR_NONFINITE_FORCE, IS_MAX_ITER, OK, ST_FAIL_INDEX
 from rtsim.road.query import CT_D, CT_EX, CT_GAMMA, CT_MU, CT_NX, CT_PX, CT_RR, NCONTACT, wheel_contact
 
-from .brake import BI_SIZE, BO_SIZE, brake_commit, brake_step, brake_wheel_torque
+from .brake import BI_SIZE, BO_LINE, BO_SIZE, brake_commit, brake_step, brake_wheel_torque
+from .powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PI_THROTTLE_CMD, PI_TORQUE_RL, PI_TORQUE_RR,
+                         PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_RL, PO_TORQUE_RR, powertrain_step)
+from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_SW_ANGLE, SG_THROTTLE,
+                      SG_TORQUE_RL, SG_TORQUE_RR)
+from .steering import SI_CMD, SI_RACK_FORCE, SI_SIZE, SO_RACK_ACC, SO_RACK_POS, SO_RACK_VEL, SO_SIZE, SO_SW_ANGLE, \
+    SO_TORQUE, steering_step
 from .model import (
     CI_PHI, CI_S, CI_WX, CI_Z, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE, SP_K, SP_PARTNER,
 )
@@ -108,11 +114,8 @@ def _add_chassis_moment(veh, q, force, m0, m1, m2):
 
 @inline_kernel
 def _poly3(coef, exps, z, s):
-    """A body-frame 3-vector polynomial and its z, s derivatives: (v0, v1, v2)."""
-    a = poly_eval(coef[0], exps, z, s)
-    b = poly_eval(coef[1], exps, z, s)
-    c = poly_eval(coef[2], exps, z, s)
-    return a[0], b[0], c[0]
+    """A body-frame 3-vector polynomial: (v0, v1, v2)."""
+    return poly_value(coef[0], exps, z, s), poly_value(coef[1], exps, z, s), poly_value(coef[2], exps, z, s)
 
 
 @kernel
@@ -289,30 +292,82 @@ def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, h):
     return finish_project(m, d, h)
 
 
+Parts = namedtuple("Parts", ["tyre", "brake", "powertrain", "steering"])   # parameter arrays
+States = namedtuple("States", ["brake", "powertrain", "steering"])          # subsystem state arrays
+IO = namedtuple("IO", [
+    "commands",     # (3,) throttle_angle_cmd rad, brake_pressure_cmd kPa, steering_wheel_angle_cmd rad
+    "extra",        # (4,) measured wheel torque rl, rr (N m), selector (+1 D, 0 N, -1 R), spare
+    "pt_in", "pt_out", "st_in", "st_out",
+    "signals",      # (NSIGNAL,) subsystem values handed to the sensors
+])
+CMD_THROTTLE, CMD_BRAKE, CMD_STEER = 0, 1, 2
+RACK_FORCE_TAU = 0.015   # s, low-pass of the rack force fed back to the steering model
+EX_TORQUE_RL, EX_TORQUE_RR, EX_SELECTOR = 0, 1, 2
+
+
+def make_io() -> IO:
+    return IO(commands=np.zeros(3), extra=np.array([0.0, 0.0, 1.0, 0.0]), pt_in=np.zeros(PI_SIZE),
+              pt_out=np.zeros(PO_SIZE), st_in=np.zeros(SI_SIZE), st_out=np.zeros(SO_SIZE),
+              signals=np.zeros(NSIGNAL))
+
+
 @kernel
-def vehicle_step(m, d, veh, vd, road, tp, bp, bs, h):
-    """A full vehicle step: brake pressures to t + h, the multibody step with all forces implicit,
-    then the between-step commits (brake stick/slide modes, tyre contact deflections)."""
-    brake_step(bp, bs, vd.brake_in, h, vd.brake_out)
-    status = vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, h)
+def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
+    """A full vehicle step at fixed step h:
+    1. subsystems to t + h from the commands: brake pressure (actuator), steer-by-wire (the rack
+       position, velocity and acceleration for the guided rack, loaded by last step's rack force),
+       powertrain (drive torques from the current wheel speeds);
+    2. the multibody step with tyre, suspension, brake, drive and aero forces implicit;
+    3. between-step commits: brake stick/slide modes, tyre contact deflections; signals for sensors."""
+    vd.brake_in[0] = io.commands[CMD_BRAKE]
+    brake_step(parts.brake, states.brake, vd.brake_in, h, vd.brake_out)
+    io.st_in[SI_CMD] = io.commands[CMD_STEER]
+    # The rack reaction of the guided rack (its multiplier) reaches the steering model one step late;
+    # low-pass it (RACK_FORCE_TAU) so the tyres' stiffness and damping at the rack do not close a
+    # delayed, unstable loop at the step frequency. Below ~10 Hz it passes unchanged.
+    beta = h / (RACK_FORCE_TAU + h)
+    io.st_in[SI_RACK_FORCE] += beta * (-d.lam[veh.rack_con] - io.st_in[SI_RACK_FORCE])
+    steering_step(parts.steering, states.steering, io.st_in, h, io.st_out)
+    k = veh.rack_driver
+    d.drv_ext[k, 0] = io.st_out[SO_RACK_POS]
+    d.drv_ext[k, 1] = io.st_out[SO_RACK_VEL]
+    d.drv_ext[k, 2] = io.st_out[SO_RACK_ACC]
+    io.pt_in[PI_THROTTLE_CMD] = io.commands[CMD_THROTTLE]
+    io.pt_in[PI_OMEGA_RL] = d.qd[veh.corner_idx[2, CI_PHI]]
+    io.pt_in[PI_OMEGA_RR] = d.qd[veh.corner_idx[3, CI_PHI]]
+    io.pt_in[PI_TORQUE_RL] = io.extra[EX_TORQUE_RL]
+    io.pt_in[PI_TORQUE_RR] = io.extra[EX_TORQUE_RR]
+    io.pt_in[PI_SELECTOR] = io.extra[EX_SELECTOR]
+    powertrain_step(parts.powertrain, states.powertrain, io.pt_in, h, io.pt_out)
+    vd.drive[2] = io.pt_out[PO_TORQUE_RL]
+    vd.drive[3] = io.pt_out[PO_TORQUE_RR]
+    status = vehicle_mbs_step(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, h)
     if status != OK:
         return status
     for i in range(4):
         kp = veh.corner_idx[i, CI_PHI]
         vd.theta[i] = d.q[kp]
         vd.omega[i] = d.qd[kp]
-    brake_commit(bp, bs, vd.theta, vd.omega)
+    brake_commit(parts.brake, states.brake, vd.theta, vd.omega)
     for i in range(4):
         t = vd.tyre[i]
-        advance_deflections(tp, vd.slip, i, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY], t[TO_OMEGA], t[TO_RE], h)
+        advance_deflections(parts.tyre, vd.slip, i, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY], t[TO_OMEGA],
+                            t[TO_RE], h)
+    io.signals[SG_BRAKE_PRESSURE] = vd.brake_out[BO_LINE]
+    io.signals[SG_SW_ANGLE] = io.st_out[SO_SW_ANGLE]
+    io.signals[SG_STEERING_TORQUE] = io.st_out[SO_TORQUE]
+    io.signals[SG_ENGINE_SPEED] = io.pt_out[PO_ENGINE_SPEED]
+    io.signals[SG_THROTTLE] = io.pt_out[PO_THROTTLE]
+    io.signals[SG_TORQUE_RL] = io.pt_out[PO_TORQUE_RL]
+    io.signals[SG_TORQUE_RR] = io.pt_out[PO_TORQUE_RR]
     return OK
 
 
 @kernel
-def vehicle_advance(m, d, veh, vd, road, tp, bp, bs, h, nsteps):
-    """nsteps vehicle steps with the inputs held (benchmarks, settling). Returns (status, steps done)."""
+def vehicle_advance(m, d, veh, vd, road, parts, states, io, h, nsteps):
+    """nsteps vehicle steps with the commands held (benchmarks, settling). Returns (status, steps done)."""
     for n in range(nsteps):
-        status = vehicle_step(m, d, veh, vd, road, tp, bp, bs, h)
+        status = vehicle_step(m, d, veh, vd, road, parts, states, io, h)
         if status != OK:
             return status, n
     return OK, nsteps

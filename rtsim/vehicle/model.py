@@ -32,6 +32,7 @@ from .kinematics import (
 )
 
 G = 9.81
+RACK_MASS = 2.0     # kg, rack and tie rods
 
 # Corner coordinate index table (Vehicle.corner_idx[w, :]).
 CI_WX, CI_WY, CI_WZ, CI_Z, CI_PHI, CI_S = range(6)
@@ -63,6 +64,7 @@ class VehicleModel:
     corners: list[CornerKinematics]
     static_loads: np.ndarray       # N, per wheel, from the weight split
     design_wheel_centre: np.ndarray
+    rack_inertia: float            # kg, the guided linkage's inertia seen at the rack (steering model)
 
 
 def _geometry(cfg_axle, right: bool):
@@ -95,7 +97,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     ixz = cfg.chassis.ixz_kgm2
     b.body("chassis", r, [u, v, w], cfg.chassis.mass_kg, cg, np.array([[ixx, 0, -ixz], [0, iyy, 0], [-ixz, 0, izz]]))
     rack = b.length("rack", 0.0, velocity=0.0)
-    b.scalar_inertia(rack, 2.0)   # rack and tie rods, kg (the rack is guided: this only conditions A)
+    b.scalar_inertia(rack, RACK_MASS)   # the rack is guided: its mass only conditions the tangent
     rack_driver = b.drive(rack, external=True, name="steering rack guidance")
     rack_con = len(b._cons) - 1
     full_exps = _common_exponents(corners)
@@ -156,7 +158,11 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         imu_local=np.array(cfg.sensors.imu_position_m, dtype=float) - cg,
         aero=np.array([cfg.aero.drag_area_m2, cfg.aero.air_density_kg_m3]),
     )
-    return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w)
+    # inertia at the rack: the rack itself and the front unsprung masses the rack drags along
+    j = full_exps.tolist().index([0, 1])
+    rack_inertia = RACK_MASS + sum(cfg.front.unsprung_mass_kg * float(np.sum(_pad(corners[i], full_exps)[OUT_CENTRE][:, j] ** 2))
+                                   for i in (0, 1))
+    return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w, rack_inertia)
 
 
 def _basis(exps: np.ndarray, z: float, s: float) -> np.ndarray:

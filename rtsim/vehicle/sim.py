@@ -13,8 +13,12 @@ from rtsim.road.model import Road
 from rtsim.road.query import NQUERY, Q_NX, Q_NZ, Q_Z, road_query
 
 from .brake import brake_config, brake_params, brake_state
-from .brake import BI_PRESSURE_CMD
-from .dynamics import make_vehicle_data, vehicle_step
+from rtsim.mbs.model import Data
+
+from .dynamics import CMD_BRAKE, Parts, States, VehicleData, make_io, make_vehicle_data, vehicle_advance, vehicle_mbs_step
+from .powertrain import powertrain_config, powertrain_params, powertrain_state
+from .sensors import NSENSOR, true_sensors
+from .steering import steering_config, steering_params, steering_state
 from .model import VehicleModel
 from .tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
 
@@ -42,17 +46,30 @@ class VehicleSim:
         cfg = model.config
         self.tyre = load_tir(Path(model.base) / cfg.tyres.property_file)
         self.tp = self.tyre.params
-        self.bcfg = brake_config(cfg.brakes or None)
-        self.bp = brake_params(self.bcfg)
-        self.bs = brake_state(self.bp, self.dt, pressure=brake_pressure, stuck=brake_pressure > 0 and speed == 0)
+        self.bcfg = brake_config(cfg.brakes or None, "brakes")
+        bp = brake_params(self.bcfg)
+        bs = brake_state(bp, self.dt, pressure=brake_pressure, stuck=brake_pressure > 0 and speed == 0)
+        self.ptcfg = powertrain_config(cfg.powertrain or None, "powertrain")
+        pp = powertrain_params(self.ptcfg)
+        ps = powertrain_state(pp, self.dt)
         self.vd = make_vehicle_data()
-        self.vd.brake_in[BI_PRESSURE_CMD] = brake_pressure
+        self.parts = Parts(self.tp, bp, pp, np.zeros(0))
+        self.states = States(bs, ps, np.zeros(0))
         mech = model.mech
         q0 = self._placed(mech.q0.copy(), position, yaw)
-        qd0 = np.zeros_like(q0)
-        self.sim = Simulation(mech, self.dt, q0=q0, qd0=qd0)
+        self.sim = Simulation(mech, self.dt, q0=q0, qd0=np.zeros_like(q0))
         self.data = self.sim.data
         self.m = mech.model
+        steer = dict(cfg.steering)
+        self.rack_inertia = self._probe_rack_inertia()
+        steer.setdefault("linkage_mass", self.rack_inertia)
+        self.stcfg = steering_config(steer, "steering")
+        sp = steering_params(self.stcfg)
+        ss = steering_state(sp, self.dt)
+        self.parts = Parts(self.tp, bp, pp, sp)
+        self.states = States(bs, ps, ss)
+        self.io = make_io()
+        self.io.commands[CMD_BRAKE] = brake_pressure
 
     def _placed(self, q: np.ndarray, position, yaw: float) -> np.ndarray:
         """Design coordinates moved onto the road: yawed by `yaw`, the design ground point under the
@@ -82,9 +99,35 @@ class VehicleSim:
                 res[i:i + 3] = rot @ (q[i:i + 3] - ref) + target
         return res
 
+    def _probe_rack_inertia(self, accel: float = 0.2, steps: int = 20) -> float:
+        """The inertia (kg) the guided linkage presents at the rack, measured on copies of the state:
+        the change of the rack reaction per unit of imposed rack acceleration. The steering model
+        needs it to take the inertial part out of the (one step late) rack force."""
+        lam = []
+        for a in (0.0, accel):
+            d = Data(*[x.copy() for x in self.data])
+            vd = VehicleData(*[x.copy() for x in self.vd])
+            bs = self.states.brake.copy()
+            k = self.vm.vehicle.rack_driver
+            for n in range(1, steps + 1):
+                t = n * self.dt
+                d.drv_ext[k] = (0.5 * a * t * t, a * t, a)
+                status = vehicle_mbs_step(self.m, d, self.vm.vehicle, vd, self.road, self.tp, self.parts.brake,
+                                          bs, self.dt)
+                if status != OK:
+                    self.sim._raise(status, n)
+            lam.append(float(d.lam[self.vm.vehicle.rack_con]))
+        return abs(lam[1] - lam[0]) / accel
+
     def step(self, n: int = 1) -> None:
-        m, d = self.m, self.data
-        for _ in range(n):
-            status = vehicle_step(m, d, self.vm.vehicle, self.vd, self.road, self.tp, self.bp, self.bs, self.dt)
-            if status != OK:
-                self.sim._raise(status, int(d.stats[0]) + 1)
+        """n steps with the commands in self.io held; raises a typed SimulationError on failure."""
+        status, done = vehicle_advance(self.m, self.data, self.vm.vehicle, self.vd, self.road, self.parts,
+                                       self.states, self.io, self.dt, n)
+        if status != OK:
+            self.sim._raise(status, int(self.data.stats[0]) + 1)
+
+    def sensors(self, out: np.ndarray | None = None) -> np.ndarray:
+        """True (noise-free) sensor channels of the current state, rtsim.channels.SENSOR_NAMES order."""
+        out = np.zeros(NSENSOR) if out is None else out
+        true_sensors(self.m, self.data, self.vm.vehicle, self.io.signals, out)
+        return out
