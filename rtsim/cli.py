@@ -10,6 +10,8 @@ import math
 import sys
 import time
 
+import numpy as np
+
 from rtsim.errors import RtsimError
 
 _T_IMPORT = time.perf_counter()
@@ -53,6 +55,49 @@ def _bench(args) -> int:
     return 0
 
 
+def _run(args) -> int:
+    from rtsim.vehicle.run import prepare, run, write_csv
+
+    sim, sc = prepare(args.vehicle, args.scenario)
+    out = args.out
+    from pathlib import Path
+    if Path(out).suffix.lower() != ".csv":
+        raise RtsimError(f"{out}: only .csv output is available so far (MCAP output comes with the recording layer)")
+    shown = [-1]
+
+    def progress(frac):
+        pct = int(frac * 100)
+        if pct // 5 != shown[0] // 5 and sys.stderr.isatty():
+            print(f"\r{sc.name}: {pct:3d} %", end="", file=sys.stderr, flush=True)
+            shown[0] = pct
+    res = run(sim, sc, progress)
+    write_csv(res, out)
+    dist = \
+        float(np.sum(np.hypot(np.diff(res.column("pos_x")), np.diff(res.column("pos_y")))))
+    print(f"{'' if not sys.stderr.isatty() else chr(13)}{sc.name}: {sc.duration:g} s simulated in {res.wall_s:.2f} s "
+          f"({res.wall_s / res.steps * 1e6:.1f} us/step), distance {dist:.1f} m, "
+          f"peak speed {res.column('speed').max() * 3.6:.1f} km/h, {len(res.data)} rows -> {out}")
+    return 0
+
+
+def _describe(args) -> int:
+    from rtsim.road.model import make_plane
+    from rtsim.vehicle.config import load_vehicle
+    from rtsim.vehicle.model import build_vehicle
+    from rtsim.vehicle.run import default_vehicle_path, describe
+    from rtsim.vehicle.sim import VehicleSim
+
+    cfg, base = load_vehicle(args.vehicle or default_vehicle_path())
+    model = build_vehicle(cfg, base)
+    info = describe(model, VehicleSim(model, make_plane(), 1e-3))
+    if args.json:
+        print(json.dumps(info, indent=2))
+    else:
+        for k, v in info.items():
+            print(f"{k:32s} {v}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="rtsim", description="Real-time HIL vehicle simulator")
     sub = p.add_subparsers(dest="command", required=True)
@@ -63,6 +108,15 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--json", action="store_true", help="print a JSON list, one object per problem")
     b.add_argument("--scaling", action="store_true", help="also time the N-four-bar for N = 1, 2, 10, 40, 100")
     b.set_defaults(func=_bench)
+    r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV")
+    r.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")
+    r.add_argument("--scenario", required=True, help="scenario TOML (configs/scenarios/)")
+    r.add_argument("--out", required=True, help="output file (.csv)")
+    r.set_defaults(func=_run)
+    d = sub.add_parser("describe", help="print the vehicle model's size and key parameters")
+    d.add_argument("--vehicle", help="vehicle TOML (default configs/vehicles/xbw.toml)")
+    d.add_argument("--json", action="store_true")
+    d.set_defaults(func=_describe)
     return p
 
 

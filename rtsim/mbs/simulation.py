@@ -91,15 +91,15 @@ class Simulation:
                                     f"'{names[i]}' stays violated by {phi[i]:.3g}")
             self.position_correction = float(np.max(np.abs(q - d.q)))
             d.q[:] = q
-        # velocities: keep prescribed components, solve the others (minimum norm)
+        # velocities: keep prescribed components, correct the others as little as possible
         given = self.mech.qd_given
         qd = d.qd.copy()
         phi, jac = self.constraint_jacobian(d.q)
         if m.nc:
             free = ~given
             rhs = -d.phit - jac[:, given] @ qd[given]
-            if free.any():
-                qd[free] = np.linalg.lstsq(jac[:, free], rhs, rcond=None)[0]
+            if free.any():   # free components: the smallest change of the given guess
+                qd[free] += np.linalg.lstsq(jac[:, free], rhs - jac[:, free] @ qd[free], rcond=None)[0]
             res = jac @ qd + d.phit
             if np.max(np.abs(res)) > 1e-9 * max(1.0, float(np.max(np.abs(qd)))):
                 i = int(np.argmax(np.abs(res)))

@@ -203,7 +203,14 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc):
         vsy = (vwx + rv[0]) * lyx + (vwy + rv[1]) * lyy + (vwz + rv[2]) * lyz
         re = effective_rolling_radius(tp, fz)
         kappa, alpha = transient_slip(tp, vd.slip, i, fz, gamma, vx, vsy, omega, re)
-        fx, fy, mz, my = mf52_forces(tp, fz, kappa, alpha, gamma, vx, ct[CT_MU])
+        if i % 2 == 0:
+            fx, fy, mz, my = mf52_forces(tp, fz, kappa, alpha, gamma, vx, ct[CT_MU])
+        else:
+            # the property file describes a left-side tyre; a right-side one is its mirror image
+            # (MF-Tyre convention): Fy(alpha, gamma) -> -Fy(-alpha, -gamma), likewise Mz
+            fx, fy, mz, my = mf52_forces(tp, fz, kappa, -alpha, -gamma, vx, ct[CT_MU])
+            fy = -fy
+            mz = -mz
         rr = ct[CT_RR] * fz * re
         my -= rr if vx > 0.1 else (-rr if vx < -0.1 else rr * vx / 0.1)
         fvx = fx * ex + fy * lyx + fz * nx

@@ -16,10 +16,13 @@ from .brake import brake_config, brake_params, brake_state
 from rtsim.mbs.model import Data
 
 from .dynamics import CMD_BRAKE, Parts, States, VehicleData, make_io, make_vehicle_data, vehicle_advance, vehicle_mbs_step
-from .powertrain import powertrain_config, powertrain_params, powertrain_state
+from .powertrain import PP_MEASURED, powertrain_config, powertrain_params, powertrain_state
 from .sensors import NSENSOR, true_sensors
 from .steering import steering_config, steering_params, steering_state
 from .model import VehicleModel
+from rtsim.channels import WHEELS
+
+from .tyre.magic_formula import effective_rolling_radius
 from .tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
 
 
@@ -56,8 +59,8 @@ class VehicleSim:
         self.parts = Parts(self.tp, bp, pp, np.zeros(0))
         self.states = States(bs, ps, np.zeros(0))
         mech = model.mech
-        q0 = self._placed(mech.q0.copy(), position, yaw)
-        self.sim = Simulation(mech, self.dt, q0=q0, qd0=np.zeros_like(q0))
+        q0, qd0 = self._placed(mech.q0.copy(), position, yaw, speed)
+        self.sim = Simulation(mech, self.dt, q0=q0, qd0=qd0)
         self.data = self.sim.data
         self.m = mech.model
         steer = dict(cfg.steering)
@@ -71,10 +74,11 @@ class VehicleSim:
         self.io = make_io()
         self.io.commands[CMD_BRAKE] = brake_pressure
 
-    def _placed(self, q: np.ndarray, position, yaw: float) -> np.ndarray:
+    def _placed(self, q: np.ndarray, position, yaw: float, speed: float) -> tuple[np.ndarray, np.ndarray]:
         """Design coordinates moved onto the road: yawed by `yaw`, the design ground point under the
         centre of mass put on the road surface at `position` (x, y), the car tilted to the local road
-        normal, and lowered along it so that the tyres carry their static loads."""
+        normal, and lowered along it so that the tyres carry their static loads; velocities of a car
+        rolling straight ahead at `speed` (m/s), wheels spinning at speed / rolling radius."""
         tp = self.tp
         defl = self.vm.static_loads / tp[P_VERTICAL_STIFFNESS]
         wz = self.vm.design_wheel_centre[:, 2]
@@ -91,13 +95,19 @@ class VehicleSim:
         mech = self.vm.mech
         names = mech.coordinate_names
         res = q.copy()
+        vel = np.zeros_like(q)
+        heading = rot @ np.array([1.0, 0.0, 0.0])
         for name in {n_[:-2] for n_ in names if n_.endswith(".x")}:
             i = names.index(name + ".x")
             if name in ("chassis.u", "chassis.v", "chassis.w"):
                 res[i:i + 3] = rot @ q[i:i + 3]                 # frame unit vectors rotate only
             else:
                 res[i:i + 3] = rot @ (q[i:i + 3] - ref) + target
-        return res
+                vel[i:i + 3] = speed * heading
+        for i, w in enumerate(WHEELS):
+            re = float(effective_rolling_radius(tp, self.vm.static_loads[i]))
+            vel[names.index(f"spin_{w}")] = speed / re
+        return res, vel
 
     def _probe_rack_inertia(self, accel: float = 0.2, steps: int = 20) -> float:
         """The inertia (kg) the guided linkage presents at the rack, measured on copies of the state:
@@ -118,6 +128,10 @@ class VehicleSim:
                     self.sim._raise(status, n)
             lam.append(float(d.lam[self.vm.vehicle.rack_con]))
         return abs(lam[1] - lam[0]) / accel
+
+    def set_torque_mode(self, measured: bool) -> None:
+        """Drive with the measured wheel torques (io.extra) instead of the engine model."""
+        self.parts.powertrain[PP_MEASURED] = 1.0 if measured else 0.0
 
     def step(self, n: int = 1) -> None:
         """n steps with the commands in self.io held; raises a typed SimulationError on failure."""

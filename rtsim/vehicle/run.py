@@ -1,0 +1,187 @@
+"""Offline runs: a vehicle, a road and a scenario's driver, as fast as the machine allows, logged at
+the scenario's output rate to CSV (column `time`, then the sensor channels, then the state columns)."""
+from __future__ import annotations
+
+import csv
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from drivers.base import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, NSTATE, S_SPEED, S_X, S_Y, S_YAW
+from drivers.scenario import Scenario, load_scenario
+from rtsim.channels import SENSOR_NAMES, WHEELS
+from rtsim.errors import ConfigError
+from rtsim.road.config import load_road
+
+from .config import load_vehicle
+from .dynamics import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR, TO_FX, TO_FY, TO_FZ
+from .model import VehicleModel, build_vehicle
+from .sensors import NSENSOR
+from .sim import VehicleSim
+
+STATE_COLUMNS = ("pos_x", "pos_y", "pos_z", "yaw", "speed",
+                 *(f"tyre_{c}_{w}" for c in ("fx", "fy", "fz") for w in WHEELS), "constraint_violation")
+COLUMNS = ("time", *SENSOR_NAMES, *STATE_COLUMNS)
+
+
+@dataclass
+class RunResult:
+    columns: tuple[str, ...]
+    data: np.ndarray          # (n, len(columns))
+    wall_s: float
+    steps: int
+
+    def column(self, name: str) -> np.ndarray:
+        return self.data[:, self.columns.index(name)]
+
+
+def default_vehicle_path() -> Path:
+    return Path(__file__).resolve().parents[2] / "configs" / "vehicles" / "xbw.toml"
+
+
+def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario) -> tuple[VehicleSim, Scenario]:
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, check_files=True)
+    vpath = Path(vehicle) if vehicle is not None else (sc.vehicle_path or default_vehicle_path())
+    cfg, base = load_vehicle(vpath)
+    model = build_vehicle(cfg, base)
+    road = load_road(sc.road_path)
+    ini = sc.spec.initial
+    driver = sc.driver()
+    first = driver.step(0.0, sc.initial_state())
+    sim = VehicleSim(model, road, sc.dt, brake_pressure=float(first[I_BRAKE]), position=(ini.x, ini.y),
+                     yaw=ini.yaw, speed=ini.speed)
+    if sc.torque_mode:
+        sim.set_torque_mode(True)
+    return sim, sc
+
+
+def vehicle_state(sim: VehicleSim, out: np.ndarray) -> None:
+    """Speed, x, y, yaw of the centre of mass for the closed-loop drivers (drivers.base.S_*)."""
+    q, qd = sim.data.q, sim.data.qd
+    ci = sim.vm.vehicle.chassis_idx
+    ux, uy = q[ci[3]], q[ci[4]]
+    out[S_X], out[S_Y] = q[ci[0]], q[ci[1]]
+    out[S_YAW] = math.atan2(uy, ux)
+    out[S_SPEED] = (qd[ci[0]] * ux + qd[ci[1]] * uy + qd[ci[2]] * q[ci[5]]) / max(1e-12, math.hypot(ux, uy))
+
+
+def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None = None) -> RunResult:
+    """Run the scenario to its duration; rows at the scenario's output rate."""
+    dt = sc.dt
+    nsteps = int(round(sc.duration / dt))
+    every = max(1, int(round(1.0 / (sc.spec.output_rate * dt))))
+    rows = np.zeros((nsteps // every + 1, len(COLUMNS)))
+    driver = sc.driver()
+    state = np.zeros(NSTATE)
+    sens = np.zeros(NSENSOR)
+    io = sim.io
+    nrow = 0
+    t0 = time.perf_counter()
+    for n in range(nsteps + 1):
+        if n % every == 0:
+            _log(sim, sens, rows[nrow])
+            nrow += 1
+            if progress is not None and nrow % 50 == 0:
+                progress(n / nsteps)
+        if n == nsteps:
+            break
+        vehicle_state(sim, state)
+        cmd = driver.step(sim.data.t[0] + dt, state)
+        io.commands[CMD_THROTTLE] = cmd[I_THROTTLE]
+        io.commands[CMD_BRAKE] = cmd[I_BRAKE]
+        io.commands[CMD_STEER] = cmd[I_STEER]
+        io.extra[EX_TORQUE_RL] = cmd[I_TORQUE_RL]
+        io.extra[EX_TORQUE_RR] = cmd[I_TORQUE_RR]
+        sim.step(1)
+    wall = time.perf_counter() - t0
+    return RunResult(COLUMNS, rows[:nrow], wall, nsteps)
+
+
+def _log(sim: VehicleSim, sens: np.ndarray, row: np.ndarray) -> None:
+    sim.sensors(sens)
+    q, qd = sim.data.q, sim.data.qd
+    ci = sim.vm.vehicle.chassis_idx
+    row[0] = sim.data.t[0]
+    row[1:1 + NSENSOR] = sens
+    k = 1 + NSENSOR
+    row[k:k + 3] = q[ci[0]:ci[0] + 3]
+    row[k + 3] = math.atan2(q[ci[4]], q[ci[3]])
+    row[k + 4] = float(np.linalg.norm(qd[ci[0]:ci[0] + 3]))
+    tyre = sim.vd.tyre
+    row[k + 5:k + 9] = tyre[:, TO_FX]
+    row[k + 9:k + 13] = tyre[:, TO_FY]
+    row[k + 13:k + 17] = tyre[:, TO_FZ]
+    row[k + 17] = float(np.max(np.abs(sim.data.phi), initial=0.0))   # max |Phi| at the end of the last step
+
+
+def write_csv(result: RunResult, path: str | Path) -> None:
+    path = Path(path)
+    if path.suffix.lower() != ".csv":
+        raise ConfigError(f"{path}: output format {path.suffix or '(none)'} not supported here; use .csv")
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(result.columns)
+        for r in result.data:
+            w.writerow([f"{v:.9g}" for v in r])
+
+
+def describe(model: VehicleModel, sim: VehicleSim) -> dict:
+    """The model's size and key parameters in SI units (`rtsim describe`)."""
+    from .brake import brake_gains
+    from .tyre.magic_formula import slip_stiffnesses
+    cfg = model.config
+    mech = model.mech
+    loads = model.static_loads
+    w = model.design_wheel_centre
+    cg = np.array(cfg.chassis.cg_m)
+    m_total = cfg.chassis.mass_kg + 2 * cfg.front.unsprung_mass_kg + 2 * cfg.rear.unsprung_mass_kg
+    cg_total_z = (cfg.chassis.mass_kg * cg[2] + 2 * cfg.front.unsprung_mass_kg * w[0, 2]
+                  + 2 * cfg.rear.unsprung_mass_kg * w[2, 2]) / m_total
+    cg_total_x = (cfg.chassis.mass_kg * cg[0] + 2 * cfg.front.unsprung_mass_kg * w[0, 0]
+                  + 2 * cfg.rear.unsprung_mass_kg * w[2, 0]) / m_total
+    kf = slip_stiffnesses(sim.tp, loads[0], 0.0)
+    kr = slip_stiffnesses(sim.tp, loads[2], 0.0)
+    gains = brake_gains(sim.bcfg)
+    from .tyre.magic_formula import effective_rolling_radius
+    return {
+        "name": cfg.name,
+        "id": cfg.id,
+        "n_coordinates": mech.model.nq,
+        "n_constraints": mech.model.nc,
+        "n_dof": mech.model.nq - mech.model.nc,
+        "mass": m_total,
+        "wheelbase": float(w[0, 0] - w[2, 0]),
+        "track_front": float(2 * w[0, 1]),
+        "track_rear": float(2 * w[2, 1]),
+        "cg_height": float(cg_total_z),
+        "cg_to_front_axle": float(w[0, 0] - cg_total_x),
+        "wheel_radius": float(effective_rolling_radius(sim.tp, loads[0])),
+        "wheel_inertia": cfg.front.wheel_spin_inertia_kgm2,
+        "cornering_stiffness_front": float(abs(kf[1])),
+        "cornering_stiffness_rear": float(abs(kr[1])),
+        "slip_stiffness": float(kf[0]),
+        "rolling_resistance_coefficient": float(sim.tyre.coefficients.get("QSY1", 0.0)),
+        "drag_area": cfg.aero.drag_area_m2,
+        "brake_gain_front": gains["front_Nm_per_kPa"],
+        "brake_gain_rear": gains["rear_Nm_per_kPa"],
+        "steering_ratio": _steering_ratio(model, sim),
+        "static_wheel_loads": [float(x) for x in loads],
+        "suspension_fit_error": max(k.fit_error for k in model.corners),
+    }
+
+
+def _steering_ratio(model: VehicleModel, sim: VehicleSim) -> float:
+    """Steering-wheel angle per mean front road-wheel angle around straight ahead."""
+    from .kinematics import OUT_AXIS
+    rp = sim.stcfg.rack_travel_per_rad
+    ds = 1e-3
+    angles = []
+    for k in model.corners[:2]:
+        a = k.evaluate(OUT_AXIS, 0.0, ds)
+        angles.append(math.atan2(-a[0], a[1]))
+    road_per_rack = float(np.mean(angles)) / ds
+    return 1.0 / (rp * road_per_rack)
