@@ -25,6 +25,19 @@ def _bench(args) -> int:
     from rtsim.benchmarks import PROBLEMS
     from rtsim.benchmarks.runner import run_problem, scaling, startup_seconds
 
+    if args.suite == "vehicle":
+        from rtsim.benchmarks.vehicle import suite
+        results = suite()
+        if args.json:
+            print(json.dumps(results, indent=2))
+            return 0
+        for r in results:
+            print(f"{r['scenario']:<36} {r['us_per_step']:7.1f} us/step  "
+                  f"({r['newton_iterations_per_step']:.2f} Newton iterations, "
+                  f"{r['factorizations_per_step']:.1f} factorizations per step)")
+            for part, us in r["parts_us_per_step"].items():
+                print(f"    {part:<70} {us:6.1f} us  {100 * r['share'][part]:5.1f} %")
+        return 0
     if args.problem and args.problem not in PROBLEMS:
         raise RtsimError(f"unknown problem {args.problem!r}; choose from {', '.join(PROBLEMS)}")
     for flag, value in (("--dt", args.dt), ("--t-end", args.t_end)):
@@ -107,6 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--t-end", type=float, help="end time, s (default: the problem's)")
     b.add_argument("--json", action="store_true", help="print a JSON list, one object per problem")
     b.add_argument("--scaling", action="store_true", help="also time the N-four-bar for N = 1, 2, 10, 40, 100")
+    b.add_argument("--suite", choices=["mbs", "vehicle"], default="mbs",
+                   help="mbs: the IFToMM benchmark problems (default); vehicle: the vehicle model's cost per step")
     b.set_defaults(func=_bench)
     r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV")
     r.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")

@@ -335,10 +335,9 @@ def jac_matvec(m, d, x, out):
     idx = m.con_idx
     for i in range(m.nc):
         s = 0.0
-        for k in range(NSLOT):
-            j = idx[i, k]
-            if j >= 0:
-                s += d.jac[i, k] * x[j]
+        for a in range(m.con_nact[i]):
+            k = m.con_act[i, a]
+            s += d.jac[i, k] * x[idx[i, k]]
         out[i] = s
 
 
@@ -349,7 +348,6 @@ def jac_t_matvec_add(m, d, v, out, scale):
     for i in range(m.nc):
         vi = scale * v[i]
         if vi != 0.0:
-            for k in range(NSLOT):
-                j = idx[i, k]
-                if j >= 0:
-                    out[j] += d.jac[i, k] * vi
+            for a in range(m.con_nact[i]):
+                k = m.con_act[i, a]
+                out[idx[i, k]] += d.jac[i, k] * vi

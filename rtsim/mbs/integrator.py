@@ -29,7 +29,7 @@ from .forces import eval_forces
 from .model import (
     ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION,
     FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
-    IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
+    IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
     ST_LAST_RESIDUAL, ST_MAX_PHI, ST_MAX_PHID, ST_MAX_PHIDD, ST_PROJ_ITER, ST_STEPS,
 )
 
@@ -45,15 +45,16 @@ def factorize(m, d, bq):
     idx = m.con_idx
     for i in range(m.nc):
         ai = bq * d.alpha[i]
-        for s in range(NSLOT):
+        na = m.con_nact[i]
+        for a in range(na):
+            s = m.con_act[i, a]
             js = idx[i, s]
             vs = d.jac[i, s]
-            if js < 0 or vs == 0.0:
+            if vs == 0.0:
                 continue
-            for u in range(s, NSLOT):
+            for b in range(a, na):
+                u = m.con_act[i, b]
                 ju = idx[i, u]
-                if ju < 0:
-                    continue
                 val = ai * vs * d.jac[i, u]
                 if u != s and ju == js:
                     val *= 2.0
@@ -352,9 +353,11 @@ def finish_project(m, d, h):
     bq = 0.25 * h * h
     st = d.stats
     # The projections need the tangent at the converged q: the Newton factor was made at an earlier
-    # iterate, and near singular positions the projection is sensitive to that difference.
-    if refresh_factor(m, d, bq) != OK:
-        return ERR_FACTOR
+    # iterate, and near singular positions the projection is sensitive to that difference. Models
+    # without singular positions (a vehicle) may keep the Newton factor (IS_PROJECTION_FACTOR = 0).
+    if m.iset[IS_PROJECTION_FACTOR] == 1 or d.flags[HAVE_FACTOR] == 0:
+        if refresh_factor(m, d, bq) != OK:
+            return ERR_FACTOR
     k1, gv = project(m, d, d.qd, d.phit, bq, m.fset[FS_TOL_VEL], m.fset[FS_TOL_VEL_FAIL])
     if k1 < 0:
         st[ST_LAST_RESIDUAL] = gv

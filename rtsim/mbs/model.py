@@ -48,6 +48,7 @@ IS_MAX_ITER = 0        # Newton iterations per step before giving up
 IS_MAX_PROJ = 1        # augmented-Lagrangian projection iterations
 IS_TANGENT_FORCES = 2  # 1 if any force contributes stiffness/damping to the tangent
 IS_REUSE_STEPS = 3     # 1: keep the factorization across steps while Newton contracts; 0: refactor each step
+IS_PROJECTION_FACTOR = 4  # 1: refactor at the converged q for the projections; 0: reuse Newton's factor
 FS_TOL_DQ = 0          # Newton increment tolerance (coordinate units)
 FS_TOL_PHI = 1         # position constraint tolerance
 FS_TOL_VEL = 2         # velocity constraint tolerance
@@ -81,6 +82,7 @@ Model = namedtuple("Model", [
     "nq", "nc", "dim",
     # constraints
     "con_kind", "con_idx", "con_cst", "con_par", "con_drv",
+    "con_nact", "con_act",   # per row: number of slots with a coordinate, and those slots first
     # drivers
     "drv_kind", "drv_par",
     # forces

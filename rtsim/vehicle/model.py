@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.channels import WHEELS
-from rtsim.mbs import Mechanism, MechanismBuilder
+from rtsim.mbs import Mechanism, MechanismBuilder, Settings
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import VehicleConfig
@@ -87,7 +87,8 @@ def corner_kinematics(cfg: VehicleConfig) -> list[CornerKinematics]:
 
 def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics] | None = None) -> VehicleModel:
     corners = corners or corner_kinematics(cfg)
-    b = MechanismBuilder(dim=3, name=cfg.id)
+    # no singular positions in a car's suspension: the projections reuse the Newton factor
+    b = MechanismBuilder(dim=3, name=cfg.id, settings=Settings(projection_factor=False))
     cg = np.array(cfg.chassis.cg_m, dtype=float)
     r = b.point("chassis", cg, velocity=(None, None, None))
     u = b.unit_vector("chassis.u", (1, 0, 0))

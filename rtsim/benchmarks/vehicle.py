@@ -1,0 +1,135 @@
+"""`rtsim bench --suite vehicle`: the cost per step of the full vehicle model (MF tyres, suspension
+kinematics, brakes, powertrain, steer-by-wire) on each road kind, in compiled stepping loops, with the
+share of each part measured by timing its kernels alone on the same state."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numba as nb
+import numpy as np
+
+from rtsim.road.config import load_road
+from rtsim.road.model import make_plane
+from rtsim.road.query import NCONTACT, wheel_contact
+from rtsim.vehicle.brake import brake_step
+from rtsim.vehicle.config import load_vehicle
+from rtsim.vehicle.dynamics import CMD_STEER, CMD_THROTTLE, vehicle_forces
+from rtsim.vehicle.model import CI_WX, build_vehicle
+from rtsim.vehicle.powertrain import powertrain_step
+from rtsim.vehicle.sim import VehicleSim
+from rtsim.vehicle.steering import steering_step
+from rtsim.vehicle.tyre.magic_formula import mf52_forces, transient_slip
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _clock(fn, reps: int) -> float:
+    fn(1)
+    t0 = time.perf_counter()
+    fn(reps)
+    return (time.perf_counter() - t0) / reps
+
+
+def _vehicle(road_path: Path | None):
+    cfg, base = load_vehicle(ROOT / "configs" / "vehicles" / "xbw.toml")
+    model = build_vehicle(cfg, base)
+    road = load_road(road_path) if road_path is not None else make_plane()
+    return model, road
+
+
+def run_scenario(name: str, road_path: Path | None, speed: float, steer: float, steps: int = 3000) -> dict:
+    model, road = _vehicle(road_path)
+    sim = VehicleSim(model, road, 1e-3, speed=speed, position=(2.0, 0.0))
+    sim.io.commands[CMD_THROTTLE] = 0.2
+    sim.io.commands[CMD_STEER] = steer
+    sim.step(200)                                   # compile/load, settle
+    s0 = sim.data.stats.copy()
+    t0 = time.perf_counter()
+    sim.step(steps)
+    wall = time.perf_counter() - t0
+    s1 = sim.data.stats
+    shares = _shares(sim)
+    per_step = wall / steps
+    # the formulation (constraints, factorizations, Newton, projections) is what remains of the step
+    shares["formulation (ALI3-P: constraints, factorizations, Newton, projections)"] = max(
+        0.0, per_step - sum(shares.values()))
+    total_parts = sum(shares.values())
+    return {
+        "scenario": name,
+        "road": "plane" if road_path is None else road_path.stem,
+        "dt": 1e-3,
+        "steps": steps,
+        "wall_s": wall,
+        "us_per_step": per_step * 1e6,
+        "newton_iterations_per_step": float(s1[1] - s0[1]) / steps,
+        "factorizations_per_step": float(s1[2] - s0[2]) / steps,
+        "share": {k: v / total_parts for k, v in shares.items()},
+        "parts_us_per_step": {k: v * 1e6 for k, v in shares.items()},
+    }
+
+
+def _shares(sim: VehicleSim) -> dict:
+    """Seconds per step of each part but the formulation, from its kernels timed alone on the current
+    state, times their calls per step (Newton iterations + the finishing evaluation)."""
+    m, d, veh, vd, road = sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road
+    parts, states, io = sim.parts, sim.states, sim.io
+    h = sim.dt
+    bq, hc = 0.25 * h * h, 0.5 * h
+    iters = max(1.0, float(d.stats[1]) / max(1.0, float(d.stats[0])))
+    reps = 2000
+    out = {}
+    bs, ps, ss = states.brake.copy(), states.powertrain.copy(), states.steering.copy()
+    out["subsystems (brake, powertrain, steering)"] = _clock(
+        lambda n: _subsystems(parts, states, io, vd, h, n), reps)
+    states.brake[:], states.powertrain[:], states.steering[:] = bs, ps, ss
+    t_contact = _clock(lambda n: _contacts(m, d, veh, road, n), reps)
+    t_tyre = _clock(lambda n: _tyres(parts.tyre, vd, n), reps)
+    t_forces = _clock(lambda n: _forces(m, d, veh, vd, road, parts, states, bq, hc, n), reps)
+    calls = iters + 1.0                                  # Newton iterations + the finishing evaluation
+    out["road contact"] = t_contact * calls
+    out["tyres (MF 5.2 + transient slip)"] = t_tyre * calls
+    out["other vehicle forces (suspension, brakes, aero)"] = max(0.0, t_forces - t_contact - t_tyre) * calls
+    return out
+
+
+@nb.njit(cache=True)
+def _subsystems(parts, states, io, vd, h, n):
+    for _ in range(n):
+        brake_step(parts.brake, states.brake, vd.brake_in, h, vd.brake_out)
+        steering_step(parts.steering, states.steering, io.st_in, h, io.st_out)
+        powertrain_step(parts.powertrain, states.powertrain, io.pt_in, h, io.pt_out)
+
+
+@nb.njit(cache=True)
+def _contacts(m, d, veh, road, n):
+    ct = np.empty(NCONTACT)
+    for _ in range(n):
+        for i in range(4):
+            k = veh.corner_idx[i, CI_WX]
+            wheel_contact(road, d.q[k], d.q[k + 1], d.q[k + 2], 0.0, 1.0, 0.0, 0.289, ct)
+
+
+@nb.njit(cache=True)
+def _tyres(tp, vd, n):
+    for _ in range(n):
+        for i in range(4):
+            k, a = transient_slip(tp, vd.slip, i, 2000.0, 0.0, 20.0, 0.1, 71.0, 0.28)
+            mf52_forces(tp, 2000.0, k, a, 0.0, 20.0, 1.0)
+
+
+@nb.njit(cache=True)
+def _forces(m, d, veh, vd, road, parts, states, bq, hc, n):
+    for _ in range(n):
+        for i in range(m.nq):
+            d.force[i] = 0.0
+        vehicle_forces(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, False, bq, hc)
+
+
+def suite() -> list[dict]:
+    campus = ROOT / "configs" / "roads" / "campus.toml"
+    return [
+        run_scenario("straight 30 km/h, campus mesh", campus, 8.33, 0.0),
+        run_scenario("step steer 80 km/h, flat", None, 22.22, np.radians(35.0)),
+        run_scenario("step steer 80 km/h, campus mesh", campus, 22.22, np.radians(20.0), steps=1500),
+    ]
