@@ -1,0 +1,50 @@
+"""Whole scenarios through the vehicle model: the seed's straight-line manoeuvre on the surveyed
+campus track (its published distance and peak speed), and the stop at its end (no creep, no
+oscillation at standstill)."""
+import numpy as np
+import pytest
+
+from rtsim.vehicle.run import prepare, run, write_csv, COLUMNS
+
+SEED_DISTANCE = 63.5      # m, xbw-vehicle-mbs-validation sec. 2.3
+SEED_PEAK_SPEED = 23 / 3.6  # m/s
+
+
+@pytest.fixture(scope="module")
+def straight_line():
+    sim, sc = prepare(None, "configs/scenarios/straight_line.toml")
+    return run(sim, sc), sim
+
+
+def test_straight_line_matches_the_seed_figures(straight_line):
+    res, _ = straight_line
+    x, y = res.column("pos_x"), res.column("pos_y")
+    distance = float(np.sum(np.hypot(np.diff(x), np.diff(y))))
+    assert abs(distance - SEED_DISTANCE) <= 0.05 * SEED_DISTANCE
+    assert abs(res.column("speed").max() - SEED_PEAK_SPEED) <= 0.05 * SEED_PEAK_SPEED
+    assert np.max(np.abs(y)) < 0.05                       # straight ahead on a surveyed, crowned lane
+
+
+def test_straight_line_stops_without_creep_or_oscillation(straight_line):
+    res, _ = straight_line
+    t, x, v = res.column("time"), res.column("pos_x"), res.column("speed")
+    stopped = np.nonzero((t > 15.0) & (v < 1e-3))[0]
+    assert stopped.size, "the car never stopped"
+    i0 = stopped[0]
+    assert t[-1] - t[i0] > 5.0                            # at least 5 s of standstill observed
+    # after the stop the body rocks back on its suspension and tyres (a few mm, damped within a
+    # second); from then on nothing may move: no creep, no oscillation
+    settled = t >= t[i0] + 1.0
+    assert np.ptp(x[settled]) < 1e-3
+    assert np.max(v[t >= t[-1] - 5.0]) < 1e-4
+    assert np.max(res.column("constraint_violation")) <= 1e-8
+
+
+def test_csv_has_the_channel_columns(straight_line, tmp_path):
+    res, _ = straight_line
+    out = tmp_path / "run.csv"
+    write_csv(res, out)
+    header = out.read_text().splitlines()[0].split(",")
+    assert tuple(header) == COLUMNS
+    for name in ("time", "accel_x", "wheel_angle_rr", "brake_pressure", "pos_x", "tyre_fz_rr", "constraint_violation"):
+        assert name in header
