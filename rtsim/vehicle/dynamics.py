@@ -33,7 +33,7 @@ from rtsim.mbs.integrator import (
 from rtsim.mbs.model import ERR_NONFINITE_FORCE, IS_MAX_ITER, OK, ST_FAIL_INDEX
 from rtsim.road.query import CT_D, CT_EX, CT_GAMMA, CT_MU, CT_NX, CT_PX, CT_RR, NCONTACT, wheel_contact
 
-from .brake import BI_SIZE, BO_LINE, BO_SIZE, brake_commit, brake_step, brake_wheel_torque
+from .brake import BI_SIZE, BO_LINE, BO_SIZE, BP_EPS, BS_TAU_SLIDE, brake_commit, brake_step, brake_wheel_torque
 from .powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PI_THROTTLE_CMD, PI_TORQUE_RL, PI_TORQUE_RR,
                          PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_RL, PO_TORQUE_RR, powertrain_step)
 from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_SW_ANGLE, SG_THROTTLE,
@@ -181,7 +181,14 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc):
         f[kp] += tb + vd.drive[i]
         f[kz] += vd.drive[i] * (ax * tzx + ay * tzy + az * tzz)
         if tangent:
-            add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, -bq * dtdth - hc * dtdw)
+            # Near a locked wheel the sliding law's slope is -tau_s/omega_eps inside the band and 0
+            # outside: a tangent of 0 lets Newton jump across the band and back forever. Use the band's
+            # slope within 20 bands of zero speed: an over-estimated tangent only damps the iteration.
+            c_b = -dtdw
+            w_band = bp[BP_EPS]
+            if c_b == 0.0 and abs(qd[kp]) < 20.0 * w_band and w_band > 0.0:
+                c_b = bs[BS_TAU_SLIDE + i] / w_band
+            add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, -bq * dtdth + hc * c_b)
         # ---- tyre --------------------------------------------------------------------------------
         ct = vd.contact
         wheel_contact(road, wx, wy, wz, ax, ay, az, r0, ct)
