@@ -69,13 +69,15 @@ def _bench(args) -> int:
 
 
 def _run(args) -> int:
+    from pathlib import Path
+
     from rtsim.vehicle.run import prepare, run, write_csv
 
-    sim, sc = prepare(args.vehicle, args.scenario)
     out = args.out
-    from pathlib import Path
-    if Path(out).suffix.lower() != ".csv":
-        raise RtsimError(f"{out}: only .csv output is available so far (MCAP output comes with the recording layer)")
+    kind = Path(out).suffix.lower()
+    if kind not in (".csv", ".mcap"):
+        raise RtsimError(f"{out}: output must end in .csv or .mcap")
+    sim, sc = prepare(args.vehicle, args.scenario)
     shown = [-1]
 
     def progress(frac):
@@ -84,7 +86,11 @@ def _run(args) -> int:
             print(f"\r{sc.name}: {pct:3d} %", end="", file=sys.stderr, flush=True)
             shown[0] = pct
     res = run(sim, sc, progress)
-    write_csv(res, out)
+    if kind == ".csv":
+        write_csv(res, out)
+    else:
+        from bridge.mcap_log import write_run
+        write_run(out, res.columns, res.data, sim.vm.config.id)
     dist = \
         float(np.sum(np.hypot(np.diff(res.column("pos_x")), np.diff(res.column("pos_y")))))
     print(f"{'' if not sys.stderr.isatty() else chr(13)}{sc.name}: {sc.duration:g} s simulated in {res.wall_s:.2f} s "
@@ -126,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV")
     r.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")
     r.add_argument("--scenario", required=True, help="scenario TOML (configs/scenarios/)")
-    r.add_argument("--out", required=True, help="output file (.csv)")
+    r.add_argument("--out", required=True, help="output file: .csv or .mcap")
     r.set_defaults(func=_run)
     d = sub.add_parser("describe", help="print the vehicle model's size and key parameters")
     d.add_argument("--vehicle", help="vehicle TOML (default configs/vehicles/xbw.toml)")

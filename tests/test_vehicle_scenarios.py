@@ -48,3 +48,19 @@ def test_csv_has_the_channel_columns(straight_line, tmp_path):
     assert tuple(header) == COLUMNS
     for name in ("time", "accel_x", "wheel_angle_rr", "brake_pressure", "pos_x", "tyre_fz_rr", "constraint_violation"):
         assert name in header
+
+
+def test_mcap_output_round_trips(straight_line, tmp_path):
+    """The MCAP file holds one sensors and one state message per logged row, with the same values."""
+    from bridge.mcap_log import read_messages, write_run
+    res, sim = straight_line
+    out = tmp_path / "run.mcap"
+    rows = res.data[:200]
+    write_run(out, res.columns, rows, sim.vm.config.id)
+    msgs = list(read_messages(out, f"rtsim/{sim.vm.config.id}/sensors"))
+    assert len(msgs) == len(rows)
+    for (t, m), r in zip(msgs, rows):
+        assert abs(t - r[0]) < 1e-9
+        assert m["brake_pressure"] == r[res.columns.index("brake_pressure")]
+    state = list(read_messages(out, f"rtsim/{sim.vm.config.id}/state"))
+    assert len(state) == len(rows) and "tyre_fz_rr" in state[0][1]
