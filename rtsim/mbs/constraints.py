@@ -91,6 +91,15 @@ def poly_value(coef, exps, z, s):
     return p
 
 
+@inline_kernel
+def _fill_poly_cache(m, pc, k, z, s):
+    """pc[e, :] = (p, p_z, p_s, p_zz, p_zs, p_ss) of the three frame components of path k."""
+    for e in range(3):
+        r = poly_eval(m.poly_coef[k, e], m.poly_exp, z, s)
+        for j in range(6):
+            pc[e, j] = r[j]
+
+
 @kernel
 def eval_drivers(m, d, t):
     """Fill d.drv[k] = (f, f', f'') of every driver at time t."""
@@ -191,10 +200,7 @@ def eval_constraints(m, d, q):
             jac[3 + comp] = -1.0
             pc = d.poly_cache[k]
             if comp == 0:   # the three rows of a poly point share p(z, s): evaluate once
-                for e in range(3):
-                    r = poly_eval(m.poly_coef[k, e], m.poly_exp, z, s)
-                    for j in range(6):
-                        pc[e, j] = r[j]
+                _fill_poly_cache(m, pc, k, z, s)
             for e in range(3):
                 p = pc[e, 0]
                 pz = pc[e, 1]
@@ -287,10 +293,7 @@ def eval_hqd(m, d, q, qd):
             h = 0.0
             pc = d.poly_cache[kp]
             if comp == 0:
-                for e in range(3):
-                    r = poly_eval(m.poly_coef[kp, e], m.poly_exp, z, s)
-                    for j in range(6):
-                        pc[e, j] = r[j]
+                _fill_poly_cache(m, pc, kp, z, s)
             for e in range(3):
                 pz = pc[e, 1]
                 ps = pc[e, 2]
