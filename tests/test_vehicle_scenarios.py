@@ -64,3 +64,39 @@ def test_mcap_output_round_trips(straight_line, tmp_path):
         assert m["brake_pressure"] == r[res.columns.index("brake_pressure")]
     state = list(read_messages(out, f"rtsim/{sim.vm.config.id}/state"))
     assert len(state) == len(rows) and "tyre_fz_rr" in state[0][1]
+
+
+def test_sensor_model_bias_quantisation_delay_and_noise(tmp_path):
+    """The vehicle config's sensor model on logged samples: a bias shifts, a quantum rounds, a delay
+    shifts by whole samples, white noise has the configured standard deviation; all against the same
+    run without it."""
+    import shutil
+    import tomllib
+    src = "configs/vehicles/xbw.toml"
+    text = open(src).read()
+    extra = """
+[sensors.channels.accel_x]
+bias = 0.5
+[sensors.channels.brake_pressure]
+quantum = 100.0
+[sensors.channels.engine_speed]
+delay_s = 0.01
+[sensors.channels.gyro_z]
+noise_std = 0.01
+"""
+    vfile = tmp_path / "xbw.toml"
+    vfile.write_text(text.replace('[tyres]\nproperty_file = "../tyres/', f'[tyres]\nproperty_file = "{(tmp_path / "tyres").as_posix()}/') + extra)
+    shutil.copytree("configs/tyres", tmp_path / "tyres")
+    assert tomllib.loads(vfile.read_text())["sensors"]["channels"]["accel_x"]["bias"] == 0.5
+    base_sim, sc = prepare(None, "configs/scenarios/step_steer_80kph.toml")
+    base = run(base_sim, sc)
+    sim, sc = prepare(vfile, "configs/scenarios/step_steer_80kph.toml")
+    res = run(sim, sc, seed=1)
+    c = res.columns.index
+    assert np.allclose(res.data[:, c("accel_x")], base.data[:, c("accel_x")] + 0.5, atol=1e-9)
+    bp = res.data[:, c("brake_pressure")]
+    assert np.allclose(bp, 100.0 * np.round(base.data[:, c("brake_pressure")] / 100.0))
+    lag = round(0.01 * sc.spec.output_rate)
+    assert np.allclose(res.data[lag:, c("engine_speed")], base.data[:-lag, c("engine_speed")])
+    noise = res.data[:, c("gyro_z")] - base.data[:, c("gyro_z")]
+    assert 0.008 < np.std(noise) < 0.012 and abs(np.mean(noise)) < 0.002

@@ -20,7 +20,7 @@ from rtsim.road.config import load_road
 from .config import load_vehicle
 from .dynamics import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR, TO_FX, TO_FY, TO_FZ
 from .model import VehicleModel, build_vehicle
-from .sensors import NSENSOR
+from .sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_model, sensor_params
 from .sim import VehicleSim
 
 STATE_COLUMNS = ("pos_x", "pos_y", "pos_z", "yaw", "speed",
@@ -69,8 +69,10 @@ def vehicle_state(sim: VehicleSim, out: np.ndarray) -> None:
     out[S_SPEED] = (qd[ci[0]] * ux + qd[ci[1]] * uy + qd[ci[2]] * q[ci[5]]) / max(1e-12, math.hypot(ux, uy))
 
 
-def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None = None) -> RunResult:
-    """Run the scenario to its duration; rows at the scenario's output rate."""
+def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None = None,
+        seed: int = 0) -> RunResult:
+    """Run the scenario to its duration; rows at the scenario's output rate. Sensor channels carry the
+    vehicle config's sensor model ([sensors.channels]: bias, noise, quantisation, delay) if any."""
     dt = sc.dt
     nsteps = int(round(sc.duration / dt))
     every = max(1, int(round(1.0 / (sc.spec.output_rate * dt))))
@@ -80,10 +82,20 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
     sens = np.zeros(NSENSOR)
     io = sim.io
     nrow = 0
+    # optional sensor model (bias, noise, quantisation, delay) on the logged samples
+    sm = sensor_params(sim.vm.config.sensors.channels, every * dt)
+    sm_on = bool(np.any(sm))
+    buf = np.zeros((NSENSOR, int(sm[:, SM_DELAY_STEPS].max()) + 1))
+    head = 0
+    noisy = np.zeros(NSENSOR)
+    seed_sensor_noise(seed)
     t0 = time.perf_counter()
     for n in range(nsteps + 1):
         if n % every == 0:
             _log(sim, sens, rows[nrow])
+            if sm_on:
+                head = sensor_model(sm, buf, head, rows[nrow, 1:1 + NSENSOR].copy(), noisy)
+                rows[nrow, 1:1 + NSENSOR] = noisy
             nrow += 1
             if progress is not None and nrow % 50 == 0:
                 progress(n / nsteps)

@@ -113,8 +113,15 @@ def sensor_model(params, buf, head, true_values, out):
     return (head + 1) % nbuf
 
 
+@kernel
+def seed_sensor_noise(seed):
+    """Seed the noise generator of the compiled sensor model (reproducible runs)."""
+    np.random.seed(seed)
+
+
 def sensor_params(channels: dict, dt: float) -> np.ndarray:
-    """Sensor model parameters from the vehicle config's [sensors.channels] (name -> SensorNoise)."""
+    """Sensor model parameters from the vehicle config's [sensors.channels] (name -> SensorNoise), for
+    samples dt seconds apart (delays are whole samples)."""
     p = np.zeros((NSENSOR, NSM))
     for name, spec in channels.items():
         c = SENSOR_NAMES.index(name) if name in SENSOR_NAMES else -1
