@@ -31,6 +31,17 @@ from .model import (
 )
 
 
+def _structural_slots(kind: int, idx: np.ndarray, par) -> np.ndarray:
+    """Slots of a row whose Jacobian entry can be nonzero: those with a coordinate, and for a poly
+    point only the row's own component of each vector reference plus its scalars."""
+    slots = np.nonzero(idx >= 0)[0]
+    if kind == CON_POLY_POINT:
+        comp = int(par[1])
+        keep = {3 * r + comp for r in range(5)} | {SCALAR, SCALAR2}
+        slots = np.array([k for k in slots if k in keep], dtype=np.int64)
+    return slots
+
+
 @dataclass(frozen=True)
 class Ref:
     """A vector reference: component c is q[idx[c]] (if idx[c] >= 0) plus cst[c]."""
@@ -518,7 +529,7 @@ class MechanismBuilder:
             if con["kind"] == CON_LINEAR:
                 con_par[i, 0] = const
             con_drv[i] = con["drv"]
-            used = np.unique(idx[idx >= 0])
+            used = np.unique(idx[_structural_slots(con["kind"], idx, con["par"])])
             pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
         nf = len(self._forces)
         frc_kind = np.zeros(nf, dtype=np.int64)
@@ -551,7 +562,7 @@ class MechanismBuilder:
         con_act = np.zeros((nc, NSLOT), dtype=np.int64)
         con_nact = np.zeros(nc, dtype=np.int64)
         for i in range(nc):
-            act = np.nonzero(con_idx[i] >= 0)[0]
+            act = _structural_slots(con_kind[i], con_idx[i], con_par[i])
             con_nact[i] = act.size
             con_act[i, :act.size] = act
         model = Model(

@@ -47,15 +47,18 @@ def pos(first, ptr, r, c):
     return ptr[r] + c - first[r]
 
 
-@kernel
+@inline_kernel
 def add_entry(env, first, ptr, pinv, i, j, value):
     """Add value to the symmetric entry (i, j) (original indices). A diagonal entry gets it once;
-    an off-diagonal pair (i, j) ~ (j, i) is stored once, so callers add each unordered pair once."""
+    an off-diagonal pair (i, j) ~ (j, i) is stored once, so callers add each unordered pair once.
+    A pair outside the envelope is dropped (it would land on another row's storage): declare every
+    coupling a force's tangent needs in the pattern (MechanismBuilder.couple)."""
     r = pinv[i]
     c = pinv[j]
     if c > r:
         r, c = c, r
-    env[ptr[r] + c - first[r]] += value
+    if c >= first[r]:   # outside the profile there is no storage: the pattern must include the pair
+        env[ptr[r] + c - first[r]] += value
 
 
 @kernel

@@ -111,6 +111,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     spring_coef = np.zeros((4, full_exps.shape[0]))
     susp = np.zeros((4, NSP))
     design_w = np.zeros((4, 3))
+    zs = []
     for i, (name, kin) in enumerate(zip(WHEELS, corners)):
         axle = cfg.front if i < 2 else cfg.rear
         front = i < 2
@@ -125,11 +126,16 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         b.poly_point(wc, r, (u, v, w), path, full_exps, z, rack if front else None, name=f"suspension {name}")
         phi = b.angle(f"spin_{name}", 0.0, velocity=0.0)
         b.scalar_inertia(phi, axle.wheel_spin_inertia_kgm2)
-        # tyre, brake and drive forces couple the wheel centre, spin, travel, rack and chassis
-        b.couple(wc, phi, z, rack, r, u, v, w)
+        zs.append(z)
+        b.couple(wc)           # the tyre's 3x3 stiffness/damping block on the wheel centre
         corner_idx[i] = [*wc.idx, z.index, phi.index, rack.index if front else -1]
         axis_coef[i], rotz_coef[i], rots_coef[i] = vec[OUT_AXIS], vec[OUT_ROT_Z], vec[OUT_ROT_S]
         spring_coef[i] = _pad_scalar(kin, full_exps)
+    # the tangent entries rtsim.vehicle.dynamics adds: each wheel centre's 3x3 block (tyre stiffness
+    # and damping, already coupled by its mass), each spin and travel diagonal, and the anti-roll bars
+    # between the travels of an axle
+    b.couple(zs[0], zs[1])
+    b.couple(zs[2], zs[3])
     b.gravity((0.0, 0.0, -G))
     mech = b.compile()
     mech.model.iset[IS_TANGENT_FORCES] = 1
