@@ -150,6 +150,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:          # output piped into head & co.
+        return 0
 
 
 if __name__ == "__main__":

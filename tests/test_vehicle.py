@@ -159,3 +159,13 @@ def test_unreachable_travel_range_is_a_clear_error():
     from rtsim.errors import ModelError
     with pytest.raises(ModelError, match="cannot reach travel"):
         solve_corner(geom, z_range=(-0.6, 0.6), nz=5, ns=3)
+
+
+def test_bad_subsystem_value_names_the_key(model):
+    """A bad brake value in the vehicle file is reported with its dotted key when the car is built."""
+    import dataclasses
+    cfg = model.config
+    bad = cfg.model_copy(update={"brakes": {**cfg.brakes, "front": {**cfg.brakes["front"], "mu": -1.0}}})
+    bad_model = dataclasses.replace(model, config=bad)
+    with pytest.raises(ConfigError, match=r"brakes\.front\.mu"):
+        VehicleSim(bad_model, make_plane(), 1e-3)
