@@ -113,17 +113,16 @@ def test_brake_holds_the_car_on_a_5_percent_grade(model, grade):
 
 
 # ---- dynamics ---------------------------------------------------------------------------------------
-def test_steady_turn_is_kinematically_consistent(model):
-    """From 80 km/h, a steering-wheel step: at steady state the lateral acceleration of the centre of
-    mass (horizontal, normal to its velocity) equals yaw rate x speed within 2 %, and the outer (right)
-    wheels carry more load than the inner ones."""
-    sim = VehicleSim(model, make_plane(), 1e-3, speed=22.22)
-    i = _chassis(sim)
-    sim.io.commands[CMD_THROTTLE] = 0.25
-    sim.step(500)
-    sim.io.commands[CMD_STEER] = np.radians(35.0)
-    sim.step(3500)
+def test_steady_turn_is_kinematically_consistent():
+    """step_steer_80kph (35 deg at the steering wheel from 80 km/h, speed held): at its steady state
+    the lateral acceleration of the centre of mass (horizontal, normal to its velocity) equals yaw
+    rate x speed within 2 %, and the outer (right) wheels carry more load than the inner ones."""
+    from rtsim.vehicle.run import prepare, run
+    sim, sc = prepare(None, "configs/scenarios/step_steer_80kph.toml")
+    run(sim, sc)
     d = sim.data
+    model = sim.vm
+    i = _chassis(sim)
     v = d.qd[i:i + 3]
     a = d.qdd[i:i + 3]
     speed = np.linalg.norm(v[:2])

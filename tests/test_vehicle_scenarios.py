@@ -100,3 +100,17 @@ noise_std = 0.01
     assert np.allclose(res.data[lag:, c("engine_speed")], base.data[:-lag, c("engine_speed")])
     noise = res.data[:, c("gyro_z")] - base.data[:, c("gyro_z")]
     assert 0.008 < np.std(noise) < 0.012 and abs(np.mean(noise)) < 0.002
+
+
+@pytest.mark.parametrize("scenario", ["straight_line", "step_steer_80kph", "step_steer_braking_80kph",
+                                      "steady_circle"])
+def test_every_scenario_runs_within_the_constraint_bar(scenario):
+    """Each shipped scenario runs to its end (no convergence error) with |Phi| <= 1e-8 and
+    |Phi_q qd + Phi_t| <= 1e-6 after every step."""
+    from rtsim.mbs.model import ST_MAX_PHI, ST_MAX_PHID, ST_STEPS
+    sim, sc = prepare(None, f"configs/scenarios/{scenario}.toml")
+    res = run(sim, sc)
+    st = sim.data.stats
+    assert st[ST_STEPS] == round(sc.duration / sc.dt)
+    assert st[ST_MAX_PHI] <= 1e-8 and st[ST_MAX_PHID] <= 1e-6
+    assert np.all(np.isfinite(res.data))

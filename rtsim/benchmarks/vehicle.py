@@ -14,7 +14,7 @@ from rtsim.road.model import make_plane
 from rtsim.road.query import NCONTACT, wheel_contact
 from rtsim.vehicle.brake import brake_step
 from rtsim.vehicle.config import load_vehicle
-from rtsim.vehicle.dynamics import CMD_STEER, CMD_THROTTLE, vehicle_forces
+from rtsim.vehicle.dynamics import CMD_STEER, CMD_THROTTLE, TO_FZ, vehicle_forces
 from rtsim.vehicle.model import CI_WX, build_vehicle
 from rtsim.vehicle.powertrain import powertrain_step
 from rtsim.vehicle.sim import VehicleSim
@@ -48,6 +48,8 @@ def run_scenario(name: str, road_path: Path | None, speed: float, steer: float, 
     t0 = time.perf_counter()
     sim.step(steps)
     wall = time.perf_counter() - t0
+    if np.any(sim.vd.tyre[:, TO_FZ] <= 0.0):
+        raise RuntimeError(f"{name}: a wheel left the road during the benchmark")
     s1 = sim.data.stats
     shares = _shares(sim)
     per_step = wall / steps
@@ -131,5 +133,6 @@ def suite() -> list[dict]:
     return [
         run_scenario("straight 30 km/h, campus mesh", campus, 8.33, 0.0),
         run_scenario("step steer 80 km/h, flat", None, 22.22, np.radians(35.0)),
-        run_scenario("step steer 80 km/h, campus mesh", campus, 22.22, np.radians(20.0), steps=1500),
+        # the surveyed lane is ~6 m wide: a mild steer keeps the car on it for the 1.5 s measured
+        run_scenario("steer 80 km/h, campus mesh", campus, 22.22, np.radians(4.0), steps=1500),
     ]

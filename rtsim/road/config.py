@@ -75,6 +75,9 @@ class MeshRoadConfig(_Road):
                                        description="alpha-shape radius, m (default from point spacing)")
     mu: float = _MU
     rolling_resistance: float = _RR
+    smooth_normals: bool = Field(True, strict=True,
+                                 description="contact normals interpolated from vertex normals, so tyre "
+                                             "forces are continuous across triangle edges")
 
 
 RoadConfig = Annotated[Union[FlatRoadConfig, GradeRoadConfig, MeshRoadConfig],
@@ -164,4 +167,4 @@ def load_road(path) -> Road:
     survey = read_survey(survey_path)
     mesh = survey_to_mesh(survey, cfg.grid_spacing, cfg.alpha_radius, cfg.mu, cfg.rolling_resistance)
     return make_mesh(mesh.vertices, mesh.triangles, mesh.tri_mu, mesh.tri_rr,
-                     cell_size=cfg.grid_spacing, source=str(survey_path))
+                     cell_size=cfg.grid_spacing, source=str(survey_path), smooth_normals=cfg.smooth_normals)

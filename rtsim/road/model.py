@@ -51,7 +51,8 @@ IP_NCX = 1
 IP_NCY = 2
 IP_NT = 3
 IP_NV = 4
-NIPAR = 5
+IP_SMOOTH = 5   # mesh: 1 = normals interpolated from vertex normals (smooth across edges)
+NIPAR = 6
 
 # fpar
 FP_X0 = 0
@@ -94,6 +95,7 @@ MAX_CELLS = 4_000_000
 
 Road = namedtuple("Road", [
     "ipar", "fpar", "vert", "tri", "tri_geom", "tri_mu", "tri_rr", "cell_start", "cell_tri",
+    "vert_n",   # (nv, 3) area-weighted unit vertex normals (used with IP_SMOOTH)
 ])
 
 #: Friction scale and rolling resistance accepted anywhere (configs and survey columns).
@@ -106,6 +108,7 @@ def _empty_mesh_fields():
         vert=np.zeros((0, 3)), tri=np.zeros((0, 3), dtype=np.int32),
         tri_geom=np.zeros((0, NGEOM)), tri_mu=np.zeros(0), tri_rr=np.zeros(0),
         cell_start=np.zeros(1, dtype=np.int32), cell_tri=np.zeros(0, dtype=np.int32),
+        vert_n=np.zeros((0, 3)),
     )
 
 
@@ -205,7 +208,7 @@ def build_grid_hash(vert: np.ndarray, tri: np.ndarray, cell_size: float):
 
 
 def make_mesh(vertices, triangles, tri_mu, tri_rr, cell_size: float | None = None,
-              source: str = "mesh") -> Road:
+              source: str = "mesh", smooth_normals: bool = False) -> Road:
     """A triangle-mesh road from vertices (nv, 3), triangles (nt, 3) and per-triangle friction scale
     and rolling resistance (scalars broadcast). Triangles are re-oriented counter-clockwise; the
     grid-hash cell size defaults to the mean edge length. Bad input raises ConfigError naming
@@ -248,9 +251,21 @@ def make_mesh(vertices, triangles, tri_mu, tri_rr, cell_size: float | None = Non
     x0, y0, h, ncx, ncy, cell_start, cell_tri = build_grid_hash(vert, tri, h)
     ipar = np.zeros(NIPAR, dtype=np.int64)
     ipar[[IP_KIND, IP_NCX, IP_NCY, IP_NT, IP_NV]] = ROAD_MESH, ncx, ncy, nt, vert.shape[0]
+    ipar[IP_SMOOTH] = int(smooth_normals)
     fpar = np.zeros(NFPAR)
     fpar[[FP_GRID_X0, FP_GRID_Y0, FP_INV_H]] = x0, y0, 1.0 / h
     fpar[FP_GRID_X1], fpar[FP_GRID_Y1] = x0 + ncx * h, y0 + ncy * h
     fpar[FP_NZ] = 1.0
+    # vertex normals: area-weighted mean of the adjacent facets' normals (the cross product of two
+    # edges is the normal times twice the area)
+    e1 = vert[tri[:, 1]] - vert[tri[:, 0]]
+    e2 = vert[tri[:, 2]] - vert[tri[:, 0]]
+    fn = np.cross(e1, e2)
+    vert_n = np.zeros_like(vert)
+    for k in range(3):
+        np.add.at(vert_n, tri[:, k], fn)
+    norm = np.linalg.norm(vert_n, axis=1)
+    vert_n[norm > 0] /= norm[norm > 0, None]
+    vert_n[norm == 0] = (0.0, 0.0, 1.0)
     return Road(ipar=ipar, fpar=fpar, vert=vert, tri=tri, tri_geom=geom, tri_mu=mu, tri_rr=rr,
-                cell_start=cell_start, cell_tri=cell_tri)
+                cell_start=cell_start, cell_tri=cell_tri, vert_n=vert_n)

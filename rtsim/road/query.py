@@ -35,7 +35,7 @@ import math
 from rtsim.jit import inline_kernel, kernel
 from rtsim.road.model import (
     FP_GRID_X0, FP_GRID_X1, FP_GRID_Y0, FP_GRID_Y1, FP_GX, FP_GY, FP_INV_H, FP_MU, FP_NX, FP_NY,
-    FP_NZ, FP_RR, FP_X0, FP_Y0, FP_Z0, INSIDE_TOL, IP_KIND, IP_NCX, IP_NCY, ROAD_PLANE, TG_B11, TG_B12,
+    FP_NZ, FP_RR, FP_X0, FP_Y0, FP_Z0, INSIDE_TOL, IP_KIND, IP_NCX, IP_NCY, IP_SMOOTH, ROAD_PLANE, TG_B11, TG_B12,
     TG_B21, TG_B22, TG_GX, TG_GY, TG_NX, TG_NY, TG_NZ, TG_X0, TG_Y0, TG_Z0,
 )
 
@@ -88,7 +88,17 @@ def locate(road, x, y):
             if l2 < -INSIDE_TOL or l1 + l2 > 1.0 + INSIDE_TOL:
                 continue
             z = g[t, TG_Z0] + g[t, TG_GX] * dx + g[t, TG_GY] * dy
-            return t, z, g[t, TG_NX], g[t, TG_NY], g[t, TG_NZ], road.tri_mu[t], road.tri_rr[t]
+            if road.ipar[IP_SMOOTH] == 0:
+                return t, z, g[t, TG_NX], g[t, TG_NY], g[t, TG_NZ], road.tri_mu[t], road.tri_rr[t]
+            # smooth: the normal interpolated from the vertex normals (continuous across edges)
+            l0 = 1.0 - l1 - l2
+            vn = road.vert_n
+            a, b, c3 = road.tri[t, 0], road.tri[t, 1], road.tri[t, 2]
+            nx = l0 * vn[a, 0] + l1 * vn[b, 0] + l2 * vn[c3, 0]
+            ny = l0 * vn[a, 1] + l1 * vn[b, 1] + l2 * vn[c3, 1]
+            nz = l0 * vn[a, 2] + l1 * vn[b, 2] + l2 * vn[c3, 2]
+            inv = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+            return t, z, nx * inv, ny * inv, nz * inv, road.tri_mu[t], road.tri_rr[t]
     return -1, -math.inf, 0.0, 0.0, 1.0, 0.0, 0.0
 
 
