@@ -10,7 +10,7 @@ import pytest
 from rtsim.errors import ConfigError
 from rtsim.road.model import make_grade, make_plane
 from rtsim.vehicle.config import load_vehicle, validate, VehicleConfig, load_toml
-from rtsim.vehicle.dynamics import CMD_STEER, CMD_THROTTLE, TO_FZ
+from rtsim.vehicle.dynamics import TO_FZ
 from rtsim.vehicle.kinematics import (
     OUT_AXIS, OUT_CENTRE, _pose_points, _solve_double_wishbone, _solve_macpherson, solve_corner,
 )

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
-from .model import CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, NSLOT, SCALAR
+from .model import CON_ANGLE2D, CON_DOT, CON_LINEAR, CON_POLY_POINT, DRV_POLY, DRV_SINE, NSLOT, SCALAR, SCALAR2
 
 
 @inline_kernel

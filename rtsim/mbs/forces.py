@@ -7,11 +7,11 @@ onto the coordinates), precomputed in the model as `q_grav`.
 from __future__ import annotations
 
 import numpy as np
-from rtsim.jit import inline_kernel, kernel
+from rtsim.jit import kernel
 
 from .constraints import ref, refd
 from .envelope import add_entry
-from .model import FRC_COORD, FRC_SPRING, SCALAR
+from .model import FRC_SPRING, SCALAR
 
 
 @kernel

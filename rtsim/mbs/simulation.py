@@ -10,6 +10,7 @@ import numpy as np
 
 from rtsim.errors import (
     AssemblyError, ConvergenceError, FactorizationError, NonFiniteForceError, NonFiniteStateError,
+    SimulationError,
 )
 
 from .builder import Mechanism
