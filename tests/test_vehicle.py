@@ -168,3 +168,23 @@ def test_bad_subsystem_value_names_the_key(model):
     bad_model = dataclasses.replace(model, config=bad)
     with pytest.raises(ConfigError, match=r"brakes\.front\.mu"):
         VehicleSim(bad_model, make_plane(), 1e-3)
+
+
+def test_linear_tyre_model_is_used_when_configured():
+    """tyres.model = "linear" in the vehicle file switches every tyre to the seed's linearised law:
+    in a steady turn each tyre's lateral force is -C_alpha x slip angle (mirrored on the right side),
+    with C_alpha from the same .tir at FNOMIN."""
+    from rtsim.vehicle.dynamics import TO_ALPHA, TO_FY
+    from rtsim.vehicle.tyre.tir import P_LIN_CALPHA
+    cfg, base = load_vehicle(VEHICLE)
+    lin = cfg.model_copy(update={"tyres": cfg.tyres.model_copy(update={"model": "linear"})})
+    sim = VehicleSim(build_vehicle(lin, base), make_plane(), 1e-3, speed=15.0)
+    from rtsim.vehicle.dynamics import CMD_STEER
+    sim.io.commands[CMD_STEER] = 0.3
+    sim.step(3000)
+    t = sim.vd.tyre
+    c_alpha = sim.tp[P_LIN_CALPHA]
+    for i in range(4):
+        # steady state: the transient slip equals the steady one, and the law is linear there
+        assert abs(t[i, TO_FY] - (-c_alpha * t[i, TO_ALPHA])) < 1e-3 * abs(t[i, TO_FY]) + 1.0
+    assert np.all(np.abs(t[:, TO_FY]) > 50.0)

@@ -41,10 +41,12 @@ from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_STEERING_T
 from .steering import SI_CMD, SI_RACK_FORCE, SI_SIZE, SO_RACK_ACC, SO_RACK_POS, SO_RACK_VEL, SO_SIZE, SO_SW_ANGLE, \
     SO_TORQUE, steering_step
 from .model import (
+    TYRE_LINEAR,
     CI_PHI, CI_S, CI_WX, CI_Z, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE, SP_K, SP_PARTNER,
 )
 from .tyre.magic_formula import (advance_deflections, effective_rolling_radius, mf52_forces, transient_slip,
                                  vertical_force)
+from .tyre.linear import linear_forces
 from .tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_DAMPING, P_VERTICAL_STIFFNESS
 
 # Per-tyre outputs (VehicleData.tyre[w, :]) for logging and sensors.
@@ -210,14 +212,15 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc):
         vsy = (vwx + rv[0]) * lyx + (vwy + rv[1]) * lyy + (vwz + rv[2]) * lyz
         re = effective_rolling_radius(tp, fz)
         kappa, alpha = transient_slip(tp, vd.slip, i, fz, gamma, vx, vsy, omega, re)
-        if i % 2 == 0:
-            fx, fy, mz, my = mf52_forces(tp, fz, kappa, alpha, gamma, vx, ct[CT_MU])
+        # the property file describes a left-side tyre; a right-side one is its mirror image
+        # (MF-Tyre convention): Fy(alpha, gamma) -> -Fy(-alpha, -gamma), likewise Mz
+        side = 1.0 if i % 2 == 0 else -1.0
+        if veh.tyre_model[0] == TYRE_LINEAR:
+            fx, fy, mz, my = linear_forces(tp, fz, kappa, side * alpha, side * gamma, vx, ct[CT_MU])
         else:
-            # the property file describes a left-side tyre; a right-side one is its mirror image
-            # (MF-Tyre convention): Fy(alpha, gamma) -> -Fy(-alpha, -gamma), likewise Mz
-            fx, fy, mz, my = mf52_forces(tp, fz, kappa, -alpha, -gamma, vx, ct[CT_MU])
-            fy = -fy
-            mz = -mz
+            fx, fy, mz, my = mf52_forces(tp, fz, kappa, side * alpha, side * gamma, vx, ct[CT_MU])
+        fy *= side
+        mz *= side
         rr = ct[CT_RR] * fz * re
         my -= rr if vx > 0.1 else (-rr if vx < -0.1 else rr * vx / 0.1)
         fvx = fx * ex + fy * lyx + fz * nx

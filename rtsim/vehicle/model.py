@@ -52,7 +52,9 @@ Vehicle = namedtuple("Vehicle", [
     "rack_con",        # () int constraint row of the rack (its multiplier is the rack force)
     "imu_local",       # (3,) IMU position in the body frame relative to the CG, m
     "aero",            # (2,) drag area m^2, air density kg/m^3
+    "tyre_model",      # (1,) int: TYRE_MAGIC_FORMULA or TYRE_LINEAR
 ])
+TYRE_MAGIC_FORMULA, TYRE_LINEAR = 0, 1
 
 
 @dataclass
@@ -166,6 +168,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         spring_coef=spring_coef, susp=susp, rack_driver=np.int64(rack_driver), rack_con=np.int64(rack_con),
         imu_local=np.array(cfg.sensors.imu_position_m, dtype=float) - cg,
         aero=np.array([cfg.aero.drag_area_m2, cfg.aero.air_density_kg_m3]),
+        tyre_model=np.array([TYRE_LINEAR if cfg.tyres.model == "linear" else TYRE_MAGIC_FORMULA], dtype=np.int64),
     )
     # inertia at the rack: the rack itself and the front unsprung masses the rack drags along
     j = full_exps.tolist().index([0, 1])
