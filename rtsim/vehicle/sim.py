@@ -6,22 +6,20 @@ from pathlib import Path
 
 import numpy as np
 
+from rtsim.channels import WHEELS
 from rtsim.errors import ConfigError
 from rtsim.mbs import Simulation
-from rtsim.mbs.model import OK
+from rtsim.mbs.model import OK, Data
 from rtsim.road.model import Road
 from rtsim.road.query import NQUERY, Q_NX, Q_NZ, Q_Z, road_query
 
 from .brake import brake_config, brake_params, brake_state
-from rtsim.mbs.model import Data
-
-from .dynamics import CMD_BRAKE, Parts, States, VehicleData, make_io, make_vehicle_data, vehicle_advance, vehicle_mbs_step
+from .dynamics import (CMD_BRAKE, Parts, States, VehicleData, make_io, make_vehicle_data, vehicle_advance,
+                       vehicle_mbs_step)
+from .model import VehicleModel
 from .powertrain import PP_MEASURED, powertrain_config, powertrain_params, powertrain_state
 from .sensors import NSENSOR, true_sensors
 from .steering import steering_config, steering_params, steering_state
-from .model import VehicleModel
-from rtsim.channels import WHEELS
-
 from .tyre.magic_formula import effective_rolling_radius
 from .tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
 
