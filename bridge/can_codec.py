@@ -450,8 +450,6 @@ def _benchmark(n: int = 20000) -> None:  # pragma: no cover - manual measurement
     import random
     import timeit
 
-    import cantools  # noqa: F401
-
     codec = Codec()
     rx = CommandReceiver(codec)
     rng = random.Random(1)
@@ -461,7 +459,6 @@ def _benchmark(n: int = 20000) -> None:  # pragma: no cover - manual measurement
     print(f"encode_sensors, all {nf} frames: {t * 1e6:.2f} us ({t * 1e6 / nf:.2f} us per frame)")
     msgs = {m.frame_id: m for m in codec.db.messages}
     frames = codec.encode_sensors(vals, 1.234)
-    dv = {m.name: m.decode(d) for m, d in ((msgs[i], d) for i, d in frames)}  # noqa: F841
     t = min(timeit.repeat(lambda: [msgs[i].encode(msgs[i].decode(d)) for i, d in frames],
                           number=n // 20, repeat=3)) / (n // 20)
     print(f"  for comparison cantools decode+encode of the {nf} frames: {t * 1e6:.1f} us")
