@@ -1,0 +1,477 @@
+"""Live session recorder of the HIL service: MCAP written off the real-time thread.
+
+The real-time loop calls :meth:`Recorder.record` (``topic_key, log_time_ns, payload``), which only
+appends a tuple to a bounded queue and never blocks: when the queue is full the message is dropped
+and counted (:attr:`Recorder.dropped`). A writer thread serialises the payloads (JSON) and writes
+them into zstd-compressed chunks.
+
+Topics (``topic_key`` → MCAP topic), each registered on first use with a JSON-schema channel that
+Foxglove opens without plug-ins (message encoding ``json``, schema encoding ``jsonschema``; names and
+units from the channel dictionary, rtsim.channels):
+
+* ``sensors``  → ``rtsim/<vehicle_id>/sensors``  every sensor channel + ``time`` (s)
+* ``state``    → ``rtsim/<vehicle_id>/state``    pose, speed, tyre forces, constraint violation
+* ``status``   → ``rtsim/<vehicle_id>/status``   free-form service status (mode, overruns, ...)
+* ``commands`` → ``rtsim/<vehicle_id>/commands`` the ECU's actuator commands
+* ``can/rx``, ``can/tx`` → ``rtsim/<vehicle_id>/can/rx|tx`` raw frames as
+  ``{"id": int, "dlc": int, "data": "hex", "time": s}``
+
+Payloads: a dict (``time`` is added from ``log_time_ns`` when missing), or ``bytes`` holding an
+already-encoded JSON message. On the CAN topics a frame may also be given as ``(can_id, data)`` or
+``(can_id, data, dlc)`` with ``data`` bytes, or as a dict whose ``data`` is bytes. The payload is
+serialised later on the writer thread: do not mutate a dict after handing it to ``record``.
+
+Chunking / flush policy: a chunk is closed and pushed to the operating system (``Writer.flush`` +
+file flush, so it survives a SIGKILL of the process; no fsync) when its messages reach
+``chunk_size`` bytes (default 256 KiB) or when its first message is ``flush_interval`` seconds old
+(default 1 s, wall clock), whichever comes first. A killed recorder therefore loses at most the
+chunk in progress (≤ ``chunk_size`` bytes, ≤ about ``flush_interval`` s) plus what was still queued.
+:func:`read_recording` recovers every complete chunk of such a file.
+"""
+from __future__ import annotations
+
+import collections
+import json
+import math
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, NamedTuple
+
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Channel, Chunk, Footer, Message, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import CompressionType, Writer
+
+from rtsim.channels import COMMANDS, SENSORS
+from rtsim.errors import ConfigError
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+_FOOTER_OPCODE = 0x02
+
+TOPIC_KEYS = ("sensors", "state", "status", "commands", "can/rx", "can/tx")
+CAN_KEYS = frozenset(("can/rx", "can/tx"))
+
+_TIME = {"type": "number", "description": "log time, s (simulation time of the sample)"}
+_STATE_FIELDS = {
+    "pos_x": ("m", "vehicle reference point x, world frame (ISO 8855)"),
+    "pos_y": ("m", "vehicle reference point y, world frame"),
+    "pos_z": ("m", "vehicle reference point z, world frame"),
+    "yaw": ("rad", "yaw angle, positive turning left"),
+    "speed": ("m/s", "forward speed"),
+    "constraint_violation": ("coordinate units", "max |Phi| of the multibody constraints"),
+}
+
+
+def _num(unit: str, desc: str) -> dict:
+    return {"type": "number", "description": f"{desc} [{unit}]"}
+
+
+def _schemas() -> dict[str, tuple[str, dict]]:
+    sensors = {"time": _TIME, **{c.name: _num(c.unit, c.description) for c in SENSORS}}
+    commands = {"time": _TIME, **{c.name: _num(c.unit, c.description) for c in COMMANDS}}
+    state = {"time": _TIME, **{k: _num(u, d) for k, (u, d) in _STATE_FIELDS.items()}}
+    status = {
+        "time": _TIME,
+        "mode": {"type": "string", "description": "service mode (e.g. idle, running, fault)"},
+        "overruns": {"type": "integer", "description": "real-time step overruns so far"},
+        "step_us": {"type": "number", "description": "cost of the last step [us]"},
+        "message": {"type": "string", "description": "free text"},
+    }
+    can = {
+        "id": {"type": "integer", "description": "CAN arbitration id"},
+        "dlc": {"type": "integer", "description": "data length code (bytes)"},
+        "data": {"type": "string", "description": "frame payload, hexadecimal, 2 digits per byte"},
+        "time": _TIME,
+    }
+
+    def obj(title, props, required, extra):
+        s = {"title": title, "type": "object", "properties": props, "required": required}
+        s["additionalProperties"] = extra
+        return s
+
+    return {
+        "sensors": ("rtsim.sensors", obj("rtsim sensors", sensors, ["time"], {"type": ["number", "null"]})),
+        "state": ("rtsim.state", obj("rtsim state", state, ["time"], {"type": ["number", "null"]})),
+        "status": ("rtsim.status", obj("rtsim status", status, ["time"], True)),
+        "commands": ("rtsim.commands", obj("rtsim commands", commands, ["time"], {"type": ["number", "null"]})),
+        "can/rx": ("rtsim.can_frame", obj("rtsim CAN frame (received by the simulator)", can,
+                                          ["id", "dlc", "data", "time"], False)),
+        "can/tx": ("rtsim.can_frame", obj("rtsim CAN frame (sent by the simulator)", can,
+                                          ["id", "dlc", "data", "time"], False)),
+    }
+
+
+def _finite(x):
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    return x
+
+
+def _dumps(obj) -> bytes:
+    try:
+        return json.dumps(obj, allow_nan=False, separators=(",", ":")).encode()
+    except ValueError:  # NaN / inf are not JSON: write them as null
+        return json.dumps(_finite(obj), allow_nan=False, separators=(",", ":")).encode()
+
+
+def _can_frame(payload, t_s: float) -> dict:
+    if isinstance(payload, dict):
+        data = payload.get("data", b"")
+        hexdata = data.hex() if isinstance(data, (bytes, bytearray, memoryview)) else str(data)
+        dlc = payload.get("dlc", len(hexdata) // 2)
+        return {"id": int(payload["id"]), "dlc": int(dlc), "data": hexdata,
+                "time": float(payload.get("time", t_s))}
+    can_id, data, *rest = payload
+    data = bytes(data)
+    return {"id": int(can_id), "dlc": int(rest[0]) if rest else len(data), "data": data.hex(),
+            "time": t_s}
+
+
+class Recorder:
+    """Records a live session to an MCAP file from a writer thread (see the module docstring).
+
+    ``on_chunk(chunks, messages)`` (optional) is called on the writer thread after each chunk has
+    been pushed to the operating system, with the number of chunks and of messages written so far.
+    """
+
+    def __init__(self, path: str | Path, vehicle_id: str, chunk_size: int = 256 * 1024,
+                 flush_interval: float = 1.0, queue_size: int = 100_000,
+                 on_chunk: Callable[[int, int], Any] | None = None, poll_interval: float = 0.002):
+        if chunk_size <= 0 or flush_interval <= 0 or queue_size <= 0:
+            raise ValueError("chunk_size, flush_interval and queue_size must be positive")
+        self.path = Path(path)
+        self.vehicle_id = vehicle_id
+        self.chunk_size = int(chunk_size)
+        self.flush_interval = float(flush_interval)
+        self.queue_size = int(queue_size)
+        self.on_chunk = on_chunk
+        self._poll = poll_interval
+        self._queue: collections.deque = collections.deque()
+        self.dropped = 0        # messages refused by record() (queue full, or recorder closed)
+        self.written = 0        # messages handed to the MCAP writer
+        self.chunks = 0         # chunks pushed to the OS
+        self.errors = 0         # payloads that could not be serialised (skipped)
+        self.last_error: str | None = None
+        self.error: BaseException | None = None   # fatal writer-thread error (I/O), re-raised by close()
+        self._closing = False
+        self._closed = False
+        self._close_lock = threading.Lock()
+        self._running = threading.Event()
+        self._running.set()
+        self._fh = open(self.path, "wb")
+        self._writer = Writer(self._fh, chunk_size=self.chunk_size * 4 + (1 << 20),
+                              compression=CompressionType.ZSTD)
+        self._writer.start(profile="", library="rtsim")
+        self._fh.flush()         # the header is on disk even if the process dies before a chunk
+        self._schema_defs = _schemas()
+        self._schema_ids: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._seq: dict[str, int] = {}
+        self._chunk_bytes = 0
+        self._chunk_started: float | None = None
+        self._thread = threading.Thread(target=self._run, name=f"mcap-recorder-{vehicle_id}",
+                                        daemon=True)
+        self._thread.start()
+
+    # ---------------------------------------------------------------- real-time side
+    def record(self, topic_key: str, log_time_ns: int, payload) -> bool:
+        """Queue one message; never blocks. Returns False (and counts it in ``dropped``) when the
+        queue is full or the recorder is closed. Raises ValueError for an unknown topic key."""
+        if topic_key not in self._schema_defs:
+            raise ValueError(f"unknown topic key {topic_key!r}; allowed: {', '.join(TOPIC_KEYS)}")
+        q = self._queue
+        if self._closing or len(q) >= self.queue_size:
+            self.dropped += 1
+            return False
+        q.append((topic_key, log_time_ns, payload))
+        return True
+
+    @property
+    def queued(self) -> int:
+        return len(self._queue)
+
+    def topic(self, topic_key: str) -> str:
+        return f"rtsim/{self.vehicle_id}/{topic_key}"
+
+    # ---------------------------------------------------------------- diagnostics / tests
+    def pause(self) -> None:
+        """Suspend the writer thread (messages keep queueing, then dropping). For tests."""
+        self._running.clear()
+
+    def resume(self) -> None:
+        self._running.set()
+
+    # ---------------------------------------------------------------- writer thread
+    def _channel(self, key: str) -> int:
+        cid = self._channels.get(key)
+        if cid is None:
+            name, schema = self._schema_defs[key]
+            sid = self._schema_ids.get(name)
+            if sid is None:
+                sid = self._writer.register_schema(name=name, encoding="jsonschema",
+                                                   data=json.dumps(schema).encode())
+                self._schema_ids[name] = sid
+            cid = self._writer.register_channel(topic=self.topic(key), message_encoding="json",
+                                                schema_id=sid)
+            self._channels[key] = cid
+            self._seq[key] = 0
+        return cid
+
+    def _serialise(self, key: str, t_ns: int, payload) -> bytes:
+        if key in CAN_KEYS and not isinstance(payload, (bytes, bytearray)):
+            return _dumps(_can_frame(payload, t_ns * 1e-9))
+        if isinstance(payload, (bytes, bytearray, memoryview)):
+            return bytes(payload)
+        if "time" not in payload:
+            payload = {"time": t_ns * 1e-9, **payload}
+        return _dumps(payload)
+
+    def _write(self, item) -> None:
+        key, t_ns, payload = item
+        try:
+            data = self._serialise(key, t_ns, payload)
+        except Exception as e:  # a bad payload must not stop the recording
+            self.errors += 1
+            self.last_error = f"{key} at {t_ns} ns: {type(e).__name__}: {e}"
+            return
+        cid = self._channel(key)
+        seq = self._seq[key]
+        self._seq[key] = seq + 1
+        self._writer.add_message(channel_id=cid, log_time=int(t_ns), publish_time=int(t_ns),
+                                 sequence=seq & 0xFFFFFFFF, data=data)
+        self.written += 1
+        if self._chunk_started is None:
+            self._chunk_started = time.monotonic()
+        self._chunk_bytes += len(data) + 31
+
+    def _maybe_flush(self, force: bool = False) -> None:
+        if self._chunk_started is None:
+            return
+        if (force or self._chunk_bytes >= self.chunk_size
+                or time.monotonic() - self._chunk_started >= self.flush_interval):
+            self._writer.flush()       # closes the chunk, writes it and flushes the file object
+            self._fh.flush()
+            self._chunk_bytes = 0
+            self._chunk_started = None
+            self.chunks += 1
+            if self.on_chunk is not None:
+                try:
+                    self.on_chunk(self.chunks, self.written)
+                except Exception as e:
+                    self.last_error = f"on_chunk: {type(e).__name__}: {e}"
+
+    def _run(self) -> None:
+        q = self._queue
+        try:
+            while True:
+                if not self._running.is_set() and not self._closing:
+                    self._running.wait(0.05)
+                    continue
+                try:
+                    item = q.popleft()
+                except IndexError:
+                    if self._closing:
+                        break
+                    self._maybe_flush()
+                    time.sleep(self._poll)
+                    continue
+                self._write(item)
+                self._maybe_flush()
+            self._maybe_flush(force=True)   # the last chunk, counted and reported like the others
+            self._writer.finish()
+        except BaseException as e:  # I/O failure: stop; close() re-raises
+            self.error = e
+            self._closing = True
+        finally:
+            try:
+                self._fh.close()
+            except OSError as e:
+                self.error = self.error or e
+
+    # ---------------------------------------------------------------- closing
+    def close(self) -> None:
+        """Drain the queue, finish the file (summary with every channel) and close it. Idempotent."""
+        with self._close_lock:
+            if self._closed:
+                return
+            self._closing = True
+            self._running.set()
+            self._thread.join()
+            self._closed = True
+        if self.error is not None:
+            raise OSError(f"MCAP recorder {self.path}: writer failed: {self.error}") from self.error
+
+    def __enter__(self) -> "Recorder":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+# -------------------------------------------------------------------- reading
+
+
+class RecordedMessage(NamedTuple):
+    log_time_ns: int
+    sequence: int
+    data: Any          # the decoded JSON message (dict), or raw bytes for non-JSON channels
+
+
+@dataclass
+class RecordingInfo:
+    path: Path
+    complete: bool                 # footer and summary present: the writer closed the file
+    messages: int                  # messages read (recovered, for a damaged file)
+    chunks: int                    # complete chunks read
+    topics: dict[str, int] = field(default_factory=dict)   # messages per topic
+    truncated_bytes: int = 0       # trailing bytes of an incomplete record that were discarded
+    note: str = ""                 # what stopped the recovery of a damaged file
+
+
+class _Bounded:
+    """A read-only view of a file limited to its first ``end`` bytes (for StreamReader)."""
+
+    def __init__(self, fh, end: int):
+        self._fh, self._left = fh, end - fh.tell()
+
+    def read(self, n: int = -1) -> bytes:
+        if n < 0 or n > self._left:
+            n = self._left
+        data = self._fh.read(n)
+        self._left -= len(data)
+        return data
+
+
+def _decode(channel: Channel, data: bytes):
+    if channel.message_encoding == "json":
+        return json.loads(data)
+    return bytes(data)
+
+
+def _scan_complete_records(fh, size: int) -> int:
+    """Offset just after the last whole top-level record (framing: opcode u8, length u64)."""
+    pos = len(MCAP_MAGIC)
+    while pos + 9 <= size:
+        fh.seek(pos)
+        opcode, length = struct.unpack("<BQ", fh.read(9))
+        if pos + 9 + length > size:
+            break
+        pos += 9 + length
+        if opcode == _FOOTER_OPCODE:
+            break
+    return pos
+
+
+def read_recording(path: str | Path):
+    """Read a recording: ``(messages, info)`` with ``messages[topic]`` the list of
+    :class:`RecordedMessage` in file (recording) order and ``info`` a :class:`RecordingInfo`.
+
+    A finished file is read through its summary. A damaged one (writer killed: no summary or
+    footer, last chunk truncated) is streamed record by record and every complete chunk's messages
+    are kept; it never raises for truncation. Raises ConfigError when the file is not MCAP."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        fh = open(path, "rb")
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot open recording: {e.strerror or e}") from e
+    with fh:
+        head = fh.read(len(MCAP_MAGIC))
+        if not head or not MCAP_MAGIC.startswith(head):
+            raise ConfigError(f"{path}: not an MCAP file (magic {head[:8]!r}, expected {MCAP_MAGIC!r})")
+        if len(head) < len(MCAP_MAGIC):
+            return {}, RecordingInfo(path, False, 0, 0, truncated_bytes=size, note="truncated magic")
+        fh.seek(size - len(MCAP_MAGIC))
+        if size >= 2 * len(MCAP_MAGIC) and fh.read(len(MCAP_MAGIC)) == MCAP_MAGIC:
+            fh.seek(0)
+            try:
+                return _read_complete(path, fh)
+            except (McapError, ValueError, struct.error, EOFError):
+                pass          # footer present but summary damaged: fall back to streaming
+        return _read_stream(path, fh, size)
+
+
+def _read_complete(path: Path, fh):
+    reader = make_reader(fh)
+    summary = reader.get_summary()
+    if summary is None:
+        raise McapError("no summary")
+    out: dict[str, list[RecordedMessage]] = {}
+    n = 0
+    for _schema, channel, msg in reader.iter_messages(log_time_order=False):
+        out.setdefault(channel.topic, []).append(
+            RecordedMessage(msg.log_time, msg.sequence, _decode(channel, msg.data)))
+        n += 1
+    for ch in summary.channels.values():
+        out.setdefault(ch.topic, [])
+    chunks = summary.statistics.chunk_count if summary.statistics else len(summary.chunk_indexes)
+    info = RecordingInfo(path, True, n, chunks, {t: len(v) for t, v in out.items()})
+    return out, info
+
+
+def _read_stream(path: Path, fh, size: int):
+    end = _scan_complete_records(fh, size)
+    fh.seek(len(MCAP_MAGIC))
+    channels: dict[int, Channel] = {}
+    out: dict[str, list[RecordedMessage]] = {}
+    n = chunks = 0
+    note = ""
+    complete = False
+
+    def take(records):
+        nonlocal n
+        got = []
+        for r in records:
+            if isinstance(r, (Schema,)):
+                continue
+            if isinstance(r, Channel):
+                channels[r.id] = r
+            elif isinstance(r, Message):
+                ch = channels.get(r.channel_id)
+                if ch is None:
+                    raise McapError(f"message on unknown channel {r.channel_id}")
+                got.append((ch.topic, RecordedMessage(r.log_time, r.sequence, _decode(ch, r.data))))
+        for topic, m in got:       # all or nothing per chunk
+            out.setdefault(topic, []).append(m)
+        n += len(got)
+
+    reader = StreamReader(_Bounded(fh, end), skip_magic=True, emit_chunks=True)
+    it = iter(reader.records)
+    while True:
+        try:
+            rec = next(it)
+        except StopIteration:
+            break
+        except Exception as e:     # EndOfFile at the cut, or a damaged record
+            if not (type(e).__name__ == "EndOfFile"):
+                note = f"stopped at a damaged record: {type(e).__name__}: {e}"
+            break
+        try:
+            if isinstance(rec, Chunk):
+                take(breakup_chunk(rec, validate_crc=True))
+                chunks += 1
+            else:
+                take([rec])
+                if isinstance(rec, Footer):
+                    fh.seek(end)
+                    complete = end + len(MCAP_MAGIC) == size and fh.read(len(MCAP_MAGIC)) == MCAP_MAGIC
+                    break
+        except Exception as e:     # corrupt chunk (bad CRC, bad zstd frame, bad JSON): stop here
+            note = f"stopped at a damaged chunk: {type(e).__name__}: {e}"
+            break
+    discarded = size - end - (len(MCAP_MAGIC) if complete else 0)
+    if not note and discarded:
+        note = f"last record truncated ({discarded} bytes discarded)"
+    for ch in channels.values():
+        out.setdefault(ch.topic, [])
+    info = RecordingInfo(path, complete, n, chunks, {t: len(v) for t, v in out.items()},
+                         truncated_bytes=discarded, note=note)
+    return out, info
