@@ -17,11 +17,14 @@ from rtsim.channels import SENSOR_NAMES, WHEELS
 from rtsim.errors import ConfigError
 from rtsim.road.config import load_road
 
+from .brake import brake_gains
 from .config import load_vehicle
 from .dynamics import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR, TO_FX, TO_FY, TO_FZ
+from .kinematics import OUT_AXIS
 from .model import VehicleModel, build_vehicle
 from .sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_model, sensor_params
 from .sim import VehicleSim
+from .tyre.magic_formula import effective_rolling_radius, slip_stiffnesses
 
 STATE_COLUMNS = ("pos_x", "pos_y", "pos_z", "yaw", "speed",
                  *(f"tyre_{c}_{w}" for c in ("fx", "fy", "fz") for w in WHEELS), "constraint_violation")
@@ -143,8 +146,6 @@ def write_csv(result: RunResult, path: str | Path) -> None:
 
 def describe(model: VehicleModel, sim: VehicleSim) -> dict:
     """The model's size and key parameters in SI units (`rtsim describe`)."""
-    from .brake import brake_gains
-    from .tyre.magic_formula import slip_stiffnesses
     cfg = model.config
     mech = model.mech
     loads = model.static_loads
@@ -158,7 +159,6 @@ def describe(model: VehicleModel, sim: VehicleSim) -> dict:
     kf = slip_stiffnesses(sim.tp, loads[0], 0.0)
     kr = slip_stiffnesses(sim.tp, loads[2], 0.0)
     gains = brake_gains(sim.bcfg)
-    from .tyre.magic_formula import effective_rolling_radius
     return {
         "name": cfg.name,
         "id": cfg.id,
@@ -188,7 +188,6 @@ def describe(model: VehicleModel, sim: VehicleSim) -> dict:
 
 def _steering_ratio(model: VehicleModel, sim: VehicleSim) -> float:
     """Steering-wheel angle per mean front road-wheel angle around straight ahead."""
-    from .kinematics import OUT_AXIS
     rp = sim.stcfg.rack_travel_per_rad
     ds = 1e-3
     angles = []
