@@ -52,6 +52,37 @@ COMMANDS: tuple[Channel, ...] = (
     _ch("steering_wheel_angle_cmd", "rad", "commanded steering-wheel angle"),
 )
 
+#: Vehicle state published for observers (Zenoh ``state``, MCAP ``state``), 100 Hz by default.
+STATE: tuple[Channel, ...] = (
+    _ch("pos_x", "m", "centre of mass x, world frame"),
+    _ch("pos_y", "m", "centre of mass y, world frame"),
+    _ch("pos_z", "m", "centre of mass z, world frame"),
+    _ch("roll_angle", "rad", "chassis roll (Euler z-y-x), positive right side down"),
+    _ch("pitch_angle", "rad", "chassis pitch (Euler z-y-x), positive nose down"),
+    _ch("yaw_angle", "rad", "chassis yaw (Euler z-y-x), positive turning left"),
+    _ch("vel_x", "m/s", "centre-of-mass velocity, body x (forward)"),
+    _ch("vel_y", "m/s", "centre-of-mass velocity, body y (left)"),
+    _ch("vel_z", "m/s", "centre-of-mass velocity, body z (up)"),
+    _ch("roll_rate", "rad/s", "body angular rate about x"),
+    _ch("pitch_rate", "rad/s", "body angular rate about y"),
+    _ch("yaw_rate", "rad/s", "body angular rate about z"),
+    _ch("speed", "m/s", "magnitude of the centre-of-mass velocity"),
+    *(_ch(f"wheel_speed_{w}", "rad/s", f"spin rate of wheel {w}, positive rolling forward") for w in WHEELS),
+    *(_ch(f"tyre_fx_{w}", "N", f"longitudinal tyre force {w}, tyre frame") for w in WHEELS),
+    *(_ch(f"tyre_fy_{w}", "N", f"lateral tyre force {w}, tyre frame") for w in WHEELS),
+    *(_ch(f"tyre_fz_{w}", "N", f"vertical tyre load {w}") for w in WHEELS),
+    *(_ch(f"slip_ratio_{w}", "1", f"longitudinal slip ratio {w}") for w in WHEELS),
+    *(_ch(f"slip_angle_{w}", "rad", f"tyre slip angle {w}") for w in WHEELS),
+    *(_ch(f"brake_torque_{w}", "N*m", f"brake torque on wheel {w}") for w in WHEELS),
+    _ch("throttle_angle", "rad", "throttle plate angle (actuator state)"),
+    _ch("brake_pressure", "kPa", "brake line pressure (actuator state)"),
+    _ch("steering_wheel_angle", "rad", "steering-wheel angle (actuator state)"),
+    _ch("rack_position", "m", "steering rack position, positive steering left"),
+    _ch("engine_speed", "rad/s", "engine crankshaft speed"),
+    _ch("constraint_violation", "1", "max |Phi| of the multibody constraints (coordinate units)"),
+)
+
 SENSOR_NAMES = tuple(c.name for c in SENSORS)
+STATE_NAMES = tuple(c.name for c in STATE)
 COMMAND_NAMES = tuple(c.name for c in COMMANDS)
 BY_NAME = {c.name: c for c in SENSORS + COMMANDS}
