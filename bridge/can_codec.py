@@ -50,6 +50,9 @@ DEFAULT_DBC = Path(__file__).resolve().parent.parent / "configs" / "can" / "xbw.
 
 TIME_SIGNAL = "sim_time_ms"
 STATUS_FRAME = "SIM_STATUS"
+STEP_REQUEST_FRAME = "SIM_STEP_REQ"   # lockstep: ECU asks for n steps (event frame, E2E protected)
+STEP_ACK_FRAME = "SIM_STEP_ACK"       # lockstep: SIM answers with the time reached (event frame)
+EVENT_FRAMES = frozenset((STEP_REQUEST_FRAME, STEP_ACK_FRAME))
 FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error")
 REJECT_KINDS = ("dlc", "crc", "counter", "range")
 #: What the watchdog applies when a command times out.
@@ -145,10 +148,10 @@ def _sig_layout(msg, s, where) -> _Sig:
 def _frame_info(msg, where) -> FrameInfo:
     if msg.is_extended_frame or getattr(msg, "is_fd", False) or msg.length != 8:
         raise ConfigError(f"{where}: frame {msg.name} must be a classic standard-id 8-byte frame")
-    if not msg.cycle_time:
+    if not msg.cycle_time and msg.name not in EVENT_FRAMES:
         raise ConfigError(f"{where}: frame {msg.name} has no GenMsgCycleTime")
     sigs = tuple(_sig_layout(msg, s, where) for s in msg.signals)
-    return FrameInfo(msg.frame_id, msg.name, msg.length, msg.cycle_time / 1000.0,
+    return FrameInfo(msg.frame_id, msg.name, msg.length, (msg.cycle_time or 0) / 1000.0,
                      (msg.senders or [""])[0], sigs)
 
 
@@ -216,7 +219,7 @@ class Codec:
         self.command_frames: dict[str, FrameInfo] = {}
         self._cmd_plans: dict[str, tuple] = {}
         for msg in self.db.messages:
-            if "ECU" not in (msg.senders or []):
+            if "ECU" not in (msg.senders or []) or msg.name in EVENT_FRAMES:
                 continue
             f = self.frames[msg.name]
             data_id = _attr(msg, "E2EDataID", None)
@@ -235,6 +238,20 @@ class Codec:
             raise ConfigError(f"{where}: command frames carry {sorted(self.command_frames)}, "
                               f"expected {list(COMMAND_NAMES)}")
         self._cmd_by_frame_name = {p[0].name: n for n, p in self._cmd_plans.items()}
+
+        # lockstep request/acknowledgement
+        for name in EVENT_FRAMES:
+            if name not in self.frames:
+                raise ConfigError(f"{where}: no {name} frame")
+        req = self.frames[STEP_REQUEST_FRAME]
+        by = {s_.name: s_ for s_ in req.signals}
+        self.step_request = req
+        self._step_req_plan = (req, by["lockstep_steps"], by["lockstep_counter"], by["lockstep_crc"],
+                               int(_attr(self.db.get_message_by_name(STEP_REQUEST_FRAME), "E2EDataID", 0)))
+        ack = self.frames[STEP_ACK_FRAME]
+        by = {s_.name: s_ for s_ in ack.signals}
+        self.step_ack = ack
+        self._step_ack_plan = (ack, by["lockstep_sim_time"], by["lockstep_ack_counter"])
 
     # -- sensors ------------------------------------------------------------------------------------
     def encode_sensors(self, values: Mapping[str, float] | Sequence[float], sim_time: float
@@ -309,6 +326,59 @@ class Codec:
         crc = crc8_j1850(bytes((data_id,)) + body)
         return f.frame_id, body + bytes((crc,))
 
+    # -- lockstep -----------------------------------------------------------------------------------
+    def encode_step_request(self, steps: int, counter: int) -> tuple[int, bytes]:
+        """SIM_STEP_REQ asking for ``steps`` (1..65535) fixed steps, counter and CRC filled in."""
+        f, vs, cs, _, data_id = self._step_req_plan
+        if not vs.raw_min <= int(steps) <= vs.raw_max:
+            raise ValueError(f"lockstep_steps = {steps}: expected {vs.raw_min}..{vs.raw_max}")
+        word = (int(steps) << vs.start) | ((counter & cs.mask) << cs.start)
+        body = word.to_bytes(f.length, "little")[: f.length - 1]
+        return f.frame_id, body + bytes((crc8_j1850(bytes((data_id,)) + body),))
+
+    def decode_step_request(self, data: bytes) -> tuple[int, int] | None:
+        """(steps, counter) of an authentic SIM_STEP_REQ payload; None if the DLC, CRC or the step
+        count is wrong. Never raises."""
+        f, vs, cs, _, data_id = self._step_req_plan
+        try:
+            if len(data) != f.length or crc8_j1850(bytes((data_id,)) + bytes(data[:-1])) != data[-1]:
+                return None
+            word = int.from_bytes(data, "little")
+        except Exception:  # noqa: BLE001
+            return None
+        steps = (word >> vs.start) & vs.mask
+        if not vs.raw_min <= steps <= vs.raw_max:
+            return None
+        return steps, (word >> cs.start) & cs.mask
+
+    def encode_step_ack(self, sim_time: float, counter: int) -> tuple[int, bytes]:
+        """SIM_STEP_ACK: the simulation time reached (s, 1 us resolution) and the request's counter."""
+        f, ts, cs = self._step_ack_plan
+        word = (_encode_raw(ts, sim_time) << ts.start) | ((counter & cs.mask) << cs.start)
+        return f.frame_id, word.to_bytes(f.length, "little")
+
+    def decode_step_ack(self, data: bytes) -> tuple[float, int]:
+        """(sim_time s, counter) of a SIM_STEP_ACK payload."""
+        f, ts, cs = self._step_ack_plan
+        word = int.from_bytes(bytes(data), "little")
+        return ((word >> ts.start) & ts.mask) * ts.factor + ts.offset, (word >> cs.start) & cs.mask
+
+    def sensor_layout(self) -> dict[str, "np.ndarray"]:
+        """The sensor frames as flat arrays for the compiled packer (bridge.can_pack): per frame its
+        id and time-stamp position; per signal its frame, channel index and scaling."""
+        import numpy as np
+
+        frames, sigs = [], []
+        for k, (frame_id, tstart, tmask, items) in enumerate(self._sensor_plans):
+            frames.append((frame_id, tstart, tmask))
+            for i, s_ in items:
+                sigs.append((k, i, s_.start, s_.mask, s_.factor, s_.offset, s_.minimum, s_.maximum,
+                             s_.raw_min, s_.raw_max, 1.0 if s_.wrap else 0.0))
+        fr = np.array(frames, dtype=np.int64)
+        sg = np.array(sigs, dtype=np.float64)
+        return {"frame_id": fr[:, 0].copy(), "time_start": fr[:, 1].copy(), "time_mask": fr[:, 2].copy(),
+                "sig_int": sg[:, [0, 1, 2, 3, 8, 9]].astype(np.int64), "sig_float": sg[:, [4, 5, 6, 7, 10]].copy()}
+
     def command_plan(self, name: str):
         """(FrameInfo, value signal, counter signal, crc signal, data id, fault prefix) of a command."""
         return self._cmd_plans[self._cmd_name(name)]
@@ -347,6 +417,8 @@ class CommandReceiver:
                 cs.start, cs.mask, self.timeout[name],
             )
         n = len(self.names)
+        self._timeout_by_index = [self.timeout[nm] for nm in self.names]
+        self._policy = [SAFE_POLICY.get(nm, "zero") for nm in self.names]
         self.value: list[float | None] = [None] * n      # latest valid value
         self.last_valid_t: list[float | None] = [None] * n
         self._counter: list[int | None] = [None] * n
@@ -420,17 +492,33 @@ class CommandReceiver:
             age = t - (ref if ref is not None else self.t0)
             self.timed_out[i] = age > self.timeout[name]
             v = self.value[i]
-            if v is not None and not self.timed_out[i]:
-                out[name] = v
-            else:
-                policy = SAFE_POLICY.get(name, "zero")
-                if policy == "hold_pressure":
-                    out[name] = self.hold_pressure
-                elif policy == "hold_last":
-                    out[name] = v if v is not None else 0.0
-                else:
-                    out[name] = 0.0
+            out[name] = v if v is not None and not self.timed_out[i] else self._safe_value(i, v)
         return out
+
+    def apply_timeouts(self, t: float, out) -> int:
+        """As ``check_timeouts`` but writes the values into ``out[i]`` (COMMAND_NAMES order, e.g. the
+        vehicle's command array) without building a dict; returns a bit mask of timed-out commands
+        (bit i = COMMAND_NAMES[i]). The real-time loop calls this every step."""
+        mask = 0
+        for i in range(len(self.names)):
+            ref = self.last_valid_t[i]
+            timed_out = t - (ref if ref is not None else self.t0) > self._timeout_by_index[i]
+            self.timed_out[i] = timed_out
+            v = self.value[i]
+            if v is not None and not timed_out:
+                out[i] = v
+            else:
+                mask |= 1 << i
+                out[i] = self._safe_value(i, v)
+        return mask
+
+    def _safe_value(self, i: int, v: float | None) -> float:
+        policy = self._policy[i]
+        if policy == "hold_pressure":
+            return self.hold_pressure
+        if policy == "hold_last":
+            return v if v is not None else 0.0
+        return 0.0
 
     @property
     def faults(self) -> dict[str, bool]:

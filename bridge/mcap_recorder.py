@@ -6,13 +6,13 @@ and counted (:attr:`Recorder.dropped`). A writer thread serialises the payloads 
 them into zstd-compressed chunks.
 
 Topics (``topic_key`` → MCAP topic), each registered on first use with a JSON-schema channel that
-Foxglove opens without plug-ins (message encoding ``json``, schema encoding ``jsonschema``; names and
-units from the channel dictionary, rtsim.channels):
+Foxglove opens without plug-ins (message encoding ``json``, schema encoding ``jsonschema``; the schemas
+are bridge.payloads.SCHEMAS, names and units from the channel dictionary, rtsim.channels):
 
 * ``sensors``  → ``rtsim/<vehicle_id>/sensors``  every sensor channel + ``time`` (s)
-* ``state``    → ``rtsim/<vehicle_id>/state``    pose, speed, tyre forces, constraint violation
-* ``status``   → ``rtsim/<vehicle_id>/status``   free-form service status (mode, overruns, ...)
-* ``commands`` → ``rtsim/<vehicle_id>/commands`` the ECU's actuator commands
+* ``state``    → ``rtsim/<vehicle_id>/state``    every state channel + ``time`` (s)
+* ``status``   → ``rtsim/<vehicle_id>/status``   service status (mode, loop health, faults, ...)
+* ``commands`` → ``rtsim/<vehicle_id>/commands`` the actuator commands applied + their ``source``
 * ``can/rx``, ``can/tx`` → ``rtsim/<vehicle_id>/can/rx|tx`` raw frames as
   ``{"id": int, "dlc": int, "data": "hex", "time": s}``
 
@@ -46,64 +46,13 @@ from mcap.records import Channel, Chunk, Footer, Message, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
-from rtsim.channels import COMMANDS, SENSORS
+from bridge.payloads import SCHEMAS, TOPIC_KEYS
 from rtsim.errors import ConfigError
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOOTER_OPCODE = 0x02
 
-TOPIC_KEYS = ("sensors", "state", "status", "commands", "can/rx", "can/tx")
 CAN_KEYS = frozenset(("can/rx", "can/tx"))
-
-_TIME = {"type": "number", "description": "log time, s (simulation time of the sample)"}
-_STATE_FIELDS = {
-    "pos_x": ("m", "vehicle reference point x, world frame (ISO 8855)"),
-    "pos_y": ("m", "vehicle reference point y, world frame"),
-    "pos_z": ("m", "vehicle reference point z, world frame"),
-    "yaw": ("rad", "yaw angle, positive turning left"),
-    "speed": ("m/s", "forward speed"),
-    "constraint_violation": ("coordinate units", "max |Phi| of the multibody constraints"),
-}
-
-
-def _num(unit: str, desc: str) -> dict:
-    return {"type": "number", "description": f"{desc} [{unit}]"}
-
-
-def _schemas() -> dict[str, tuple[str, dict]]:
-    sensors = {"time": _TIME, **{c.name: _num(c.unit, c.description) for c in SENSORS}}
-    commands = {"time": _TIME, **{c.name: _num(c.unit, c.description) for c in COMMANDS}}
-    state = {"time": _TIME, **{k: _num(u, d) for k, (u, d) in _STATE_FIELDS.items()}}
-    status = {
-        "time": _TIME,
-        "mode": {"type": "string", "description": "service mode (e.g. idle, running, fault)"},
-        "overruns": {"type": "integer", "description": "real-time step overruns so far"},
-        "step_us": {"type": "number", "description": "cost of the last step [us]"},
-        "message": {"type": "string", "description": "free text"},
-    }
-    can = {
-        "id": {"type": "integer", "description": "CAN arbitration id"},
-        "dlc": {"type": "integer", "description": "data length code (bytes)"},
-        "data": {"type": "string", "description": "frame payload, hexadecimal, 2 digits per byte"},
-        "time": _TIME,
-    }
-
-    def obj(title, props, required, extra):
-        s = {"title": title, "type": "object", "properties": props, "required": required}
-        s["additionalProperties"] = extra
-        return s
-
-    return {
-        "sensors": ("rtsim.sensors", obj("rtsim sensors", sensors, ["time"], {"type": ["number", "null"]})),
-        "state": ("rtsim.state", obj("rtsim state", state, ["time"], {"type": ["number", "null"]})),
-        "status": ("rtsim.status", obj("rtsim status", status, ["time"], True)),
-        "commands": ("rtsim.commands", obj("rtsim commands", commands, ["time"], {"type": ["number", "null"]})),
-        "can/rx": ("rtsim.can_frame", obj("rtsim CAN frame (received by the simulator)", can,
-                                          ["id", "dlc", "data", "time"], False)),
-        "can/tx": ("rtsim.can_frame", obj("rtsim CAN frame (sent by the simulator)", can,
-                                          ["id", "dlc", "data", "time"], False)),
-    }
-
 
 def _finite(x):
     if isinstance(x, float):
@@ -171,7 +120,7 @@ class Recorder:
                               compression=CompressionType.ZSTD)
         self._writer.start(profile="", library="rtsim")
         self._fh.flush()         # the header is on disk even if the process dies before a chunk
-        self._schema_defs = _schemas()
+        self._schema_defs = SCHEMAS
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._seq: dict[str, int] = {}

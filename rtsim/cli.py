@@ -1,6 +1,9 @@
 """The `rtsim` command: one entry point, one subcommand per job.
 
-    rtsim bench [--problem NAME] [--dt S] [--t-end S] [--json] [--scaling]
+    rtsim serve    the HIL service (CAN, Zenoh, MCAP)      rtsim demo     service + demo ECU, recorded
+    rtsim watch    live dashboard over Zenoh               rtsim play     recorded frames back on the bus
+    rtsim resim    re-run a recording, compare the state   rtsim run      a scenario offline to CSV/MCAP
+    rtsim bench    benchmarks                              rtsim describe the vehicle model
 """
 from __future__ import annotations
 
@@ -137,7 +140,29 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--vehicle", help="vehicle TOML (default configs/vehicles/xbw.toml)")
     d.add_argument("--json", action="store_true")
     d.set_defaults(func=_describe)
+    for name, module, text in _DELEGATED:
+        sp = sub.add_parser(name, help=text)
+        sp.set_defaults(func=_delegate(module))
+        _import(module).add_arguments(sp)
     return p
+
+
+#: subcommands whose arguments and main live in their own module: (name, module, help)
+_DELEGATED = (
+    ("serve", "rtsim.service.cli", "run the HIL service: the vehicle behind CAN, Zenoh state, MCAP recording"),
+    ("demo", "rtsim.service.demo", "the service plus a demo ECU process driving over CAN, recorded"),
+    ("watch", "rtsim.watch", "live terminal dashboard of a running service (Zenoh)"),
+)
+
+
+def _import(module: str):
+    import importlib
+
+    return importlib.import_module(module)
+
+
+def _delegate(module: str):
+    return lambda args: _import(module).main(args)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -16,7 +16,7 @@ cantools = pytest.importorskip("cantools")
 from bridge.can_codec import (  # noqa: E402
     DEFAULT_DBC, FAULTS, Codec, CommandReceiver, crc8_j1850,
 )
-from rtsim.channels import BY_NAME, COMMANDS, SENSOR_NAMES, SENSORS  # noqa: E402
+from rtsim.channels import BY_NAME, COMMAND_NAMES, COMMANDS, SENSOR_NAMES, SENSORS  # noqa: E402
 from rtsim.errors import ConfigError  # noqa: E402
 
 CMD_FRAMES = {"THROTTLE_CMD": "throttle_angle_cmd", "BRAKE_CMD": "brake_pressure_cmd",
@@ -36,7 +36,7 @@ def codec():
 
 
 def sensor_messages(db):
-    return [m for m in db.messages if m.senders == ["SIM"] and m.name != "SIM_STATUS"]
+    return [m for m in db.messages if m.senders == ["SIM"] and m.name not in ("SIM_STATUS", "SIM_STEP_ACK")]
 
 
 def crc8_bitwise(data: bytes) -> int:
@@ -53,7 +53,7 @@ def crc8_bitwise(data: bytes) -> int:
 
 def test_dbc_loads_and_is_classic_intel_8_byte(db):
     assert {n.name for n in db.nodes} == {"ECU", "SIM"}
-    assert len(db.messages) == 3 + 8 + 1
+    assert len(db.messages) == 3 + 8 + 1 + 2   # commands, sensor frames, status, lockstep request/ack
     for m in db.messages:
         assert m.length == 8 and not m.is_extended_frame, m.name
         for s in m.signals:
@@ -113,6 +113,8 @@ def test_cycle_times(db):
             assert m.cycle_time == 10, m.name
         elif m.name == "SIM_STATUS":
             assert m.cycle_time == 100
+        elif m.name in ("SIM_STEP_REQ", "SIM_STEP_ACK"):
+            assert m.cycle_time is None, m.name   # event frames
         else:
             assert m.cycle_time == 2, m.name
 
@@ -444,3 +446,55 @@ def test_watchdog_custom_timeout(codec):
     assert not rx.faults["brake_timeout"] and rx.faults["throttle_timeout"]
     rx.check_timeouts(0.11)
     assert rx.faults["brake_timeout"]
+
+
+# ---------------------------------------------------------------------------------------- lockstep
+
+def test_step_request_round_trip_against_cantools(db, codec):
+    m = db.get_message_by_name("SIM_STEP_REQ")
+    for steps, ctr in ((1, 0), (10, 7), (65535, 15)):
+        fid, data = codec.encode_step_request(steps, ctr)
+        assert fid == m.frame_id == 0xC0
+        dec = m.decode(data)
+        assert dec["lockstep_steps"] == steps and dec["lockstep_counter"] == ctr
+        assert dec["lockstep_crc"] == crc8_bitwise(bytes((0xC0,)) + data[:7])
+        assert codec.decode_step_request(data) == (steps, ctr)
+    fid, data = codec.encode_step_request(5, 3)
+    bad = bytearray(data)
+    bad[0] ^= 1
+    assert codec.decode_step_request(bytes(bad)) is None           # CRC
+    assert codec.decode_step_request(data[:7]) is None             # DLC
+    assert codec.decode_step_request(object()) is None              # not bytes: no exception
+    with pytest.raises(ValueError):
+        codec.encode_step_request(0, 0)
+
+
+def test_step_ack_round_trip_against_cantools(db, codec):
+    m = db.get_message_by_name("SIM_STEP_ACK")
+    fid, data = codec.encode_step_ack(12.345678, 9)
+    assert fid == m.frame_id
+    dec = m.decode(data)
+    assert dec["lockstep_sim_time"] == pytest.approx(12.345678, abs=1e-6)
+    assert dec["lockstep_ack_counter"] == 9
+    t, c = codec.decode_step_ack(data)
+    assert t == pytest.approx(12.345678, abs=1e-6) and c == 9
+
+
+def test_apply_timeouts_matches_check_timeouts(codec):
+    import numpy as np
+
+    a = CommandReceiver(codec, hold_pressure=1234.0)
+    b = CommandReceiver(codec, hold_pressure=1234.0)
+    out = np.zeros(3)
+    frames = [(0.001, codec.encode_command("throttle_angle_cmd", 0.3, 1)),
+              (0.002, codec.encode_command("steering_wheel_angle_cmd", -0.5, 1)),
+              (0.003, codec.encode_command("brake_pressure_cmd", 800.0, 1))]
+    for t, (fid, data) in frames:
+        a.receive(fid, data, t)
+        b.receive(fid, data, t)
+    for t in (0.0, 0.01, 0.031, 0.0325, 0.5):
+        ref = a.check_timeouts(t)
+        mask = b.apply_timeouts(t, out)
+        assert list(out) == [ref[n] for n in COMMAND_NAMES]
+        assert mask == sum(1 << i for i, n in enumerate(COMMAND_NAMES) if b.timed_out[i])
+    assert list(out) == [0.0, 1234.0, -0.5]     # throttle closed, brake hold, steering held

@@ -93,3 +93,15 @@ def test_steal_over_run():
 def test_real_proc_stat_if_present():
     v = read_steal_seconds()
     assert v is None or v >= 0.0
+
+
+def test_recent_percentiles_use_the_newest_samples_only():
+    h = LoopHealth(window=100, period=1e-3, steal_source=lambda: None)
+    assert h.recent_percentiles(10)["cpu_p50"] is None
+    for i in range(250):                      # wraps the ring twice and a half
+        h.record(lateness=i * 1e-6, cpu=i * 1e-6)
+    r = h.recent_percentiles(10)             # samples 240..249
+    assert r["cpu_p50"] == pytest.approx(np.percentile(np.arange(240, 250) * 1e-6, 50))
+    assert r["lateness_p99"] == pytest.approx(np.percentile(np.arange(240, 250) * 1e-6, 99))
+    r = h.recent_percentiles(1000)           # capped at the window: samples 150..249
+    assert r["cpu_p50"] == pytest.approx(np.percentile(np.arange(150, 250) * 1e-6, 50))

@@ -150,6 +150,18 @@ class LoopHealth:
             return buf[: self._filled].copy()
         return np.concatenate((buf[self._next:], buf[: self._next]))
 
+    def recent_percentiles(self, n: int = 2000) -> dict:
+        """p50/p99 of lateness and CPU (s) over the last ``n`` samples (None before any): cheap enough
+        for a live status at 10 Hz (the full-window ``summary`` sorts up to ``window`` samples)."""
+        m = min(n, self._filled)
+        if m == 0:
+            return {"lateness_p50": None, "lateness_p99": None, "cpu_p50": None, "cpu_p99": None}
+        idx = (self._next - 1 - np.arange(m)) % self.window
+        lat50, lat99 = np.percentile(self._lateness[idx], [50.0, 99.0])
+        cpu50, cpu99 = np.percentile(self._cpu[idx], [50.0, 99.0])
+        return {"lateness_p50": float(lat50), "lateness_p99": float(lat99),
+                "cpu_p50": float(cpu50), "cpu_p99": float(cpu99)}
+
     def summary(self) -> dict:
         """Percentiles over the window, maxima over the whole run, counters and steal time (s)."""
         n = self._filled

@@ -1,0 +1,260 @@
+"""A demo ECU: drives the simulated car over CAN only, as a by-wire controller on a real bench would.
+
+It knows the car only through the DBC (``configs/can/xbw.dbc``) and a few calibration constants
+(wheel radius, wheelbase, steering ratio: the values `rtsim describe` prints for the xbw car). From
+the sensor frames it estimates its own state: speed from the front (undriven) wheel angles
+(differenced, times the wheel radius), yaw by integrating the yaw-rate gyro, position by dead
+reckoning. Every 5th sensor sample (10 ms, the command frames' DBC period) it runs its drivers and
+sends the three command frames with alive counters and CRCs.
+
+The manoeuvre (``--manoeuvre demo``, the default) has two phases:
+
+1. ``straight_line``: the seed's straight-line manoeuvre, open loop: the throttle and brake profiles of
+   ``configs/scenarios/straight_line.toml`` (held by the brake, released, a throttle press to about
+   23 km/h, braking to a stop), until the car has stopped after 22 s;
+2. ``lane_change``: closed loop: a speed follower (accelerate to 45 km/h, hold, brake to a stop) and a
+   pure-pursuit path follower through a 3.5 m single lane change (cosine-shaped over 40 m, starting
+   60 m after the phase starts), in the frame of the car's own estimated pose at the phase start.
+
+``--lockstep``: the ECU also drives simulated time: after each command cycle it sends SIM_STEP_REQ for
+the 10 ms until its next cycle and waits for SIM_STEP_ACK (deterministic runs: CI, SIL).
+
+Run as a separate process (``python -m drivers.ecu_demo --can-interface remote --can-channel
+127.0.0.1:54701``); it prints a one-line JSON summary last.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bridge.can_bus import open_bus
+from bridge.can_codec import Codec
+from bridge.can_pack import SensorDecoder
+from rtsim.channels import COMMAND_NAMES, SENSOR_NAMES
+
+from .base import I_BRAKE, I_STEER, I_THROTTLE, NSTATE, S_SPEED, S_X, S_Y, S_YAW
+from .driver import Driver
+from .path_follower import path_follower
+from .speed_follower import speed_follower
+
+ROOT = Path(__file__).resolve().parents[1]
+STRAIGHT_LINE = ROOT / "configs" / "scenarios" / "straight_line.toml"
+COMMAND_EVERY = 5                  # sensor samples per command cycle (10 ms at 2 ms)
+PHASE_A_END = 22.0                 # s: the straight-line manoeuvre has stopped the car by then
+LANE_OFFSET = 3.5                  # m
+LANE_START, LANE_LENGTH = 60.0, 40.0   # m, along the phase's start heading
+SPEED_TABLE = ([0.0, 7.0, 17.0, 23.0, 25.0], [0.0, 12.5, 12.5, 0.0, 0.0])   # s -> m/s (45 km/h)
+
+
+class DemoEcu:
+    """The ECU's logic on decoded samples; bus I/O is done by ``run``."""
+
+    def __init__(self, codec: Codec, wheel_radius: float = 0.2818, wheelbase: float = 2.40,
+                 steering_ratio: float = 18.2, manoeuvre: str = "demo"):
+        from drivers.scenario import load_scenario
+
+        self.codec = codec
+        self.decoder = SensorDecoder(codec)
+        self.r = wheel_radius
+        self.wheelbase = wheelbase
+        self.ratio = steering_ratio
+        self.manoeuvre = manoeuvre
+        self.straight = load_scenario(STRAIGHT_LINE).driver()
+        self.lane: Driver | None = None
+        self.phase = "straight_line" if manoeuvre in ("demo", "straight_line") else "lane_change"
+        self.phase_t0 = 0.0
+        self.state = np.zeros(NSTATE)
+        self.cmd = np.zeros(3)
+        self.counters = [0, 0, 0]
+        self.samples = 0
+        self.t0: float | None = None
+        self.t = 0.0
+        self._prev_t: float | None = None
+        self._prev_wheels: tuple[float, float] | None = None
+        self._iw = (SENSOR_NAMES.index("wheel_angle_fl"), SENSOR_NAMES.index("wheel_angle_fr"))
+        self._igz = SENSOR_NAMES.index("gyro_z")
+        self.done = False
+        self.peak_speed = 0.0
+        self.distance = 0.0
+        self.max_lateral = 0.0
+        self.phase_log: list[dict] = []
+        self._warm_up()
+        if self.phase == "lane_change":
+            self._start_lane_change(0.0)
+
+    def _warm_up(self) -> None:
+        """Load the compiled driver kernels now (numba loads them at the first call, ~1 s), so the
+        first command cycles on the bus are not late."""
+        self.straight.step(0.0)
+        self._start_lane_change(0.0)
+        self.lane.step(0.0, self.state)
+        self.lane, self.phase_log = None, []
+        self.phase = "straight_line" if self.manoeuvre in ("demo", "straight_line") else "lane_change"
+
+    # -- estimation ------------------------------------------------------------------------------
+    def _estimate(self, t: float, values: np.ndarray) -> None:
+        wl, wr = values[self._iw[0]], values[self._iw[1]]
+        if self._prev_t is not None and t > self._prev_t:
+            h = t - self._prev_t
+            v = 0.5 * ((wl - self._prev_wheels[0]) + (wr - self._prev_wheels[1])) / h * self.r
+            s = self.state
+            s[S_SPEED] = v
+            s[S_YAW] += values[self._igz] * h
+            s[S_X] += v * h * math.cos(s[S_YAW])
+            s[S_Y] += v * h * math.sin(s[S_YAW])
+            self.distance += abs(v) * h
+            self.peak_speed = max(self.peak_speed, v)
+        self._prev_t, self._prev_wheels = t, (wl, wr)
+
+    # -- drivers ---------------------------------------------------------------------------------
+    def _start_lane_change(self, t: float) -> None:
+        x0, y0, yaw0 = self.state[S_X], self.state[S_Y], self.state[S_YAW]
+        xs = np.arange(0.0, 400.0, 1.0)
+        u = np.clip((xs - LANE_START) / LANE_LENGTH, 0.0, 1.0)
+        ys = LANE_OFFSET * 0.5 * (1.0 - np.cos(math.pi * u))
+        c, s = math.cos(yaw0), math.sin(yaw0)
+        self._lane_frame = (x0, y0, c, s)
+        sf = speed_follower(SPEED_TABLE[0], SPEED_TABLE[1], by="time")
+        pf = path_follower(x0 + c * xs - s * ys, y0 + s * xs + c * ys, wheelbase=self.wheelbase,
+                           steering_ratio=self.ratio)
+        self.lane = Driver(None, speed=sf, path=pf)
+        self.phase, self.phase_t0 = "lane_change", t
+        self.phase_log.append({"phase": "lane_change", "start": t})
+
+    def _lateral(self) -> float:
+        x0, y0, c, s = self._lane_frame
+        return -s * (self.state[S_X] - x0) + c * (self.state[S_Y] - y0)
+
+    def on_sample(self, t: float, values: np.ndarray) -> bool:
+        """Take one complete sensor sample; True when it is time to send commands (self.cmd)."""
+        if self.t0 is None:
+            self.t0 = t
+            self.phase_log.append({"phase": self.phase, "start": 0.0})
+        self.t = t - self.t0
+        self._estimate(t, values)
+        self.samples += 1
+        if self.samples % COMMAND_EVERY:
+            return False
+        if self.phase == "straight_line":
+            if self.t >= PHASE_A_END and abs(self.state[S_SPEED]) < 0.05:
+                if self.manoeuvre == "straight_line":
+                    self.done = True
+                else:
+                    self._start_lane_change(self.t)
+        if self.phase == "straight_line":
+            out = self.straight.step(self.t)
+        else:
+            tl = self.t - self.phase_t0
+            out = self.lane.step(tl, self.state)
+            self.max_lateral = max(self.max_lateral, self._lateral())
+            if tl >= SPEED_TABLE[0][-1] and abs(self.state[S_SPEED]) < 0.05:
+                self.done = True
+        self.cmd[0] = min(max(out[I_THROTTLE], 0.0), 1.4)
+        self.cmd[1] = min(max(out[I_BRAKE], 0.0), 12000.0)
+        self.cmd[2] = min(max(out[I_STEER], -11.0), 11.0)
+        return True
+
+    def command_frames(self) -> list[tuple[int, bytes]]:
+        frames = []
+        for i, name in enumerate(COMMAND_NAMES):
+            self.counters[i] = (self.counters[i] + 1) & 0xF
+            frames.append(self.codec.encode_command(name, float(self.cmd[i]), self.counters[i]))
+        return frames
+
+    def summary(self) -> dict:
+        return {"ecu_time": self.t, "samples": self.samples, "phase": self.phase, "done": self.done,
+                "distance_estimate": self.distance, "peak_speed_estimate": self.peak_speed,
+                "lane_offset_estimate": self.max_lateral, "phases": self.phase_log}
+
+
+def run(bus, ecu: DemoEcu, duration: float | None = None, lockstep: bool = False,
+        timeout: float = 5.0) -> dict:
+    """Drive until the manoeuvre is done, ``duration`` s of ECU (simulation) time, or no sensor frame
+    for ``timeout`` s of wall time. Returns the ECU summary plus bus counters."""
+    import can
+
+    sent = received = 0
+    step_counter = 0
+    waiting_ack = False
+
+    def send(fid, data):
+        nonlocal sent
+        bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+        sent += 1
+
+    def request_steps():
+        nonlocal step_counter, waiting_ack
+        step_counter = (step_counter + 1) & 0xF
+        send(*ecu.codec.encode_step_request(COMMAND_EVERY * 2, step_counter))   # 10 ms of 1 ms steps
+        waiting_ack = True
+
+    if lockstep:
+        for fid, data in ecu.command_frames():
+            send(fid, data)
+        request_steps()
+    ack_id = ecu.codec.step_ack.frame_id
+    last_rx = time.monotonic()
+    while not ecu.done and (duration is None or ecu.t < duration):
+        msg = bus.recv(0.1)
+        if msg is None:
+            if time.monotonic() - last_rx > timeout:
+                break
+            continue
+        last_rx = time.monotonic()
+        received += 1
+        if msg.arbitration_id == ack_id and lockstep:
+            _, ctr = ecu.codec.decode_step_ack(msg.data)
+            if ctr == step_counter:
+                request_steps()
+            continue
+        if ecu.decoder.receive(msg.arbitration_id, msg.data):
+            if ecu.on_sample(ecu.decoder.time, ecu.decoder.values):
+                for fid, data in ecu.command_frames():
+                    send(fid, data)
+    out = ecu.summary()
+    out.update({"frames_sent": sent, "frames_received": received})
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m drivers.ecu_demo", description=__doc__.split("\n\n")[0])
+    p.add_argument("--can-interface")
+    p.add_argument("--can-channel")
+    p.add_argument("--duration", type=float, help="stop after this much simulated time, s")
+    p.add_argument("--manoeuvre", choices=["demo", "straight_line", "lane_change"], default="demo")
+    p.add_argument("--lockstep", action="store_true", help="request the steps (service in --mode lockstep)")
+    p.add_argument("--timeout", type=float, default=5.0, help="give up after this long without frames, s")
+    p.add_argument("--connect-timeout", type=float, default=60.0,
+                   help="keep trying to open the bus this long (the service may still be starting), s")
+    args = p.parse_args(argv)
+    from rtsim.errors import RtsimError
+
+    ecu = DemoEcu(Codec(), manoeuvre=args.manoeuvre)   # everything slow before the bus: no backlog
+    deadline = time.monotonic() + args.connect_timeout
+    while True:
+        try:
+            bus = open_bus(args.can_interface, args.can_channel)
+            break
+        except RtsimError as exc:
+            if time.monotonic() > deadline:
+                print(f"ecu_demo: error: {exc}", file=sys.stderr)
+                return 2
+            time.sleep(0.2)
+    try:
+        result = run(bus, ecu, args.duration, args.lockstep, args.timeout)
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        bus.shutdown()
+    print(json.dumps(result), flush=True)
+    return 0 if result["samples"] > 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

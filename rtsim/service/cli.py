@@ -1,0 +1,86 @@
+"""`rtsim serve` command line: flags map one to one onto ServeOptions."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from .server import DEFAULT_SCENARIO, DEFAULT_ZENOH_LISTEN, ServeOptions, Service
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenario", default=str(DEFAULT_SCENARIO),
+                   help="scenario TOML or name in configs/scenarios (road, start, step; default hil_flat)")
+    p.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")
+    p.add_argument("--dt", type=float, help="fixed step, s (default: the scenario's, 0.001)")
+    p.add_argument("--mode", choices=["realtime", "lockstep", "fast"], default="realtime",
+                   help="realtime: paced by the wall clock; lockstep: steps only on request (CAN SIM_STEP_REQ "
+                        "or Zenoh control op=step); fast: as fast as possible")
+    p.add_argument("--can-interface", help="python-can interface (socketcan, remote, virtual, pcan, ...); "
+                                           "default: socketcan vcan0 if present, else the loopback hub")
+    p.add_argument("--can-channel", help="python-can channel (vcan0, can0, 127.0.0.1:54701, ...)")
+    p.add_argument("--no-hub", action="store_true", help="do not start the embedded loopback CAN hub")
+    p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT",
+                   help=f"Zenoh listen endpoint (repeatable; default {DEFAULT_ZENOH_LISTEN})")
+    p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", default=[],
+                   help="Zenoh endpoint to connect to (a router on a bench; repeatable)")
+    p.add_argument("--zenoh-allow-remote", action="store_true",
+                   help="allow Zenoh endpoints off 127.0.0.1 (a real bench network)")
+    p.add_argument("--no-zenoh", action="store_true", help="do not publish over Zenoh")
+    p.add_argument("--record", metavar="FILE.mcap", help="record the session to MCAP")
+    p.add_argument("--vehicle-id", help="key segment of the Zenoh keys and MCAP topics (default: the vehicle's id)")
+    p.add_argument("--state-rate", type=float, default=100.0, help="state publication rate, Hz (default 100)")
+    p.add_argument("--status-rate", type=float, default=10.0, help="status publication rate, Hz (1-10)")
+    p.add_argument("--hold-pressure", type=float, help="brake pressure applied when the brake command "
+                                                       "times out, kPa (default 3000)")
+    p.add_argument("--max-catch-up", type=int, default=20,
+                   help="after a stall, steps run back to back before the rest are skipped (default 20)")
+    p.add_argument("--duration", type=float, help="stop after this many seconds of wall time")
+    p.add_argument("--json", action="store_true", help="print the closing summary as JSON")
+
+
+def options(args) -> ServeOptions:
+    return ServeOptions(
+        scenario=Path(args.scenario), vehicle=Path(args.vehicle) if args.vehicle else None, dt=args.dt,
+        mode=args.mode, can_interface=args.can_interface, can_channel=args.can_channel,
+        start_hub=not args.no_hub, zenoh=not args.no_zenoh,
+        zenoh_listen=args.zenoh_listen or [DEFAULT_ZENOH_LISTEN], zenoh_connect=args.zenoh_connect,
+        zenoh_allow_remote=args.zenoh_allow_remote, record=Path(args.record) if args.record else None,
+        vehicle_id=args.vehicle_id, state_rate=args.state_rate, status_rate=args.status_rate,
+        hold_pressure=args.hold_pressure, max_catch_up=args.max_catch_up, duration=args.duration)
+
+
+def main(args) -> int:
+    svc = Service(options(args))
+    summary = svc.run()
+    if args.json:
+        print(json.dumps(summary, indent=2, default=str))
+    else:
+        print(format_summary(summary))
+    return 0
+
+
+def _us(x):
+    return "-" if x is None else f"{x * 1e6:.0f} us"
+
+
+def format_summary(s: dict) -> str:
+    h = s.get("health", {})
+    lines = [f"rtsim serve: stopped after {s.get('wall_s', 0):.1f} s, simulated {s.get('sim_time', 0):.3f} s "
+             f"({s.get('steps', 0)} steps), state {s.get('run_state')}"
+             + (f": {s['message']}" if s.get("message") else ""),
+             f"  loop: cpu/step p50 {_us(h.get('step_cpu_p50_s'))} p99 {_us(h.get('step_cpu_p99_s'))} "
+             f"max {_us(h.get('step_cpu_max_s'))}; lateness p50 {_us(h.get('lateness_p50_s'))} p99 "
+             f"{_us(h.get('lateness_p99_s'))} max {_us(h.get('lateness_max_s'))}; overruns {h.get('overruns')}, "
+             f"stalls {h.get('stalls')}, skipped {h.get('skipped_steps')}, steal "
+             f"{'-' if h.get('steal_s') is None else format(h['steal_s'], '.2f') + ' s'}"]
+    c = s.get("can")
+    if c:
+        lines.append(f"  CAN: sent {c['sent']}, received {c['received']}, accepted commands "
+                     f"{s.get('accepted_frames')}, rejected {s.get('rejected')}, bus errors "
+                     f"{c['send_errors'] + c['recv_errors'] + c['error_frames']}")
+    r = s.get("recording")
+    if r:
+        lines.append(f"  recording: {r['path']} ({r['written']} messages, {r['chunks']} chunks, "
+                     f"{r['dropped']} dropped)")
+    return "\n".join(lines)

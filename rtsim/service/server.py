@@ -1,0 +1,326 @@
+"""`rtsim serve`: the HIL service assembled from its parts, run until stopped.
+
+Parts: the vehicle on the scenario's road (``VehicleSim``), the CAN port (python-can through
+``bridge.can_bus.open_bus``: ``--can-interface/--can-channel``, else ``vcan0`` when the kernel has it,
+else the embedded python-can-remote hub on 127.0.0.1, started here when none is running), the Zenoh
+link (peer mode, scouting off, tcp/127.0.0.1 endpoints), the MCAP recorder, the publisher thread
+(``Outbox``) and the loop (``HilLoop``) paced by ``rtsim.realtime.Pacer``.
+
+Threads: the loop runs on the thread that calls ``run()`` (the main thread for the CLI, so SIGINT and
+SIGTERM are handled there: they stop the pacer, which returns within one period); the CAN reader, the
+publisher, the recorder's writer and Zenoh's own threads run beside it. Control requests from Zenoh
+are built off the loop thread (a reset or a new scenario builds its VehicleSim there) and handed to the
+loop through the inbox, so the loop only swaps a finished object in between two steps.
+"""
+from __future__ import annotations
+
+import queue
+import signal
+import sys
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from bridge.can_bus import HUB_HOST, LoopbackHub, default_hub_port, socketcan_available
+from bridge.can_codec import DEFAULT_DBC, Codec
+from rtsim.errors import ConfigError
+from rtsim.realtime.health import LoopHealth
+from rtsim.realtime.pacer import MODES, Pacer
+
+from .loop import HilLoop, Request
+
+ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_SCENARIO = ROOT / "configs" / "scenarios" / "hil_flat.toml"
+DEFAULT_ZENOH_LISTEN = "tcp/127.0.0.1:7447"
+
+
+@dataclass
+class ServeOptions:
+    """Everything `rtsim serve` can be told (CLI flags map one to one)."""
+    scenario: Path = DEFAULT_SCENARIO
+    vehicle: Path | None = None                 # default: the scenario's vehicle, else configs/vehicles/xbw.toml
+    dt: float | None = None                     # s; default: the scenario's step
+    mode: str = "realtime"
+    can_interface: str | None = None
+    can_channel: str | None = None
+    start_hub: bool = True                      # embedded default: start the loopback hub if none runs
+    zenoh: bool = True
+    zenoh_listen: list[str] = field(default_factory=lambda: [DEFAULT_ZENOH_LISTEN])
+    zenoh_connect: list[str] = field(default_factory=list)
+    zenoh_allow_remote: bool = False            # a router on another machine (a real bench)
+    record: Path | None = None
+    vehicle_id: str | None = None
+    state_rate: float = 100.0                   # Hz
+    status_rate: float = 10.0                   # Hz (Zenoh/MCAP status; the CAN status frame follows the DBC)
+    hold_pressure: float | None = None          # kPa applied when the brake command times out
+    max_catch_up: int = 20                      # steps run back to back after a stall before skipping
+    duration: float | None = None               # s of wall time (None: until stopped)
+    dbc: Path = DEFAULT_DBC
+
+    def check(self) -> None:
+        if self.mode not in MODES:
+            raise ConfigError(f"--mode {self.mode!r}: expected one of {', '.join(MODES)}")
+        if self.dt is not None and not 1e-5 <= self.dt <= 0.01:
+            raise ConfigError(f"--dt {self.dt}: allowed 1e-05 <= dt <= 0.01 s")
+        if not 1.0 <= self.state_rate <= 1000.0:
+            raise ConfigError(f"--state-rate {self.state_rate}: allowed 1 <= rate <= 1000 Hz")
+        if not 1.0 <= self.status_rate <= 10.0:
+            raise ConfigError(f"--status-rate {self.status_rate}: allowed 1 <= rate <= 10 Hz")
+        if not 0 <= self.max_catch_up <= 10000:
+            raise ConfigError(f"--max-catch-up {self.max_catch_up}: allowed 0..10000 steps")
+        if self.duration is not None and not self.duration > 0:
+            raise ConfigError(f"--duration {self.duration}: must be > 0 s")
+        if self.record is not None and Path(self.record).suffix.lower() != ".mcap":
+            raise ConfigError(f"--record {self.record}: the recording must be an .mcap file")
+
+
+def resolve_scenario(name: str | Path) -> Path:
+    """A scenario path, or a bare name of configs/scenarios/<name>.toml."""
+    p = Path(name)
+    if p.exists():
+        return p
+    cand = ROOT / "configs" / "scenarios" / f"{name}.toml"
+    if cand.exists():
+        return cand
+    raise ConfigError(f"scenario {str(name)!r}: no such file and no configs/scenarios/{name}.toml")
+
+
+def build_sim(scenario: Path, vehicle: Path | None = None, dt: float | None = None,
+              models: dict | None = None):
+    """(VehicleSim, Scenario) at the scenario's start. ``models`` caches built vehicle models by
+    resolved config path (a build solves the suspension linkages: seconds)."""
+    from drivers.scenario import load_scenario
+    from rtsim.road.config import load_road
+    from rtsim.vehicle.config import load_vehicle
+    from rtsim.vehicle.model import build_vehicle
+    from rtsim.vehicle.run import default_vehicle_path
+    from rtsim.vehicle.sim import VehicleSim
+
+    sc = load_scenario(scenario, check_files=True)
+    vpath = Path(vehicle) if vehicle is not None else (sc.vehicle_path or default_vehicle_path())
+    models = {} if models is None else models
+    model = models.get(vpath.resolve())
+    if model is None:
+        cfg, base = load_vehicle(vpath)
+        model = models[vpath.resolve()] = build_vehicle(cfg, base)
+    road = load_road(sc.road_path)
+    ini = sc.spec.initial
+    sim = VehicleSim(model, road, dt if dt is not None else sc.dt, brake_pressure=0.0,
+                     position=(ini.x, ini.y), yaw=ini.yaw, speed=ini.speed)
+    return sim, sc
+
+
+class Service:
+    """The assembled service (see the module docstring). ``out`` prints the start-up lines."""
+
+    def __init__(self, opts: ServeOptions, out=print):
+        opts.check()
+        self.opts = opts
+        self.out = out
+        self.hub = None
+        self.port = None
+        self.zenoh = None
+        self.recorder = None
+        self.outbox = None
+        self._closed = False
+        self._stopping = threading.Event()
+        try:
+            self._build()
+        except BaseException:
+            self.close()
+            raise
+
+    # -- assembly ------------------------------------------------------------------------------------
+    def _build(self) -> None:
+        o = self.opts
+        self.scenario_path = resolve_scenario(o.scenario)
+        self.models: dict = {}
+        self.sim, self.sc = build_sim(self.scenario_path, o.vehicle, o.dt, self.models)
+        self.model = self.sim.vm
+        self.vehicle_id = o.vehicle_id or self.model.config.id
+        self.codec = Codec(o.dbc)
+        self.inbox = queue.SimpleQueue()
+        self._open_can()
+        if o.record is not None:
+            from bridge.mcap_recorder import Recorder
+            self.recorder = Recorder(o.record, self.vehicle_id)
+        if o.zenoh:
+            from bridge.zenoh_link import ZenohLink
+            self.zenoh = ZenohLink(self.vehicle_id, listen=tuple(o.zenoh_listen),
+                                   connect=tuple(o.zenoh_connect), allow_remote=o.zenoh_allow_remote)
+        self.health = LoopHealth(period=self.sim.dt)
+        self.loop = HilLoop(self.sim, self.codec, self.port, None, mode=o.mode, state_rate=o.state_rate,
+                            hold_pressure=o.hold_pressure, inbox=self.inbox, health=self.health,
+                            scenario_name=self.sc.name)
+        from rtsim.channels import SENSOR_NAMES, STATE_NAMES
+
+        from .outbox import Outbox
+        self.outbox = Outbox(len(SENSOR_NAMES), len(STATE_NAMES), self.loop.packer.frame_ids,
+                             zenoh=self.zenoh, recorder=self.recorder, status_fn=self.loop.status,
+                             status_period=1.0 / o.status_rate)
+        self.loop.outbox = self.outbox
+        self.pacer = Pacer(self.loop.run_steps, self.sim.dt, "fast" if o.mode == "fast" else (
+            "lockstep" if o.mode == "lockstep" else "realtime"), max_catch_up=o.max_catch_up,
+            health=self.health)
+        if self.zenoh is not None:
+            self.zenoh.serve(self.control, self.config)
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Load every compiled kernel of the loop (numba loads a cached kernel at its first call:
+        ~1 s for the vehicle step) on a throwaway copy, so the first paced step is not a stall."""
+        import numpy as np
+
+        from rtsim.vehicle.state import NSTATE_OUT, vehicle_state_values
+
+        sim, _ = build_sim(self.scenario_path, self.opts.vehicle, self.opts.dt, self.models)
+        sim.step(1)
+        vals = sim.sensors()
+        self.loop.packer.pack(vals, 0.0)
+        vehicle_state_values(sim.data, sim.vm.vehicle, sim.vd, sim.io.signals, np.zeros(NSTATE_OUT))
+
+    def _open_can(self) -> None:
+        o = self.opts
+        from .busport import BusPort
+
+        iface, chan = o.can_interface, o.can_channel
+        if iface is None:
+            if socketcan_available(chan or "vcan0"):
+                iface, chan = "socketcan", chan or "vcan0"
+            else:
+                port = default_hub_port()
+                if chan is None and o.start_hub and not _reachable(HUB_HOST, port):
+                    self.hub = LoopbackHub(port)
+                    self.out(f"rtsim serve: started the loopback CAN hub on {self.hub.channel} "
+                             f"(python-can interface 'remote'; no SocketCAN in this kernel)")
+                iface, chan = "remote", chan or f"{HUB_HOST}:{port}"
+        self.can_interface, self.can_channel = iface, chan
+        self.port = BusPort(self.inbox, iface, chan)
+
+    # -- control (Zenoh threads) -----------------------------------------------------------------------
+    def control(self, request: dict) -> dict:
+        """Handle one control request (see ``HilLoop._control``); builds new simulations here, off the
+        loop thread, and waits for the loop to take the request."""
+        op = str(request.get("op", ""))
+        args = {k: v for k, v in request.items() if k != "op"}
+        if op in ("reset", "load_scenario"):
+            path = self.scenario_path if op == "reset" else resolve_scenario(str(args.get("scenario", "")))
+            sim, sc = build_sim(path, self.opts.vehicle, self.opts.dt, self.models)
+            if op == "load_scenario":
+                self.scenario_path, self.sc, self.model = path, sc, sim.vm
+            args = {"_sim": sim, "_name": sc.name}
+        req = Request(op, args)
+        self.inbox.put(("ctl", req))
+        timeout = 120.0 if op == "step" else 10.0
+        if not req.done.wait(timeout):
+            return {"ok": False, "error": f"{op}: the loop did not answer within {timeout:g} s"}
+        return req.reply
+
+    def config(self) -> dict:
+        """The running configuration (Zenoh ``config`` query)."""
+        o = asdict(self.opts)
+        o = {k: (str(v) if isinstance(v, Path) else v) for k, v in o.items()}
+        return {
+            "vehicle_id": self.vehicle_id,
+            "options": o,
+            "scenario": {"name": self.sc.name, "path": str(self.scenario_path)},
+            "vehicle": self.model.config.model_dump(mode="json"),
+            "dt": self.sim.dt,
+            "can": self.port.stats() if self.port is not None else None,
+            "zenoh": {"endpoints": list(self.zenoh.endpoints)} if self.zenoh is not None else None,
+            "dbc": str(self.opts.dbc),
+        }
+
+    # -- running ---------------------------------------------------------------------------------------
+    def describe(self) -> list[str]:
+        lines = [f"rtsim serve: vehicle {self.vehicle_id} ({self.model.config.name}), scenario "
+                 f"{self.sc.name}, mode {self.opts.mode}, step {self.sim.dt * 1e3:g} ms",
+                 f"  CAN:    {self.port.description} (DBC {self.opts.dbc.name}: sensors every "
+                 f"{self.loop.sensor_every * self.sim.dt * 1e3:g} ms, status every "
+                 f"{self.loop.status_every * self.sim.dt * 1e3:g} ms)"]
+        if self.zenoh is not None:
+            lines.append(f"  Zenoh:  {', '.join(self.zenoh.endpoints)} (peer, scouting off); keys "
+                         f"rtsim/{self.vehicle_id}/{{sensors,state,status,commands,control,config}}")
+        else:
+            lines.append("  Zenoh:  off")
+        lines.append(f"  record: {self.recorder.path}" if self.recorder is not None else "  record: off")
+        lines.append("  stop with Ctrl-C (SIGINT) or SIGTERM")
+        return lines
+
+    def run(self) -> dict:
+        """Run until stopped (signal, ``stop()``, or ``duration``); returns the closing summary."""
+        for line in self.describe():
+            self.out(line)
+        restore = self._install_signals()
+        t0 = time.monotonic()
+        try:
+            if self.opts.mode == "lockstep":
+                if self.opts.duration is not None:
+                    threading.Timer(self.opts.duration, self.stop).start()
+                self.loop.run_lockstep()
+            else:
+                self.pacer.run(duration=self.opts.duration)
+        finally:
+            restore()
+            wall = time.monotonic() - t0
+            summary = self.close()
+            summary["wall_s"] = wall
+        return summary
+
+    def stop(self) -> None:
+        """Thread-safe: makes ``run()`` return within one period (and close everything)."""
+        self._stopping.set()
+        self.pacer.stop()
+        self.loop.stop_event.set()
+
+    def _install_signals(self):
+        if threading.current_thread() is not threading.main_thread():
+            return lambda: None
+        old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+
+        def handler(signum, frame):
+            self.stop()
+        for s in old:
+            signal.signal(s, handler)
+
+        def restore():
+            for s, h in old.items():
+                signal.signal(s, h)
+        return restore
+
+    def close(self) -> dict:
+        """Stop every part, finalise the recording; idempotent. Returns a summary."""
+        if self._closed:
+            return {}
+        self._closed = True
+        summary = {}
+        if hasattr(self, "loop"):
+            summary = {"sim_time": self.loop.sim_time, "steps": self.loop.k, "health": self.health.summary(),
+                       "run_state": self.loop.run_state, "message": self.loop.message,
+                       "rejected": dict(self.loop.rx.counters), "accepted_frames": self.loop.rx.accepted}
+        for part in ("outbox", "zenoh", "recorder", "port", "hub"):
+            obj = getattr(self, part)
+            if obj is None:
+                continue
+            try:
+                obj.close()
+            except Exception as exc:  # noqa: BLE001  (report, keep closing the others)
+                print(f"rtsim serve: closing {part}: {type(exc).__name__}: {exc}", file=sys.stderr)
+        if self.port is not None:
+            summary["can"] = self.port.stats()
+        if self.recorder is not None:
+            summary["recording"] = {"path": str(self.recorder.path), "written": self.recorder.written,
+                                    "dropped": self.recorder.dropped, "chunks": self.recorder.chunks}
+        return summary
+
+
+def _reachable(host: str, port: int) -> bool:
+    import socket
+
+    try:
+        socket.create_connection((host, port), timeout=0.5).close()
+        return True
+    except OSError:
+        return False
+
