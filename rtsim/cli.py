@@ -152,6 +152,8 @@ _DELEGATED = (
     ("serve", "rtsim.service.cli", "run the HIL service: the vehicle behind CAN, Zenoh state, MCAP recording"),
     ("demo", "rtsim.service.demo", "the service plus a demo ECU process driving over CAN, recorded"),
     ("watch", "rtsim.watch", "live terminal dashboard of a running service (Zenoh)"),
+    ("play", "bridge.player", "put recorded CAN frames back on the bus with their original timing"),
+    ("resim", "rtsim.service.resim", "re-run a recording (or a CAN log of commands) and compare the state"),
 )
 
 
