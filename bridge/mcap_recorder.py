@@ -42,7 +42,7 @@ from typing import Any, Callable, NamedTuple
 
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Footer, Message, Schema
+from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
@@ -93,7 +93,8 @@ class Recorder:
 
     def __init__(self, path: str | Path, vehicle_id: str, chunk_size: int = 256 * 1024,
                  flush_interval: float = 1.0, queue_size: int = 100_000,
-                 on_chunk: Callable[[int, int], Any] | None = None, poll_interval: float = 0.002):
+                 on_chunk: Callable[[int, int], Any] | None = None, poll_interval: float = 0.002,
+                 metadata: dict[str, dict[str, str]] | None = None):
         if chunk_size <= 0 or flush_interval <= 0 or queue_size <= 0:
             raise ValueError("chunk_size, flush_interval and queue_size must be positive")
         self.path = Path(path)
@@ -119,7 +120,9 @@ class Recorder:
         self._writer = Writer(self._fh, chunk_size=self.chunk_size * 4 + (1 << 20),
                               compression=CompressionType.ZSTD)
         self._writer.start(profile="", library="rtsim")
-        self._fh.flush()         # the header is on disk even if the process dies before a chunk
+        for name, values in (metadata or {}).items():     # session facts (config, versions): before
+            self._writer.add_metadata(name, {str(k): str(v) for k, v in values.items()})   # any chunk
+        self._fh.flush()         # header and metadata are on disk even if the process dies before a chunk
         self._schema_defs = SCHEMAS
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
@@ -283,6 +286,7 @@ class RecordingInfo:
     topics: dict[str, int] = field(default_factory=dict)   # messages per topic
     truncated_bytes: int = 0       # trailing bytes of an incomplete record that were discarded
     note: str = ""                 # what stopped the recovery of a damaged file
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)   # MCAP metadata records by name
 
 
 class _Bounded:
@@ -362,7 +366,8 @@ def _read_complete(path: Path, fh):
     for ch in summary.channels.values():
         out.setdefault(ch.topic, [])
     chunks = summary.statistics.chunk_count if summary.statistics else len(summary.chunk_indexes)
-    info = RecordingInfo(path, True, n, chunks, {t: len(v) for t, v in out.items()})
+    meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    info = RecordingInfo(path, True, n, chunks, {t: len(v) for t, v in out.items()}, metadata=meta)
     return out, info
 
 
@@ -371,6 +376,7 @@ def _read_stream(path: Path, fh, size: int):
     fh.seek(len(MCAP_MAGIC))
     channels: dict[int, Channel] = {}
     out: dict[str, list[RecordedMessage]] = {}
+    meta: dict[str, dict[str, str]] = {}
     n = chunks = 0
     note = ""
     complete = False
@@ -383,6 +389,8 @@ def _read_stream(path: Path, fh, size: int):
                 continue
             if isinstance(r, Channel):
                 channels[r.id] = r
+            elif isinstance(r, Metadata):
+                meta[r.name] = dict(r.metadata)
             elif isinstance(r, Message):
                 ch = channels.get(r.channel_id)
                 if ch is None:
@@ -422,5 +430,5 @@ def _read_stream(path: Path, fh, size: int):
     for ch in channels.values():
         out.setdefault(ch.topic, [])
     info = RecordingInfo(path, complete, n, chunks, {t: len(v) for t, v in out.items()},
-                         truncated_bytes=discarded, note=note)
+                         truncated_bytes=discarded, note=note, metadata=meta)
     return out, info

@@ -269,3 +269,19 @@ def test_not_mcap_is_config_error(tmp_path):
         read_recording(empty)
     with pytest.raises(ConfigError, match="missing.mcap"):
         read_recording(tmp_path / "missing.mcap")
+
+
+def test_metadata_survives_a_clean_close_and_a_kill(tmp_path):
+    meta = {"rtsim.session": {"scenario": "hil_flat", "dt": "0.001"}, "rtsim.vehicle": {"toml": "a = 1\n"}}
+    path = tmp_path / "meta.mcap"
+    rec = Recorder(path, "xbw", metadata=meta)
+    rec.record("status", 0, {"mode": "realtime"})
+    rec.close()
+    _, info = read_recording(path)
+    assert info.complete and info.metadata == meta
+    # the same file cut after the metadata (a writer killed before its first chunk): still there
+    cut = tmp_path / "cut.mcap"
+    data = path.read_bytes()
+    cut.write_bytes(data[: data.index(b"a = 1\n") + 40])
+    _, info = read_recording(cut)
+    assert not info.complete and info.metadata == meta

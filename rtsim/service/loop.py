@@ -36,7 +36,7 @@ from bridge.can_pack import SensorPacker
 from rtsim.channels import COMMAND_NAMES
 from rtsim.errors import RtsimError, SimulationError
 from rtsim.realtime.health import LoopHealth
-from rtsim.vehicle.sensors import NSENSOR, SM_DELAY_STEPS, sensor_model, sensor_params
+from rtsim.vehicle.sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_model, sensor_params
 from rtsim.mbs.model import OK
 from rtsim.vehicle.state import NSTATE_OUT
 
@@ -99,6 +99,8 @@ class HilLoop:
         self.sm_on = bool(np.any(self.sm))
         self.sm_buf = np.zeros((NSENSOR, int(self.sm[:, SM_DELAY_STEPS].max()) + 1))
         self.sm_head = 0
+        if self.sm_on:
+            seed_sensor_noise(0)          # reproducible noise: a session replays bit for bit
         self.rx.t0 = 0.0
         for i in range(len(self.rx.value)):   # a new session: no command received yet
             self.rx.value[i] = None

@@ -144,7 +144,7 @@ class Service:
         self._open_can()
         if o.record is not None:
             from bridge.mcap_recorder import Recorder
-            self.recorder = Recorder(o.record, self.vehicle_id)
+            self.recorder = Recorder(o.record, self.vehicle_id, metadata=self.session_metadata())
         if o.zenoh:
             from bridge.zenoh_link import ZenohLink
             self.zenoh = ZenohLink(self.vehicle_id, listen=tuple(o.zenoh_listen),
@@ -197,6 +197,27 @@ class Service:
                 iface, chan = "remote", chan or f"{HUB_HOST}:{port}"
         self.can_interface, self.can_channel = iface, chan
         self.port = BusPort(self.inbox, iface, chan)
+
+    def session_metadata(self) -> dict[str, dict[str, str]]:
+        """What `rtsim resim` needs to rebuild this session: the files as they were, the step, the
+        mode and the watchdog's hold pressure (MCAP metadata records)."""
+        from rtsim.vehicle.run import default_vehicle_path
+
+        vpath = Path(self.opts.vehicle) if self.opts.vehicle else (self.sc.vehicle_path or default_vehicle_path())
+        return {
+            "rtsim.session": {"mode": self.opts.mode, "dt": repr(self.sim.dt), "vehicle_id": self.vehicle_id,
+                              "scenario": self.sc.name, "hold_pressure": repr(self.loop_hold_pressure()),
+                              "state_rate": repr(self.opts.state_rate),
+                              "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
+            "rtsim.scenario": {"path": str(self.scenario_path.resolve()), "toml": self.scenario_path.read_text()},
+            "rtsim.vehicle": {"path": str(vpath.resolve()), "toml": vpath.read_text()},
+            "rtsim.dbc": {"path": str(Path(self.opts.dbc).resolve()), "text": Path(self.opts.dbc).read_text()},
+        }
+
+    def loop_hold_pressure(self) -> float:
+        from bridge.can_codec import DEFAULT_HOLD_PRESSURE
+
+        return self.opts.hold_pressure if self.opts.hold_pressure is not None else DEFAULT_HOLD_PRESSURE
 
     # -- control (Zenoh threads) -----------------------------------------------------------------------
     def control(self, request: dict) -> dict:

@@ -1,0 +1,215 @@
+"""`rtsim resim FILE.mcap`: re-run the model from a recording's received CAN frames and report how far
+the new run is from the recorded sensors and state.
+
+The recording's metadata (written by `rtsim serve --record`) names the scenario, the vehicle, the
+step, the mode and the watchdog's hold pressure. The received frames (``can/rx``) are fed to a fresh
+``HilLoop`` exactly as the service took them: in lockstep mode in recorded order (the SIM_STEP_REQ
+frames among them run the steps); in realtime/fast mode each frame at the step at which the service
+processed it (its recorded simulation time), stepping in between, up to the last recorded sample. The
+loop, the E2E checks, the watchdog and the compiled step are the service's own, so with an unchanged
+model and configuration the sensors and state come out bit for bit identical. A changed model shows
+as per-channel differences. Control requests of the live session (pause, reset) are not recorded and
+not replayed; sessions that used them replay only up to the first one.
+
+Also accepts python-can logs (.asc, .blf, candump .log) of ECU command frames with ``--scenario``: the
+model is driven by them and the run is reported without a comparison.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from bridge.can_codec import Codec
+from rtsim.channels import SENSOR_NAMES, STATE_NAMES
+from rtsim.errors import ConfigError
+
+from .loop import HilLoop
+from .server import build_sim, resolve_scenario
+
+
+class _Frame:
+    """The attributes of a can.Message the loop reads."""
+    __slots__ = ("arbitration_id", "data")
+
+    def __init__(self, can_id: int, data: bytes):
+        self.arbitration_id = can_id
+        self.data = data
+
+
+class Collector:
+    """Stands in for the Outbox: keeps every sample in memory."""
+
+    def __init__(self):
+        self.sensors: list[tuple[float, np.ndarray]] = []
+        self.state: list[tuple[float, np.ndarray]] = []
+        self.events: list[tuple[str, float, object]] = []
+
+    def push_sensor(self, t, values, words):
+        self.sensors.append((t, values.copy()))
+
+    def push_state(self, t, values):
+        self.state.append((t, values.copy()))
+
+    def push_event(self, key, t, payload):
+        self.events.append((key, t, payload))
+
+
+def _file_for(meta: dict, key: str, override: Path | None, tmp: Path) -> tuple[Path, str]:
+    """The config file to use and a note: the override, the recorded path if its text is unchanged,
+    else the recorded text written next to nothing (a temporary file in the recorded folder when
+    possible, so relative paths still resolve)."""
+    if override is not None:
+        return override, f"{key} {override} (given)"
+    rec = meta.get(f"rtsim.{key}")
+    if rec is None:
+        raise ConfigError(f"the recording has no rtsim.{key} metadata (not written by rtsim serve?)")
+    path = Path(rec["path"])
+    if path.exists() and path.read_text() == rec["toml"]:
+        return path, f"{key} {path} (unchanged)"
+    folder = path.parent if path.parent.exists() else tmp
+    out = Path(tempfile.mkstemp(suffix=".toml", prefix=f".resim-{key}-", dir=folder)[1])
+    out.write_text(rec["toml"])
+    return out, f"{key} as recorded ({path} {'changed since' if path.exists() else 'missing'})"
+
+
+def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None = None) -> dict:
+    """Re-run a recording; returns the comparison report (see the module docstring)."""
+    from bridge.mcap_recorder import read_recording
+
+    path = Path(path)
+    messages, info = read_recording(path)
+    meta = info.metadata
+    session = meta.get("rtsim.session")
+    if session is None:
+        raise ConfigError(f"{path}: no rtsim.session metadata; record with `rtsim serve --record`")
+    vid = session["vehicle_id"]
+    notes = []
+    temps = []
+    with tempfile.TemporaryDirectory() as tmp:
+        spath, note = _file_for(meta, "scenario", scenario, Path(tmp))
+        notes.append(note)
+        vpath, note = _file_for(meta, "vehicle", vehicle, Path(tmp))
+        notes.append(note)
+        temps = [p for p in (spath, vpath) if p.name.startswith(".resim-")]
+        try:
+            sim, _ = build_sim(spath, vpath, float(session["dt"]))
+        finally:
+            for p in temps:
+                p.unlink(missing_ok=True)
+    col = Collector()
+    mode = session["mode"]
+    loop = HilLoop(sim, Codec(), None, col, mode=mode, state_rate=float(session.get("state_rate", 100.0)),
+                   hold_pressure=float(session["hold_pressure"]))
+    rx = messages.get(f"rtsim/{vid}/can/rx", [])
+    rec_sensors = messages.get(f"rtsim/{vid}/sensors", [])
+    rec_state = messages.get(f"rtsim/{vid}/state", [])
+    dt = sim.dt
+    for m in rx:
+        f = _Frame(int(m.data["id"]), bytes.fromhex(m.data["data"]))
+        if mode != "lockstep":
+            loop.run_steps(int(round(m.data["time"] / dt)) - loop.k)
+        loop.on_frame(f)
+        if loop.run_state == "stopped":
+            break
+    if mode != "lockstep" and rec_sensors:
+        loop.run_steps(int(round(rec_sensors[-1].data["time"] / dt)) - loop.k)
+    report = {"recording": str(path), "mode": mode, "dt": dt, "files": notes, "frames_replayed": len(rx),
+              "sim_time": loop.sim_time, "run_state": loop.run_state, "message": loop.message,
+              "sensors": _compare(rec_sensors, col.sensors, SENSOR_NAMES),
+              "state": _compare(rec_state, col.state, STATE_NAMES)}
+    report["identical"] = bool(report["sensors"]["identical"] and report["state"]["identical"])
+    return report
+
+
+def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | None = None,
+               dt: float | None = None) -> dict:
+    """Drive the model with the ECU command frames of a python-can log (.asc, .blf, candump .log),
+    each applied at its logged time (relative to the first frame), through the service's loop (E2E
+    checks and watchdog included); returns a report of the run (no recorded state to compare)."""
+    from bridge.can_logs import read_frames
+
+    from .server import DEFAULT_SCENARIO
+
+    frames = read_frames(path)
+    sim, sc = build_sim(scenario or DEFAULT_SCENARIO, vehicle, dt)
+    col = Collector()
+    loop = HilLoop(sim, Codec(), None, col, mode="fast")
+    t_first = frames[0].time if frames else 0.0
+    for f in frames:
+        loop.run_steps(int(round((f.time - t_first) / sim.dt)) - loop.k)
+        loop.on_frame(_Frame(f.can_id, bytes(f.data)))
+        if loop.run_state == "stopped":
+            break
+    loop.run_steps(int(round(0.5 / sim.dt)))       # half a second after the last frame
+    xs = np.array([v for _, v in col.state]) if col.state else np.zeros((0, len(STATE_NAMES)))
+    ix, iy, isp = STATE_NAMES.index("pos_x"), STATE_NAMES.index("pos_y"), STATE_NAMES.index("speed")
+    dist = float(np.sum(np.hypot(np.diff(xs[:, ix]), np.diff(xs[:, iy])))) if len(xs) > 1 else 0.0
+    return {"log": str(path), "scenario": sc.name, "frames": len(frames), "accepted": loop.rx.accepted,
+            "rejected": dict(loop.rx.counters), "sim_time": loop.sim_time, "run_state": loop.run_state,
+            "message": loop.message, "distance": dist,
+            "peak_speed": float(xs[:, isp].max()) if len(xs) else 0.0}
+
+
+def _compare(recorded, rerun, names) -> dict:
+    """Per-channel max |difference| over the samples present in both (matched by time)."""
+    got = {round(t * 1e6): v for t, v in rerun}
+    worst = {n: 0.0 for n in names}
+    matched = missing = 0
+    identical = True
+    for m in recorded:
+        t = m.data["time"]
+        v = got.get(round(t * 1e6))
+        if v is None:
+            missing += 1
+            continue
+        matched += 1
+        for i, n in enumerate(names):
+            r = m.data.get(n)
+            r = np.nan if r is None else float(r)
+            if not (r == v[i] or (np.isnan(r) and np.isnan(v[i]))):
+                identical = False
+                worst[n] = max(worst[n], abs(r - v[i]) if np.isfinite(r - v[i]) else np.inf)
+    return {"recorded": len(recorded), "rerun": len(rerun), "matched": matched, "missing": missing,
+            "identical": identical and missing == 0 and matched > 0,
+            "max_abs_diff": {n: d for n, d in worst.items() if d > 0}}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("recording", help="an MCAP recording of `rtsim serve --record`, or a python-can log "
+                                     "(.asc, .blf, candump .log) of ECU command frames")
+    p.add_argument("--vehicle", help="vehicle TOML to use instead of the recorded one (what-if runs)")
+    p.add_argument("--scenario", help="scenario TOML or name to use instead of the recorded one")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument("--strict", action="store_true", help="exit 1 unless the rerun is bit-identical")
+
+
+def main(args) -> int:
+    if Path(args.recording).suffix.lower() in (".asc", ".blf", ".log"):
+        rep = replay_log(args.recording, resolve_scenario(args.scenario) if args.scenario else None,
+                         Path(args.vehicle) if args.vehicle else None)
+        if args.json:
+            print(json.dumps(rep, indent=2))
+        else:
+            print(f"rtsim resim: {rep['log']}: {rep['frames']} frames, {rep['accepted']} commands accepted, "
+                  f"rejected {({k: v for k, v in rep['rejected'].items() if v})}; {rep['sim_time']:.3f} s "
+                  f"simulated on {rep['scenario']}: distance {rep['distance']:.1f} m, peak speed "
+                  f"{rep['peak_speed'] * 3.6:.1f} km/h, {rep['run_state']}")
+        return 0
+    rep = resim(args.recording, Path(args.vehicle) if args.vehicle else None,
+                resolve_scenario(args.scenario) if args.scenario else None)
+    if args.json:
+        print(json.dumps(rep, indent=2, default=float))
+    else:
+        print(f"rtsim resim: {rep['recording']}: {rep['frames_replayed']} received frames replayed in "
+              f"{rep['mode']} mode, {rep['sim_time']:.3f} s simulated ({'; '.join(rep['files'])})")
+        for part in ("sensors", "state"):
+            c = rep[part]
+            diff = ", ".join(f"{n} {d:.3g}" for n, d in sorted(c["max_abs_diff"].items(), key=lambda x: -x[1])[:6])
+            print(f"  {part}: {c['matched']} of {c['recorded']} recorded samples matched, "
+                  f"{'bit-identical' if c['identical'] else 'max |diff|: ' + (diff or 'none, but samples missing')}")
+        print(f"rtsim resim: {'IDENTICAL' if rep['identical'] else 'DIFFERENT'}")
+    return 1 if args.strict and not rep["identical"] else 0

@@ -1,0 +1,92 @@
+"""Helpers for the service end-to-end tests: the CAN segment to use, the service as a child process,
+and a bus reader that keeps arrival times. Every process started here is stopped by the caller's
+``finally`` (``ServiceProcess.close`` kills what did not stop)."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+READY = "stop with Ctrl-C"
+
+
+def segment_from_env() -> tuple[str, str] | None:
+    """(interface, channel) when the run targets a given bus (e.g. socketcan vcan0 in the VM)."""
+    iface = os.environ.get("RTSIM_CAN_INTERFACE")
+    if not iface:
+        return None
+    return iface, os.environ.get("RTSIM_CAN_CHANNEL", "vcan0")
+
+
+class ServiceProcess:
+    """`rtsim serve` in a child process; ``lines`` collects its stdout."""
+
+    def __init__(self, iface: str, channel: str, *args: str, ready_timeout: float = 180.0):
+        cmd = [sys.executable, "-m", "rtsim.cli", "serve", "--can-interface", iface, "--can-channel", channel,
+               "--no-hub", *args]
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                     env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        self.lines: list[str] = []
+        self._ready = threading.Event()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+        if not self._ready.wait(ready_timeout) or self.proc.poll() is not None:
+            out = "\n".join(self.lines)
+            self.close()
+            raise RuntimeError(f"rtsim serve did not start:\n{out}")
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+            if READY in line:
+                self._ready.set()
+
+    def stop(self, sig=signal.SIGTERM, timeout: float = 10.0) -> tuple[int | None, float]:
+        """Send ``sig``; returns (exit code, seconds until the process ended)."""
+        t0 = time.monotonic()
+        self.proc.send_signal(sig)
+        try:
+            rc = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            rc = None
+        dt = time.monotonic() - t0
+        self._reader.join(5)
+        return rc, dt
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(10)
+
+    @property
+    def output(self) -> str:
+        return "\n".join(self.lines)
+
+
+class Listener:
+    """Reads a bus in a thread: every frame with its arrival time (monotonic s)."""
+
+    def __init__(self, bus):
+        self.bus = bus
+        self.frames: list[tuple[float, int, bytes]] = []
+        self._stop = threading.Event()
+        self._t = threading.Thread(target=self._run, daemon=True)
+        self._t.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                msg = self.bus.recv(0.05)
+            except Exception:  # noqa: BLE001  (bus closed under us at the end)
+                return
+            if msg is not None:
+                self.frames.append((time.monotonic(), msg.arbitration_id, bytes(msg.data)))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._t.join(2)
