@@ -200,10 +200,11 @@ def run(bus, ecu: DemoEcu, duration: float | None = None, lockstep: bool = False
         request_steps()
     ack_id = ecu.codec.step_ack.frame_id
     last_rx = time.monotonic()
+    first_wait = max(timeout, 60.0)     # the service may still be starting when the ECU is up
     while not ecu.done and (duration is None or ecu.t < duration):
         msg = bus.recv(0.1)
         if msg is None:
-            if time.monotonic() - last_rx > timeout:
+            if time.monotonic() - last_rx > (timeout if received else first_wait):
                 break
             continue
         last_rx = time.monotonic()
@@ -229,7 +230,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=float, help="stop after this much simulated time, s")
     p.add_argument("--manoeuvre", choices=["demo", "straight_line", "lane_change"], default="demo")
     p.add_argument("--lockstep", action="store_true", help="request the steps (service in --mode lockstep)")
-    p.add_argument("--timeout", type=float, default=5.0, help="give up after this long without frames, s")
+    p.add_argument("--timeout", type=float, default=5.0,
+                   help="give up after this long without frames once they flowed (60 s before the first), s")
     p.add_argument("--connect-timeout", type=float, default=60.0,
                    help="keep trying to open the bus this long (the service may still be starting), s")
     args = p.parse_args(argv)

@@ -28,6 +28,13 @@ def _bench(args) -> int:
     from rtsim.benchmarks import PROBLEMS
     from rtsim.benchmarks.runner import run_problem, scaling, startup_seconds
 
+    if args.suite == "service":
+        from rtsim.benchmarks.service import format_report, run_service_bench
+        if not (args.duration > 0 and math.isfinite(args.duration)):
+            raise RtsimError(f"--duration must be a positive number of seconds, got {args.duration}")
+        res = run_service_bench(args.duration, record=not args.no_record, zenoh=not args.no_zenoh)
+        print(json.dumps(res, indent=2) if args.json else format_report(res))
+        return 0
     if args.suite == "vehicle":
         from rtsim.benchmarks.vehicle import suite
         results = suite()
@@ -128,8 +135,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--t-end", type=float, help="end time, s (default: the problem's)")
     b.add_argument("--json", action="store_true", help="print a JSON list, one object per problem")
     b.add_argument("--scaling", action="store_true", help="also time the N-four-bar for N = 1, 2, 10, 40, 100")
-    b.add_argument("--suite", choices=["mbs", "vehicle"], default="mbs",
-                   help="mbs: the IFToMM benchmark problems (default); vehicle: the vehicle model's cost per step")
+    b.add_argument("--suite", choices=["mbs", "vehicle", "service"], default="mbs",
+                   help="mbs: the IFToMM benchmark problems (default); vehicle: the vehicle model's cost per "
+                        "step; service: the HIL service's real-time budget under load (CAN, Zenoh, MCAP, ECU)")
+    b.add_argument("--duration", type=float, default=60.0, help="service suite: wall seconds to run (60)")
+    b.add_argument("--no-record", action="store_true", help="service suite: without the MCAP recording")
+    b.add_argument("--no-zenoh", action="store_true", help="service suite: without Zenoh")
     b.set_defaults(func=_bench)
     r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV")
     r.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 
+from bridge.can_batch import batch_sender
 from bridge.can_bus import open_bus
 from rtsim.errors import RtsimError
 
@@ -24,6 +25,7 @@ class BusPort:
         self.retry_interval = float(retry_interval)
         self.recv_timeout = float(recv_timeout)
         self.bus = open_bus(interface, channel)         # the first open must work: raises RtsimError
+        self._send_all = batch_sender(self.bus)
         self.description = f"{self.bus.__class__.__name__} {getattr(self.bus, 'channel_info', channel)}"
         self.sent = 0
         self.received = 0
@@ -62,6 +64,21 @@ class BusPort:
             self._mark_down(exc)
             return False
         self.sent += 1
+        return True
+
+    def send_batch(self, msgs) -> bool:
+        """Send several frames in one write where the transport allows (bridge.can_batch); counted
+        like ``send``. Never raises."""
+        if not self._up:
+            self.dropped_while_down += len(msgs)
+            return False
+        try:
+            self._send_all(msgs)
+        except Exception as exc:  # noqa: BLE001
+            self.send_errors += 1
+            self._mark_down(exc)
+            return False
+        self.sent += len(msgs)
         return True
 
     # -- reader / reconnect thread ---------------------------------------------------------------
@@ -105,6 +122,7 @@ class BusPort:
                 continue
             with self._lock:
                 self.bus = bus
+                self._send_all = batch_sender(bus)
                 self._up = True
                 self.reconnects += 1
             return

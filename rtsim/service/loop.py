@@ -173,9 +173,7 @@ class HilLoop:
             vals = self.true
         if self.port is not None:
             self.packer.refresh_messages(t)
-            send = self.port.send
-            for msg in self.sensor_msgs:
-                send(msg)
+            self.port.send_batch(self.sensor_msgs)
         if self.outbox is not None:
             self.outbox.push_sensor(t, vals, self.packer.words)
 
