@@ -138,7 +138,7 @@ class HilLoop:
         k = self.k + 1
         t1 = k * self.dt
         want_sensors = k % self.sensor_every == 0
-        want_state = k % self.state_every == 0 and self.outbox is not None
+        want_state = k % self.state_every == 0
         sim, p = self.sim, self.packer
         status = service_step(sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states,
                               sim.io, self.dt, want_sensors, not self.sm_on, self.true, t1, p.time_start,
@@ -153,7 +153,7 @@ class HilLoop:
         self.k = k
         if want_sensors:
             self._sensors(t1)
-        if want_state:
+        if want_state and self.outbox is not None:
             self.outbox.push_state(t1, self.state)
         if k % self.status_every == 0:
             self.send_status(t1)

@@ -137,11 +137,17 @@ class Outbox:
         self._drain_state()
 
     def _run(self) -> None:
+        import gc
         import time
 
+        next_gc = 0.0
         while not self._stop.is_set():
             self.flush()
-            self._maybe_status(time.monotonic())
+            now = time.monotonic()
+            self._maybe_status(now)
+            if now >= next_gc:          # the service switches automatic collection off (server.py)
+                next_gc = now + 1.0
+                gc.collect(0)
             self._stop.wait(self.poll)
 
     def close(self, final_status: bool = True) -> None:

@@ -14,6 +14,7 @@ loop through the inbox, so the loop only swaps a finished object in between two 
 """
 from __future__ import annotations
 
+import gc
 import queue
 import signal
 import sys
@@ -170,15 +171,11 @@ class Service:
     def _warm_up(self) -> None:
         """Load every compiled kernel of the loop (numba loads a cached kernel at its first call:
         ~1 s for the vehicle step) on a throwaway copy, so the first paced step is not a stall."""
-        import numpy as np
-
-        from rtsim.vehicle.state import NSTATE_OUT, vehicle_state_values
-
         sim, _ = build_sim(self.scenario_path, self.opts.vehicle, self.opts.dt, self.models)
-        sim.step(1)
-        vals = sim.sensors()
-        self.loop.packer.pack(vals, 0.0)
-        vehicle_state_values(sim.data, sim.vm.vehicle, sim.vd, sim.io.signals, np.zeros(NSTATE_OUT))
+        scratch = HilLoop(sim, self.codec, None, None, mode="fast", state_rate=self.opts.state_rate)
+        scratch.run_steps(scratch.sensor_every * scratch.state_every)   # every branch of the step
+        scratch.packer.pack(scratch.true, 0.0)
+        self.health.recent_percentiles()
 
     def _open_can(self) -> None:
         o = self.opts
@@ -274,6 +271,12 @@ class Service:
         for line in self.describe():
             self.out(line)
         restore = self._install_signals()
+        # The cyclic garbage collector would run on whichever thread allocates, the loop included,
+        # for milliseconds at a time. Move everything built so far out of its reach and switch the
+        # automatic collection off; the publisher thread collects the young generation once a second.
+        gc.collect()
+        gc.freeze()
+        gc.disable()
         t0 = time.monotonic()
         try:
             if self.opts.mode == "lockstep":
@@ -283,6 +286,7 @@ class Service:
             else:
                 self.pacer.run(duration=self.opts.duration)
         finally:
+            gc.enable()
             restore()
             wall = time.monotonic() - t0
             summary = self.close()
