@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import collections
 import json
-import math
 import struct
 import threading
 import time
@@ -46,30 +45,13 @@ from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
-from bridge.payloads import SCHEMAS, TOPIC_KEYS
+from bridge.payloads import SCHEMAS, TOPIC_KEYS, encode_json
 from rtsim.errors import ConfigError
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOOTER_OPCODE = 0x02
 
 CAN_KEYS = frozenset(("can/rx", "can/tx"))
-
-def _finite(x):
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    return x
-
-
-def _dumps(obj) -> bytes:
-    try:
-        return json.dumps(obj, allow_nan=False, separators=(",", ":")).encode()
-    except ValueError:  # NaN / inf are not JSON: write them as null
-        return json.dumps(_finite(obj), allow_nan=False, separators=(",", ":")).encode()
-
 
 def _can_frame(payload, t_s: float) -> dict:
     if isinstance(payload, dict):
@@ -179,12 +161,12 @@ class Recorder:
 
     def _serialise(self, key: str, t_ns: int, payload) -> bytes:
         if key in CAN_KEYS and not isinstance(payload, (bytes, bytearray)):
-            return _dumps(_can_frame(payload, t_ns * 1e-9))
+            return encode_json(_can_frame(payload, t_ns * 1e-9))
         if isinstance(payload, (bytes, bytearray, memoryview)):
             return bytes(payload)
         if "time" not in payload:
             payload = {"time": t_ns * 1e-9, **payload}
-        return _dumps(payload)
+        return encode_json(payload)
 
     def _write(self, item) -> None:
         key, t_ns, payload = item

@@ -154,16 +154,9 @@ def test_brake_step_latency_and_watchdog_safe_states(segment, tmp_path, db):
             return None
         sent = _ecu_sender(bus, codec, schedule)
         t_last_sent = sent[-1][0]
-        total = valid + sum(expect.values())
-        deadline = time.monotonic() + 120.0          # the hub may still be delivering a backlog
-        while time.monotonic() < deadline:
-            st = status[-1] if status else None
-            if st and st["accepted_frames"] + sum(st["rejected"].values()) >= total:
-                break
-            time.sleep(0.2)
+        time.sleep(1.0)
         rc, _ = svc.stop(signal.SIGTERM)
     finally:
-        client.close()
         listener.close()
         bus.shutdown()
         svc.close()

@@ -84,35 +84,33 @@ class Outbox:
         if self.recorder is not None:
             self.recorder.record(key, int(round(t * 1e9)), (can_id, data))
 
+    def _pending(self, head: int, tail: int) -> int:
+        """Where to resume reading a ring: the oldest sample still in it (skipped ones counted)."""
+        if head - tail > self.capacity:
+            self.dropped += head - tail - self.capacity
+            return head - self.capacity
+        return tail
+
     def _drain_sensors(self) -> None:
         head, cap = self.sensor_head, self.capacity
-        tail = self._sensor_tail
-        if head - tail > cap:
-            self.dropped += head - tail - cap
-            tail = head - cap
-        while tail < head:
-            j = tail % cap
+        tail = self._pending(head, self._sensor_tail)
+        for n in range(tail, head):
+            j = n % cap
             t = float(self.sensor_t[j])
             self._emit("sensors", t, payloads.encode_sensors(t, self.sensor_v[j]))
             if self.recorder is not None:
                 raw = self.sensor_words[j].tobytes()
                 for k, fid in enumerate(self.frame_ids):
                     self._record_frame("can/tx", t, fid, raw[8 * k:8 * k + 8])
-            tail += 1
-        self._sensor_tail = tail
+        self._sensor_tail = head
 
     def _drain_state(self) -> None:
         head, cap = self.state_head, self.capacity
-        tail = self._state_tail
-        if head - tail > cap:
-            self.dropped += head - tail - cap
-            tail = head - cap
-        while tail < head:
-            j = tail % cap
+        for n in range(self._pending(head, self._state_tail), head):
+            j = n % cap
             t = float(self.state_t[j])
             self._emit("state", t, payloads.encode_state(t, self.state_v[j]))
-            tail += 1
-        self._state_tail = tail
+        self._state_tail = head
 
     def _drain_events(self) -> None:
         ev = self.events
