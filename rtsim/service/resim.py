@@ -126,16 +126,17 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
 
 
 def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | None = None,
-               dt: float | None = None) -> dict:
+               dt: float | None = None, models: dict | None = None) -> dict:
     """Drive the model with the ECU command frames of a python-can log (.asc, .blf, candump .log),
     each applied at its logged time (relative to the first frame), through the service's loop (E2E
-    checks and watchdog included); returns a report of the run (no recorded state to compare)."""
+    checks and watchdog included); returns a report of the run (no recorded state to compare).
+    ``models``: a cache of built vehicle models (see ``build_sim``)."""
     from bridge.can_logs import read_frames
 
     from .server import DEFAULT_SCENARIO
 
     frames = read_frames(path)
-    sim, sc = build_sim(scenario or DEFAULT_SCENARIO, vehicle, dt)
+    sim, sc = build_sim(scenario or DEFAULT_SCENARIO, vehicle, dt, models)
     col = Collector()
     loop = HilLoop(sim, Codec(), None, col, mode="fast")
     t_first = frames[0].time if frames else 0.0
