@@ -125,7 +125,8 @@ def _forces(m, d, veh, vd, road, parts, states, bq, hc, n):
     for _ in range(n):
         for i in range(m.nq):
             d.force[i] = 0.0
-        vehicle_forces(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, False, bq, hc)
+        vehicle_forces(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, parts.effects, states.effects,
+                       False, bq, hc)
 
 
 def suite() -> list[dict]:

@@ -10,7 +10,7 @@ from bridge.can_pack import pack_sensor_frames
 from rtsim.jit import kernel
 from rtsim.mbs.model import OK
 from rtsim.vehicle.dynamics import vehicle_step
-from rtsim.vehicle.sensors import true_sensors
+from rtsim.vehicle.effect_kernels import sensor_stage
 from rtsim.vehicle.state import vehicle_state_values
 
 
@@ -24,7 +24,7 @@ def service_step(m, d, veh, vd, road, parts, states, io, h, want_sensors, pack, 
     if status != OK:
         return status
     if want_sensors:
-        true_sensors(m, d, veh, io.signals, sens)
+        sensor_stage(m, d, veh, io.signals, parts.effects, states.effects, sens)   # incl. sensor effects
         if pack:
             pack_sensor_frames(sens, t_s, time_start, time_mask, sig_int, sig_float, words)
     if want_state:

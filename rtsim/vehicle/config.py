@@ -4,15 +4,19 @@ Frame of all hardpoints and positions: the vehicle's design frame, ISO 8855 (x f
 z up), origin on the ground under the front axle centre at design ride height. Hardpoints are given
 for the left corners; the right ones are their mirror images. SI units throughout (the unit is in each
 key's name or comment).
+
+Optional ``[effects.<name>]`` tables (sensor effects: ``[[effects.<name>]]`` arrays of tables, one per
+channel) switch on effects of the catalogue rtsim.vehicle.effects; absent: none (the nominal model).
 """
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from rtsim.configfile import Strict, load, load_toml, validate
+from rtsim.configfile import Strict, load_toml, validate
+from rtsim.errors import ConfigError
 
 Vec3 = tuple[float, float, float]
 
@@ -124,6 +128,17 @@ class VehicleConfig(Strict):
     brakes: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.brake")
     powertrain: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.powertrain")
     steering: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.steering")
+    effects: dict = Field(default_factory=dict, description="switchable effects, validated by "
+                          "rtsim.vehicle.effects (canonical form after loading)")
+
+    @field_validator("effects", mode="before")
+    @classmethod
+    def _effects(cls, v):
+        from .effects import validate_effects     # here: effects imports the model, which imports this
+        try:
+            return validate_effects(v, "effects")
+        except ConfigError as exc:
+            raise ValueError(str(exc)) from None
 
     @model_validator(mode="after")
     def _axles(self):
@@ -139,9 +154,14 @@ class VehicleConfig(Strict):
 
 
 def load_vehicle(path: str | Path) -> tuple[VehicleConfig, Path]:
-    """The validated vehicle config and the folder its relative paths refer to."""
+    """The validated vehicle config and the folder its relative paths refer to. The [effects] tables
+    are checked first, so that their errors name the file and the full key (effects.<name>.<param>)."""
+    from .effects import validate_effects
     path = Path(path)
-    return load(VehicleConfig, path), path.parent
+    data = load_toml(path)
+    if "effects" in data:
+        data["effects"] = validate_effects(data["effects"], f"{path}: effects")
+    return validate(VehicleConfig, data, str(path)), path.parent
 
 
 __all__ = ["VehicleConfig", "load_vehicle", "validate", "load_toml"]

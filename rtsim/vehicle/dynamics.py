@@ -14,12 +14,14 @@ stiffness and damping to W:
   (z, s): Q_z = F dL/dz, Q_s = F dL/ds; anti-roll bars on the travel difference;
 - brakes: torque on the spin coordinate with stiction (rtsim.vehicle.brake), reaction on the knuckle;
 - drive torques (set per step by the powertrain) on the spin coordinate, reacting on the chassis;
-- aerodynamic drag at the centre of mass.
+- aerodynamic drag at the centre of mass;
+- the switchable effects of rtsim.vehicle.effects when any is on (parameters fx = Parts.effects, states
+  fs = States.effects; with fx[FX_ON] = 0 none of their code runs and the step is the nominal one).
 """
 from __future__ import annotations
 
 from collections import namedtuple
-from math import sqrt
+from math import atan, sqrt, tan
 
 import numpy as np
 
@@ -33,6 +35,10 @@ from rtsim.mbs.integrator import (
 from rtsim.mbs.model import ERR_NONFINITE_FORCE, IS_MAX_ITER, OK, ST_FAIL_INDEX
 from rtsim.road.query import CT_D, CT_EX, CT_GAMMA, CT_MU, CT_NX, CT_PX, CT_RR, NCONTACT, wheel_contact
 
+from .effect_kernels import (BEARING_OMEGA_EPS, FS_DL, FX_BEARING, FX_BRAKE, FX_CDA, FX_DL,
+                             FX_G_1MCOS, FX_G_SIN, FX_GRADE, FX_HIST, FX_M_CHASSIS, FX_M_CORNER, FX_MASS, FX_ON,
+                             FX_RELAX, FX_RR, FX_SLIP, RR_SPEED_EPS, driveline_commit, driveline_torque,
+                             effects_brake, record_sensors, smooth_sign)
 from .brake import BI_SIZE, BO_LINE, BO_SIZE, BP_EPS, BS_TAU_SLIDE, brake_commit, brake_step, brake_wheel_torque
 from .powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PI_THROTTLE_CMD, PI_TORQUE_RL, PI_TORQUE_RR,
                          PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_RL, PO_TORQUE_RR, powertrain_step)
@@ -41,11 +47,11 @@ from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_STEERING_T
 from .steering import SI_CMD, SI_RACK_FORCE, SI_SIZE, SO_RACK_ACC, SO_RACK_POS, SO_RACK_VEL, SO_SIZE, SO_SW_ANGLE, \
     SO_TORQUE, steering_step
 from .model import (
-    TYRE_LINEAR,
+    G, TYRE_LINEAR,
     CI_PHI, CI_S, CI_WX, CI_Z, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE, SP_K, SP_PARTNER,
 )
-from .tyre.magic_formula import (advance_deflections, effective_rolling_radius, mf52_forces, transient_slip,
-                                 vertical_force)
+from .tyre.magic_formula import (advance_deflections, advance_deflections_relaxed, effective_rolling_radius,
+                                 mf52_forces, transient_slip, transient_slip_relaxed, vertical_force)
 from .tyre.linear import linear_forces
 from .tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_DAMPING, P_VERTICAL_STIFFNESS
 
@@ -121,15 +127,17 @@ def _poly3(coef, exps, z, s):
 
 
 @kernel
-def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc):
+def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, fx, fs, tangent, bq, hc):
     """Add the vehicle's forces to d.force (and with `tangent` their K, C to d.w_env, scaled by
-    bq = h^2/4 and hc = h/2). Returns the index of a non-finite generalized force, or -1."""
+    bq = h^2/4 and hc = h/2), with the effects of fx, fs (rtsim.vehicle.effect_kernels). Returns the
+    index of a non-finite generalized force, or -1."""
     q = d.q
     qd = d.qd
     f = d.force
     exps = m.poly_exp
     om = chassis_omega(veh, q, qd)
     r0 = tp[P_UNLOADED_RADIUS]
+    fx_on = fx[FX_ON] > 0.5
     for i in range(4):
         ix = veh.corner_idx[i]
         kz = ix[CI_Z]
@@ -180,8 +188,18 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc):
         # ---- brake (implicit, with stiction) and drive torques on the spin coordinate --------------
         tb, dtdw, dtdth = brake_wheel_torque(bp, bs, i, q[kp], qd[kp])
         vd.brake_torque[i] = tb
-        f[kp] += tb + vd.drive[i]
-        f[kz] += vd.drive[i] * (ax * tzx + ay * tzy + az * tzz)
+        drive = vd.drive[i]
+        k_fx = 0.0         # stiffness and damping of the effects on the spin coordinate
+        c_fx = 0.0
+        if fx_on:
+            if fx[FX_DL] > 0.5 and i >= 2:
+                drive, _w, _x, k_fx, c_fx = driveline_torque(fx, fs, i - 2, vd.drive[i], q[kp], qd[kp], 2.0 * hc)
+            if fx[FX_BEARING] != 0.0:
+                sb, dsb = smooth_sign(qd[kp], BEARING_OMEGA_EPS)
+                f[kp] -= fx[FX_BEARING] * sb
+                c_fx += fx[FX_BEARING] * dsb
+        f[kp] += tb + drive
+        f[kz] += drive * (ax * tzx + ay * tzy + az * tzz)
         if tangent:
             # Near a locked wheel the sliding law's slope is -tau_s/omega_eps inside the band and 0
             # outside: a tangent of 0 lets Newton jump across the band and back forever. Use the band's
@@ -191,6 +209,8 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc):
             if c_b == 0.0 and abs(qd[kp]) < 20.0 * w_band and w_band > 0.0:
                 c_b = bs[BS_TAU_SLIDE + i] / w_band
             add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, -bq * dtdth + hc * c_b)
+            if k_fx != 0.0 or c_fx != 0.0:
+                add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, bq * k_fx + hc * c_fx)
         # ---- tyre --------------------------------------------------------------------------------
         ct = vd.contact
         wheel_contact(road, wx, wy, wz, ax, ay, az, r0, ct)
@@ -211,21 +231,32 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc):
         rv = _cross(okx, oky, okz, px, py, pz)
         vsy = (vwx + rv[0]) * lyx + (vwy + rv[1]) * lyy + (vwz + rv[2]) * lyz
         re = effective_rolling_radius(tp, fz)
-        kappa, alpha = transient_slip(tp, vd.slip, i, fz, gamma, vx, vsy, omega, re)
+        if fx_on and fx[FX_RELAX] != 0.0:
+            kappa, alpha = transient_slip_relaxed(tp, vd.slip, i, fz, gamma, vx, vsy, omega, re, fx[FX_RELAX])
+        else:
+            kappa, alpha = transient_slip(tp, vd.slip, i, fz, gamma, vx, vsy, omega, re)
         # the property file describes a left-side tyre; a right-side one is its mirror image
         # (MF-Tyre convention): Fy(alpha, gamma) -> -Fy(-alpha, -gamma), likewise Mz
         side = 1.0 if i % 2 == 0 else -1.0
+        kap_in = kappa
+        alp_in = side * alpha
+        if fx_on and fx[FX_SLIP] != 1.0:
+            kap_in = fx[FX_SLIP] * kappa
+            alp_in = atan(fx[FX_SLIP] * tan(alp_in))
         if veh.tyre_model[0] == TYRE_LINEAR:
-            fx, fy, mz, my = linear_forces(tp, fz, kappa, side * alpha, side * gamma, vx, ct[CT_MU])
+            fxt, fy, mz, my = linear_forces(tp, fz, kap_in, alp_in, side * gamma, vx, ct[CT_MU])
         else:
-            fx, fy, mz, my = mf52_forces(tp, fz, kappa, side * alpha, side * gamma, vx, ct[CT_MU])
+            fxt, fy, mz, my = mf52_forces(tp, fz, kap_in, alp_in, side * gamma, vx, ct[CT_MU])
         fy *= side
         mz *= side
         rr = ct[CT_RR] * fz * re
         my -= rr if vx > 0.1 else (-rr if vx < -0.1 else rr * vx / 0.1)
-        fvx = fx * ex + fy * lyx + fz * nx
-        fvy = fx * ey + fy * lyy + fz * ny
-        fvz = fx * ez + fy * lyz + fz * nz
+        if fx_on and fx[FX_RR] != 0.0:
+            sr, _d = smooth_sign(vx, RR_SPEED_EPS)
+            my += fx[FX_RR] * fz * (px * nx + py * ny + pz * nz) * sr     # -c Fz r_l sat(vx)
+        fvx = fxt * ex + fy * lyx + fz * nx
+        fvy = fxt * ey + fy * lyy + fz * ny
+        fvz = fxt * ez + fy * lyz + fz * nz
         f[kw] += fvx
         f[kw + 1] += fvy
         f[kw + 2] += fvz
@@ -238,7 +269,7 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc):
         f[kz] += m0 * tzx + m1 * tzy + m2 * tzz
         if ks >= 0:
             f[ks] += m0 * tsx + m1 * tsy + m2 * tsz
-        out[TO_FX] = fx
+        out[TO_FX] = fxt
         out[TO_FY] = fy
         out[TO_FZ] = fz
         out[TO_MZ] = mz
@@ -264,21 +295,61 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc):
     ci = veh.chassis_idx
     vx, vy, vz = qd[ci[0]], qd[ci[1]], qd[ci[2]]
     speed = sqrt(vx * vx + vy * vy + vz * vz)
-    cd = 0.5 * veh.aero[1] * veh.aero[0] * speed
+    cda = veh.aero[0]
+    if fx_on:
+        cda += fx[FX_CDA]
+    cd = 0.5 * veh.aero[1] * cda * speed
     f[ci[0]] -= cd * vx
     f[ci[1]] -= cd * vy
     f[ci[2]] -= cd * vz
     if tangent and speed > 0.0:
         for a in range(3):
             add_entry(d.w_env, m.first, m.ptr, m.pinv, ci[a], ci[a], hc * 2.0 * cd)
+    if fx_on:
+        _mass_and_grade(m, d, veh, fx, tangent)
     for i in range(m.nq):
         if not np.isfinite(f[i]):
             return i
     return -1
 
 
+@inline_kernel
+def _mass_and_grade(m, d, veh, fx, tangent):
+    """The mass effect (-dm r'' - dm g e_z at the centre of mass, tangent dm on W: the step then
+    integrates (M + dm) r'' exactly) and the road grade (m (g' - g) on every translational mass)."""
+    ci = veh.chassis_idx
+    f = d.force
+    dm = fx[FX_MASS]
+    if dm != 0.0:
+        for a in range(3):
+            f[ci[a]] -= dm * d.qdd[ci[a]]
+        f[ci[2]] -= dm * G
+        if tangent:
+            for a in range(3):
+                add_entry(d.w_env, m.first, m.ptr, m.pinv, ci[a], ci[a], dm)
+    if fx[FX_GRADE] > 0.5:
+        hx = d.q[ci[3]]
+        hy = d.q[ci[4]]
+        nh = sqrt(hx * hx + hy * hy)
+        if nh > 1e-9:
+            hx /= nh
+            hy /= nh
+        gs = fx[FX_G_SIN]
+        gc = fx[FX_G_1MCOS]
+        for k in range(5):
+            if k == 0:
+                mass = fx[FX_M_CHASSIS]
+                j = ci[0]
+            else:
+                mass = fx[FX_M_CORNER + k - 1]
+                j = veh.corner_idx[k - 1, CI_WX]
+            f[j] -= mass * gs * hx
+            f[j + 1] -= mass * gs * hy
+            f[j + 2] += mass * gc
+
+
 @kernel
-def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, h):
+def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, fx, fs, h):
     """One ALI3-P step of the vehicle: the multibody stages with the vehicle's forces added."""
     bq = 0.25 * h * h
     hc = 0.5 * h
@@ -288,7 +359,7 @@ def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, h):
         if status != OK:
             return status
         tangent = wants_tangent(m, d)
-        bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, tangent, bq, hc)
+        bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, fx, fs, tangent, bq, hc)
         if bad >= 0:
             d.stats[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE
@@ -302,15 +373,17 @@ def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, h):
     status = finish_prepare(m, d, h)
     if status != OK:
         return status
-    bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, True, bq, hc)
+    bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, fx, fs, True, bq, hc)
     if bad >= 0:
         d.stats[ST_FAIL_INDEX] = bad
         return ERR_NONFINITE_FORCE
     return finish_project(m, d, h)
 
 
-Parts = namedtuple("Parts", ["tyre", "brake", "powertrain", "steering"])   # parameter arrays
-States = namedtuple("States", ["brake", "powertrain", "steering"])          # subsystem state arrays
+# parameter arrays; effects: rtsim.vehicle.effect_kernels FX_* (neutral_params() for the nominal model)
+Parts = namedtuple("Parts", ["tyre", "brake", "powertrain", "steering", "effects"])
+# subsystem state arrays; effects: FS_* (brake lag, driveline nodes, sensor history)
+States = namedtuple("States", ["brake", "powertrain", "steering", "effects"])
 IO = namedtuple("IO", [
     "commands",     # (3,) throttle_angle_cmd rad, brake_pressure_cmd kPa, steering_wheel_angle_cmd rad
     "extra",        # (4,) measured wheel torque rl, rr (N m), selector (+1 D, 0 N, -1 R), spare
@@ -335,9 +408,16 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
        position, velocity and acceleration for the guided rack, loaded by last step's rack force),
        powertrain (drive torques from the current wheel speeds);
     2. the multibody step with tyre, suspension, brake, drive and aero forces implicit;
-    3. between-step commits: brake stick/slide modes, tyre contact deflections; signals for sensors."""
+    3. between-step commits: brake stick/slide modes, tyre contact deflections; signals for sensors.
+    Effects (parts.effects) act in 1 (brake torques, driveline speeds), 2 and 3 (driveline nodes,
+    relaxation, sensor history)."""
+    fx = parts.effects
+    fs = states.effects
+    fx_on = fx[FX_ON] > 0.5
     vd.brake_in[0] = io.commands[CMD_BRAKE]
     brake_step(parts.brake, states.brake, vd.brake_in, h, vd.brake_out)
+    if fx_on and fx[FX_BRAKE] > 0.5:
+        effects_brake(fx, fs, parts.brake, states.brake, vd.brake_out)
     io.st_in[SI_CMD] = io.commands[CMD_STEER]
     # The rack reaction of the guided rack (its multiplier) reaches the steering model one step late;
     # low-pass it (RACK_FORCE_TAU) so the tyres' stiffness and damping at the rack do not close a
@@ -350,15 +430,19 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     d.drv_ext[k, 1] = io.st_out[SO_RACK_VEL]
     d.drv_ext[k, 2] = io.st_out[SO_RACK_ACC]
     io.pt_in[PI_THROTTLE_CMD] = io.commands[CMD_THROTTLE]
-    io.pt_in[PI_OMEGA_RL] = d.qd[veh.corner_idx[2, CI_PHI]]
-    io.pt_in[PI_OMEGA_RR] = d.qd[veh.corner_idx[3, CI_PHI]]
+    if fx_on and fx[FX_DL] > 0.5:       # the gearbox turns with the driveline nodes
+        io.pt_in[PI_OMEGA_RL] = fs[FS_DL + 1]
+        io.pt_in[PI_OMEGA_RR] = fs[FS_DL + 4]
+    else:
+        io.pt_in[PI_OMEGA_RL] = d.qd[veh.corner_idx[2, CI_PHI]]
+        io.pt_in[PI_OMEGA_RR] = d.qd[veh.corner_idx[3, CI_PHI]]
     io.pt_in[PI_TORQUE_RL] = io.extra[EX_TORQUE_RL]
     io.pt_in[PI_TORQUE_RR] = io.extra[EX_TORQUE_RR]
     io.pt_in[PI_SELECTOR] = io.extra[EX_SELECTOR]
     powertrain_step(parts.powertrain, states.powertrain, io.pt_in, h, io.pt_out)
     vd.drive[2] = io.pt_out[PO_TORQUE_RL]
     vd.drive[3] = io.pt_out[PO_TORQUE_RR]
-    status = vehicle_mbs_step(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, h)
+    status = vehicle_mbs_step(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, fx, fs, h)
     if status != OK:
         return status
     for i in range(4):
@@ -366,10 +450,17 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
         vd.theta[i] = d.q[kp]
         vd.omega[i] = d.qd[kp]
     brake_commit(parts.brake, states.brake, vd.theta, vd.omega)
+    if fx_on and fx[FX_DL] > 0.5:
+        driveline_commit(fx, fs, d, veh, vd.drive, h)
+    relax = fx[FX_RELAX] if fx_on else 0.0
     for i in range(4):
         t = vd.tyre[i]
-        advance_deflections(parts.tyre, vd.slip, i, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY], t[TO_OMEGA],
-                            t[TO_RE], h)
+        if relax != 0.0:
+            advance_deflections_relaxed(parts.tyre, vd.slip, i, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY],
+                                        t[TO_OMEGA], t[TO_RE], h, relax)
+        else:
+            advance_deflections(parts.tyre, vd.slip, i, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY],
+                                t[TO_OMEGA], t[TO_RE], h)
     io.signals[SG_BRAKE_PRESSURE] = vd.brake_out[BO_LINE]
     io.signals[SG_SW_ANGLE] = io.st_out[SO_SW_ANGLE]
     io.signals[SG_STEERING_TORQUE] = io.st_out[SO_TORQUE]
@@ -377,6 +468,8 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     io.signals[SG_THROTTLE] = io.pt_out[PO_THROTTLE]
     io.signals[SG_TORQUE_RL] = io.pt_out[PO_TORQUE_RL]
     io.signals[SG_TORQUE_RR] = io.pt_out[PO_TORQUE_RR]
+    if fx[FX_HIST] > 0.5:
+        record_sensors(m, d, veh, io.signals, fx, fs)
     return OK
 
 

@@ -1,5 +1,7 @@
 """A vehicle on a road: builds everything from the configuration, places the car on the road in
-static equilibrium, and steps it (compiled) with the subsystems' states."""
+static equilibrium, and steps it (compiled) with the subsystems' states. The switchable effects of
+rtsim.vehicle.effects (the config's [effects], or `effects=`) can be replaced at any time between steps
+with `set_effects`, without rebuilding the model."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,16 +11,20 @@ import numpy as np
 from rtsim.channels import WHEELS
 from rtsim.errors import ConfigError
 from rtsim.mbs import Simulation
+from rtsim.mbs.integrator import NEED_FACTOR
 from rtsim.mbs.model import OK, Data
 from rtsim.road.model import Road
 from rtsim.road.query import NQUERY, Q_NX, Q_NZ, Q_Z, road_query
 
-from .brake import brake_config, brake_params, brake_state
+from .brake import BP_GAIN, BS_P_FRONT, BS_P_REAR, brake_config, brake_params, brake_state
 from .dynamics import (CMD_BRAKE, Parts, States, VehicleData, make_io, make_vehicle_data, vehicle_advance,
                        vehicle_mbs_step)
-from .model import VehicleModel
+from .effect_kernels import (FS_DL, FS_HIST, FS_LAG, FX_B_LAG, FX_DL, FX_DL_K, FX_HIST, FX_MASS, FX_ON, fill_history,
+                             neutral_params, sensor_stage, state_size)
+from .effects import pack_effects, validate_effects
+from .model import CI_PHI, VehicleModel
 from .powertrain import PP_MEASURED, powertrain_config, powertrain_params, powertrain_state
-from .sensors import NSENSOR, true_sensors
+from .sensors import NSENSOR
 from .steering import steering_config, steering_params, steering_state
 from .tyre.magic_formula import effective_rolling_radius
 from .tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
@@ -40,7 +46,9 @@ class VehicleSim:
     """The vehicle model, its multibody state and the subsystem states, at fixed step dt (s)."""
 
     def __init__(self, model: VehicleModel, road: Road, dt: float = 1e-3, brake_pressure: float = 0.0,
-                 position=(0.0, 0.0), yaw: float = 0.0, speed: float = 0.0):
+                 position=(0.0, 0.0), yaw: float = 0.0, speed: float = 0.0, effects=None):
+        """effects: a mapping of rtsim.vehicle.effects (validated) that replaces the config's [effects];
+        None keeps the config's."""
         self.vm = model
         self.road = road
         self.dt = float(dt)
@@ -54,8 +62,9 @@ class VehicleSim:
         pp = powertrain_params(self.ptcfg)
         ps = powertrain_state(pp, self.dt)
         self.vd = make_vehicle_data()
-        self.parts = Parts(self.tp, bp, pp, np.zeros(0))
-        self.states = States(bs, ps, np.zeros(0))
+        self.parts = Parts(self.tp, bp, pp, np.zeros(0), neutral_params())
+        self.states = States(bs, ps, np.zeros(0), np.zeros(state_size(0)))
+        self._effects: dict = {}
         mech = model.mech
         q0, qd0 = self._placed(mech.q0.copy(), position, yaw, speed)
         self.sim = Simulation(mech, self.dt, q0=q0, qd0=qd0)
@@ -67,10 +76,13 @@ class VehicleSim:
         self.stcfg = steering_config(steer, "steering")
         sp = steering_params(self.stcfg)
         ss = steering_state(sp, self.dt)
-        self.parts = Parts(self.tp, bp, pp, sp)
-        self.states = States(bs, ps, ss)
+        self.parts = Parts(self.tp, bp, pp, sp, self.parts.effects)
+        self.states = States(bs, ps, ss, self.states.effects)
         self.io = make_io()
         self.io.commands[CMD_BRAKE] = brake_pressure
+        start = cfg.effects if effects is None else effects
+        if start:
+            self.set_effects(start)
 
     def _placed(self, q: np.ndarray, position, yaw: float, speed: float) -> tuple[np.ndarray, np.ndarray]:
         """Design coordinates moved onto the road: yawed by `yaw`, the design ground point under the
@@ -117,15 +129,60 @@ class VehicleSim:
             vd = VehicleData(*[x.copy() for x in self.vd])
             bs = self.states.brake.copy()
             k = self.vm.vehicle.rack_driver
+            fx, fs = neutral_params(), np.zeros(state_size(0))       # a property of the nominal linkage
             for n in range(1, steps + 1):
                 t = n * self.dt
                 d.drv_ext[k] = (0.5 * a * t * t, a * t, a)
                 status = vehicle_mbs_step(self.m, d, self.vm.vehicle, vd, self.road, self.tp, self.parts.brake,
-                                          bs, self.dt)
+                                          bs, fx, fs, self.dt)
                 if status != OK:
                     self.sim._raise(status, n)
             lam.append(float(d.lam[self.vm.vehicle.rack_con]))
         return abs(lam[1] - lam[0]) / accel
+
+    @property
+    def effects(self) -> dict:
+        """The active effects (canonical mapping of rtsim.vehicle.effects.validate_effects; a copy)."""
+        return {k: ([dict(r) for r in v] if isinstance(v, list) else dict(v)) for k, v in self._effects.items()}
+
+    def set_effects(self, mapping) -> None:
+        """Replace the active effects by `mapping` ({} or None: the nominal model), between steps and
+        without rebuilding the model. Raises ConfigError for an unknown effect or channel, a missing
+        parameter or a value outside its plausible range. Effect states start from the current state:
+        the brake lag at the present brake torque, the driveline nodes at the wheels with the present
+        drive torque wound into the springs, the sensor history holding the present values; the states
+        of effects that stay on carry on (a changed stiffness keeps the shaft torque). A changed mass or
+        driveline makes the next step refactor the tangent (the factor is reused across steps)."""
+        eff = validate_effects(mapping, "effects")
+        cfg = self.vm.config
+        unsprung = [cfg.front.unsprung_mass_kg] * 2 + [cfg.rear.unsprung_mass_kg] * 2
+        fx = pack_effects(eff, self.dt, cfg.chassis.mass_kg, unsprung)
+        old = self.parts.effects
+        lag_on = old[FX_ON] > 0.5 and old[FX_B_LAG] > 0.0 and fx[FX_B_LAG] > 0.0
+        dl_on = old[FX_ON] > 0.5 and old[FX_DL] > 0.5
+        slots, old_slots = int(fx[FX_HIST]), int(old[FX_HIST])
+        if fx[FX_MASS] != old[FX_MASS] or fx[FX_DL] != old[FX_DL] or fx[FX_DL_K] != old[FX_DL_K]:
+            self.data.flags[NEED_FACTOR] = 1
+        fs = self.states.effects
+        if fs.shape[0] != state_size(slots):
+            new_fs = np.zeros(state_size(slots))
+            new_fs[:FS_HIST] = fs[:FS_HIST]
+            fs = new_fs
+        bp, bs = self.parts.brake, self.states.brake
+        if not lag_on:
+            for i in range(4):
+                fs[FS_LAG + i] = bp[BP_GAIN + i] * bs[BS_P_FRONT if i < 2 else BS_P_REAR]
+        if fx[FX_DL] > 0.5:
+            for j in range(2):
+                o = FS_DL + 3 * j
+                kp = self.vm.vehicle.corner_idx[2 + j, CI_PHI]
+                t, w = (fs[o + 2], fs[o + 1]) if dl_on else (float(self.vd.drive[2 + j]), self.data.qd[kp])
+                fs[o:o + 3] = (self.data.q[kp] + t / fx[FX_DL_K], w, t)
+        if slots and slots != old_slots:
+            fill_history(self.m, self.data, self.vm.vehicle, self.io.signals, fx, fs)
+        old[:] = fx                                      # in place: holders of self.parts stay valid
+        self.states = self.states._replace(effects=fs)
+        self._effects = eff
 
     def set_torque_mode(self, measured: bool) -> None:
         """Drive with the measured wheel torques (io.extra) instead of the engine model."""
@@ -139,7 +196,11 @@ class VehicleSim:
             self.sim._raise(status, int(self.data.stats[0]) + 1)
 
     def sensors(self, out: np.ndarray | None = None) -> np.ndarray:
-        """True (noise-free) sensor channels of the current state, rtsim.channels.SENSOR_NAMES order."""
+        """Noise-free sensor channels of the current state, rtsim.channels.SENSOR_NAMES order, with the
+        active sensor effects (scale x(t - delay) + bias) and what model effects change in the sensing
+        (the grade's tilted gravity); the config's noise model ([sensors.channels]) comes on top of
+        these (rtsim.vehicle.run)."""
         out = np.zeros(NSENSOR) if out is None else out
-        true_sensors(self.m, self.data, self.vm.vehicle, self.io.signals, out)
+        sensor_stage(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, self.states.effects,
+                     out)
         return out

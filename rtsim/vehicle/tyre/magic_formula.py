@@ -441,9 +441,23 @@ def transient_slip(p, state, i, fz, gamma, vx, vsy, omega, re):
     kappa' = (u + d du/dt)/sigma_kappa, alpha' = atan((v + d dv/dt)/sigma_alpha).
     vx: wheel-centre speed along the heading; vsy: lateral velocity of the contact point (left);
     omega: wheel spin rate (positive rolling forward) [rad/s]; re: effective rolling radius [m]."""
+    return _transient_slip(p, state, i, fz, gamma, vx, vsy, omega, re, 0.0)
+
+
+@kernel
+def transient_slip_relaxed(p, state, i, fz, gamma, vx, vsy, omega, re, extra):
+    """transient_slip with both relaxation lengths lengthened by `extra` (m): the tyre_relaxation
+    effect (rtsim.vehicle.effects)."""
+    return _transient_slip(p, state, i, fz, gamma, vx, vsy, omega, re, extra)
+
+
+@inline_kernel
+def _transient_slip(p, state, i, fz, gamma, vx, vsy, omega, re, extra):
     if not fz > 0.0:
         return 0.0, 0.0
     sk, sa = relaxation_lengths(p, fz, gamma)
+    sk += extra
+    sa += extra
     u = state[i, S_U]
     v = state[i, S_V]
     avx = abs(vx)
@@ -467,11 +481,24 @@ def _relax_step(x, rate_in, a, dt):
 def advance_deflections(p, state, i, fz, gamma, vx, vsy, omega, re, dt):
     """Advance state[i, S_U], state[i, S_V] by dt (exact for inputs frozen over the step), then apply
     the wind-up limit; airborne (fz <= 0): both reset to 0."""
+    _advance_deflections(p, state, i, fz, gamma, vx, vsy, omega, re, dt, 0.0)
+
+
+@kernel
+def advance_deflections_relaxed(p, state, i, fz, gamma, vx, vsy, omega, re, dt, extra):
+    """advance_deflections with both relaxation lengths lengthened by `extra` (m)."""
+    _advance_deflections(p, state, i, fz, gamma, vx, vsy, omega, re, dt, extra)
+
+
+@inline_kernel
+def _advance_deflections(p, state, i, fz, gamma, vx, vsy, omega, re, dt, extra):
     if not fz > 0.0:
         state[i, S_U] = 0.0
         state[i, S_V] = 0.0
         return
     sk, sa = relaxation_lengths(p, fz, gamma)
+    sk += extra
+    sa += extra
     avx = abs(vx)
     vsx = vx - omega * re
     u = _relax_step(state[i, S_U], -vsx, avx / sk, dt)

@@ -1,0 +1,272 @@
+"""Compiled parts of the switchable physical effects (rtsim.vehicle.effects has the catalogue): the
+array layouts and the kernels the vehicle step calls when an effect is on.
+
+Parameter array ``Parts.effects`` (float64, FX_SIZE), packed by ``rtsim.vehicle.effects.pack_effects``;
+all zeros (but the neutral scales, 1.0) is the nominal model, and with ``FX_ON`` = 0 the vehicle step
+runs exactly the nominal code. State array ``States.effects`` (float64, ``state_size(slots)``): brake
+lag, driveline nodes, the sensor history ring. Units SI; brake torques N*m, pressures kPa.
+
+Formulations (each chosen so that the multibody step stays implicit and allocation-free):
+
+- rolling_resistance: My -= c Fz r_l sat(vx / RR_SPEED_EPS) on each wheel, r_l = |P - W| along the road
+  normal, i.e. a force c Fz at the contact point opposing rolling; sat is the C1 cubic
+  x (3 - x^2) / 2 on |x| < 1 (smooth through standstill), +-1 outside.
+- aero_drag: drag area added to the model's (same law, 0.5 rho CdA |v| v at the centre of mass).
+- road_grade: gravity tilted by theta = atan(grade) about the horizontal axis normal to the car's heading
+  (uphill ahead): every translational mass m gets m (g' - g), g' = -g (sin theta h + cos theta e_z),
+  h the heading in the horizontal plane; accelerometers and inclinometers see the tilted gravity.
+- brake_friction, brake_lag, brake_stiction act on each wheel's sliding torque tau_s and breakaway
+  torque tau_b after the pressure actuator (``effects_brake``): x = first-order lag of the nominal
+  tau_s (exact step, x += (1 - exp(-h/tau)) (tau_s - x)), tau_s' = scale x, tau_b' = (mu_s/mu) tau_s'
+  + T_b min(1, p_eff / BRAKE_STICTION_PRESSURE), p_eff = x / gain the (lagged) wheel-cylinder pressure.
+- driveline_compliance: per driven wheel a node of inertia J_d (DRIVELINE_INERTIA) takes the drive
+  torque and drives the wheel through a torsional spring k and damper c = 2 zeta sqrt(k J_d). The node is
+  integrated with the trapezoidal rule inside the multibody step and condensed out exactly
+  (``driveline_torque``), so the shaft torque and its stiffness/damping enter the implicit step; the
+  powertrain sees the node speed.
+- tyre_slip_stiffness: the slips fed to the force law are kappa s and atan(s tan alpha) (slip
+  stiffnesses scaled by s, peak forces unchanged).
+- tyre_relaxation: relaxation lengths lengthened by L in the transient-slip model.
+- bearing_drag: -T sat(omega_rel / BEARING_OMEGA_EPS) between wheel and knuckle (implicit, with its
+  damping in the tangent).
+- mass: a point mass dm at the sprung centre of mass: generalized force -dm r'' - dm g e_z with its
+  exact tangent dm on W (rtsim.vehicle.dynamics); the constant mass matrix of the model is untouched.
+- sensor_*: y = scale x(t - delay) + bias per channel, with x from a per-step history ring (linear
+  interpolation between steps) (``effect_sensors``).
+"""
+from __future__ import annotations
+
+from math import sqrt
+
+import numpy as np
+
+from rtsim.jit import inline_kernel, kernel
+
+from .brake import BO_TAU_BREAK, BO_TAU_SLIDE, BP_BREAK_RATIO, BP_GAIN, BS_P_FRONT, BS_P_REAR, BS_TAU_BREAK, \
+    BS_TAU_SLIDE
+from .model import CI_PHI
+from .sensors import NSENSOR, S_ACCEL_X, S_PITCH, S_ROLL, true_sensors
+
+# ---- constants of the formulations ------------------------------------------------------------------
+RR_SPEED_EPS = 0.1            # m/s, rolling resistance fades linearly-smoothly to 0 below this speed
+BEARING_OMEGA_EPS = 0.2       # rad/s, bearing drag band around zero relative spin
+BRAKE_STICTION_PRESSURE = 100.0   # kPa: the added breakaway torque grows with pressure up to here
+DRIVELINE_INERTIA = 0.1       # kg*m^2 per driven wheel: propshaft, differential, inboard half-shaft
+DRIVELINE_DAMPING_RATIO = 0.1  # zeta of the node on the spring against a held wheel
+
+# ---- parameter array layout (Parts.effects) -----------------------------------------------------------
+FX_ON = 0             # 1.0: a model effect is on (nothing below FX_SENS_ON is read otherwise)
+FX_RR = 1             # rolling resistance coefficient added, 1
+FX_CDA = 2            # drag area added, m^2
+FX_GRADE = 3          # 1.0: road grade on
+FX_G_SIN = 4          # g sin(theta), m/s^2
+FX_G_1MCOS = 5        # g (1 - cos(theta)), m/s^2
+FX_SIN = 6            # sin(theta)
+FX_COS = 7            # cos(theta)
+FX_BRAKE = 8          # 1.0: a brake effect is on
+FX_B_SCALE = 9        # brake friction scale (1 nominal)
+FX_B_BREAK = 10       # added breakaway torque per wheel, N*m
+FX_B_LAG = 11         # 1 - exp(-h / tau) of the brake lag (0: no lag)
+FX_DL = 12            # 1.0: driveline compliance on
+FX_DL_K = 13          # N*m/rad
+FX_DL_C = 14          # N*m*s/rad
+FX_DL_J = 15          # kg*m^2
+FX_SLIP = 16          # tyre slip stiffness scale (1 nominal)
+FX_RELAX = 17         # relaxation length added, m
+FX_BEARING = 18       # bearing drag per wheel, N*m
+FX_MASS = 19          # added mass at the sprung centre of mass, kg
+FX_M_CHASSIS = 20     # sprung mass + added mass, kg (for the grade)
+FX_M_CORNER = 21      # [4] unsprung masses, kg (for the grade)
+FX_SENS_ON = 25       # 1.0: the sensor stage must apply effects (sensor effects or the grade)
+FX_HIST = 26          # slots of the sensor history ring (0: no delay, no history kept)
+FX_SENS = 27          # [NSENSOR x 3] per channel: delay in steps, scale, bias
+FXS_DELAY, FXS_SCALE, FXS_BIAS = 0, 1, 2
+FX_SIZE = FX_SENS + 3 * NSENSOR
+
+# ---- state array layout (States.effects) ---------------------------------------------------------------
+FS_LAG = 0            # [4] lagged nominal sliding torque, N*m
+FS_DL = 4             # [2 x 3] driven wheels rl, rr: node angle rad, node speed rad/s, shaft torque N*m
+FS_HEAD = 10          # slot of the latest sample in the history ring
+FS_HIST = 11          # [slots x NSENSOR] history of the sensor values at the end of each step
+DRIVEN = (2, 3)       # rl, rr (rear-wheel drive)
+
+
+def neutral_params() -> np.ndarray:
+    """The parameter array of the nominal model (no effect on)."""
+    fx = np.zeros(FX_SIZE)
+    fx[FX_B_SCALE] = 1.0
+    fx[FX_SLIP] = 1.0
+    fx[FX_COS] = 1.0
+    for c in range(NSENSOR):
+        fx[FX_SENS + 3 * c + FXS_SCALE] = 1.0
+    return fx
+
+
+def state_size(slots: int) -> int:
+    return FS_HIST + slots * NSENSOR
+
+
+# ---- helpers -----------------------------------------------------------------------------------------
+@inline_kernel
+def smooth_sign(x, eps):
+    """(s, ds/dx): the C1 cubic s = y (3 - y^2) / 2, y = x / eps, on |y| < 1; sign(x) outside."""
+    y = x / eps
+    if y >= 1.0:
+        return 1.0, 0.0
+    if y <= -1.0:
+        return -1.0, 0.0
+    return 0.5 * y * (3.0 - y * y), 1.5 * (1.0 - y * y) / eps
+
+
+@inline_kernel
+def driveline_torque(fx, fs, j, t_src, phi, phid, h):
+    """Shaft torque on driven wheel j (0 rl, 1 rr) at the end of a step h for the wheel's spin angle phi
+    and rate phid at that instant, with the node's trapezoidal step condensed out:
+        x = x_n + h/2 (w_n + w),  J (w - w_n) = h T_src - h/2 (T_n + T),  T = k (x - phi) + c (w - phid).
+    Returns (T, node speed w, node angle x, dT/d(-phi) = k g, dT/d(-phid) = c g) with g = J / (J + h/2 B)."""
+    k = fx[FX_DL_K]
+    c = fx[FX_DL_C]
+    jd = fx[FX_DL_J]
+    o = FS_DL + 3 * j
+    x0 = fs[o]
+    w0 = fs[o + 1]
+    t0 = fs[o + 2]
+    hh = 0.5 * h
+    a = k * (x0 + hh * w0 - phi) - c * phid
+    b = k * hh + c
+    den = jd + hh * b
+    w = (jd * w0 + h * t_src - hh * (t0 + a)) / den
+    gam = jd / den
+    return a + b * w, w, x0 + hh * (w0 + w), k * gam, c * gam
+
+
+# ---- kernels called by the vehicle step ------------------------------------------------------------------
+@kernel
+def effects_brake(fx, fs, bp, bs, out):
+    """Brake lag, friction scale and added stiction on each wheel's sliding and breakaway torques, after
+    brake_step set them from the line pressure (rtsim.vehicle.brake state BS_*, outputs BO_*)."""
+    a = fx[FX_B_LAG]
+    scale = fx[FX_B_SCALE]
+    t_break = fx[FX_B_BREAK]
+    for i in range(4):
+        pw = bs[BS_P_FRONT] if i < 2 else bs[BS_P_REAR]
+        gain = bp[BP_GAIN + i]
+        target = gain * pw
+        x = target
+        if a > 0.0:
+            x = fs[FS_LAG + i] + a * (target - fs[FS_LAG + i])
+        fs[FS_LAG + i] = x
+        ts = scale * x
+        tb = ts * bp[BP_BREAK_RATIO + i]
+        if t_break > 0.0 and gain > 0.0:
+            r = x / (gain * BRAKE_STICTION_PRESSURE)
+            if r > 1.0:
+                r = 1.0
+            elif r < 0.0:
+                r = 0.0
+            tb += t_break * r
+        bs[BS_TAU_SLIDE + i] = ts
+        bs[BS_TAU_BREAK + i] = tb
+        out[BO_TAU_SLIDE + i] = ts
+        out[BO_TAU_BREAK + i] = tb
+
+
+@kernel
+def driveline_commit(fx, fs, d, veh, drive, h):
+    """Advance the driveline nodes over the converged step (drive: source torques, N*m)."""
+    for j in range(2):
+        kp = veh.corner_idx[2 + j, CI_PHI]
+        t, w, x, _k, _c = driveline_torque(fx, fs, j, drive[2 + j], d.q[kp], d.qd[kp], h)
+        o = FS_DL + 3 * j
+        fs[o] = x
+        fs[o + 1] = w
+        fs[o + 2] = t
+
+
+@inline_kernel
+def _grade_sensors(fx, q, veh, out):
+    """Accelerometers and inclinometers under the tilted gravity of the road grade."""
+    ci = veh.chassis_idx
+    ux, uy, uz = q[ci[3]], q[ci[4]], q[ci[5]]
+    hx, hy = ux, uy
+    nh = sqrt(hx * hx + hy * hy)
+    if nh > 1e-9:
+        hx /= nh
+        hy /= nh
+    # specific force f' = f - (g' - g) = f + g sin h - g (1 - cos) e_z, in body axes
+    gs = fx[FX_G_SIN]
+    gc = fx[FX_G_1MCOS]
+    dx, dy, dz = gs * hx, gs * hy, -gc
+    for k in range(3):
+        e = ci[3 + 3 * k]
+        out[S_ACCEL_X + k] += dx * q[e] + dy * q[e + 1] + dz * q[e + 2]
+    # "up" is now sin h + cos e_z
+    s, c = fx[FX_SIN], fx[FX_COS]
+    upx, upy, upz = s * hx, s * hy, c
+    vu = q[ci[6]] * upx + q[ci[7]] * upy + q[ci[8]] * upz
+    wu = q[ci[9]] * upx + q[ci[10]] * upy + q[ci[11]] * upz
+    uu = ux * upx + uy * upy + uz * upz
+    out[S_ROLL] = np.arctan2(vu, wu)
+    out[S_PITCH] = np.arcsin(min(1.0, max(-1.0, -uu)))
+
+
+@kernel
+def physical_sensors(m, d, veh, signals, fx, out):
+    """Noise-free channel values (rtsim.channels.SENSOR_NAMES order) including the model effects that
+    change what the sensors sense (the grade's tilted gravity)."""
+    true_sensors(m, d, veh, signals, out)
+    if fx[FX_ON] > 0.5 and fx[FX_GRADE] > 0.5:
+        _grade_sensors(fx, d.q, veh, out)
+
+
+@kernel
+def record_sensors(m, d, veh, signals, fx, fs):
+    """Append this step's physical sensor values to the history ring (sensor delays)."""
+    slots = int(fx[FX_HIST])
+    head = (int(fs[FS_HEAD]) + 1) % slots
+    fs[FS_HEAD] = head
+    row = fs[FS_HIST + head * NSENSOR:FS_HIST + (head + 1) * NSENSOR]
+    physical_sensors(m, d, veh, signals, fx, row)
+
+
+@kernel
+def fill_history(m, d, veh, signals, fx, fs):
+    """Fill the whole history ring with the current values (before the first step nothing older is
+    known: the signal is held)."""
+    slots = int(fx[FX_HIST])
+    row = fs[FS_HIST:FS_HIST + NSENSOR]
+    physical_sensors(m, d, veh, signals, fx, row)
+    for s in range(1, slots):
+        for c in range(NSENSOR):
+            fs[FS_HIST + s * NSENSOR + c] = row[c]
+    fs[FS_HEAD] = 0.0
+
+
+@kernel
+def effect_sensors(m, d, veh, signals, fx, fs, out):
+    """The sensor stage with effects: physical values, then per channel y = scale x(t - delay) + bias,
+    x(t - delay) linear between the per-step samples of the history ring."""
+    physical_sensors(m, d, veh, signals, fx, out)
+    slots = int(fx[FX_HIST])
+    head = int(fs[FS_HEAD])
+    for c in range(NSENSOR):
+        k = FX_SENS + 3 * c
+        x = out[c]
+        lag = fx[k + FXS_DELAY]
+        if lag > 0.0 and slots > 0:
+            n = int(lag)
+            frac = lag - n
+            a = fs[FS_HIST + ((head - n) % slots) * NSENSOR + c]
+            b = fs[FS_HIST + ((head - n - 1) % slots) * NSENSOR + c]
+            x = a + frac * (b - a)
+        out[c] = fx[k + FXS_SCALE] * x + fx[k + FXS_BIAS]
+
+
+@kernel
+def sensor_stage(m, d, veh, signals, fx, fs, out):
+    """The sensor channels as the car's sensors show them: true_sensors when no effect concerns the
+    sensors (bit-identical), effect_sensors otherwise. A drop-in for true_sensors in compiled loops."""
+    if fx[FX_SENS_ON] > 0.5:
+        effect_sensors(m, d, veh, signals, fx, fs, out)
+    else:
+        true_sensors(m, d, veh, signals, out)

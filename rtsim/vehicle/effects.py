@@ -1,0 +1,380 @@
+"""The catalogue of switchable physical effects: named, parameterised extensions the nominal vehicle
+model lacks, switched on from the vehicle config (``[effects.<name>]``) or at run time
+(``VehicleSim.set_effects``) without rebuilding the model. The validation workflow (issue 5) fits their
+parameters by re-simulation and writes the winner back into a config.
+
+Mapping form (config tables, ``set_effects``, ``VehicleSim(effects=...)``), SI units::
+
+    {"rolling_resistance": {"coefficient": 0.012},
+     "sensor_bias": [{"channel": "accel_x", "bias": 0.1}, {"channel": "gyro_z", "bias": -0.002}]}
+
+and in TOML::
+
+    [effects.rolling_resistance]
+    coefficient = 0.012
+    [[effects.sensor_bias]]          # sensor effects: an array of tables, one per channel
+    channel = "accel_x"
+    bias = 0.1
+
+A single table is accepted for a sensor effect too (one channel). Every parameter is required; its
+plausible range (ParamSpec.lo..hi, for sensor_bias the channel's own range, ``EffectSpec.bounds``) is
+enforced on load and by ``set_effects``. Sensor effects act on the channels of
+rtsim.channels.SENSOR_NAMES in the sensor stage (``VehicleSim.sensors``): y = scale x(t - delay) + bias.
+Wheel speeds are not sensor channels (the workflow derives them from ``wheel_angle_*``): a scale or
+delay of a wheel angle carries over to its speed, and a bias of a speed has no meaning for an angle
+counter, so there are no ``wheel_speed_*`` sensor effects. The formulations are in
+rtsim.vehicle.effect_kernels.
+
+Mass at run time. The multibody model's mass matrix is constant and compiled into ``Model.m_env``,
+which every VehicleSim of one VehicleModel shares, and the integrator reuses its Cholesky factor across
+steps. So ``mass`` does not touch the model arrays: the point mass dm enters the vehicle forces as
+-dm r'' - dm g e_z at the centre of mass (r'' being the Newton iterate's trapezoidal acceleration),
+with its exact tangent dm added to W = M + h/2 C + h^2/4 K whenever the tangent is rebuilt. The Newton
+residual, the tangent and the metric of the velocity and acceleration projections all then carry
+M + dm, i.e. the step integrates the heavier car exactly, and ``set_effects`` flags a refactorization
+when dm (or the driveline) changes. The penalty factors keep the nominal mass scale (they only
+condition the constraints). The added mass is not in the car's static placement: it sags onto its
+springs during the first second (the same whether set at construction or by set_effects).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from rtsim.channels import BY_NAME, SENSOR_NAMES
+from rtsim.errors import ConfigError
+
+from .effect_kernels import (
+    BRAKE_STICTION_PRESSURE, DRIVELINE_DAMPING_RATIO, DRIVELINE_INERTIA, FX_B_BREAK, FX_B_LAG, FX_B_SCALE,
+    FX_BEARING, FX_BRAKE, FX_CDA, FX_COS, FX_DL, FX_DL_C, FX_DL_J, FX_DL_K, FX_G_1MCOS, FX_G_SIN, FX_GRADE,
+    FX_HIST, FX_M_CHASSIS, FX_M_CORNER, FX_MASS, FX_ON, FX_RELAX, FX_RR, FX_SENS, FX_SENS_ON, FX_SIN, FX_SLIP,
+    FXS_BIAS, FXS_DELAY, FXS_SCALE, neutral_params,
+)
+from .model import G
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: SI unit, a typical value (start of a fit), the physically plausible range and
+    the value at which the effect does nothing (None: none, e.g. an infinitely stiff driveline)."""
+    name: str
+    unit: str
+    default: float
+    lo: float
+    hi: float
+    description: str
+    neutral: float | None = None
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    name: str
+    kind: Literal["model", "sensor"]
+    params: tuple[ParamSpec, ...]      # numeric parameters (sensor effects also take a `channel`)
+    description: str
+    signature: str                     # where it shows in the channels, and how
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.params)
+
+    def param(self, name: str) -> ParamSpec:
+        for p in self.params:
+            if p.name == name:
+                return p
+        raise KeyError(f"effect {self.name!r} has no parameter {name!r}")
+
+    def bounds(self, param: str, channel: str | None = None) -> tuple[float, float]:
+        """Plausible range of a parameter; sensor_bias.bias depends on the channel (its unit)."""
+        if self.name == "sensor_bias" and param == "bias":
+            if channel is None:
+                raise ValueError("sensor_bias.bias: the plausible range depends on the channel; give it")
+            return _bias_range(channel)
+        p = self.param(param)
+        return p.lo, p.hi
+
+
+def _bias_range(channel: str) -> tuple[float, float]:
+    """Plausible offsets per channel: a few degrees of mounting tilt for the accelerometers (2 m/s^2),
+    MEMS gyro offsets (0.1 rad/s), 0.2 rad for angle encoders and inclinometers, one revolution for a
+    wheel angle counter, 500 kPa, 50 N*m (5 N*m on the steering column), 50 rad/s of engine speed."""
+    special = {"steering_torque": 5.0, "engine_speed": 50.0}
+    if channel in special:
+        b = special[channel]
+    elif channel.startswith("wheel_angle_"):
+        b = 2.0 * math.pi
+    else:
+        b = {"m/s^2": 2.0, "rad/s": 0.1, "rad": 0.2, "kPa": 500.0, "N*m": 50.0}[BY_NAME[channel].unit]
+    return -b, b
+
+
+def _p(name, unit, default, lo, hi, description, neutral=0.0) -> ParamSpec:
+    return ParamSpec(name, unit, default, lo, hi, description, neutral)
+
+
+EFFECTS: dict[str, EffectSpec] = {e.name: e for e in (
+    EffectSpec("rolling_resistance", "model",
+               (_p("coefficient", "1", 0.01, 0.0, 0.05, "added rolling-resistance coefficient: a force c Fz at "
+                   "each contact patch opposing rolling"),),
+               "Rolling resistance on top of the tyre's and the road's: c Fz per wheel opposing the wheel "
+               "centre's forward speed, C1-smooth through standstill (|vx| < 0.1 m/s).",
+               "coast-down decelerates more by ~c g, independent of speed; no effect at standstill; "
+               "steady speed needs more drive torque (c m g r)"),
+    EffectSpec("aero_drag", "model",
+               (_p("drag_area", "m^2", 0.3, 0.0, 2.0, "added drag area Cd A (air density of the config)"),),
+               "Aerodynamic drag on top of the model's: 0.5 rho dCdA |v| v at the centre of mass.",
+               "decelerates in coast-down ~ v^2 (0.5 rho CdA v^2 / m); negligible below ~5 m/s; "
+               "no effect at standstill"),
+    EffectSpec("road_grade", "model",
+               (_p("grade", "1", 0.02, -0.3, 0.3, "rise over run, positive uphill in the direction of "
+                   "travel (the car's heading)"),),
+               "The road rises at this grade along the car's heading: gravity is tilted by atan(grade) "
+               "for all masses, and the accelerometers and inclinometers sense the tilted gravity.",
+               "constant offset of the longitudinal force -m g sin(atan(grade)): slower acceleration "
+               "uphill, creep when released; accel_x offset +g sin at rest, pitch -atan(grade)"),
+    EffectSpec("brake_friction", "model",
+               (_p("scale", "1", 0.8, 0.3, 2.0, "factor on the pad friction, i.e. on every brake torque "
+                   "(sliding and breakaway)", 1.0),),
+               "Pad/disc friction differs from the nominal mu: all brake torques scaled.",
+               "braking deceleration scaled in proportion to the brake torque; no effect without "
+               "brake pressure"),
+    EffectSpec("brake_stiction", "model",
+               (_p("breakaway_torque", "N*m", 50.0, 0.0, 500.0, "added static (breakaway) friction torque "
+                   f"per wheel, full from {BRAKE_STICTION_PRESSURE:g} kPa wheel-cylinder pressure, "
+                   "linear below"),),
+               "A held wheel needs this much more torque to break away than the nominal mu_s/mu; it "
+               "vanishes with the pressure (pads lift off), so a released brake drags nothing.",
+               "the car starts later when the brake is released from standstill (and is held "
+               "against more torque); no effect while rolling"),
+    EffectSpec("brake_lag", "model",
+               (_p("time_constant", "s", 0.05, 0.0, 0.5, "first-order lag from line pressure to "
+                   "brake torque (hydraulic line and caliper compliance)"),),
+               "The brake torque follows the measured line pressure through a first-order lag.",
+               "deceleration lags brake_pressure at each brake application and release by tau; "
+               "steady braking unchanged"),
+    EffectSpec("driveline_compliance", "model",
+               (ParamSpec("stiffness", "N*m/rad", 5000.0, 300.0, 1e5, "torsional stiffness per driven "
+                          f"wheel between the drive torque source and the wheel (node inertia "
+                          f"{DRIVELINE_INERTIA:g} kg*m^2, damping ratio {DRIVELINE_DAMPING_RATIO:g})",
+                          None),),
+               "The drive torque (engine model or measured wheel torque) reaches each driven wheel "
+               "through a torsional spring with a little damping, from a node of inertia "
+               f"{DRIVELINE_INERTIA:g} kg*m^2; the powertrain sees the node speed.",
+               "torsional oscillation at ~sqrt(k/J) after drive-torque steps (wheel speeds, accel_x); "
+               "smooth torque inputs show almost nothing"),
+    EffectSpec("tyre_slip_stiffness", "model",
+               (_p("scale", "1", 0.8, 0.3, 3.0, "factor on the longitudinal slip stiffness and the "
+                   "cornering stiffness (peak friction unchanged)", 1.0),),
+               "The slips fed to the tyre force law are scaled (kappa s, atan(s tan alpha)).",
+               "wheel slip at a given drive/brake force scales by 1/s (driven wheel speed vs free "
+               "wheels); lateral: yaw-rate and accel_y gains at small slip angles"),
+    EffectSpec("tyre_relaxation", "model",
+               (_p("length", "m", 0.2, 0.0, 1.5, "added relaxation length (longitudinal and lateral)"),),
+               "Tyre forces build up over a longer rolling distance (transient-slip model), and the "
+               "tyre is a softer spring at standstill.",
+               "force transients lag by ~L/v: slower yaw-rate rise in steering, delayed drive/brake "
+               "force at low speed; steady state unchanged"),
+    EffectSpec("bearing_drag", "model",
+               (_p("torque", "N*m", 2.0, 0.0, 30.0, "drag torque per wheel between wheel and knuckle "
+                   "(bearings, seals, residual pad drag)"),),
+               "A constant drag torque on each wheel's spin, C1-smooth through standstill "
+               "(|omega| < 0.2 rad/s).",
+               "coast-down decelerates more by ~4 T / (r m), independent of speed; no effect at "
+               "standstill"),
+    EffectSpec("mass", "model",
+               (_p("added_mass", "kg", 50.0, -200.0, 600.0, "point mass at the sprung centre of mass "
+                   "(negative: the model is heavier than the car)"),),
+               "Extra mass at the centre of mass with its weight and its translational inertia (a point "
+               "mass: no rotational inertia); the car settles onto its springs after it is added.",
+               "every longitudinal acceleration scales by m/(m + dm) for the same forces; grade and "
+               "rolling loads grow; static sag (accel_z, pitch transients at the start)"),
+    EffectSpec("sensor_delay", "sensor",
+               (_p("delay", "s", 0.02, 0.0, 0.5, "transport delay of the channel"),),
+               "The channel shows its value `delay` seconds late (linear between integrator steps).",
+               "the channel is shifted in time against the others: residual ~ -delay x'(t), largest "
+               "where the channel changes fast; zero in steady phases"),
+    EffectSpec("sensor_bias", "sensor",
+               (ParamSpec("bias", "unit of the channel", 0.0, -math.inf, math.inf, "constant offset; the "
+                          "plausible range depends on the channel (EffectSpec.bounds)", 0.0),),
+               "The channel reads a constant offset.",
+               "constant residual on one channel in every phase, also at standstill"),
+    EffectSpec("sensor_scale", "sensor",
+               (_p("scale", "1", 1.05, 0.5, 2.0, "gain error of the channel (wheel angles: rolling "
+                   "radius / tooth count)", 1.0),),
+               "The channel reads its value times a factor.",
+               "residual proportional to the channel's value: zero where it is zero, largest at its "
+               "peaks"),
+)}
+
+SENSOR_EFFECTS = tuple(n for n, e in EFFECTS.items() if e.kind == "sensor")
+MODEL_EFFECTS = tuple(n for n, e in EFFECTS.items() if e.kind == "model")
+
+
+# ---------------------------------------------------------------------------------------- validation
+def _number(where: str, key: str, value, lo: float, hi: float, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise ConfigError(f"{where}.{key} = {value!r}: expected a number in {lo:g} .. {hi:g} {unit}")
+    x = float(value)
+    if not math.isfinite(x) or x < lo or x > hi:
+        raise ConfigError(f"{where}.{key} = {value!r}: outside the plausible range {lo:g} .. {hi:g} {unit}")
+    return x
+
+
+def _table(where: str, spec: EffectSpec, table) -> dict:
+    if hasattr(table, "items"):
+        table = dict(table.items())
+    if not isinstance(table, dict):
+        raise ConfigError(f"{where} = {table!r}: expected a table of {', '.join(spec.param_names)}")
+    allowed = (("channel",) if spec.kind == "sensor" else ()) + spec.param_names
+    for key in table:
+        if key not in allowed:
+            raise ConfigError(f"{where}: unknown key {key!r}; {spec.name} takes {', '.join(allowed)}")
+    out: dict = {}
+    channel = None
+    if spec.kind == "sensor":
+        channel = table.get("channel")
+        if channel not in SENSOR_NAMES:
+            raise ConfigError(f"{where}.channel = {channel!r}: not a sensor channel; channels are "
+                              f"{', '.join(SENSOR_NAMES)}")
+        out["channel"] = channel
+    for p in spec.params:
+        if p.name not in table:
+            lo, hi = spec.bounds(p.name, channel)
+            raise ConfigError(f"{where}: missing key {p.name!r} ({p.description}; {lo:g} .. {hi:g} {p.unit})")
+        lo, hi = spec.bounds(p.name, channel)
+        unit = BY_NAME[channel].unit if (spec.kind == "sensor" and p.unit.startswith("unit")) else p.unit
+        out[p.name] = _number(where, p.name, table[p.name], lo, hi, unit)
+    return out
+
+
+def validate_effects(mapping, where: str = "effects") -> dict:
+    """The canonical effects mapping of `mapping` (None or {} for none): model effects as
+    {name: {param: float}}, sensor effects as {name: [{"channel": str, param: float}, ...]}.
+    ConfigError (one line, naming `where`, the key, the value and the allowed range) otherwise."""
+    if mapping is None:
+        return {}
+    if hasattr(mapping, "items"):
+        mapping = dict(mapping.items())
+    if not isinstance(mapping, dict):
+        raise ConfigError(f"{where} = {mapping!r}: expected a table of effects ({', '.join(EFFECTS)})")
+    out: dict = {}
+    for name, val in mapping.items():
+        spec = EFFECTS.get(name)
+        if spec is None:
+            raise ConfigError(f"{where}: unknown effect {name!r}; effects are {', '.join(EFFECTS)}")
+        if spec.kind == "model":
+            if isinstance(val, (list, tuple)):
+                raise ConfigError(f"{where}.{name}: a model effect is one table ([effects.{name}]), not an array")
+            out[name] = _table(f"{where}.{name}", spec, val)
+            continue
+        tables = list(val) if isinstance(val, (list, tuple)) else [val]
+        seen: set = set()
+        rows = []
+        for k, t in enumerate(tables):
+            row = _table(f"{where}.{name}[{k}]", spec, t)
+            if row["channel"] in seen:
+                raise ConfigError(f"{where}.{name}[{k}].channel = {row['channel']!r}: channel given twice "
+                                  f"for {name}")
+            seen.add(row["channel"])
+            rows.append(row)
+        if rows:
+            out[name] = rows
+    return out
+
+
+def effects_toml(effects) -> str:
+    """TOML text of an effects mapping ([effects.<name>] tables, [[effects.<sensor effect>]] arrays)."""
+    eff = validate_effects(effects)
+    lines: list[str] = []
+    for name, val in eff.items():
+        if EFFECTS[name].kind == "model":
+            lines.append(f"[effects.{name}]")
+            lines += [f"{k} = {v!r}" for k, v in val.items()]
+        else:
+            for row in val:
+                lines.append(f"[[effects.{name}]]")
+                lines += [f'channel = "{row["channel"]}"'] + [f"{k} = {v!r}" for k, v in row.items()
+                                                             if k != "channel"]
+        lines.append("")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------------------- packing
+def history_slots(effects: dict, dt: float) -> int:
+    """Slots of the per-step sensor history the active delays need (0: none)."""
+    delays = [row["delay"] for row in effects.get("sensor_delay", ()) if row["delay"] > 0.0]
+    return int(math.floor(max(delays) / dt)) + 2 if delays else 0
+
+
+def pack_effects(effects: dict, dt: float, chassis_mass: float, unsprung_masses) -> np.ndarray:
+    """The kernels' parameter array (rtsim.vehicle.effect_kernels FX_*) of a validated effects mapping,
+    for integrator step dt (s), sprung mass (kg) and the four unsprung masses (kg)."""
+    fx = neutral_params()
+    model_on = False
+
+    def val(name, param):
+        return effects[name][param] if name in effects else None
+
+    if (c := val("rolling_resistance", "coefficient")) is not None:
+        fx[FX_RR] = c
+        model_on = True
+    if (a := val("aero_drag", "drag_area")) is not None:
+        fx[FX_CDA] = a
+        model_on = True
+    dm = val("mass", "added_mass") or 0.0
+    if "mass" in effects:
+        if chassis_mass + dm <= 0.0:
+            raise ConfigError(f"effects.mass.added_mass = {dm:g}: leaves no sprung mass ({chassis_mass:g} kg)")
+        fx[FX_MASS] = dm
+        model_on = True
+    if (grade := val("road_grade", "grade")) is not None:
+        th = math.atan(grade)
+        fx[FX_GRADE] = 1.0
+        fx[FX_SIN], fx[FX_COS] = math.sin(th), math.cos(th)
+        fx[FX_G_SIN], fx[FX_G_1MCOS] = G * math.sin(th), G * (1.0 - math.cos(th))
+        model_on = True
+    fx[FX_M_CHASSIS] = chassis_mass + dm
+    fx[FX_M_CORNER:FX_M_CORNER + 4] = unsprung_masses
+    if any(n in effects for n in ("brake_friction", "brake_stiction", "brake_lag")):
+        fx[FX_BRAKE] = 1.0
+        model_on = True
+        fx[FX_B_SCALE] = val("brake_friction", "scale") or 1.0
+        fx[FX_B_BREAK] = val("brake_stiction", "breakaway_torque") or 0.0
+        tau = val("brake_lag", "time_constant") or 0.0
+        fx[FX_B_LAG] = 1.0 - math.exp(-dt / tau) if tau > 0.0 else 0.0
+    if (k := val("driveline_compliance", "stiffness")) is not None:
+        fx[FX_DL] = 1.0
+        fx[FX_DL_K] = k
+        fx[FX_DL_J] = DRIVELINE_INERTIA
+        fx[FX_DL_C] = 2.0 * DRIVELINE_DAMPING_RATIO * math.sqrt(k * DRIVELINE_INERTIA)
+        model_on = True
+    if (s := val("tyre_slip_stiffness", "scale")) is not None:
+        fx[FX_SLIP] = s
+        model_on = True
+    if (length := val("tyre_relaxation", "length")) is not None:
+        fx[FX_RELAX] = length
+        model_on = True
+    if (t := val("bearing_drag", "torque")) is not None:
+        fx[FX_BEARING] = t
+        model_on = True
+    fx[FX_ON] = 1.0 if model_on else 0.0
+    sensor_on = False
+    for name, slot in (("sensor_delay", FXS_DELAY), ("sensor_scale", FXS_SCALE), ("sensor_bias", FXS_BIAS)):
+        for row in effects.get(name, ()):
+            c = SENSOR_NAMES.index(row["channel"])
+            v = row[EFFECTS[name].params[0].name]
+            if slot == FXS_DELAY:
+                v = v / dt
+                v = float(round(v)) if abs(v - round(v)) < 1e-9 else v     # whole steps exactly
+            fx[FX_SENS + 3 * c + slot] = v
+            sensor_on = True
+    fx[FX_HIST] = history_slots(effects, dt)
+    fx[FX_SENS_ON] = 1.0 if (sensor_on or fx[FX_GRADE] > 0.5) else 0.0
+    return fx
+
+
+__all__ = ["ParamSpec", "EffectSpec", "EFFECTS", "SENSOR_EFFECTS", "MODEL_EFFECTS", "validate_effects",
+           "pack_effects", "history_slots", "effects_toml"]
