@@ -426,6 +426,20 @@ class CommandReceiver:
         self.accepted = 0
         self.counters = {k: 0 for k in ("unknown_id",) + REJECT_KINDS + ("counter_repeated", "counter_jump", "clamped")}
 
+    def reset(self, t0: float = 0.0) -> None:
+        """Forget every command (a new session starting at ``t0``); counters are kept."""
+        self.t0 = float(t0)
+        for i in range(len(self.names)):
+            self.value[i] = None
+            self.last_valid_t[i] = None
+            self._counter[i] = None
+            self.timed_out[i] = False
+
+    def command_index(self, arbitration_id: int) -> int:
+        """Index in COMMAND_NAMES of a command frame id (-1 for other ids)."""
+        p = self._plans.get(arbitration_id)
+        return -1 if p is None else p[0]
+
     # -- hot path -----------------------------------------------------------------------------------
     def receive(self, arbitration_id: int, data: bytes, t: float) -> bool:
         """Check and take one frame; True if accepted. Never raises (``data`` that is not bytes-like

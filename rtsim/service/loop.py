@@ -101,11 +101,7 @@ class HilLoop:
         self.sm_head = 0
         if self.sm_on:
             seed_sensor_noise(0)          # reproducible noise: a session replays bit for bit
-        self.rx.t0 = 0.0
-        for i in range(len(self.rx.value)):   # a new session: no command received yet
-            self.rx.value[i] = None
-            self.rx.last_valid_t[i] = None
-            self.rx._counter[i] = None
+        self.rx.reset(0.0)                    # a new session: no command received yet
         self._mask = -1
         self._status_msg = None
         self._bus_errors_at_status = 0
@@ -224,7 +220,7 @@ class HilLoop:
             self.on_step_request(data)
             return
         if self.rx.receive(msg.arbitration_id, data, t) and self.outbox is not None:
-            i = self.rx._plans[msg.arbitration_id][0]
+            i = self.rx.command_index(msg.arbitration_id)
             self.outbox.push_event("commands", t, {COMMAND_NAMES[i]: self.rx.value[i], "source": "can"})
 
     def on_step_request(self, data) -> None:
