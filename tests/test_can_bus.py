@@ -3,7 +3,9 @@
 Every test is bounded: receives use timeouts inside deadline loops, child processes are killed and
 joined in ``finally``, hubs are closed by their context manager. Skips (with the reason) when
 python-can / python-can-remote cannot be imported or a hub cannot start here.
-Run with ``-s`` to see the measured round trip and throughput through the hub.
+Run with ``-s`` to see the measured round trip and throughput through the hub. The ``can_e2e`` test
+runs over the ``can_bus_factory`` segment (tests/conftest.py): the hub here, SocketCAN vcan0 when
+RTSIM_CAN_INTERFACE/RTSIM_CAN_CHANNEL say so (tests/test_vcan.py does that inside a qemu VM).
 """
 from __future__ import annotations
 
@@ -96,14 +98,20 @@ def test_two_buses_through_hub_lossless_both_ways(mode):
 
 
 # --------------------------------------------------------------------------------------------------
-# (b) end to end across processes: ECU child -> hub -> CommandReceiver in this process
+# (b) end to end across processes: ECU child -> CAN segment (hub or vcan0) -> CommandReceiver here
 
 _CHILD = r"""
-import sys, time, can
+import argparse, time, can
+from bridge.can_bus import open_bus
 from bridge.can_codec import Codec
-channel, n = sys.argv[1], int(sys.argv[2])
+ap = argparse.ArgumentParser()
+ap.add_argument("--can-interface", required=True)
+ap.add_argument("--can-channel", required=True)
+ap.add_argument("-n", type=int, required=True)
+args = ap.parse_args()
+n = args.n
 codec = Codec()
-bus = can.Bus(interface="remote", channel=channel)
+bus = open_bus(args.can_interface, args.can_channel)
 def send(fid, data):
     bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
 bad_crc = bad_dlc = 0
@@ -123,52 +131,91 @@ bus.shutdown()
 """
 
 
-def test_end_to_end_child_process_commands_through_hub():
+@pytest.mark.can_e2e
+def test_end_to_end_child_process_commands_over_can(can_bus_factory):
+    """An ECU in a child process sends commands over the test's CAN segment (the loopback hub, or
+    SocketCAN vcan0 when RTSIM_CAN_INTERFACE says so, e.g. inside tests/test_vcan.py's VM)."""
     from bridge.can_codec import CommandReceiver
 
     n = 200
-    with _start_hub() as hub:
-        rx_bus = hub.open_bus()  # connected before the child starts: nothing can be missed
-        rx = CommandReceiver()
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-        child = subprocess.Popen([sys.executable, "-c", _CHILD, hub.channel, str(n)], cwd=ROOT, env=env,
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        values = []
-        marker = None
-        try:
-            deadline = time.monotonic() + 60.0
-            while marker is None and time.monotonic() < deadline:
-                msg = rx_bus.recv(0.2)
-                if msg is None:
-                    if child.poll() not in (None, 0):
-                        break
-                    continue
-                if msg.arbitration_id == 0x7FF:
-                    marker = bytes(msg.data)
-                    continue
-                if rx.receive(msg.arbitration_id, bytes(msg.data), time.monotonic()):
-                    values.append(rx.value[rx.names.index("throttle_angle_cmd")])
-        finally:
-            if child.poll() is None:
-                try:
-                    child.wait(5.0)
-                except subprocess.TimeoutExpired:
-                    child.kill()
+    rx_bus = can_bus_factory()  # connected before the child starts: nothing can be missed
+    rx = CommandReceiver()
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    child = subprocess.Popen([sys.executable, "-c", _CHILD, *can_bus_factory.child_args(), "-n", str(n)],
+                             cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    values = []
+    marker = None
+    try:
+        deadline = time.monotonic() + 60.0
+        while marker is None and time.monotonic() < deadline:
+            msg = rx_bus.recv(0.2)
+            if msg is None:
+                if child.poll() not in (None, 0):
+                    break
+                continue
+            if msg.arbitration_id == 0x7FF:
+                marker = bytes(msg.data)
+                continue
+            if rx.receive(msg.arbitration_id, bytes(msg.data), time.monotonic()):
+                values.append(rx.value[rx.names.index("throttle_angle_cmd")])
+    finally:
+        if child.poll() is None:
             try:
-                out, err = child.communicate(timeout=5.0)
+                child.wait(5.0)
             except subprocess.TimeoutExpired:
                 child.kill()
-                out, err = child.communicate(timeout=5.0)
-            rx_bus.shutdown()
-        assert marker is not None, f"no end marker from the child (rc {child.returncode}): {err.decode()[-800:]}"
-        assert child.returncode == 0, err.decode()[-800:]
-        bad_crc, bad_dlc = marker[0], marker[1]
-        assert (bad_crc, bad_dlc) == (20, 8)
-        assert rx.accepted == n
-        assert values == pytest.approx([(i % 140) * 0.01 for i in range(n)], abs=1e-4)
-        assert rx.counters["crc"] == bad_crc
-        assert rx.counters["dlc"] == bad_dlc
-        assert rx.counters["counter"] == 0 and rx.counters["range"] == 0 and rx.counters["unknown_id"] == 0
+        try:
+            out, err = child.communicate(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            out, err = child.communicate(timeout=5.0)
+        rx_bus.shutdown()
+    assert marker is not None, f"no end marker from the child (rc {child.returncode}): {err.decode()[-800:]}"
+    assert child.returncode == 0, err.decode()[-800:]
+    bad_crc, bad_dlc = marker[0], marker[1]
+    assert (bad_crc, bad_dlc) == (20, 8)
+    assert rx.accepted == n
+    assert values == pytest.approx([(i % 140) * 0.01 for i in range(n)], abs=1e-4)
+    assert rx.counters["crc"] == bad_crc
+    assert rx.counters["dlc"] == bad_dlc
+    assert rx.counters["counter"] == 0 and rx.counters["range"] == 0 and rx.counters["unknown_id"] == 0
+
+
+@pytest.mark.can_e2e
+def test_segment_two_buses_classic_and_fd_lossless_both_ways(can_bus_factory):
+    """Two buses on the test's CAN segment (hub or vcan0): classic and CAN FD frames (64 bytes, bit
+    rate switch, extended ids), sent in bursts of 50, arrive complete, in order and unaltered both ways,
+    the sender does not get its own frames back; the round trip a -> b -> a is printed (not asserted)."""
+    a = can_bus_factory(fd=True)
+    b = can_bus_factory(fd=True)
+    n = 200
+    for src, dst, base in ((a, b, 0x100), (b, a, 0x1ABC000)):
+        sent = _frames(n, base & 0x7FF)
+        sent += [can.Message(arbitration_id=base + i, is_extended_id=True, is_fd=True, bitrate_switch=bool(i % 2),
+                             data=bytes((i + k) % 256 for k in range(64 if i % 3 else 12))) for i in range(n)]
+        got = []
+        for k in range(0, len(sent), 50):  # bursts of 50: a SocketCAN receiver that is not reading
+            for m in sent[k: k + 50]:       # drops what overflows its socket buffer (~280 frames)
+                src.send(m)
+            got += _recv_n(dst, min(50, len(sent) - k), 30.0)
+        assert len(got) == len(sent), f"{len(got)} of {len(sent)} frames arrived"
+        bad = [i for i, (s, r) in enumerate(zip(sent, got))
+               if not (_same(s, r) and s.is_fd == r.is_fd and s.bitrate_switch == r.bitrate_switch)]
+        assert not bad, f"frames out of order or altered from index {bad[0]}: {sent[bad[0]]} -> {got[bad[0]]}"
+        assert src.recv(0.05) is None, "the sender must not receive its own frames"
+    rtt = []
+    ping = can.Message(arbitration_id=0x300, data=bytes(8), is_extended_id=False)
+    for _ in range(100):
+        t0 = time.perf_counter()
+        a.send(ping)
+        m = b.recv(5.0)
+        assert m is not None
+        b.send(m)
+        assert a.recv(5.0) is not None
+        rtt.append(time.perf_counter() - t0)
+    rtt.sort()
+    print(f"\n[{can_bus_factory.interface} {can_bus_factory.channel}] round trip a->b->a: "
+          f"p50 {statistics.median(rtt) * 1e3:.3f} ms, p99 {rtt[98] * 1e3:.3f} ms, max {rtt[-1] * 1e3:.3f} ms")
 
 
 # --------------------------------------------------------------------------------------------------

@@ -103,7 +103,6 @@ class HilLoop:
             seed_sensor_noise(0)          # reproducible noise: a session replays bit for bit
         self.rx.reset(0.0)                    # a new session: no command received yet
         self._mask = -1
-        self._status_msg = None
         self._bus_errors_at_status = 0
 
     def _every(self, period: float, what: str) -> int:
