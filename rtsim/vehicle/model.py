@@ -26,6 +26,7 @@ from rtsim.mbs import Mechanism, MechanismBuilder, Settings
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import VehicleConfig
+from .kinematics_cache import cached_corner_kinematics
 from .kinematics import (
     OUT_AXIS, OUT_CENTRE, OUT_ROT_S, OUT_ROT_Z, CornerKinematics, DoubleWishbone, MacPherson, mirror,
     solve_corner,
@@ -88,7 +89,7 @@ def corner_kinematics(cfg: VehicleConfig) -> list[CornerKinematics]:
 
 
 def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics] | None = None) -> VehicleModel:
-    corners = corners or corner_kinematics(cfg)
+    corners = corners or cached_corner_kinematics(cfg, corner_kinematics)
     # no singular positions in a car's suspension: the projections reuse the Newton factor; the
     # position tolerance is 5x under the 1e-8 bar (a tighter one costs a second Newton iteration on
     # most steps on a mesh road, for no visible change of the motion)
