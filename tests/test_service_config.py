@@ -1,0 +1,50 @@
+"""`rtsim serve --config`: the documented file loads to the embedded defaults, flags override it, and
+bad values are rejected naming file, key, value and range."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from rtsim.cli import build_parser
+from rtsim.errors import ConfigError
+from rtsim.service.cli import options
+from rtsim.service.server import ServeOptions
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _opts(*argv):
+    return options(build_parser().parse_args(["serve", *argv]))
+
+
+def test_documented_config_is_the_embedded_default():
+    a, b = _opts("--config", str(ROOT / "configs" / "service.toml")), ServeOptions()
+    assert Path(a.scenario).resolve() == Path(b.scenario).resolve()
+    for f in ("mode", "dt", "can_interface", "can_channel", "start_hub", "zenoh", "zenoh_listen",
+              "zenoh_connect", "state_rate", "status_rate", "max_catch_up", "record"):
+        assert getattr(a, f) == getattr(b, f), f
+    assert a.hold_pressure == 3000.0
+
+
+def test_flags_override_the_file(tmp_path):
+    cfg = tmp_path / "svc.toml"
+    cfg.write_text('[simulation]\nmode = "lockstep"\n[can]\ninterface = "virtual"\nchannel = "x"\n'
+                   '[record]\npath = "out.mcap"\n')
+    o = _opts("--config", str(cfg), "--can-channel", "y", "--no-zenoh")
+    assert (o.mode, o.can_interface, o.can_channel, o.zenoh) == ("lockstep", "virtual", "y", False)
+    assert o.record == tmp_path / "out.mcap"              # relative to the file
+
+
+@pytest.mark.parametrize("text, key", [
+    ("[zenoh]\nstatus_rate = 50\n", "zenoh.status_rate"),
+    ("[simulation]\nmode = \"turbo\"\n", "simulation.mode"),
+    ("[can]\nbitrate = 500000\n", "can.bitrate"),
+    ("[simulation]\nhold_pressure = -1\n", "simulation.hold_pressure"),
+])
+def test_bad_values_name_file_key_and_range(tmp_path, text, key):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        _opts("--config", str(cfg))
+    assert str(cfg) in str(e.value) and key in str(e.value)
