@@ -4,6 +4,7 @@
     rtsim watch    live dashboard over Zenoh               rtsim play     recorded frames back on the bus
     rtsim resim    re-run a recording, compare the state   rtsim run      a scenario offline to CSV/MCAP
     rtsim bench    benchmarks                              rtsim describe the vehicle model
+    rtsim validate field runs vs the model: find, fit and add the missing effect, report
 """
 from __future__ import annotations
 
@@ -165,6 +166,7 @@ _DELEGATED = (
     ("watch", "rtsim.watch", "live terminal dashboard of a running service (Zenoh)"),
     ("play", "bridge.player", "put recorded CAN frames back on the bus with their original timing"),
     ("resim", "rtsim.service.resim", "re-run a recording (or a CAN log of commands) and compare the state"),
+    ("validate", "rtsim.validate.cli", "compare the model with repeated field runs, name and add the missing effect"),
 )
 
 

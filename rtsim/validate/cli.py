@@ -1,0 +1,106 @@
+"""`rtsim validate --vehicle FILE --runs PATH... --report DIR`: repetitions of one manoeuvre (CSV or
+MCAP) against the vehicle model; names the missing effect, writes the model with it and the report.
+Standalone: `python -m rtsim.validate.cli ...`. Heavy imports happen in main (the parser stays cheap)."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--vehicle", required=True, type=Path, help="vehicle TOML of the model to validate")
+    p.add_argument("--runs", required=True, nargs="+", type=Path,
+                   help="repetitions of one manoeuvre: CSV files (column time [s] + sensor channels, SI) or "
+                        "MCAP recordings of the service, or folders holding them")
+    p.add_argument("--report", required=True, type=Path, help="output folder: report.html, summary.json, plots, "
+                                                               "the new vehicle config")
+    p.add_argument("--road", type=Path, help="road TOML the runs were driven on (default configs/roads/flat.toml)")
+    p.add_argument("--rate", type=float, default=100.0, help="comparison grid rate, Hz (default 100)")
+    p.add_argument("--align", default="xcorr",
+                   help="'xcorr' (cross-correlation of the inputs, default) or 'event:<channel>[:<fraction>]'")
+    p.add_argument("--compare", nargs="+", help="output channels to compare (default: wheel_speed_fl..rr, "
+                                                "accel_x; + accel_y, gyro_z, roll when steering)")
+    p.add_argument("--max-iterations", type=int, default=4, help="effects added at most (default 4)")
+    p.add_argument("--workers", type=int, default=2, help="processes fitting candidates in parallel (default 2)")
+    p.add_argument("--no-progress", action="store_true", help="no progress display")
+
+
+class RichProgress:
+    """Stage-by-stage progress on stderr (rich)."""
+
+    def __init__(self):
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+        self.p = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                          TimeElapsedColumn(), console=Console(stderr=True), transient=False)
+        self.task = None
+
+    def __enter__(self):
+        self.p.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stage("", None)
+        self.p.stop()
+
+    def stage(self, text: str, total: int | None = None) -> None:
+        if self.task is not None:
+            self.p.update(self.task, completed=self.p.tasks[-1].total)
+        self.task = self.p.add_task(text, total=total or 1) if text else None
+
+    def advance(self, n: int = 1) -> None:
+        if self.task is not None:
+            self.p.advance(self.task, n)
+
+
+def main(args: argparse.Namespace) -> int:
+    from contextlib import nullcontext
+
+    from . import report
+    from .configwrite import write_config
+    from .workflow import Options, run
+
+    opts = Options(vehicle=args.vehicle, runs=list(args.runs), report=args.report, road=args.road, rate=args.rate,
+                   align=args.align, max_iterations=args.max_iterations, workers=args.workers, compare=args.compare)
+    prog = nullcontext(None) if args.no_progress else RichProgress()
+    with prog as pr:
+        opts.progress = pr
+        res = run(opts)
+        if pr:
+            pr.stage("writing the report", None)
+        if res.effects:
+            out = args.report / f"{args.vehicle.stem}_validated.toml"
+            res.config_path = out
+            res.diff = write_config(args.vehicle, [*res.effects], out,
+                                    f"effects identified by `rtsim validate` from {res.bench.n} run(s); "
+                                    "value +- 95 % half-width")
+        summ = report.write(res, args.report)
+    print(f"verdict: {res.verdict}")
+    for e in res.effects:
+        print(f"added: {e.label()}  (+- {', '.join(f'{v:.2g}' for v in e.uncertainty.values())})")
+    for c, m in summ["after"].items():
+        b = summ["before"][c]
+        ins = lambda x: "no band" if x is None else f"{100 * x:.0f} % inside"   # noqa: E731
+        print(f"  {c:<16} RMS {b['rms']:.4g} -> {m['rms']:.4g}, {ins(b['inside_band'])} -> {ins(m['inside_band'])}")
+    if res.diff:
+        print(res.diff)
+    print(f"report: {args.report / 'report.html'} ({res.timings['total']:.1f} s, "
+          f"{res.timings['simulations']} simulations)")
+    return 0
+
+
+def _standalone(argv: list[str] | None = None) -> int:
+    from rtsim.errors import RtsimError
+    p = argparse.ArgumentParser(prog="rtsim validate", description=__doc__.splitlines()[0])
+    add_arguments(p)
+    args = p.parse_args(argv)
+    try:
+        return main(args)
+    except RtsimError as exc:
+        print(f"rtsim validate: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(_standalone())

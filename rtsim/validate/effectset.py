@@ -1,0 +1,88 @@
+"""Effects as the workflow handles them: a name from the model's catalogue
+(rtsim.vehicle.effects.EFFECTS) with its parameter values, and the conversions to the mapping that
+`VehicleSim.set_effects` and the vehicle config's `[effects]` tables take:
+{"rolling_resistance": {"coefficient": 0.012}, "sensor_bias": [{"channel": "accel_x", "bias": 0.1}]}.
+Model effects go to the model; sensor effects are applied to the model's outputs (sensorfx)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from rtsim.errors import ConfigError
+
+SENSOR_EFFECTS = ("sensor_delay", "sensor_bias", "sensor_scale")
+
+
+def catalogue() -> dict:
+    """The model's effect catalogue: name -> EffectSpec (ConfigError when the model has none)."""
+    try:
+        from rtsim.vehicle.effects import EFFECTS
+    except ImportError as exc:
+        raise ConfigError(f"the vehicle model has no effect catalogue (rtsim.vehicle.effects: {exc})") from None
+    return EFFECTS
+
+
+def kind(name: str) -> str:
+    try:
+        return catalogue()[name].kind
+    except ConfigError:
+        return "sensor" if name in SENSOR_EFFECTS else "model"
+
+
+@dataclass
+class Effect:
+    name: str
+    params: dict                                         # parameter -> value (SI); sensor effects: + "channel"
+    uncertainty: dict = field(default_factory=dict)      # parameter -> 95 % half-width (SI)
+
+    @property
+    def kind(self) -> str:
+        return kind(self.name)
+
+    @property
+    def channel(self) -> str | None:
+        return self.params.get("channel")
+
+    @property
+    def key(self) -> tuple:
+        """Identity for 'already in the model': the name, and the channel of a sensor effect."""
+        return (self.name, self.channel)
+
+    def values(self) -> dict:
+        """Numeric parameters only."""
+        return {k: v for k, v in self.params.items() if k != "channel"}
+
+    def label(self) -> str:
+        vals = ", ".join(f"{k} = {v:.4g}" for k, v in self.values().items())
+        return f"{self.name}[{self.channel}]({vals})" if self.channel else f"{self.name}({vals})"
+
+
+def to_mapping(effects: list[Effect]) -> dict:
+    """The set_effects / config mapping of a list of effects (sensor effects as lists of tables)."""
+    out: dict = {}
+    for e in effects:
+        if e.kind == "sensor":
+            out.setdefault(e.name, []).append(dict(e.params))
+        else:
+            out[e.name] = dict(e.params)
+    return out
+
+
+def model_mapping(effects: list[Effect]) -> dict:
+    return to_mapping([e for e in effects if e.kind != "sensor"])
+
+
+def from_mapping(mapping) -> list[Effect]:
+    """Effects of a config's effects mapping (dict or pydantic model)."""
+    if mapping is None:
+        return []
+    if hasattr(mapping, "model_dump"):
+        mapping = mapping.model_dump(exclude_none=True)
+    out = []
+    for name, val in dict(mapping).items():
+        if val is None:
+            continue
+        if isinstance(val, (list, tuple)):
+            out.extend(Effect(name, dict(v)) for v in val)
+        else:
+            out.append(Effect(name, dict(val)))
+    return out

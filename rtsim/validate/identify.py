@@ -1,0 +1,492 @@
+"""Naming the missing effect: every candidate of the model's catalogue is fitted to the benchmark by
+re-simulation, and the candidates are ranked by how much of the disagreement they remove, penalised
+by their number of fitted values (objective.Objective.ic).
+
+Fitting a model effect (one parameter p). The parameter is mapped to a coordinate theta that is 0
+where the effect is off (theta = p for additive parameters, p - 1 for a `scale`, the compliance 1/p
+for a `stiffness`; the ParamSpec's `neutral`), so the nominal simulation is the theta = 0 point and
+costs nothing. One trial simulation at a quarter of the plausible range gives a secant sensitivity
+J = d residual / d theta and a Gauss-Newton step theta = -(J . r0) / (J . J) (the screening: two
+simulations). The responses are far from linear in theta (a different brake friction moves the stop
+in time, and the residual of a moved event grows faster than the shift), so Gauss-Newton converges
+slowly from there: the best candidates (workflow.REFINE_TOP) continue with the minimum of the cost
+bracketed (steps of 1.5 times the last distance) and found by Brent's method (parabolic
+interpolation with golden-section safeguards, scipy) to a relative tolerance `TOL`, within
+`MAX_SIMS` simulations. Values stay in the plausible range [lo, hi] of the catalogue's ParamSpec;
+when the data ask for a value beyond it (the Gauss-Newton estimate or the slope at the bound points
+outside), the candidate is rejected as implausible with the value asked for. A candidate that removes
+less than `LITTLE` of the cost at the trial and the first step is not refined.
+
+Sensor effects need no simulation (sensorfx): bias and scale are linear least squares on their
+channel, the delay is a grid search over its range refined by a parabola.
+
+Uncertainty (95 %) of a candidate: linearised least squares with the residual left at the optimum
+as the noise, samples correlated within a channel: var(theta) = sum_c tau_c mean(r_c^2) |J_c|^2 /
+(J . J)^2, tau_c the integrated autocorrelation time of the channel's residual; half-width 1.96
+sqrt(var); J is the secant to the nearest simulated point at least `SECANT` |theta| away. The winner's
+value and interval then come from the runs one by one (run_estimate, combine_runs: Student-t over
+the per-run estimates, as eq. 6). A candidate is `significant` when its interval excludes the off
+value; it is eligible to be added when it is plausible, removes at least `MIN_REDUCTION` of the cost,
+lowers the information criterion by at least `MIN_DELTA_IC` and changes the outputs by at least
+`MIN_SIZE` standard errors of the mean (RMS over the channels and samples): smaller changes fit noise
+and the artefacts of averaging runs (e.g. the pitch oscillation after the stop, smeared in the mean).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from scipy.optimize import minimize_scalar
+
+from rtsim.errors import RtsimError
+
+from . import sensorfx
+from .effectset import Effect, catalogue
+from .objective import Objective, _tau
+from .stats import t_critical
+from .replay import Replayer, ReplayInputs
+from .signals import DERIVED
+
+MAX_SIMS = 10                # simulations per candidate at most
+TRIAL_FRACTION = 0.25
+TOL = 0.003                  # relative tolerance on theta of the final 1-D minimisation
+LITTLE = 0.02                # share of the cost a candidate must remove to be refined
+SECANT = 0.05                # shortest relative secant for the sensitivity behind the uncertainty
+
+
+class _Budget(Exception):
+    """The candidate's simulation budget is spent (or it is not worth more)."""
+MIN_DELTA_IC = 10.0          # "very strong" evidence on the Kass-Raftery scale of 2 ln(Bayes factor)
+MIN_REDUCTION = 0.10         # a winner removes at least this share of the disagreement
+MIN_SIZE = 1.0               # and moves the outputs by at least this many standard errors (RMS)
+NEUTRAL = {"scale": 1.0, "stiffness": math.inf}
+SENSOR_FOR = {s: a for s, a in DERIVED.items()}      # wheel_speed_x -> wheel_angle_x
+
+
+@dataclass
+class Candidate:
+    effect: Effect                      # the fitted effect (best value)
+    kind: str
+    k: int                              # fitted values counted by the information criterion
+    cost: float
+    ic: float
+    reduction: float                    # share of the current cost it removes
+    delta_ic: float                     # IC(candidate) - IC(current model)
+    plausible: bool
+    significant: bool
+    match: float                        # cosine between the needed change and the effect's sensitivity
+    match_by_channel: dict
+    sims: int
+    note: str = ""                      # why rejected / how fitted
+    requested: float | None = None      # the (implausible) value the data asks for, when rejected
+    outputs: dict = field(default_factory=dict, repr=False)     # model outputs with the effect
+    raw: dict | None = field(default=None, repr=False)         # the same before sensor effects (model effects)
+    points: list = field(default_factory=list, repr=False)     # (theta, raw outputs) simulated (model effects)
+    theta: float = 0.0                                         # fitted coordinate (see Coord)
+    u_theta: float = math.inf                                  # its 95 % half-width
+    J: np.ndarray | None = field(default=None, repr=False)     # d residual / d theta there
+    coord: object = field(default=None, repr=False)
+    per_run: list = field(default_factory=list)                # theta_i -> values from the per-run replays
+    size: float = 0.0                   # how far it moves the model's outputs, RMS in standard errors
+
+    @property
+    def eligible(self) -> bool:
+        return (self.plausible and self.delta_ic <= -MIN_DELTA_IC and self.reduction >= MIN_REDUCTION
+                and self.size >= MIN_SIZE)
+
+    def summary(self) -> dict:
+        return {"name": self.effect.name, "parameters": dict(self.effect.params),
+                "uncertainty": dict(self.effect.uncertainty), "cost": self.cost, "ic": self.ic,
+                "delta_ic": self.delta_ic, "reduction": self.reduction, "plausible": self.plausible,
+                "significant": self.significant, "signature_match": self.match, "simulations": self.sims,
+                "note": self.note, **({"requested": self.requested} if self.requested is not None else {})}
+
+
+@dataclass
+class Context:
+    """What every candidate fit of one iteration shares."""
+    bench: object
+    objective: Objective
+    replayer: Replayer
+    inputs: ReplayInputs
+    effects: list[Effect]               # the model as it stands (accepted effects)
+    outputs: dict                       # its outputs (sensor effects applied)
+    raw: dict                           # its outputs before sensor effects
+    cost: float
+    n_runs: int
+
+
+# ------------------------------------------------------------------------------ parameter mapping
+class Coord:
+    """theta <-> parameter value for one parameter (see the module docstring). The off value is the
+    ParamSpec's `neutral` (None: none, e.g. an infinitely stiff driveline, fitted as 1/p)."""
+
+    def __init__(self, pspec, lo: float | None = None, hi: float | None = None):
+        self.name = pspec.name
+        self.lo = float(pspec.lo if lo is None else lo)
+        self.hi = float(pspec.hi if hi is None else hi)
+        neutral = getattr(pspec, "neutral", NEUTRAL.get(pspec.name, 0.0))
+        self.neutral = math.inf if neutral is None else float(neutral)
+        self.inverse = math.isinf(self.neutral)
+        a, b = self.theta(self.lo), self.theta(self.hi)
+        self.tlo, self.thi = min(a, b), max(a, b)
+
+    def theta(self, p: float) -> float:
+        if self.inverse:
+            return 1.0 / p if p > 0 else math.inf
+        return p - self.neutral
+
+    def value(self, th: float) -> float:
+        if self.inverse:
+            return 1.0 / th if th > 0 else math.inf
+        return th + self.neutral
+
+    def value_uncertainty(self, th: float, uth: float) -> float:
+        if self.inverse:
+            return uth / (th * th) if th > 0 else math.inf
+        return uth
+
+    def trial(self) -> float:
+        hi = self.thi if self.thi > 0 else self.tlo
+        return TRIAL_FRACTION * hi
+
+    def clip(self, th: float) -> float:
+        return min(max(th, self.tlo), self.thi)
+
+
+def _numeric_params(spec) -> list:
+    return [p for p in spec.params if p.name != "channel"]
+
+
+def _uncertainty(ctx: Context, J: np.ndarray, out: dict) -> float:
+    """95 % half-width of theta from the residual left at the optimum (module docstring)."""
+    jj = float(J @ J)
+    if not jj > 0.0:
+        return math.inf
+    r = ctx.objective.residual(out)
+    n = r.size // len(ctx.objective.channels)
+    meat = 0.0
+    for i in range(len(ctx.objective.channels)):
+        rc, jc = r[i * n:(i + 1) * n], J[i * n:(i + 1) * n]
+        meat += _tau(rc) * float(rc @ rc) / n * float(jc @ jc)
+    return 1.96 * math.sqrt(meat) / jj
+
+
+def _match(ctx: Context, J: np.ndarray, sign: float) -> tuple[float, dict]:
+    """Cosine similarity of the effect's sensitivity (signed towards the fit) with the needed change."""
+    need = -ctx.objective.residual(ctx.outputs)
+    d = sign * J
+    out = float(d @ need / (np.linalg.norm(d) * np.linalg.norm(need) + 1e-300))
+    by = {}
+    n = ctx.objective.mean[ctx.objective.channels[0]].size
+    for i, c in enumerate(ctx.objective.channels):
+        a, b = d[i * n:(i + 1) * n], need[i * n:(i + 1) * n]
+        na, nb = np.linalg.norm(a), np.linalg.norm(b)
+        by[c] = float(a @ b / (na * nb)) if na > 0 and nb > 0 else 0.0
+    return out, by
+
+
+def _finish(ctx: Context, effect: Effect, kind: str, k: int, out: dict, J: np.ndarray, th: float,
+            coord: Coord, sims: int, requested: float | None, note: str) -> Candidate:
+    obj = ctx.objective
+    cost = obj.cost(out)
+    uth = _uncertainty(ctx, J, out)
+    effect.uncertainty = {coord.name: coord.value_uncertainty(th, uth)}
+    significant = bool(abs(th) > uth) and np.isfinite(uth)
+    match, by = _match(ctx, J, 1.0 if th >= 0 else -1.0)
+    plausible = requested is None
+    notes = [note] if note else []
+    if not plausible:
+        notes.append(f"rejected: the data ask for {coord.name} = {requested:.4g}, outside the plausible range "
+                     f"{coord.lo:g} .. {coord.hi:g}")
+    elif not significant:
+        notes.append(f"{coord.name} = {coord.value(th):.4g} +- {effect.uncertainty[coord.name]:.2g}: the interval "
+                     f"includes the off value")
+    ic = obj.ic(out, k)
+    size = distance(obj, out, ctx.outputs)
+    if plausible and size < MIN_SIZE:
+        notes.append(f"too small to matter: it moves the outputs by {size:.2f} standard errors (RMS)")
+    return Candidate(effect, kind, k, cost, ic, 1.0 - cost / ctx.cost, ic - obj.ic(ctx.outputs, 0), plausible,
+                     significant, match, by, sims, "; ".join(notes), requested, out, theta=th, u_theta=uth, J=J,
+                     coord=coord, size=size)
+
+
+# --------------------------------------------------------------------------------- model effects
+def fit_model_effect(ctx: Context, name: str, budget: int = MAX_SIMS,
+                     seed: list[tuple[float, dict]] | None = None) -> Candidate:
+    """Fit the model effect `name` by re-simulation (module docstring) with at most `budget`
+    simulations in all, continuing from the simulations `seed` ((theta, raw outputs) of a screening)."""
+    spec = catalogue()[name]
+    params = _numeric_params(spec)
+    coord = Coord(params[0])
+    obj = ctx.objective
+    others = {p.name: float(p.default) for p in params[1:]}
+
+    def simulate(th: float):
+        e = Effect(name, {coord.name: coord.value(th), **others})
+        raw = ctx.replayer.simulate(ctx.inputs, [*ctx.effects, e], fit=True)
+        raws[th] = raw
+        return sensorfx.apply(raw, ctx.inputs.t, ctx.effects)
+
+    raws: dict[float, dict] = {}
+    r0 = obj.residual(ctx.outputs)
+    pts: list[tuple[float, np.ndarray, dict]] = [(0.0, r0, ctx.outputs)]
+    for th, raw in seed or []:
+        raws[th] = raw
+        out = sensorfx.apply(raw, ctx.inputs.t, ctx.effects)
+        pts.append((th, obj.residual(out), out))
+    note = ""
+    requested = None
+    span = coord.thi - coord.tlo
+    c0 = float(r0 @ r0)
+
+    def sq(p):
+        return float(p[1] @ p[1])
+
+    def f(th: float) -> float:
+        """Cost at theta (sum of squares), simulating once per distinct value."""
+        nonlocal note
+        th = coord.clip(float(th))
+        for p in pts:
+            if p[0] == th:
+                return sq(p)
+        if len(pts) >= budget + 1:
+            raise _Budget
+        try:
+            out = simulate(th)
+        except RtsimError as exc:          # the model cannot run there: infinitely bad
+            note = f"simulation failed at {coord.name} = {coord.value(th):.4g} ({str(exc).splitlines()[0][:80]})"
+            pts.append((th, np.full_like(r0, 1e150), {}))
+            return math.inf
+        pts.append((th, obj.residual(out), out))
+        return sq(pts[-1])
+
+    try:
+        # trial point, then one Gauss-Newton step with the secant through the nominal point
+        t1 = coord.clip(coord.trial())
+        f(t1)
+        J = (next(p for p in pts if p[0] == t1)[1] - r0) / (t1 - 0.0)
+        jj = float(J @ J)
+        free = -float(J @ r0) / jj if jj > 0 else 0.0
+        t2 = coord.clip(free)
+        if abs(free - t2) > 0.05 * span:
+            requested = free
+        if t2 not in (0.0, t1):
+            f(t2)
+        best = min(pts, key=sq)
+        if sq(best) > (1.0 - LITTLE) * c0:
+            raise _Budget                  # neither the trial nor the step helps: not worth more
+        # bracket the minimum: a point on each side of the best with a higher cost
+        for _ in range(4):
+            best = min(pts, key=sq)
+            lower = [p for p in pts if p[0] < best[0]]
+            upper = [p for p in pts if p[0] > best[0]]
+            if lower and upper:
+                break
+            near = min(lower or upper, key=lambda p: abs(p[0] - best[0]))
+            ext = coord.clip(best[0] + 1.5 * (best[0] - near[0]))
+            if ext == best[0]:             # the best value is on the bound of the plausible range
+                break
+            f(ext)
+        best = min(pts, key=sq)
+        lower = [p for p in pts if p[0] < best[0]]
+        upper = [p for p in pts if p[0] > best[0]]
+        if lower and upper:
+            requested = None
+            a = max(lower, key=lambda p: p[0])[0]
+            c = min(upper, key=lambda p: p[0])[0]
+            try:
+                minimize_scalar(f, bracket=(a, best[0], c), method="brent",
+                                options={"xtol": TOL, "maxiter": MAX_SIMS})
+            except ValueError:         # a flat stretch (equal costs): no strict bracket
+                minimize_scalar(f, bounds=(a, c), method="bounded",
+                                options={"xatol": TOL * max(abs(best[0]), 0.02 * span), "maxiter": MAX_SIMS})
+        elif requested is None:
+            # on a bound: the local slope says where the data would like to go
+            near = min((p for p in pts if p is not best), key=lambda p: abs(p[0] - best[0]))
+            J = (best[1] - near[1]) / (best[0] - near[0])
+            free = best[0] - float(J @ best[1]) / float(J @ J)
+            if abs(free - coord.clip(free)) > 0.05 * span:
+                requested = free
+    except _Budget:
+        pass
+    if requested is not None:
+        requested = coord.value(requested) if (not coord.inverse or requested > 0) else 0.0
+    pts = [p for p in pts if p[2]]
+    sims = len(pts) - 1
+    if len(pts) < 2:
+        eff = Effect(name, {coord.name: coord.value(coord.clip(coord.trial())), **others})
+        cand = _finish(ctx, eff, "model", 1, ctx.outputs, np.zeros_like(r0), 0.0, coord, sims, None, note)
+        cand.plausible = False
+        return cand
+    best = min(pts, key=lambda p: float(p[1] @ p[1]))
+    if best[0] == 0.0:             # no value tried improves on the model as it stands
+        best = min(pts[1:], key=lambda p: float(p[1] @ p[1]))
+        note = (note + "; " if note else "") + "no value tried improves the fit"
+    # sensitivity for the uncertainty: the secant to the nearest point at least SECANT |theta| away (a
+    # closer one may sit on a step of a non-smooth response, e.g. the moment a held wheel breaks away)
+    others_ = [p for p in pts if p is not best]
+    far = [p for p in others_ if abs(p[0] - best[0]) >= SECANT * max(abs(best[0]), 0.02 * span)]
+    partner = min(far or others_, key=lambda p: abs(p[0] - best[0]))
+    J = (best[1] - partner[1]) / (best[0] - partner[0])
+    eff = Effect(name, {coord.name: coord.value(best[0]), **others})
+    cand = _finish(ctx, eff, "model", 1, best[2], J, best[0], coord, sims, requested, note)
+    cand.raw = raws.get(best[0])
+    cand.points = [(p[0], raws[p[0]]) for p in pts if p[0] in raws]
+    return cand
+
+
+# -------------------------------------------------------------------------------- sensor effects
+def _sensor_channels(ctx: Context) -> list[tuple[str, str]]:
+    """(compared channel, sensor channel it comes from)."""
+    return [(c, SENSOR_FOR.get(c, c)) for c in ctx.objective.channels]
+
+
+def fit_sensor_effects(ctx: Context) -> list[Candidate]:
+    """Every sensor effect on every compared channel (no simulation: sensorfx on the current outputs)."""
+    cat = catalogue()
+    obj = ctx.objective
+    t = ctx.inputs.t
+    n = t.size
+    cands = []
+    taken = {e.key for e in ctx.effects}
+    for name, spec in cat.items():
+        if spec.kind != "sensor":
+            continue
+        params = _numeric_params(spec)
+        if len(params) != 1:
+            continue
+        for ci, (comp, sensor) in enumerate(_sensor_channels(ctx)):
+            if (name, sensor) in taken:
+                continue
+            if name == "sensor_bias" and sensor != comp:
+                continue            # a wheel-angle bias does not show in the wheel speed
+            bounds = spec.bounds(params[0].name, sensor) if hasattr(spec, "bounds") else (None, None)
+            coord = Coord(params[0], *bounds)
+            base = ctx.outputs
+            y = base[comp]
+            s = obj.scale[comp]
+            r0 = obj.residual(base)
+            seg = slice(ci * n, (ci + 1) * n)
+
+            def with_value(v: float) -> dict:
+                e = Effect(name, {"channel": sensor, coord.name: v})
+                return sensorfx.apply(ctx.raw, t, [*ctx.effects, e])
+
+            J = np.zeros_like(r0)
+            if name == "sensor_bias":
+                J[seg] = 1.0 / s
+            elif name == "sensor_scale":
+                J[seg] = y / s
+            else:
+                J[seg] = -np.gradient(y, t) / s
+            if name in ("sensor_bias", "sensor_scale"):
+                jj = float(J @ J)
+                free = -float(J @ r0) / jj if jj > 0 else 0.0
+            else:   # delay: grid then parabola
+                grid = np.linspace(coord.tlo, coord.thi, 81)
+                costs = []
+                for d in grid:
+                    yd = sensorfx.delayed(t, y, d)
+                    costs.append(float(np.sum(((yd - obj.mean[comp]) / s) ** 2)))
+                k = int(np.argmin(costs))
+                free = float(grid[k])
+                if 0 < k < grid.size - 1:
+                    c0, c1, c2 = costs[k - 1], costs[k], costs[k + 1]
+                    den = c0 - 2 * c1 + c2
+                    if den > 0:
+                        free += 0.5 * (c0 - c2) / den * (grid[1] - grid[0])
+                yd = sensorfx.delayed(t, y, free)
+                J[seg] = -np.gradient(yd, t) / s
+            th = coord.clip(free)
+            span = coord.thi - coord.tlo
+            requested = coord.value(free) if abs(free - th) > 0.05 * span else None
+            out = with_value(coord.value(th))
+            eff = Effect(name, {"channel": sensor, coord.name: coord.value(th)})
+            cands.append(_finish(ctx, eff, "sensor", 2, out, J, th, coord, 0, requested,
+                                 "fitted on the model outputs (no re-simulation)"))
+    return cands
+
+
+# ------------------------------------------------------------------------------ per-run estimates
+def run_estimate(ctx: Context, cand: Candidate, i: int) -> float:
+    """Run i's own estimate of the winner's coordinate: the model with the winner at theta* replayed
+    with run i's own inputs, and one Gauss-Newton step from theta* against run i's channels,
+    theta_i = theta* - (J . r_i) / (J . J). Replaying each run's own inputs removes the bias that
+    averaging runs with slightly different event times gives to the mean (an onset of motion or a
+    stop smeared by the averaging, against the model's crisp one); these replays run at the model's
+    own step (dt), which also removes the small bias of fitting at fit_dt. The interval combine_runs
+    draws from them covers the run-to-run scatter, not systematic errors of the rest of the model."""
+    effects = [*ctx.effects, cand.effect]
+    inp = ctx.replayer.inputs(ctx.bench, run=i)
+    raw = ctx.replayer.simulate(inp, effects)        # at the model's own step: no discretisation bias
+    out = sensorfx.apply(raw, inp.t, effects)
+    r = ctx.objective.residual_to_run(out, i)
+    return cand.theta - float(cand.J @ r) / float(cand.J @ cand.J)
+
+
+def combine_runs(cand: Candidate, thetas: list[float]) -> None:
+    """Replace the winner's value by the mean of the per-run estimates and its uncertainty by the
+    Student-t interval of that mean, t_(0.975, n-1) S / sqrt(n) (eq. 6 applied to the parameter),
+    when the mean stays in the plausible range."""
+    th = np.array(thetas)
+    n = th.size
+    c = cand.coord
+    if n < 2 or c is None or not np.all(np.isfinite(th)):
+        return
+    mean = float(th.mean())
+    half = t_critical(n) * float(th.std(ddof=1)) / math.sqrt(n)
+    cand.per_run = [c.value(x) for x in th]
+    if not c.tlo <= mean <= c.thi:
+        cand.note = (cand.note + "; " if cand.note else "") + \
+            f"per-run estimates average {c.value(mean):.4g}, outside the plausible range: mean-input fit kept"
+        return
+    first = c.value(cand.theta)
+    cand.theta = mean
+    cand.u_theta = half
+    cand.effect.params[c.name] = c.value(mean)
+    cand.effect.uncertainty = {c.name: c.value_uncertainty(mean, half)}
+    cand.significant = bool(abs(mean) > half)
+    cand.note = (cand.note + "; " if cand.note else "") + \
+        f"value and 95 % interval from {n} per-run replays (the mean-input fit gave {first:.4g})"
+
+
+TIE_DISTANCE = 0.5
+
+
+def distance(obj: Objective, a: dict, b: dict) -> float:
+    """RMS difference of two model responses in units of the channels' standard errors: below
+    TIE_DISTANCE the data cannot tell the two apart."""
+    d = obj.residual(a) - obj.residual(b)
+    return float(np.sqrt(np.mean(d * d)))
+
+
+def equivalents(obj: Objective, winner: Candidate, cands: list[Candidate]) -> list[tuple[Candidate, float]]:
+    """Other plausible candidates whose fitted response is indistinguishable from the winner's."""
+    out = []
+    for c in cands:
+        if c is winner or not c.plausible or c.reduction < MIN_REDUCTION:
+            continue
+        dist = distance(obj, winner.outputs, c.outputs)
+        if dist < TIE_DISTANCE:
+            out.append((c, dist))
+    return out
+
+
+def rank(cands: list[Candidate]) -> list[Candidate]:
+    """Eligible candidates first (by IC), then the others by IC."""
+    return sorted(cands, key=lambda c: (not c.eligible, c.ic))
+
+
+def evidence_strength(delta: float) -> str:
+    """Kass-Raftery wording for an IC difference between two candidates."""
+    d = abs(delta)
+    if d < 2:
+        return "indistinguishable on this manoeuvre"
+    if d < 6:
+        return "positive evidence"
+    if d < 10:
+        return "strong evidence"
+    return "very strong evidence"

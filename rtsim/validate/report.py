@@ -1,0 +1,231 @@
+"""The report of a validation run: `DIR/report.html` with plots (PNG, matplotlib's headless Agg
+backend) and `DIR/summary.json`:
+
+    {"effects": [{"name", "parameters": {...}, "uncertainty": {...}}, ...],   # in the order added
+     "before": {channel: {"rms", "max", "inside_band"}}, "after": {...},
+     "iterations": [{"iteration", "model_effects", "cost", "metrics", "where", "verdict", "winner",
+                     "runner_up", "candidates", "seconds"}, ...]}
+
+rms and max are in the channel's SI unit; inside_band is the share of samples (0..1) inside the 95 %
+band, null when there is no band (one run). Uncertainties are 95 % half-widths in the parameter's unit.
+"""
+from __future__ import annotations
+
+import html
+import json
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .data import unit  # noqa: E402
+from .effectset import catalogue  # noqa: E402
+from .identify import evidence_strength  # noqa: E402
+from .workflow import Result  # noqa: E402
+
+
+def _clean(x):
+    """JSON-safe: NaN/inf -> None, numpy scalars -> float."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+def summary(res: Result) -> dict:
+    return _clean({
+        "effects": [{"name": e.name, "parameters": dict(e.params), "uncertainty": dict(e.uncertainty)}
+                    for e in res.effects],
+        "before": res.metrics(res.before),
+        "after": res.metrics(res.after),
+        "iterations": [it.summary() for it in res.iterations],
+    })
+
+
+def _plot_channel(res: Result, c: str, path: Path) -> None:
+    b = res.bench.bands[c]
+    t = res.bench.t
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True, gridspec_kw={"height_ratios": [3, 2]})
+    for row in res.bench.values[c]:
+        a1.plot(t, row, color="0.75", lw=0.4)
+    if b.has_band:
+        a1.fill_between(t, b.lower, b.upper, color="tab:blue", alpha=0.3, lw=0, label="95 % band of the mean")
+    a1.plot(t, b.mean, color="tab:blue", lw=1.0, label=f"mean of {b.n} run(s)")
+    a1.plot(t, res.before[c], color="tab:red", lw=0.9, label="model before")
+    if res.effects:
+        a1.plot(t, res.after[c], color="tab:green", lw=0.9, ls="--", label="model after")
+    a1.set_ylabel(f"{c} [{unit(c)}]")
+    a1.legend(loc="best", fontsize=8)
+    if b.has_band:
+        a2.fill_between(t, -b.half, b.half, color="tab:blue", alpha=0.3, lw=0)
+    a2.plot(t, res.before[c] - b.mean, color="tab:red", lw=0.7, label="residual before")
+    if res.effects:
+        a2.plot(t, res.after[c] - b.mean, color="tab:green", lw=0.7, label="residual after")
+    a2.axhline(0.0, color="k", lw=0.5)
+    a2.set_ylabel(f"model - mean [{unit(c)}]")
+    a2.set_xlabel("time [s]")
+    a2.legend(loc="best", fontsize=8)
+    for p in res.regimes.phases:
+        a2.axvline(p.start, color="0.6", lw=0.5, ls=":")
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _plot_inputs(res: Result, path: Path) -> None:
+    names = res.bench.inputs
+    fig, axes = plt.subplots(len(names), 1, figsize=(10, 1.8 * len(names) + 0.6), sharex=True, squeeze=False)
+    t = res.bench.t
+    for ax, c in zip(axes[:, 0], names):
+        b = res.bench.bands[c]
+        for row in res.bench.values[c]:
+            ax.plot(t, row, color="0.75", lw=0.4)
+        if b.has_band:
+            ax.fill_between(t, b.lower, b.upper, color="tab:blue", alpha=0.3, lw=0)
+        ax.plot(t, b.mean, color="tab:blue", lw=1.0)
+        ax.set_ylabel(f"{c}\n[{unit(c)}]", fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _table(rows: list[list], head: list[str]) -> str:
+    h = "".join(f"<th>{html.escape(str(x))}</th>" for x in head)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in r) + "</tr>" for r in rows)
+    return f"<table><tr>{h}</tr>{body}</table>"
+
+
+def _fmt(x, spec=".3g") -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "-"
+    return format(x, spec)
+
+
+def _pct(x) -> str:
+    return "no band" if x is None else f"{100 * x:.1f} %"
+
+
+def write(res: Result, folder: Path) -> dict:
+    """report.html, the plots and summary.json into `folder`; returns the summary."""
+    folder.mkdir(parents=True, exist_ok=True)
+    summ = summary(res)
+    (folder / "summary.json").write_text(json.dumps(summ, indent=2))
+    bench = res.bench
+    plots = []
+    _plot_inputs(res, folder / "inputs.png")
+    for c in bench.compared:
+        name = f"channel_{c}.png"
+        _plot_channel(res, c, folder / name)
+        plots.append((c, name))
+    cat = catalogue()
+    e = html.escape
+    parts = [f"<h1>Validation report: {e(res.options.vehicle.name)}</h1>",
+             f"<p class=verdict><b>Verdict.</b> {e(res.verdict)}</p>"]
+    # identified effects
+    if res.effects:
+        rows = []
+        for eff in res.effects:
+            spec = cat.get(eff.name)
+            for k, v in eff.values().items():
+                u = eff.uncertainty.get(k)
+                pu = next((p.unit for p in spec.params if p.name == k), "") if spec else ""
+                if pu.startswith("unit") and eff.channel:
+                    pu = unit(eff.channel)
+                rows.append([eff.name, eff.channel or "", k, f"{v:.5g}", _fmt(u, ".2g"), pu])
+        parts.append("<h2>Effects added to the model (in order)</h2>" +
+                     _table(rows, ["effect", "channel", "parameter", "value", "+- 95 %", "unit"]))
+    else:
+        parts.append("<h2>Effects added to the model</h2><p>none</p>")
+    # before / after
+    mb, ma = summ["before"], summ["after"]
+    rows = [[c, unit(c), _fmt(mb[c]["rms"]), _fmt(ma[c]["rms"]),
+             _fmt(mb[c]["rms"] / ma[c]["rms"] if ma[c]["rms"] else None, ".2f"), _fmt(mb[c]["max"]), _fmt(ma[c]["max"]),
+             _pct(mb[c]["inside_band"]), _pct(ma[c]["inside_band"])] for c in bench.compared]
+    parts.append("<h2>Gap before and after</h2>" + _table(rows, ["channel", "unit", "RMS before", "RMS after",
+                                                                 "ratio", "max before", "max after",
+                                                                 "inside band before", "inside band after"]))
+    # iterations
+    parts.append("<h2>Iterations</h2>")
+    for it in res.iterations:
+        parts.append(f"<h3>Iteration {it.index}: model {e(', '.join(it.model) or 'as configured')}</h3>")
+        parts.append(f"<p>normalised cost {it.cost:.3g} (about 1 = within the data's own uncertainty).</p>")
+        parts.append("<p><b>Where the model leaves the band</b></p><ul>" +
+                     "".join(f"<li>{e(w)}</li>" for w in it.where) + "</ul>")
+        parts.append(f"<p><b>Outcome.</b> {e(it.verdict)}</p>")
+        if it.winner:
+            w = it.winner
+            spec = cat.get(w.effect.name)
+            bych = ", ".join(f"{c} {m:.2f}" for c, m in w.match_by_channel.items())
+            vals = "; ".join(f"{k} = {v:.5g} +- {w.effect.uncertainty.get(k, float('nan')):.2g}"
+                             for k, v in w.effect.values().items())
+            parts.append("<p><b>Evidence for " + e(w.effect.label()) + ":</b> " + e(
+                f"fitted {vals} (95 %); removes {100 * w.reduction:.1f} % of the disagreement; information "
+                f"criterion {w.delta_ic:+.1f}; its signature ({spec.signature if spec else ''}) matches the "
+                f"residual with cosine {w.match:.2f} (by channel: {bych})") + "</p>")
+            if it.runner_up:
+                r = it.runner_up
+                parts.append("<p><b>Runner-up:</b> " + e(
+                    f"{r.effect.label()}, removes {100 * r.reduction:.1f} %, IC {r.delta_ic:+.1f}; "
+                    f"{evidence_strength(r.ic - w.ic)} for the winner" + (f" ({r.note})" if r.note else "")) + "</p>")
+        if it.candidates:
+            rows = []
+            for c in it.candidates[:25]:
+                vals = ", ".join(f"{k} = {v:.4g} +- {c.effect.uncertainty.get(k, float('nan')):.2g}"
+                                 for k, v in c.effect.values().items())
+                rows.append([c.effect.name, c.effect.channel or "", vals, f"{100 * c.reduction:.1f} %",
+                             f"{c.delta_ic:+.1f}", f"{c.match:.2f}", c.sims, "yes" if c.eligible else "no", c.note])
+            parts.append(_table(rows, ["candidate", "channel", "fitted value (95 %)", "removes", "delta IC",
+                                       "signature match", "simulations", "eligible", "note"]))
+    # config
+    if res.config_path:
+        parts.append(f"<h2>New vehicle config</h2><p>{e(str(res.config_path))} (the original is untouched)</p>"
+                     f"<pre>{e(res.diff)}</pre>")
+    # plots
+    parts.append("<h2>Channels</h2><p>grey: runs; blue: mean and 95 % band; red: model before; green dashed: "
+                 "after. Lower panels: residual (model - mean) and the band's half-width; dotted lines: phase "
+                 "boundaries.</p>")
+    parts.extend(f'<h3>{e(c)}</h3><img src="{e(n)}" alt="{e(c)}">' for c, n in plots)
+    # data
+    al = bench.alignment
+    rows = [[r.name, f"{o:.4f}", _fmt(al.correlation[i] if al.correlation else None, ".4f"), f"{r.rate:.0f}",
+             f"{r.duration:.2f}", "; ".join(r.notes)] for i, (r, o) in enumerate(zip(bench.runs, al.offsets))]
+    parts.append("<h2>Benchmark data</h2>"
+                 f"<p>{bench.n} run(s) used; grid {1 / bench.dt:g} Hz over {bench.t[-1]:.2f} s; alignment: "
+                 f"{e(al.method)}.</p>" +
+                 _table(rows, ["run", "time at grid 0 [s]", "input correlation", "rate [Hz]", "duration [s]", "notes"]))
+    if bench.rejected:
+        parts.append("<p><b>Left out:</b></p><ul>" + "".join(f"<li>{e(r.path.name)}: {e(r.reason)}</li>"
+                                                            for r in bench.rejected) + "</ul>")
+    if bench.notes:
+        parts.append("<ul>" + "".join(f"<li>{e(n)}</li>" for n in bench.notes) + "</ul>")
+    rows = [[c, unit(c), _fmt(v["range"]), _fmt(v["rms_spread"]), _fmt(v["max_spread"]),
+             _pct(v["relative"]) if v["relative"] == v["relative"] else "-"] for c, v in bench.repeatability.items()]
+    parts.append("<p><b>Repeatability of the inputs</b> (run-to-run standard deviation)</p>" +
+                 _table(rows, ["input", "unit", "range", "RMS spread", "max spread", "RMS spread / range"]))
+    parts.append('<img src="inputs.png" alt="inputs">')
+    base = ("config effects: " + ", ".join(x.label() for x in res.base_effects) if res.base_effects
+            else "no effects in the config")
+    parts.append(f"<h2>Model and replay</h2><p>vehicle {e(str(res.options.vehicle))}, road "
+                 f"{e(str(res.replayer.road_path))}, step {res.replayer.dt * 1e3:g} ms (fits at "
+                 f"{res.replayer.fit_dt * 1e3:g} ms); inputs replayed: {e(res.inputs.mode)}; start speed "
+                 f"{res.inputs.speed0:.3g} m/s; {e(base)}.</p>")
+    timing = ", ".join(f"{k} {v:.1f} s" if isinstance(v, float) else f"{k} {v}" for k, v in res.timings.items())
+    parts.append(f"<p>Timing: {e(timing)}</p>")
+    style = ("body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:90%}"
+             "td,th{border:1px solid #bbb;padding:2px 6px}.verdict{background:#eef;padding:6px}"
+             "img{max-width:100%}pre{background:#f6f6f6;padding:6px;overflow-x:auto}")
+    (folder / "report.html").write_text(f"<!doctype html><html><head><meta charset=utf-8><title>rtsim validate"
+                                        f"</title><style>{style}</style></head><body>{''.join(parts)}</body></html>")
+    return summ

@@ -1,0 +1,264 @@
+"""An independent vehicle simulator for the validation tests: a pitch-plane (half-car) model written
+from textbook equations, sharing nothing with rtsim's multibody model but the car's data (the vehicle
+TOML and the .tir file, read here with tomllib and a few lines of parsing).
+
+Model (SI units, x forward, pitch theta positive nose down):
+- sprung body: heave z and pitch theta on linear suspension springs/dampers at the axles (the wheel
+  rates the vehicle config's comments give: 21 / 24 kN/m per front / rear wheel), the sprung mass's
+  load transfer all through the springs (no anti-dive geometry); vehicle speed v from the sum of the
+  tyre forces and aerodynamic drag 0.5 rho CdA v|v|;
+- two axles (left = right in a straight line), each a wheel pair of spin inertia 2 J: drive torque,
+  tyre force Fx at the effective rolling radius, rolling resistance QSY1 Fz r_e (smoothed through
+  standstill), brake torque with stiction (Karnopp: a wheel at rest stays locked while the torque it
+  needs stays below the breakaway torque mu_s/mu times the sliding torque);
+- tyre: a tanh law Fx = mu Fz tanh(Kx kappa' / (mu Fz)) with the MF 5.2 slip stiffness at the axle
+  load, Kx = Fz (PKX1 + PKX2 dfz) exp(PKX3 dfz), and a first-order transient slip
+  sigma d kappa'/dt + |v| kappa' = omega r_e - v (Pacejka, "Tyre and Vehicle Dynamics", sec. 7.2),
+  relaxation length sigma = PTX1 R0 Fz / Fz0, and below V_LOW a damping of the contact spring that
+  fades with speed (as MF-Tyre's low-speed damping); effective rolling radius from the MF formula
+  r_e = R0 - (Fz0 / Cz)(DREFF atan(BREFF Fz / Fz0) + FREFF Fz / Fz0);
+- brake: line pressure from the command through a first-order lag and a rate limit (config
+  [brakes.actuator]), per-wheel sliding torque n mu A R p (seed eq. 5), the rear through the
+  proportioning valve;
+- accelerometer at the sprung centre of mass: a_x cos(theta) - g sin(theta).
+Integration: semi-implicit Euler at 0.5 ms. Hidden effects of its own: added mass at the centre of
+mass, a brake friction scale, an added rolling-resistance coefficient, an accelerometer bias.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+G = 9.81
+V_LOW = 1.0                 # m/s, below which the tyre contact is damped
+LOW_SPEED_DAMPING = 0.15    # fraction of critical damping of the contact spring at standstill
+
+
+def read_tir(path: Path) -> dict[str, float]:
+    out = {}
+    for line in path.read_text().splitlines():
+        line = line.split("$")[0].strip()
+        if "=" in line and not line.startswith(("!", "[", "$")):
+            k, v = (s.strip() for s in line.split("=", 1))
+            try:
+                out[k] = float(v.strip("'"))
+            except ValueError:
+                pass
+    return out
+
+
+@dataclass
+class Car:
+    m_s: float          # sprung mass, kg
+    m_u: float          # unsprung mass per corner, kg
+    a: float            # CG to front axle, m
+    b: float            # CG to rear axle, m
+    h: float            # sprung CG height, m
+    iyy: float          # kg m^2
+    j_f: float          # wheel spin inertia, front, kg m^2
+    j_r: float
+    k_f: float          # wheel rate per wheel, N/m
+    k_r: float
+    c_f: float          # damping at the wheel per wheel, N s/m
+    c_r: float
+    gain_f: float       # brake N m per kPa per wheel
+    gain_r: float
+    brk_ratio_f: float  # mu_s / mu
+    brk_ratio_r: float
+    knee: float         # kPa
+    prop: float
+    act_tau: float      # s
+    act_rate: float     # kPa/s
+    cda: float          # m^2
+    rho: float
+    tir: dict
+
+    @classmethod
+    def from_config(cls, path: Path) -> "Car":
+        cfg = tomllib.loads(path.read_text())
+        tir = read_tir(path.parent / cfg["tyres"]["property_file"])
+        xf = cfg["front"]["hardpoints"]["wheel_centre"][0]
+        xr = cfg["rear"]["hardpoints"]["wheel_centre"][0]
+        cg = cfg["chassis"]["cg_m"]
+        br = cfg["brakes"]
+
+        def gain(ax):
+            return ax["pads"] * ax["mu"] * ax["piston_area"] * ax["effective_radius"] * 1000.0
+
+        # wheel rates from the config's comments: motion ratio 0.75 front, 0.95 rear
+        mf, mr = 0.75, 0.95
+        fs, rs = cfg["front"]["spring"], cfg["rear"]["spring"]
+        return cls(m_s=cfg["chassis"]["mass_kg"], m_u=cfg["front"]["unsprung_mass_kg"], a=xf - cg[0],
+                   b=cg[0] - xr, h=cg[2], iyy=cfg["chassis"]["inertia_kgm2"][1],
+                   j_f=cfg["front"]["wheel_spin_inertia_kgm2"], j_r=cfg["rear"]["wheel_spin_inertia_kgm2"],
+                   k_f=fs["stiffness_n_per_m"] * mf ** 2, k_r=rs["stiffness_n_per_m"] * mr ** 2,
+                   c_f=0.5 * (fs["damping_bump_ns_per_m"] + fs["damping_rebound_ns_per_m"]) * mf ** 2,
+                   c_r=0.5 * (rs["damping_bump_ns_per_m"] + rs["damping_rebound_ns_per_m"]) * mr ** 2,
+                   gain_f=gain(br["front"]), gain_r=gain(br["rear"]),
+                   brk_ratio_f=br["front"]["mu_static"] / br["front"]["mu"],
+                   brk_ratio_r=br["rear"]["mu_static"] / br["rear"]["mu"],
+                   knee=br["proportioning_knee"], prop=br["proportioning_ratio"],
+                   act_tau=br["actuator"]["time_constant"], act_rate=br["actuator"]["rate_limit"],
+                   cda=cfg["aero"]["drag_area_m2"], rho=cfg["aero"]["air_density_kg_m3"], tir=tir)
+
+    def r_e(self, fz: float) -> float:
+        t = self.tir
+        fr = max(fz, 0.0) / t["FNOMIN"]
+        return t["UNLOADED_RADIUS"] - t["FNOMIN"] / t["VERTICAL_STIFFNESS"] * (
+            t["DREFF"] * math.atan(t["BREFF"] * fr) + t["FREFF"] * fr)
+
+    def kx(self, fz: float) -> float:
+        t = self.tir
+        dfz = fz / t["FNOMIN"] - 1.0
+        return fz * (t["PKX1"] + t["PKX2"] * dfz) * math.exp(t["PKX3"] * dfz)
+
+    def sigma(self, fz: float) -> float:
+        t = self.tir
+        return max(t["PTX1"] * t["UNLOADED_RADIUS"] * fz / t["FNOMIN"], 0.02)
+
+
+def simulate(car: Car, brake_cmd, torque_cmd, duration: float, rate: float = 500.0, dt: float = 5e-4,
+             added_mass: float = 0.0, brake_scale: float = 1.0, rr_added: float = 0.0,
+             settle: float = 1.0) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Run the manoeuvre (commands: functions of time, kPa and N m per rear wheel); samples at `rate`
+    after `settle` s standing on the first commands. Returns (time, channels)."""
+    ms = car.m_s + added_mass
+    m = ms + 4 * car.m_u
+    L = car.a + car.b
+    # static axle loads (both wheels), the CG moving with the added mass at the sprung CG
+    fz0_f = G * (ms * car.b / L + 2 * car.m_u)
+    fz0_r = G * (ms * car.a / L + 2 * car.m_u)
+    qsy1 = car.tir.get("QSY1", 0.0) + rr_added
+    mu = car.tir.get("PDX1", 1.0)
+    kf, kr = 2 * car.k_f, 2 * car.k_r
+    cf, cr = 2 * car.c_f, 2 * car.c_r
+    # state
+    v = 0.0
+    z = w = th = q = 0.0
+    # static deflection for the added mass: start at the new equilibrium
+    om = [0.0, 0.0]
+    phi = [0.0, 0.0]
+    kap = [0.0, 0.0]
+    locked = [True, True]
+    p_line = brake_cmd(0.0)
+    jj = [2 * car.j_f, 2 * car.j_r]
+    nset = int(round(settle / dt))
+    nrun = int(round(duration / dt))
+    every = int(round(1.0 / (rate * dt)))
+    rows = []
+    ax_prev = 0.0
+    for n in range(-nset, nrun + 1):
+        t = max(n, 0) * dt
+        if n >= 0 and n % every == 0:
+            fx_tot = ax_prev
+            rows.append((t, fx_tot * math.cos(th) - G * math.sin(th), phi[0], phi[1], p_line,
+                         torque_cmd(t), th))
+        # actuator: first-order lag with rate limit
+        target = p_line + (brake_cmd(t) - p_line) * (1.0 - math.exp(-dt / car.act_tau))
+        step = max(-car.act_rate * dt, min(car.act_rate * dt, target - p_line))
+        p_line = max(0.0, p_line + step)
+        p_f = p_line
+        p_r = p_line if p_line <= car.knee else car.knee + car.prop * (p_line - car.knee)
+        # suspension (compression positive) and wheel loads
+        d_f, d_r = -z + car.a * th, -z - car.b * th
+        dd_f, dd_r = -w + car.a * q, -w - car.b * q
+        f_sf = kf * d_f + cf * dd_f
+        f_sr = kr * d_r + cr * dd_r
+        fz = [fz0_f + f_sf, fz0_r + f_sr]
+        tq = torque_cmd(t)
+        fx = [0.0, 0.0]
+        for i in (0, 1):
+            re = car.r_e(fz[i])
+            sig = car.sigma(fz[i] / 2)
+            # transient slip
+            kap[i] += dt * ((om[i] * re - v) - abs(v) * kap[i]) / sig
+            fzw = fz[i] / 2
+            f1 = mu * fzw * math.tanh(car.kx(fzw) * kap[i] / max(mu * fzw, 1e-9))
+            # low-speed damping of the contact spring (standstill: the tread deflection kappa' sigma
+            # acts as a spring Kx / sigma; damped at LOW_SPEED_DAMPING of critical with a quarter of the car's mass)
+            fade = max(0.0, 1.0 - abs(v) / V_LOW)
+            if fade > 0.0:
+                c_d = LOW_SPEED_DAMPING * 2.0 * math.sqrt(car.kx(fzw) / sig * m / 4.0)
+                f1 += fade * c_d * (om[i] * re - v)
+            fx[i] = 2 * f1
+            t_drive = 2 * tq if i == 1 else 0.0
+            t_rr = qsy1 * fz[i] * re * math.tanh(om[i] / 0.5)
+            gain = (car.gain_f if i == 0 else car.gain_r) * brake_scale
+            p = p_f if i == 0 else p_r
+            t_slide = 2 * gain * p
+            t_break = t_slide * (car.brk_ratio_f if i == 0 else car.brk_ratio_r)
+            t_other = t_drive - fx[i] * re - t_rr
+            if locked[i]:
+                if abs(t_other) <= t_break:
+                    om[i] = 0.0
+                    continue
+                locked[i] = False
+            new = om[i] + dt / jj[i] * (t_other - math.copysign(t_slide, om[i] if om[i] != 0.0 else t_other))
+            if om[i] != 0.0 and (new * om[i] < 0.0) and t_break > abs(t_other):
+                om[i] = 0.0
+                locked[i] = True
+            else:
+                om[i] = new
+        for i in (0, 1):
+            phi[i] += dt * om[i]
+        # body
+        f_aero = 0.5 * car.rho * car.cda * v * abs(v)
+        ax = (fx[0] + fx[1] - f_aero) / m
+        v += dt * ax
+        ax_prev = ax
+        # heave and pitch of the sprung mass: springs, dampers, and its inertia force at the CG against
+        # the ground forces (no anti-dive / anti-squat geometry: the whole load transfer of the sprung
+        # mass goes through the springs)
+        m_pitch = -car.a * f_sf + car.b * f_sr - ms * ax * car.h
+        w += dt * (f_sf + f_sr) / ms
+        q += dt * m_pitch / car.iyy
+        z += dt * w
+        th += dt * q
+    arr = np.array(rows)
+    t = arr[:, 0]
+    out = {"accel_x": arr[:, 1], "wheel_angle_fl": arr[:, 2], "wheel_angle_fr": arr[:, 2].copy(),
+           "wheel_angle_rl": arr[:, 3], "wheel_angle_rr": arr[:, 3].copy(), "brake_pressure": arr[:, 4],
+           "wheel_torque_rl": arr[:, 5], "wheel_torque_rr": arr[:, 5].copy(), "pitch": arr[:, 6]}
+    return t, out
+
+
+# ------------------------------------------------------------------------------------- field data
+BRAKE_T = (0.0, 1.0, 2.5, 7.0, 10.0)
+BRAKE_P = (2500.0, 2500.0, 0.0, 0.0, 1800.0)
+TORQUE = (2.6, 0.5, 2.0, 0.5, 250.0)     # t0, rise, width, fall s; N m per rear wheel
+NOISE = {"accel_x": 0.2, "wheel_angle_fl": 0.002, "wheel_angle_fr": 0.002, "wheel_angle_rl": 0.002,
+         "wheel_angle_rr": 0.002, "brake_pressure": 4.0, "wheel_torque_rl": 1.0, "wheel_torque_rr": 1.0}
+
+
+def write_runs(folder: Path, car: Car, n: int = 7, seed: int = 0, duration: float = 12.0,
+               accel_bias: float = 0.0, **hidden) -> list[Path]:
+    """n repetitions with run-to-run variation, noise and logger offsets, as CSV files."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    paths = []
+    for k in range(n):
+        bt = np.array(BRAKE_T) + np.concatenate([[0.0], rng.normal(0.0, 0.015, len(BRAKE_T) - 1)])
+        bp = np.array(BRAKE_P) * np.concatenate([[1.0] * (len(BRAKE_P) - 1), [1.0 + rng.normal(0.0, 0.015)]])
+        t0, rise, width, fall, amp = TORQUE
+        t0 += rng.normal(0.0, 0.015)
+        amp *= 1.0 + rng.normal(0.0, 0.015)
+        tt = np.array([t0, t0 + rise, t0 + rise + width, t0 + rise + width + fall])
+        tv = np.array([0.0, amp, amp, 0.0])
+        t, ch = simulate(car, lambda s: float(np.interp(s, bt, bp)), lambda s: float(np.interp(s, tt, tv)),
+                         duration, **hidden)
+        ch["accel_x"] = ch["accel_x"] + accel_bias
+        names = list(NOISE)
+        x = np.column_stack([ch[c] + rng.normal(0.0, NOISE[c], t.size) for c in names])
+        k0 = int(rng.integers(0, 125))
+        k1 = t.size - int(rng.integers(0, 125))
+        clock = 50.0 * (k + 1) + rng.uniform(0.0, 1.0)
+        path = folder / f"peer{k + 1}.csv"
+        with path.open("w") as fh:
+            fh.write(",".join(("time", *names)) + "\n")
+            np.savetxt(fh, np.column_stack([t[k0:k1] + clock, x[k0:k1]]), delimiter=",", fmt="%.9g")
+        paths.append(path)
+    return paths

@@ -1,0 +1,70 @@
+"""`rtsim validate` end to end (rtsim/validate/cli.py, report.py, configwrite.py): runs with a hidden
+accelerometer bias in, report.html with its plots, summary.json in the issue's schema, a new vehicle
+config with the effect that the config loader accepts (the original untouched) and its diff; one run
+compares without a band; a missing file is a one-line error."""
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import pytest
+
+from validate_fieldgen import write_runs
+
+from rtsim.validate.cli import _standalone
+from rtsim.validate.replay import Replayer
+from rtsim.vehicle.config import load_vehicle
+
+VEHICLE = Path(__file__).resolve().parents[1] / "configs" / "vehicles" / "xbw.toml"
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cli_runs")
+    rp = Replayer(VEHICLE)
+    return write_runs(folder, rp.model, rp.road, {"sensor_bias": [{"channel": "accel_x", "bias": 0.15}]}, n=7,
+                      seed=7)
+
+
+def test_cli_writes_report_summary_and_new_config(runs, tmp_path, capsys):
+    digest = hashlib.sha256(VEHICLE.read_bytes()).hexdigest()
+    out = tmp_path / "report"
+    assert _standalone(["--vehicle", str(VEHICLE), "--runs", *map(str, runs), "--report", str(out)]) == 0
+    assert hashlib.sha256(VEHICLE.read_bytes()).hexdigest() == digest          # original untouched
+    summ = json.loads((out / "summary.json").read_text())
+    assert set(summ) == {"effects", "before", "after", "iterations"}
+    eff = summ["effects"][0]
+    assert eff["name"] == "sensor_bias" and eff["parameters"]["channel"] == "accel_x"
+    assert abs(eff["parameters"]["bias"] - 0.15) < 0.015 and eff["uncertainty"]["bias"] > 0
+    for part in ("before", "after"):
+        for c in ("wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr", "accel_x"):
+            m = summ[part][c]
+            assert set(m) == {"rms", "max", "inside_band"} and 0.0 <= m["inside_band"] <= 1.0
+    assert summ["after"]["accel_x"]["rms"] * 5 <= summ["before"]["accel_x"]["rms"]
+    assert summ["iterations"][0]["winner"]["name"] == "sensor_bias"
+    html = (out / "report.html").read_text()
+    for img in ("inputs.png", "channel_accel_x.png", "channel_wheel_speed_fl.png"):
+        assert f'src="{img}"' in html and (out / img).stat().st_size > 1000
+    new = out / "xbw_validated.toml"
+    cfg, _ = load_vehicle(new)
+    assert cfg.effects["sensor_bias"][0]["channel"] == "accel_x"
+    assert cfg.tyres.property_file.endswith("michelin_155_80_r13.tir")
+    text = capsys.readouterr().out
+    assert "+[[effects.sensor_bias]]" in text and "verdict:" in text
+
+
+def test_cli_one_run_compares_without_a_band(runs, tmp_path):
+    out = tmp_path / "one"
+    assert _standalone(["--vehicle", str(VEHICLE), "--runs", str(runs[0]), "--report", str(out),
+                        "--no-progress", "--max-iterations", "1"]) == 0
+    summ = json.loads((out / "summary.json").read_text())
+    assert all(m["inside_band"] is None for m in summ["before"].values())
+    assert "no confidence interval" in (out / "report.html").read_text()
+
+
+def test_cli_bad_input_is_one_line(tmp_path, capsys):
+    assert _standalone(["--vehicle", str(VEHICLE), "--runs", str(tmp_path / "nope.csv"), "--report",
+                        str(tmp_path / "r"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("rtsim validate: error:") and "nope.csv: no such file" in err and "\n" not in err
