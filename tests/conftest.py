@@ -2,11 +2,17 @@
 
 tests/references.py holds independent minimal-coordinate reference solutions (numpy + scipy only);
 make it importable as `references` whatever the import mode or working directory.
+
+Markers ``can_e2e`` (CAN end to end across processes; tests/test_vcan.py reruns them over a real
+vcan0) and ``vm`` (boots a qemu VM); the ``can_bus_factory`` fixture gives a test its CAN segment.
 """
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
+
+import pytest
 
 TESTS_DIR = Path(__file__).resolve().parent
 if str(TESTS_DIR) not in sys.path:
@@ -15,10 +21,6 @@ if str(TESTS_DIR) not in sys.path:
 
 # --------------------------------------------------------------------------------------------------
 # CAN segment of a test: SocketCAN (e.g. vcan0 inside tools/vcan_vm.py's VM) or a loopback hub
-
-import os  # noqa: E402
-
-import pytest  # noqa: E402
 
 CAN_INTERFACE_ENV = "RTSIM_CAN_INTERFACE"
 CAN_CHANNEL_ENV = "RTSIM_CAN_CHANNEL"

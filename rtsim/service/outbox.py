@@ -23,7 +23,7 @@ from bridge import payloads
 
 class Outbox:
     def __init__(self, nsensor: int, nstate: int, frame_ids, zenoh=None, recorder=None, status_fn=None,
-                 status_period: float = 0.1, capacity: int = 8192, poll: float = 0.001):
+                 status_period: float = 0.1, capacity: int = 8192, poll: float = 0.005):
         self.zenoh = zenoh
         self.recorder = recorder
         self.status_fn = status_fn

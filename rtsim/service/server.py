@@ -145,7 +145,8 @@ class Service:
         self._open_can()
         if o.record is not None:
             from bridge.mcap_recorder import Recorder
-            self.recorder = Recorder(o.record, self.vehicle_id, metadata=self.session_metadata())
+            self.recorder = Recorder(o.record, self.vehicle_id, metadata=self.session_metadata(),
+                                     poll_interval=0.005)
         if o.zenoh:
             from bridge.zenoh_link import ZenohLink
             self.zenoh = ZenohLink(self.vehicle_id, listen=tuple(o.zenoh_listen),
