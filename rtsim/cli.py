@@ -33,7 +33,8 @@ def _bench(args) -> int:
         from rtsim.benchmarks.service import format_report, run_service_bench
         if not (args.duration > 0 and math.isfinite(args.duration)):
             raise RtsimError(f"--duration must be a positive number of seconds, got {args.duration}")
-        res = run_service_bench(args.duration, record=not args.no_record, zenoh=not args.no_zenoh)
+        res = run_service_bench(args.duration, record=not args.no_record, zenoh=not args.no_zenoh, ecu=args.ecu,
+                                spin=args.spin)
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
     if args.suite == "vehicle":
@@ -142,6 +143,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--duration", type=float, default=60.0, help="service suite: wall seconds to run (60)")
     b.add_argument("--no-record", action="store_true", help="service suite: without the MCAP recording")
     b.add_argument("--no-zenoh", action="store_true", help="service suite: without Zenoh")
+    b.add_argument("--spin", type=float, default=0.0002,
+                   help="service suite: busy-wait before each step, s (>= 0.001: never sleep)")
+    b.add_argument("--ecu", choices=["light", "demo"], default="light",
+                   help="service suite: command-only ECU (default) or the demo ECU decoding every frame")
     b.set_defaults(func=_bench)
     r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV")
     r.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")

@@ -36,6 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                                        "times out, kPa (default 3000)")
     p.add_argument("--max-catch-up", type=int,
                    help="after a stall, steps run back to back before the rest are skipped (default 20)")
+    p.add_argument("--spin", type=float, help="busy-wait before each step, s (default 0.0002; a value >= the "
+                                              "step never sleeps: for a dedicated core)")
     p.add_argument("--duration", type=float, help="stop after this many seconds of wall time")
     p.add_argument("--json", action="store_true", help="print the closing summary as JSON")
 
@@ -51,7 +53,8 @@ def options(args) -> ServeOptions:
              "can_channel": args.can_channel, "zenoh_listen": args.zenoh_listen,
              "zenoh_connect": args.zenoh_connect, "record": args.record and Path(args.record),
              "vehicle_id": args.vehicle_id, "state_rate": args.state_rate, "status_rate": args.status_rate,
-             "hold_pressure": args.hold_pressure, "max_catch_up": args.max_catch_up, "duration": args.duration}
+             "hold_pressure": args.hold_pressure, "max_catch_up": args.max_catch_up, "duration": args.duration,
+             "spin": args.spin}
     kw.update({k: v for k, v in flags.items() if v is not None})
     for flag, key, value in (("no_hub", "start_hub", False), ("no_zenoh", "zenoh", False),
                              ("zenoh_allow_remote", "zenoh_allow_remote", True)):

@@ -56,6 +56,8 @@ class ServeOptions:
     status_rate: float = 10.0                   # Hz (Zenoh/MCAP status; the CAN status frame follows the DBC)
     hold_pressure: float | None = None          # kPa applied when the brake command times out
     max_catch_up: int = 20                      # steps run back to back after a stall before skipping
+    spin: float = 0.0002                        # s of busy-wait before each step (the rest is slept);
+                                                # >= dt: never sleep (a dedicated core on a bench)
     duration: float | None = None               # s of wall time (None: until stopped)
     dbc: Path = DEFAULT_DBC
 
@@ -68,6 +70,8 @@ class ServeOptions:
             raise ConfigError(f"--state-rate {self.state_rate}: allowed 1 <= rate <= 1000 Hz")
         if not 1.0 <= self.status_rate <= 10.0:
             raise ConfigError(f"--status-rate {self.status_rate}: allowed 1 <= rate <= 10 Hz")
+        if not 0.0 <= self.spin <= 0.01:
+            raise ConfigError(f"--spin {self.spin}: allowed 0 <= spin <= 0.01 s")
         if not 0 <= self.max_catch_up <= 10000:
             raise ConfigError(f"--max-catch-up {self.max_catch_up}: allowed 0..10000 steps")
         if self.duration is not None and not self.duration > 0:
@@ -164,7 +168,7 @@ class Service:
         self.loop.outbox = self.outbox
         self.pacer = Pacer(self.loop.run_steps, self.sim.dt, "fast" if o.mode == "fast" else (
             "lockstep" if o.mode == "lockstep" else "realtime"), max_catch_up=o.max_catch_up,
-            health=self.health)
+            health=self.health, spin=o.spin)
         if self.zenoh is not None:
             self.zenoh.serve(self.control, self.config)
         self._warm_up()
