@@ -411,7 +411,7 @@ mount -t overlay overlay -o lowerdir=/lower,upperdir=/rw/upper,workdir=/rw/work 
 mount -t proc proc /newroot/proc; mount -t sysfs sys /newroot/sys; mount -t devtmpfs dev /newroot/dev
 mkdir -p /newroot/dev/pts /newroot/dev/shm
 mount -t devpts devpts /newroot/dev/pts; mount -t tmpfs shm /newroot/dev/shm
-mount -t tmpfs tmp /newroot/tmp; mount -t tmpfs run /newroot/run 2>/dev/null
+mount -t tmpfs run /newroot/run 2>/dev/null   # /tmp stays the host's (via the overlay): a checkout may live there
 . /run.env
 i=0
 for d in $VM_SHARES; do
@@ -552,10 +552,10 @@ def run(cmd: Sequence[str], *, cwd: str | Path | None = None, env: Mapping[str, 
         share_caches: bool = True, qemu_args: Sequence[str] = ()) -> VMResult:
     """Boot the VM and run ``cmd`` (argv) in ``cwd`` (default: this process's) with ``vcan0`` up.
 
-    The guest environment: ``PATH`` of this process, ``HOME`` on a tmpfs, ``PYTHONDONTWRITEBYTECODE``,
+    The guest environment: ``PATH`` of this process, ``HOME`` in the RAM overlay, ``PYTHONDONTWRITEBYTECODE``,
     a few locale variables, with ``share_caches`` :func:`numba_env` and ``RTSIM_CACHE`` (rtsim's cache
-    root, e.g. the suspension kinematics fits, exported read-write at the same path: /tmp is a
-    fresh tmpfs in the guest), then ``env``. Each output
+    root, e.g. the suspension kinematics fits, exported read-write at the same path: writes elsewhere
+    land in the guest's RAM overlay and vanish), then ``env``. Each output
     line goes to ``stream`` (if given) as it arrives. Timeouts (s): ``boot_timeout`` until the command
     starts, ``timeout`` for the whole run. ``qemu_args`` are appended to qemu's command line.
     ``smp`` defaults to 1: on this 2-core host (busy) one vCPU ran the CAN tests about twice as fast
