@@ -33,6 +33,14 @@ Chain, per 1 ms step (``powertrain_step``):
    engine speed is returned as ``PO_DTDW`` = d T_rl / d omega_rl = d T_rl / d omega_rr (the same for
    the rr row), for the multibody tangent damping.
 
+Initial states: ``powertrain_state`` (engine speed and gear as given) and ``powertrain_state_rolling``
+(the steady state under wheels already turning: the schedule's gear, the engine where its torque
+balances the converter at that turbine speed, the idle controller settled), which a car started at
+speed uses (rtsim.vehicle.sim). In a panic stop from speed the converter does not hold the braked
+wheels up: slipping, it passes the engine's spin-down as a few tens of N m per rear wheel, and at stall
+with the engine idling only the creep torque 0.5 eta i_1 i_fd TR(0) (omega_idle / K(0))^2 (about
+99 N m per wheel in 1st with the defaults), well below the rear brakes' torque.
+
 ``wheel_torque_source = "measured"`` replaces the drive torques by the inputs ``wheel_torque_rl/rr``
 (the seed's validation inputs); the engine and gearbox still run and report their sensor channels.
 
@@ -48,7 +56,7 @@ import numpy as np
 
 from rtsim.jit import inline_kernel, kernel
 
-from .actuators import (LAG_NPAR, LagConfig, check, from_mapping, lag_init,
+from .actuators import (LAG_NPAR, LAG_Y, LagConfig, check, from_mapping, lag_init,
                         lag_state_size, lag_step, saturate)
 
 RPM = 2.0 * math.pi / 60.0   # rad/s per rpm
@@ -366,6 +374,80 @@ def powertrain_state(params: np.ndarray, dt: float, engine_speed: float | None =
     elif gear < 0:
         s[PS_RATIO_FROM] = -params[PP_REV_RATIO]
     lag_init(params, PP_THR, s, PS_THR, dt, throttle)
+    return s
+
+
+def schedule_gear(params: np.ndarray, speed: float, throttle: float = 0.0) -> int:
+    """The gear the shift schedule holds in D at vehicle speed `speed` (m/s) and throttle (rad) when
+    the car got there accelerating: 1 + the number of upshift lines below the speed (the first step
+    neither up- nor downshifts, as every downshift line lies below its upshift line)."""
+    gear = 1
+    while gear < int(params[PP_NGEAR]) and speed > shift_speeds(params, gear, throttle)[0]:
+        gear += 1
+    return gear
+
+
+def _stable_root(f, lo: float, hi: float, near: float, n: int = 400) -> float:
+    """The zero of f in [lo, hi] where f falls through 0 (a stable equilibrium of J dw/dt = f) nearest
+    `near`; without one, the grid point of smallest |f|."""
+    from scipy.optimize import brentq
+    xs = np.linspace(lo, hi, n)
+    fs = np.array([f(x) for x in xs])
+    roots = [brentq(f, xs[i], xs[i + 1], xtol=1e-12) for i in range(n - 1)
+             if fs[i] > 0.0 >= fs[i + 1]]
+    if not roots:
+        return float(xs[int(np.argmin(np.abs(fs)))])
+    return float(min(roots, key=lambda r: abs(r - near)))
+
+
+def powertrain_state_rolling(params: np.ndarray, dt: float, wheel_speed: float, throttle: float = 0.0,
+                             selector: float = 1.0) -> np.ndarray:
+    """Initial state of a car already rolling with its driven wheels at `wheel_speed` (rad/s, mean of
+    rl and rr) and the throttle settled at `throttle` (rad): the state powertrain_step keeps, so a
+    scenario started at speed has no start-up transient. In D the gear is the schedule's
+    (schedule_gear), the turbine turns at wheel speed x gear ratio x final drive, the lock-up clutch is
+    engaged if its gear and speed say so, and the engine runs at the speed where its map torque
+    balances the converter (and clutch) torque at that turbine speed. Closed throttle while coasting
+    (turbine above idle) that is the overrun equilibrium a little below the turbine speed, with the
+    idle controller wound down to zero; at low turbine speed the engine idles at the set speed with the
+    controller's integral holding the bypass opening that carries the converter's load."""
+    s = powertrain_state(params, dt, throttle=throttle, gear=0)
+    thr = float(s[PS_THR + LAG_Y])          # the settled plate angle (the command within its travel)
+    v = params[PP_RW] * wheel_speed
+    if selector > 0.5:
+        gear = schedule_gear(params, v, thr)
+    elif selector < -0.5:
+        gear = -1
+    else:
+        gear = 0
+    ratio = _gear_ratio(params, gear)
+    s[PS_GEAR] = s[PS_REQ] = gear
+    s[PS_RATIO_FROM] = ratio
+    wt = ratio * params[PP_FD] * wheel_speed
+    coupled = gear != 0
+    locked = (params[PP_LOCKUP] > 0.5 and gear == int(params[PP_LU_GEAR]) and v > params[PP_LU_SPEED])
+    s[PS_LOCKED] = 1.0 if locked else 0.0
+
+    def net(w, idle_i):
+        return _engine_net(params, thr, idle_i, w, wt, coupled, locked)[0]
+
+    idle = params[PP_IDLE]
+    top = 1.05 * max(params[PP_REV], abs(wt))     # an overrunning turbine may drag it past the limiter
+    # above idle the integral winds down to zero (clamped); the engine settles where net(w, 0) = 0
+    w = _stable_root(lambda x: net(x, 0.0), 0.0, top, max(abs(wt), idle))
+    idle_i = 0.0
+    if w < idle:
+        # below idle the integral winds up until the engine idles: net(idle, I) = 0, net rising in I
+        imax = params[PP_IDLE_MAX]
+        if net(idle, imax) <= 0.0:
+            idle_i = imax                      # the bypass cannot carry the load: engine below idle
+            w = _stable_root(lambda x: net(x, imax), 0.0, top, idle)
+        elif net(idle, 0.0) < 0.0:
+            from scipy.optimize import brentq
+            idle_i = brentq(lambda i: net(idle, i), 0.0, imax, xtol=1e-14)
+            w = idle
+    s[PS_OMEGA_E] = w
+    s[PS_IDLE_I] = idle_i
     return s
 
 

@@ -17,13 +17,14 @@ from rtsim.road.model import Road
 from rtsim.road.query import NQUERY, Q_NX, Q_NZ, Q_Z, road_query
 
 from .brake import BP_GAIN, BS_P_FRONT, BS_P_REAR, brake_config, brake_params, brake_state
-from .dynamics import (CMD_BRAKE, Parts, States, VehicleData, make_io, make_vehicle_data, vehicle_advance,
-                       vehicle_mbs_step)
+from .dynamics import (CMD_BRAKE, EX_SELECTOR, Parts, States, VehicleData, make_io, make_vehicle_data,
+                       vehicle_advance, vehicle_mbs_step)
 from .effect_kernels import (FS_DL, FS_HIST, FS_LAG, FX_B_LAG, FX_DL, FX_DL_K, FX_HIST, FX_MASS, FX_ON, fill_history,
                              neutral_params, sensor_stage, state_size)
 from .effects import pack_effects, validate_effects
 from .model import CI_PHI, VehicleModel
-from .powertrain import PP_MEASURED, powertrain_config, powertrain_params, powertrain_state
+from .powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PO_TORQUE_RL, PO_TORQUE_RR, PP_MEASURED,
+                         powertrain_config, powertrain_params, powertrain_state_rolling, powertrain_step)
 from .sensors import NSENSOR
 from .steering import steering_config, steering_params, steering_state
 from .tyre.magic_formula import effective_rolling_radius
@@ -47,8 +48,11 @@ class VehicleSim:
 
     def __init__(self, model: VehicleModel, road: Road, dt: float = 1e-3, brake_pressure: float = 0.0,
                  position=(0.0, 0.0), yaw: float = 0.0, speed: float = 0.0, effects=None):
-        """effects: a mapping of rtsim.vehicle.effects (validated) that replaces the config's [effects];
-        None keeps the config's."""
+        """A car at `position` (m), heading `yaw` (rad), rolling straight at `speed` (m/s) with the
+        powertrain in steady motion with it (D, closed throttle: the schedule's gear, the engine where the
+        converter holds it; rtsim.vehicle.powertrain.powertrain_state_rolling), so a start at speed has
+        no transient. effects: a mapping of rtsim.vehicle.effects (validated) that replaces the config's
+        [effects]; None keeps the config's."""
         self.vm = model
         self.road = road
         self.dt = float(dt)
@@ -60,13 +64,15 @@ class VehicleSim:
         bs = brake_state(bp, self.dt, pressure=brake_pressure, stuck=brake_pressure > 0 and speed == 0)
         self.ptcfg = powertrain_config(cfg.powertrain or None, "powertrain")
         pp = powertrain_params(self.ptcfg)
-        ps = powertrain_state(pp, self.dt)
+        mech = model.mech
+        q0, qd0 = self._placed(mech.q0.copy(), position, yaw, speed)
+        names = mech.coordinate_names
+        w_rear = 0.5 * float(qd0[names.index("spin_rl")] + qd0[names.index("spin_rr")])
+        ps = powertrain_state_rolling(pp, self.dt, w_rear, throttle=0.0, selector=1.0)
         self.vd = make_vehicle_data()
         self.parts = Parts(self.tp, bp, pp, np.zeros(0), neutral_params())
         self.states = States(bs, ps, np.zeros(0), np.zeros(state_size(0)))
         self._effects: dict = {}
-        mech = model.mech
-        q0, qd0 = self._placed(mech.q0.copy(), position, yaw, speed)
         self.sim = Simulation(mech, self.dt, q0=q0, qd0=qd0)
         self.data = self.sim.data
         self.m = mech.model
@@ -80,6 +86,7 @@ class VehicleSim:
         self.states = States(bs, ps, ss, self.states.effects)
         self.io = make_io()
         self.io.commands[CMD_BRAKE] = brake_pressure
+        self._prime_drive(w_rear)
         start = cfg.effects if effects is None else effects
         if start:
             self.set_effects(start)
@@ -118,6 +125,18 @@ class VehicleSim:
             re = float(effective_rolling_radius(tp, self.vm.static_loads[i]))
             vel[names.index(f"spin_{w}")] = speed / re
         return res, vel
+
+    def _prime_drive(self, w_rear: float) -> None:
+        """Drive torques of the steady powertrain (closed throttle, D) put in place before the first
+        step, so that effects started with the car (a driveline's wound-up shafts) start from them.
+        Evaluated on a copy: the powertrain state itself is left at t = 0."""
+        io = self.io
+        pt_in = np.zeros(PI_SIZE)
+        pt_in[PI_OMEGA_RL] = pt_in[PI_OMEGA_RR] = w_rear
+        pt_in[PI_SELECTOR] = io.extra[EX_SELECTOR]
+        powertrain_step(self.parts.powertrain, self.states.powertrain.copy(), pt_in, self.dt, io.pt_out)
+        self.vd.drive[2] = io.pt_out[PO_TORQUE_RL]
+        self.vd.drive[3] = io.pt_out[PO_TORQUE_RR]
 
     def _probe_rack_inertia(self, accel: float = 0.2, steps: int = 20) -> float:
         """The inertia (kg) the guided linkage presents at the rack, measured on copies of the state:
