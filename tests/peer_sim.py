@@ -3,13 +3,19 @@ from textbook equations, sharing nothing with rtsim's multibody model but the ca
 TOML and the .tir file, read here with tomllib and a few lines of parsing).
 
 Model (SI units, x forward, pitch theta positive nose down):
-- sprung body: heave z and pitch theta on linear suspension springs/dampers at the axles (the wheel
-  rates the vehicle config's comments give: 21 / 24 kN/m per front / rear wheel), the sprung mass's
-  load transfer all through the springs (no anti-dive geometry); vehicle speed v from the sum of the
-  tyre forces and aerodynamic drag 0.5 rho CdA v|v|;
+- sprung body: heave z and pitch theta on linear springs/dampers at the axles, the sprung mass's load
+  transfer all through the springs (no anti-dive geometry); vehicle speed v from the sum of the tyre
+  forces and aerodynamic drag 0.5 rho CdA v|v|. Ride rate per wheel: the spring's rate times the square
+  of its installation ratio, in series with the tyre's vertical stiffness (Milliken & Milliken, "Race
+  Car Vehicle Dynamics", ch. 16-17). The installation ratio comes from a front-view (y-z) instant-centre
+  analysis of the config's hardpoints (`installation_ratio`): a few lines of plane geometry, not the
+  multibody model's 3-D linkage solution; the damper's likewise;
 - two axles (left = right in a straight line), each a wheel pair of spin inertia 2 J: drive torque,
-  tyre force Fx at the effective rolling radius, rolling resistance QSY1 Fz r_e (smoothed through
-  standstill), brake torque with stiction (Karnopp: a wheel at rest stays locked while the torque it
+  tyre force Fx acting at the loaded radius r_l = R0 - Fz / Cz (the contact point's depth below the
+  wheel centre: the wheel's moment balance J omega' = T - Fx r_l - My), rolling resistance
+  My = Fz R0 (QSY1 + QSY3 |v| / V_ref + QSY4 (v / V_ref)^4) (MF 5.2; its sign smoothed through
+  standstill with tanh(2 omega r_e / VXLOW), VXLOW being the tyre file's low-speed blending speed), brake
+  torque with stiction (Karnopp: a wheel at rest stays locked while the torque it
   needs stays below the breakaway torque mu_s/mu times the sliding torque);
 - tyre: a tanh law Fx = mu Fz tanh(Kx kappa' / (mu Fz)) with the MF 5.2 slip stiffness at the axle
   load, Kx = Fz (PKX1 + PKX2 dfz) exp(PKX3 dfz), and a first-order transient slip
@@ -22,7 +28,8 @@ Model (SI units, x forward, pitch theta positive nose down):
   proportioning valve;
 - accelerometer at the sprung centre of mass: a_x cos(theta) - g sin(theta).
 Integration: semi-implicit Euler at 0.5 ms. Hidden effects of its own: added mass at the centre of
-mass, a brake friction scale, an added rolling-resistance coefficient, an accelerometer bias.
+mass, a brake friction scale, an added rolling-resistance coefficient (a force c Fz at each contact
+patch, the catalogue's definition), an accelerometer bias.
 """
 from __future__ import annotations
 
@@ -51,6 +58,48 @@ def read_tir(path: Path) -> dict[str, float]:
     return out
 
 
+
+def _yz(p) -> np.ndarray:
+    return np.array([p[1], p[2]], dtype=float)
+
+
+def _cross_line(p1, d1, p2, d2) -> np.ndarray:
+    """Intersection of the plane lines p1 + s d1 and p2 + t d2."""
+    s = np.linalg.solve(np.column_stack([d1, -d2]), p2 - p1)[0]
+    return p1 + s * d1
+
+
+def _rot(w: float, r: np.ndarray) -> np.ndarray:
+    """Velocity of a point at r from a plane rotation's centre, rate w (rad/s, about +x)."""
+    return w * np.array([-r[1], r[0]])
+
+
+def installation_ratio(kind: str, hp: dict) -> float:
+    """Spring compression per unit of wheel-centre rise at design height, from the front view (y-z plane)
+    of the left corner's hardpoints: the knuckle turns about its instant centre (double wishbone: where
+    the two arm lines cross; strut: where the lower arm line crosses the normal to the strut at its top
+    mount), the lower arm about its inner pivot axis."""
+    pivot = 0.5 * (_yz(hp["lower_front"]) + _yz(hp["lower_rear"]))
+    ball = _yz(hp["lower_ball"])
+    centre = _yz(hp["wheel_centre"])
+    if kind == "double_wishbone":
+        upper = 0.5 * (_yz(hp["upper_front"]) + _yz(hp["upper_rear"]))
+        ic = _cross_line(pivot, ball - pivot, upper, _yz(hp["upper_ball"]) - upper)
+        # lower arm rate for a unit knuckle rate: the ball's velocity is the same on both bodies
+        w_arm = np.linalg.norm(ball - ic) / np.linalg.norm(ball - pivot) * np.sign(np.dot(ball - ic, ball - pivot))
+        lo, up = _yz(hp["spring_lower"]), _yz(hp["spring_upper"])
+        v_mount = _rot(w_arm, lo - pivot)
+    else:
+        top, lo = _yz(hp["strut_top"]), _yz(hp["strut_lower"])
+        axis = top - lo
+        ic = _cross_line(pivot, ball - pivot, top, np.array([axis[1], -axis[0]]))
+        up = top
+        v_mount = _rot(1.0, lo - ic)
+    u = (up - lo) / np.linalg.norm(up - lo)
+    rise = _rot(1.0, centre - ic)[1]
+    return float(np.dot(v_mount, u) / rise)
+
+
 @dataclass
 class Car:
     m_s: float          # sprung mass, kg
@@ -61,7 +110,7 @@ class Car:
     iyy: float          # kg m^2
     j_f: float          # wheel spin inertia, front, kg m^2
     j_r: float
-    k_f: float          # wheel rate per wheel, N/m
+    k_f: float          # ride rate per wheel (suspension and tyre in series), N/m
     k_r: float
     c_f: float          # damping at the wheel per wheel, N s/m
     c_r: float
@@ -89,13 +138,19 @@ class Car:
         def gain(ax):
             return ax["pads"] * ax["mu"] * ax["piston_area"] * ax["effective_radius"] * 1000.0
 
-        # wheel rates from the config's comments: motion ratio 0.75 front, 0.95 rear
-        mf, mr = 0.75, 0.95
+        mf = installation_ratio(cfg["front"]["suspension"], cfg["front"]["hardpoints"])
+        mr = installation_ratio(cfg["rear"]["suspension"], cfg["rear"]["hardpoints"])
         fs, rs = cfg["front"]["spring"], cfg["rear"]["spring"]
+        k_tyre = tir["VERTICAL_STIFFNESS"]
+
+        def ride(k_spring, ratio):              # spring at the wheel in series with the tyre
+            k_w = k_spring * ratio ** 2
+            return k_w * k_tyre / (k_w + k_tyre)
+
         return cls(m_s=cfg["chassis"]["mass_kg"], m_u=cfg["front"]["unsprung_mass_kg"], a=xf - cg[0],
                    b=cg[0] - xr, h=cg[2], iyy=cfg["chassis"]["inertia_kgm2"][1],
                    j_f=cfg["front"]["wheel_spin_inertia_kgm2"], j_r=cfg["rear"]["wheel_spin_inertia_kgm2"],
-                   k_f=fs["stiffness_n_per_m"] * mf ** 2, k_r=rs["stiffness_n_per_m"] * mr ** 2,
+                   k_f=ride(fs["stiffness_n_per_m"], mf), k_r=ride(rs["stiffness_n_per_m"], mr),
                    c_f=0.5 * (fs["damping_bump_ns_per_m"] + fs["damping_rebound_ns_per_m"]) * mf ** 2,
                    c_r=0.5 * (rs["damping_bump_ns_per_m"] + rs["damping_rebound_ns_per_m"]) * mr ** 2,
                    gain_f=gain(br["front"]), gain_r=gain(br["rear"]),
@@ -110,6 +165,9 @@ class Car:
         fr = max(fz, 0.0) / t["FNOMIN"]
         return t["UNLOADED_RADIUS"] - t["FNOMIN"] / t["VERTICAL_STIFFNESS"] * (
             t["DREFF"] * math.atan(t["BREFF"] * fr) + t["FREFF"] * fr)
+
+    def r_l(self, fz: float) -> float:
+        return self.tir["UNLOADED_RADIUS"] - max(fz, 0.0) / self.tir["VERTICAL_STIFFNESS"]
 
     def kx(self, fz: float) -> float:
         t = self.tir
@@ -129,17 +187,26 @@ def simulate(car: Car, brake_cmd, torque_cmd, duration: float, rate: float = 500
     ms = car.m_s + added_mass
     m = ms + 4 * car.m_u
     L = car.a + car.b
-    # static axle loads (both wheels), the CG moving with the added mass at the sprung CG
-    fz0_f = G * (ms * car.b / L + 2 * car.m_u)
-    fz0_r = G * (ms * car.a / L + 2 * car.m_u)
-    qsy1 = car.tir.get("QSY1", 0.0) + rr_added
+    # static axle loads (both wheels) of the car as built: its springs' preload carries them at zero
+    # deflection; an added mass's weight (at the sprung CG) deflects the springs: the car sags and,
+    # its front being softer, pitches nose down
+    fz0_f = G * (car.m_s * car.b / L + 2 * car.m_u)
+    fz0_r = G * (car.m_s * car.a / L + 2 * car.m_u)
+    dw = added_mass * G
+    qsy1 = car.tir.get("QSY1", 0.0)
+    qsy3, qsy4 = car.tir.get("QSY3", 0.0), car.tir.get("QSY4", 0.0)
+    r0, v_ref = car.tir["UNLOADED_RADIUS"], car.tir["LONGVL"]
+    vx_low = car.tir.get("VXLOW", 1.0)
     mu = car.tir.get("PDX1", 1.0)
     kf, kr = 2 * car.k_f, 2 * car.k_r
     cf, cr = 2 * car.c_f, 2 * car.c_r
     # state
     v = 0.0
-    z = w = th = q = 0.0
-    # static deflection for the added mass: start at the new equilibrium
+    w = q = 0.0
+    # start at the static equilibrium with the added mass: spring forces dw b / L and dw a / L
+    d_f0, d_r0 = dw * car.b / L / kf, dw * car.a / L / kr       # compressions
+    th = (d_f0 - d_r0) / L
+    z = car.a * th - d_f0
     om = [0.0, 0.0]
     phi = [0.0, 0.0]
     kap = [0.0, 0.0]
@@ -172,11 +239,11 @@ def simulate(car: Car, brake_cmd, torque_cmd, duration: float, rate: float = 500
         tq = torque_cmd(t)
         fx = [0.0, 0.0]
         for i in (0, 1):
-            re = car.r_e(fz[i])
-            sig = car.sigma(fz[i] / 2)
+            fzw = fz[i] / 2                   # per wheel
+            re, rl = car.r_e(fzw), car.r_l(fzw)
+            sig = car.sigma(fzw)
             # transient slip
             kap[i] += dt * ((om[i] * re - v) - abs(v) * kap[i]) / sig
-            fzw = fz[i] / 2
             f1 = mu * fzw * math.tanh(car.kx(fzw) * kap[i] / max(mu * fzw, 1e-9))
             # low-speed damping of the contact spring (standstill: the tread deflection kappa' sigma
             # acts as a spring Kx / sigma; damped at LOW_SPEED_DAMPING of critical with a quarter of the car's mass)
@@ -186,12 +253,16 @@ def simulate(car: Car, brake_cmd, torque_cmd, duration: float, rate: float = 500
                 f1 += fade * c_d * (om[i] * re - v)
             fx[i] = 2 * f1
             t_drive = 2 * tq if i == 1 else 0.0
-            t_rr = qsy1 * fz[i] * re * math.tanh(om[i] / 0.5)
+            vr = abs(v) / v_ref
+            # smooth signs of the rolling speed: over the tyre file's VXLOW for the tyre's own moment, over
+            # 0.1 m/s for the added resistance (the catalogue's definition of rolling_resistance)
+            t_rr = ((qsy1 + qsy3 * vr + qsy4 * vr ** 4) * r0 * math.tanh(2.0 * om[i] * re / vx_low)
+                    + rr_added * rl * math.tanh(om[i] * re / 0.05)) * fz[i]
             gain = (car.gain_f if i == 0 else car.gain_r) * brake_scale
             p = p_f if i == 0 else p_r
             t_slide = 2 * gain * p
             t_break = t_slide * (car.brk_ratio_f if i == 0 else car.brk_ratio_r)
-            t_other = t_drive - fx[i] * re - t_rr
+            t_other = t_drive - fx[i] * rl - t_rr
             if locked[i]:
                 if abs(t_other) <= t_break:
                     om[i] = 0.0
@@ -214,7 +285,7 @@ def simulate(car: Car, brake_cmd, torque_cmd, duration: float, rate: float = 500
         # the ground forces (no anti-dive / anti-squat geometry: the whole load transfer of the sprung
         # mass goes through the springs)
         m_pitch = -car.a * f_sf + car.b * f_sr - ms * ax * car.h
-        w += dt * (f_sf + f_sr) / ms
+        w += dt * (f_sf + f_sr - dw) / ms
         q += dt * m_pitch / car.iyy
         z += dt * w
         th += dt * q

@@ -1,14 +1,16 @@
 """The validation workflow on data it has never seen, from a different simulator (tests/peer_sim.py: a
 textbook pitch-plane car with its own tyre law, brakes, suspension and integrator, sharing only the
-car's data files): the hidden effect is named and fitted, and the gap closes, exactly as on the
-project's own data, on the wheel speeds.
+car's data files): the hidden effect is named and fitted, and the gap closes on the wheel speeds and
+accel_x by the issue's criteria, exactly as on the project's own data.
 
-accel_x: the two simulators differ in the pitch the body takes per m/s^2 (the multibody suspension
-pitches about 1.4 times as much as the half-car with the config's wheel rates, so the accelerometer
-sees a different share of gravity) and in the oscillation after the stop. That leaves 0.03-0.05
-m/s^2 that no effect of the catalogue explains, about one standard error of the mean with the
-peer's vibrating accelerometer (0.2 m/s^2 noise); its RMS still falls 5 times, and at least 80 %
-(not 90 %) of its samples end inside the band."""
+What the two simulators had to agree on first (each a fix of the peer's physics, none a copy of
+rtsim's code): the ride rates from the hardpoints (a front-view instant-centre construction; the config's
+old comments claimed a front installation ratio of 0.75, the linkage gives 0.615, and the peer pitched
+30 % too little), the tyre in series with the suspension, the tyre force acting at the loaded radius in
+the wheel's moment balance, MF rolling resistance with its speed terms, and an added mass that sags the
+car. What still differs is the car rocking on its tyres and brakes after the stop (the peer's brakes
+lock ideally); the comparison of per-run replays (workflow) keeps that from being mistaken for physics.
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -23,10 +25,28 @@ from rtsim.validate.workflow import Options, run
 VEHICLE = Path(__file__).resolve().parents[1] / "configs" / "vehicles" / "xbw.toml"
 WHEELS = ["wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr"]
 
-CASES = {    # hidden in the peer -> (effect, parameter, value)
-    "brake_friction": ({"brake_scale": 0.75}, ("brake_friction", "scale", 0.75)),
-    "rolling_resistance": ({"rr_added": 0.015}, ("rolling_resistance", "coefficient", 0.015)),
+MOTION = [*WHEELS, "accel_x"]
+
+CASES = {    # hidden in the peer -> (effect, parameter, value), affected channels
+    "brake_friction": ({"brake_scale": 0.75}, ("brake_friction", "scale", 0.75), MOTION),
+    "rolling_resistance": ({"rr_added": 0.015}, ("rolling_resistance", "coefficient", 0.015), MOTION),
+    "mass": ({"added_mass": 200.0}, ("mass", "added_mass", 200.0), MOTION),
+    "sensor_bias": ({"accel_bias": 0.25}, ("sensor_bias", "bias", 0.25), ["accel_x"]),
 }
+
+
+def test_peer_and_model_see_the_same_suspension(replayer):
+    """The two simulators share only the config; the ride rates must come out the same from it: the
+    peer's front-view instant-centre installation ratios against the multibody corner's solved linkage
+    (d spring length / d wheel-centre rise at design height)."""
+    import tomllib
+    cfg = tomllib.loads(VEHICLE.read_text())
+    for i, axle in ((0, "front"), (2, "rear")):
+        corner = replayer.model.corners[i]
+        h = 1e-4
+        solved = (corner.spring_length(-h) - corner.spring_length(h)) / (2 * h)
+        plane = peer_sim.installation_ratio(cfg[axle]["suspension"], cfg[axle]["hardpoints"])
+        assert plane == pytest.approx(solved, rel=0.01), axle
 
 
 @pytest.fixture(scope="module")
@@ -36,18 +56,17 @@ def replayer():
 
 @pytest.mark.parametrize("case", list(CASES))
 def test_peer_data_hidden_effect(replayer, tmp_path, case):
-    hidden, (name, param, true) = CASES[case]
+    hidden, (name, param, true), channels = CASES[case]
     car = peer_sim.Car.from_config(VEHICLE)
     peer_sim.write_runs(tmp_path / "runs", car, n=7, seed=21, **hidden)
     res = run(Options(VEHICLE, [tmp_path / "runs"], tmp_path / "report"), replayer=replayer)
+    assert res.effects, res.verdict
     first = res.effects[0]
     equivalent = [lab for lab, _ in res.iterations[0].equivalent]
     assert first.name == name or any(name in lab for lab in equivalent), res.verdict
     if first.name == name:
         assert abs(first.params[param] - true) <= max(0.1 * true, first.uncertainty[param]), first.label()
     before, after = res.metrics(res.before), res.metrics(res.after)
-    for c in WHEELS:
+    for c in channels:
         assert before[c]["rms"] >= 5.0 * after[c]["rms"], (c, before[c], after[c])
         assert after[c]["inside_band"] >= 0.9, (c, after[c])
-    assert before["accel_x"]["rms"] >= 5.0 * after["accel_x"]["rms"], (before["accel_x"], after["accel_x"])
-    assert after["accel_x"]["inside_band"] >= 0.8, after["accel_x"]

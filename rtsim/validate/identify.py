@@ -2,20 +2,22 @@
 re-simulation, and the candidates are ranked by how much of the disagreement they remove, penalised
 by their number of fitted values (objective.Objective.ic).
 
-Fitting a model effect (one parameter p). The parameter is mapped to a coordinate theta that is 0
-where the effect is off (theta = p for additive parameters, p - 1 for a `scale`, the compliance 1/p
-for a `stiffness`; the ParamSpec's `neutral`), so the nominal simulation is the theta = 0 point and
-costs nothing. One trial simulation at a quarter of the plausible range gives a secant sensitivity
-J = d residual / d theta and a Gauss-Newton step theta = -(J . r0) / (J . J) (the screening: two
-simulations). The responses are far from linear in theta (a different brake friction moves the stop
-in time, and the residual of a moved event grows faster than the shift), so Gauss-Newton converges
-slowly from there: the best candidates (workflow.REFINE_TOP) continue with the minimum of the cost
-bracketed (steps of 1.5 times the last distance) and found by Brent's method (parabolic
-interpolation with golden-section safeguards, scipy) to a relative tolerance `TOL`, within
-`MAX_SIMS` simulations. Values stay in the plausible range [lo, hi] of the catalogue's ParamSpec;
-when the data ask for a value beyond it (the Gauss-Newton estimate or the slope at the bound points
-outside), the candidate is rejected as implausible with the value asked for. A candidate that removes
-less than `LITTLE` of the cost at the trial and the first step is not refined.
+Fitting a model effect (one parameter p). The parameter is mapped to a coordinate theta that is 0 where
+the effect is off (theta = p for additive parameters, p - 1 for a `scale`, the compliance 1/p for a
+`stiffness`; the ParamSpec's `neutral`), so the nominal simulation is the theta = 0 point and costs
+nothing. One trial simulation at a quarter of the plausible range gives a secant sensitivity J = d
+residual / d theta and a Gauss-Newton step theta = -(J . r0) / (J . J), halved once when it costs more
+than the model as it stands (the screening: two or three simulations). The responses are far from linear
+in theta (a different brake friction moves the stop in time, and the residual of a moved event grows
+faster than the shift; a softer tyre changes the slips and the yaw response roughly as 1/scale, so a
+secant taken on the stiff side overshoots far on the soft side: the halving finds the valley), so
+Gauss-Newton converges slowly from there: the best candidates (workflow.REFINE_TOP) continue with the
+minimum of the cost bracketed (steps of 1.5 times the last distance) and found by Brent's method
+(parabolic interpolation with golden-section safeguards, scipy) to a relative tolerance `TOL`, within
+`MAX_SIMS` simulations. Values stay in the plausible range [lo, hi] of the catalogue's ParamSpec; when
+the data ask for a value beyond it (the Gauss-Newton estimate or the slope at the bound points outside),
+the candidate is rejected as implausible with the value asked for. A candidate that removes less than
+`LITTLE` of the cost at the trial and the first step is not refined.
 
 Sensor effects need no simulation (sensorfx): bias and scale are linear least squares on their
 channel, the delay is a grid search over its range refined by a parabola.
@@ -273,8 +275,8 @@ def fit_model_effect(ctx: Context, name: str, budget: int = MAX_SIMS,
         t2 = coord.clip(free)
         if abs(free - t2) > 0.05 * span:
             requested = free
-        if t2 not in (0.0, t1):
-            f(t2)
+        if t2 not in (0.0, t1) and f(t2) > c0 and t2 / 2.0 not in (0.0, t1):
+            f(t2 / 2.0)                    # damped Gauss-Newton: a step that overshoots is halved
         best = min(pts, key=sq)
         if sq(best) > (1.0 - LITTLE) * c0:
             raise _Budget                  # neither the trial nor the step helps: not worth more

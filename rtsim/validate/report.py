@@ -22,6 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .benchmark import LATERAL  # noqa: E402
 from .data import unit  # noqa: E402
 from .effectset import catalogue  # noqa: E402
 from .identify import evidence_strength  # noqa: E402
@@ -78,13 +79,33 @@ def _plot_channel(res: Result, c: str, path: Path) -> None:
     a2.legend(loc="best", fontsize=8)
     for p in res.regimes.phases:
         a2.axvline(p.start, color="0.6", lw=0.5, ls=":")
+    _shade_steering(res, (a1, a2))
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)
 
 
+def _shade_steering(res: Result, axes) -> None:
+    """Shade the stretches where the manoeuvre steers (residuals.STEER_ANGLE)."""
+    st = res.regimes.steering
+    if not st.any():
+        return
+    t = res.bench.t
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], st.astype(int), [0]])))
+    for ax in axes:
+        for k, (i0, i1) in enumerate(zip(edges[::2], edges[1::2])):
+            ax.axvspan(t[i0], t[min(i1, t.size - 1)], color="tab:orange", alpha=0.08, lw=0,
+                       label="steering" if k == 0 and ax is axes[0] else None)
+
+
 def _plot_inputs(res: Result, path: Path) -> None:
+    """The replayed inputs: runs, mean and band, and what the model's own sensors read of them (the
+    steering-wheel angle after matching the steer-by-wire command, see replay)."""
     names = res.bench.inputs
+    inp = res.inputs
+    replayed = {c for c, x in (("brake_pressure", inp.brake), ("wheel_torque_rl", inp.torque_rl),
+                               ("wheel_torque_rr", inp.torque_rr), ("throttle_angle", inp.throttle),
+                               ("steering_wheel_angle", inp.steer)) if x is not None}
     fig, axes = plt.subplots(len(names), 1, figsize=(10, 1.8 * len(names) + 0.6), sharex=True, squeeze=False)
     t = res.bench.t
     for ax, c in zip(axes[:, 0], names):
@@ -93,8 +114,11 @@ def _plot_inputs(res: Result, path: Path) -> None:
             ax.plot(t, row, color="0.75", lw=0.4)
         if b.has_band:
             ax.fill_between(t, b.lower, b.upper, color="tab:blue", alpha=0.3, lw=0)
-        ax.plot(t, b.mean, color="tab:blue", lw=1.0)
+        ax.plot(t, b.mean, color="tab:blue", lw=1.0, label="mean")
+        if c in res.before and c in replayed:
+            ax.plot(t, res.before[c], color="tab:red", lw=0.7, ls="--", label="model (replayed)")
         ax.set_ylabel(f"{c}\n[{unit(c)}]", fontsize=8)
+    axes[0, 0].legend(loc="best", fontsize=7)
     axes[-1, 0].set_xlabel("time [s]")
     fig.tight_layout()
     fig.savefig(path, dpi=80)
@@ -156,6 +180,14 @@ def write(res: Result, folder: Path) -> dict:
     parts.append("<h2>Gap before and after</h2>" + _table(rows, ["channel", "unit", "RMS before", "RMS after",
                                                                  "ratio", "max before", "max after",
                                                                  "inside band before", "inside band after"]))
+    if res.comparison:
+        parts.append(f"<p>Model outputs: {e(res.comparison)}.</p>")
+    if res.mean_input and res.mean_input.get("before") is not res.before:
+        mi = {k: res.metrics(v) for k, v in res.mean_input.items()}
+        rows = [[c, unit(c), _fmt(mi["before"][c]["rms"]), _fmt(mi["after"][c]["rms"]), _pct(mi["before"][c]["inside_band"]),
+                 _pct(mi["after"][c]["inside_band"])] for c in bench.compared]
+        parts.append("<h3>The same with the mean inputs replayed once</h3>" + _table(
+            rows, ["channel", "unit", "RMS before", "RMS after", "inside band before", "inside band after"]))
     # iterations
     parts.append("<h2>Iterations</h2>")
     for it in res.iterations:
@@ -195,7 +227,7 @@ def write(res: Result, folder: Path) -> dict:
     # plots
     parts.append("<h2>Channels</h2><p>grey: runs; blue: mean and 95 % band; red: model before; green dashed: "
                  "after. Lower panels: residual (model - mean) and the band's half-width; dotted lines: phase "
-                 "boundaries.</p>")
+                 "boundaries" + ("; orange: the manoeuvre steers" if res.regimes.steering.any() else "") + ".</p>")
     parts.extend(f'<h3>{e(c)}</h3><img src="{e(n)}" alt="{e(c)}">' for c, n in plots)
     # data
     al = bench.alignment
@@ -217,10 +249,18 @@ def write(res: Result, folder: Path) -> dict:
     parts.append('<img src="inputs.png" alt="inputs">')
     base = ("config effects: " + ", ".join(x.label() for x in res.base_effects) if res.base_effects
             else "no effects in the config")
-    parts.append(f"<h2>Model and replay</h2><p>vehicle {e(str(res.options.vehicle))}, road "
+    kind = ("lateral (steering: " + ", ".join(c for c in bench.compared if c in LATERAL) + " compared)"
+            if bench.lateral else "longitudinal (no steering: lateral channels not compared)")
+    steer = ""
+    err = res.inputs.steer_error.get(res.replayer.dt)
+    if err is not None and math.isfinite(err):
+        lead = res.inputs.steer_lead.get(res.replayer.dt, 0) * bench.dt
+        steer = (f"; steering-wheel command matched so that the model's angle follows the measured one within "
+                 f"{err:.2g} rad RMS (loop delay {lead * 1e3:.0f} ms)")
+    parts.append(f"<h2>Model and replay</h2><p>manoeuvre: {e(kind)}; vehicle {e(str(res.options.vehicle))}, road "
                  f"{e(str(res.replayer.road_path))}, step {res.replayer.dt * 1e3:g} ms (fits at "
                  f"{res.replayer.fit_dt * 1e3:g} ms); inputs replayed: {e(res.inputs.mode)}; start speed "
-                 f"{res.inputs.speed0:.3g} m/s; {e(base)}.</p>")
+                 f"{res.inputs.speed0:.3g} m/s{e(steer)}; {e(base)}.</p>")
     timing = ", ".join(f"{k} {v:.1f} s" if isinstance(v, float) else f"{k} {v}" for k, v in res.timings.items())
     parts.append(f"<p>Timing: {e(timing)}</p>")
     style = ("body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:90%}"

@@ -4,11 +4,13 @@ excess (the part of |residual| beyond the band's half-width; the whole |residual
 concentrates.
 
 Regimes, from the benchmark means (one label per sample): `standstill` (speed below 0.1 m/s, speed =
-mean wheel speed x the model's rolling radius), else `braking` (line pressure above 5 % of its peak
-and 50 kPa), `acceleration` (drive torque or throttle above 5 % of its peak), or `coasting`; steering
-(|steering-wheel angle| > 0.05 rad) is flagged on top. Phases are the manoeuvre's successive regimes
-(stretches shorter than 0.3 s merged into the one before). Speed: the excess-weighted mean speed and
-the correlation of |residual| with speed say whether the gap grows with speed.
+mean wheel speed x the model's rolling radius), else `braking` (line pressure above 5 % of its peak and
+50 kPa), `acceleration` (drive torque or throttle above 5 % of its peak), or `coasting`; steering
+(|steering-wheel angle| > `STEER_ANGLE`) is flagged on top. Phases are the manoeuvre's successive
+regimes, a steered stretch being its own phase ("coasting + steering"; stretches shorter than 0.3 s,
+e.g. the steering wheel passing through zero in a lane change, merged into the one before). Speed: the
+excess-weighted mean speed and the correlation of |residual| with speed say whether the gap grows with
+speed.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from .benchmark import Benchmark
 from .signals import WHEEL_SPEEDS
 
 STANDSTILL_SPEED = 0.1       # m/s
+STEER_ANGLE = 0.05           # rad of steering-wheel angle
 MIN_PHASE = 0.3              # s
 REGIMES = ("standstill", "acceleration", "coasting", "braking")
 
@@ -60,15 +63,16 @@ def regimes(bench: Benchmark, wheel_radius: float) -> Regimes:
     lab[drive] = "acceleration"
     lab[brake] = "braking"
     lab[np.abs(speed) < STANDSTILL_SPEED] = "standstill"
-    steer = (np.abs(bench.mean("steering_wheel_angle")) > 0.05 if "steering_wheel_angle" in bench.bands
+    steer = (np.abs(bench.mean("steering_wheel_angle")) > STEER_ANGLE if "steering_wheel_angle" in bench.bands
              else np.zeros(n, bool))
-    # phases: runs of equal labels, short ones merged into the previous
+    # phases: runs of equal labels (steering on top), short ones merged into the previous
+    phase_lab = np.array([f"{x} + steering" if s else x for x, s in zip(lab, steer)], dtype=object)
     t = bench.t
     segs = []
     start = 0
     for i in range(1, n + 1):
-        if i == n or lab[i] != lab[start]:
-            segs.append([lab[start], start, i])
+        if i == n or phase_lab[i] != phase_lab[start]:
+            segs.append([phase_lab[start], start, i])
             start = i
     merged: list[list] = []
     for s in segs:

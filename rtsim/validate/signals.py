@@ -30,7 +30,11 @@ def unwrap_angle(angle: np.ndarray) -> np.ndarray:
 
 def box_average(t: np.ndarray, x: np.ndarray, width: float) -> np.ndarray:
     """Centred moving average of x over `width` seconds (x sampled at the roughly uniform times t):
-    the anti-alias filter applied before decimating onto a coarser grid. Edges use shrinking windows."""
+    the anti-alias filter applied before decimating onto a coarser grid. Near the edges the window
+    shrinks symmetrically (the first and last samples are kept as they are): a one-sided window would
+    move the sample's time, by up to half the width, where the signal ramps (a wheel angle at speed
+    when a recording starts or ends in motion; its derivative at the end would be off by about
+    speed x width / (4 dt_grid))."""
     dt = float(np.median(np.diff(t)))
     k = int(round(width / dt))
     if k < 2:
@@ -38,10 +42,10 @@ def box_average(t: np.ndarray, x: np.ndarray, width: float) -> np.ndarray:
     if k % 2 == 0:
         k += 1
     c = np.concatenate([[0.0], np.cumsum(x)])
-    h = k // 2
     i = np.arange(x.size)
-    lo = np.clip(i - h, 0, x.size)
-    hi = np.clip(i + h + 1, 0, x.size)
+    h = np.minimum(np.minimum(i, x.size - 1 - i), k // 2)
+    lo = i - h
+    hi = i + h + 1
     return (c[hi] - c[lo]) / (hi - lo)
 
 

@@ -6,26 +6,40 @@
    model fitted and ranked (identify), the winner added when the evidence is strong, the runner-up
    reported; stop when every compared channel is inside the band (>= `INSIDE_ENOUGH` of its samples),
    when no candidate helps, or after `max_iterations`;
-4. the new vehicle config with the identified effects and its diff (configwrite), the report
+4. the gap before and after: with two runs or more, every run's own inputs are replayed through the
+   model as given and with the identified effects, and the outputs are averaged over the runs exactly
+   as the benchmark averages the data (`Result.before` / `after`; the fits use the mean inputs). A
+   manoeuvre's events (the onset of motion, the stop and the car rocking after it) happen at slightly
+   different times in each run: the data's mean smears them, so the model replayed once with the mean
+   inputs, its events crisp, differs from the mean by an averaging artefact that is no missing physics;
+   the mean-input replays are kept (`Result.mean_input`) and shown in the report;
+5. the new vehicle config with the identified effects and its diff (configwrite), the report
    (report.html, plots, summary.json).
 
 The loop also stops when every channel's normalised cost (objective) is at most 1, i.e. the model is
 within the data's own uncertainty: a candidate fitted there would fit noise and averaging artefacts.
 
-Cost per iteration: every model effect is screened with two simulations (a trial value and one
-Gauss-Newton step), the `REFINE_TOP` best are refined to convergence (identify.MAX_SIMS simulations at
-most), sensor effects need none; candidates are fitted in parallel by `workers` processes forked after
-the model is built (the compiled model is shared, never rebuilt). The loop also stops when every
-channel's normalised cost (objective) is at most 1, i.e. the model is within the data's own
-uncertainty: a candidate fitted there would fit noise and averaging artefacts.
+Cost per iteration: every model effect is screened with two or three simulations (a trial value, one
+Gauss-Newton step, halved once when it overshoots), the `REFINE_TOP` best are refined to convergence
+(identify.MAX_SIMS simulations at most), sensor effects need none; candidates are fitted in parallel by
+`workers` processes forked after the model is built (the compiled model is shared, never rebuilt). Each
+run's replay inputs (its steering command matched to its measured angle, see replay) are prepared once,
+in parallel, before the first per-run replay. A simulation error in a worker comes back as text
+(_Failed): a per-run replay that fails leaves the mean-input fit and its linearised interval, said so in
+the candidate's note.
 """
 from __future__ import annotations
 
+import math
 import multiprocessing as mp
 import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
+
+from rtsim.errors import RtsimError
 
 from . import sensorfx
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
@@ -42,7 +56,7 @@ INSIDE_ENOUGH = 0.95
 INSIDE_MOSTLY = 0.90
 TRY_WINNERS = 2              # eligible candidates checked run by run before giving up
 CLEAR = 2.0                  # a winner's value must lie this many 95 % half-widths from the off value
-SCREEN_SIMS = 2              # trial and one Gauss-Newton step per model effect
+SCREEN_SIMS = 3              # trial, one Gauss-Newton step (and that step halved if it overshoots)
 REFINE_TOP = 3               # model effects refined to convergence per iteration
 
 
@@ -100,6 +114,8 @@ class Result:
     iterations: list[Iteration]
     verdict: str
     timings: dict = field(default_factory=dict)
+    mean_input: dict = field(default_factory=dict)   # "before"/"after": the mean-input replays' outputs
+    comparison: str = ""              # how `before` and `after` were made
     config_path: Path | None = None
     diff: str = ""
 
@@ -119,12 +135,33 @@ class _Quiet:
 _CTX: Context | None = None
 
 
+@dataclass
+class _Failed:
+    """A task's RtsimError, as text: SimulationError and its kind cannot be unpickled (their __init__
+    takes more than the message), and an exception that fails to unpickle in the parent kills the
+    pool's result thread and hangs the workflow."""
+    message: str
+
+
 def _task(task: tuple):
-    """One unit of parallel work on the iteration's context: ("fit", name, budget, seed) or
-    ("run", candidate, run index)."""
-    if task[0] == "fit":
-        return fit_model_effect(_CTX, *task[1:])
-    return run_estimate(_CTX, task[1], task[2])
+    """One unit of parallel work on the iteration's context: ("fit", name, budget, seed),
+    ("run", candidate, run index), ("inputs", run index): that run's replay inputs with the steering
+    command matched at the model's step, or ("replay", effects, run index): the model's outputs under
+    that run's inputs. An RtsimError comes back as _Failed."""
+    try:
+        if task[0] == "fit":
+            return fit_model_effect(_CTX, *task[1:])
+        if task[0] == "inputs":
+            inp = _CTX.replayer.inputs(_CTX.bench, run=task[1])
+            _CTX.replayer.steering_command(inp, _CTX.replayer.dt)
+            return inp
+        if task[0] == "replay":
+            effects, i = task[1], task[2]
+            inp = _CTX.replayer.inputs(_CTX.bench, run=i)
+            return sensorfx.apply(_CTX.replayer.simulate(inp, effects), inp.t, effects)
+        return run_estimate(_CTX, task[1], task[2])
+    except RtsimError as exc:
+        return _Failed(f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
 
 
 def _map(ctx: Context, tasks: list[tuple], workers: int, progress) -> list:
@@ -147,20 +184,28 @@ def _map(ctx: Context, tasks: list[tuple], workers: int, progress) -> list:
     return out
 
 
+def _raise_failed(results: list) -> list:
+    for r in results:
+        if isinstance(r, _Failed):
+            raise RtsimError(r.message)
+    return results
+
+
 def _fit_model_candidates(ctx: Context, names: list[str], workers: int, progress) -> list[Candidate]:
-    """Screen every model effect (trial + one Gauss-Newton step), then refine the `REFINE_TOP` best to
+    """Screen every model effect (trial + one damped Gauss-Newton step), then refine the `REFINE_TOP` best to
     convergence, continuing from their screening simulations; candidates run in parallel."""
-    screened = _map(ctx, [("fit", n, SCREEN_SIMS, None) for n in names], workers, progress)
+    screened = _raise_failed(_map(ctx, [("fit", n, SCREEN_SIMS, None) for n in names], workers, progress))
     screened.sort(key=lambda c: c.cost)
     top = [c for c in screened[:REFINE_TOP] if c.reduction > 0.0]
-    refined = _map(ctx, [("fit", c.effect.name, MAX_SIMS, c.points) for c in top], workers, progress)
+    refined = _raise_failed(_map(ctx, [("fit", c.effect.name, MAX_SIMS, c.points) for c in top], workers,
+                                 progress))
     byname = {c.effect.name: c for c in refined}
     out = []
     for c in screened:
         if c.effect.name in byname:
             out.append(byname[c.effect.name])
         else:
-            c.note = (c.note + "; " if c.note else "") + "screened (trial and one step), not refined"
+            c.note = (c.note + "; " if c.note else "") + "screened (trial and one damped step), not refined"
             out.append(c)
     ctx.replayer.simulations += sum(c.sims for c in out)
     return out
@@ -174,6 +219,32 @@ def _metrics(bench: Benchmark, outputs: dict) -> dict:
 def _inside(metrics: dict, share: float = None) -> bool:
     vals = [m["inside_band"] for m in metrics.values()]
     return all(v is not None and v >= (INSIDE_ENOUGH if share is None else share) for v in vals)
+
+
+def _prepare_runs(ctx: Context, workers: int) -> None:
+    """Each run's replay inputs (steering matched), once per benchmark, in parallel."""
+    rp, bench = ctx.replayer, ctx.bench
+    if rp.prepared(bench):
+        return
+    for i, ri in enumerate(_map(ctx, [("inputs", i) for i in range(bench.n)], workers, _Quiet())):
+        if not isinstance(ri, _Failed):
+            rp.remember(bench, i, ri)
+
+
+def _replay_runs(ctx: Context, effects: list[Effect], workers: int) -> tuple[dict | None, str]:
+    """The model's counterpart of the benchmark mean: every run's own inputs replayed (at the model's
+    step) with `effects`, the outputs averaged over the runs exactly as the data are. (None, why) with
+    one run or when a replay fails."""
+    bench = ctx.bench
+    if bench.n < 2:
+        return None, "one run"
+    _prepare_runs(ctx, workers)
+    outs = _map(ctx, [("replay", effects, i) for i in range(bench.n)], workers, _Quiet())
+    ctx.replayer.simulations += bench.n
+    failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(outs) if isinstance(r, _Failed)]
+    if failed:
+        return None, "a per-run replay failed (" + "; ".join(failed) + ")"
+    return {c: np.mean([o[c] for o in outs], axis=0) for c in outs[0]}, ""
 
 
 def run(opts: Options, replayer: Replayer | None = None) -> Result:
@@ -232,10 +303,16 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
         ranked = rank(cands)
         win = None
         for cand in [c for c in ranked if c.eligible][:TRY_WINNERS]:
-            if bench.n >= 2:                 # the value and its interval from the runs one by one
-                thetas = _map(ctx, [("run", cand, i) for i in range(bench.n)], workers, prog)
+            if bench.n >= 2:
+                _prepare_runs(ctx, workers)                 # the value and its interval from the runs one by one
+                ests = _map(ctx, [("run", cand, i) for i in range(bench.n)], workers, prog)
                 rp.simulations += bench.n
-                combine_runs(cand, thetas)
+                failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(ests) if isinstance(r, _Failed)]
+                if failed:
+                    cand.note = (cand.note + "; " if cand.note else "") + (
+                        "per-run replay failed (" + "; ".join(failed) + "): the mean-input fit and its "
+                        "linearised interval kept")
+                combine_runs(cand, [math.nan if isinstance(r, _Failed) else r for r in ests])
             if abs(cand.theta) >= CLEAR * cand.u_theta:
                 win = cand
                 break
@@ -290,8 +367,19 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
         verdict = f"stopped after {opts.max_iterations} iterations: " + iterations[-1].verdict
     t3 = time.perf_counter()
     after = sensorfx.apply(rp.simulate(inp, [*base, *effects]), bench.t, [*base, *effects]) if effects else before
+    replayed = {"before": before, "after": after}
+    ctx = Context(bench, obj, rp, inp, [*base, *effects], after, {}, 0.0, bench.n)
+    ens_before, why = _replay_runs(ctx, base, workers)
+    ens_after = (_replay_runs(ctx, [*base, *effects], workers)[0] if effects else ens_before) if ens_before else None
+    if ens_before is not None and ens_after is not None:
+        before, after = ens_before, ens_after
+        comparison = ("per-run replays averaged: each run's own inputs replayed and the model outputs averaged "
+                      "over the runs like the data (the mean-input replay is kept in the report)")
+    else:
+        comparison = f"the mean inputs replayed ({why or 'a per-run replay failed'})"
     tm["final_simulation"] = time.perf_counter() - t3
     tm["identification"] = sum(it.seconds for it in iterations)
     tm["simulations"] = rp.simulations
     tm["total"] = time.perf_counter() - t0
-    return Result(opts, bench, inp, rp, obj, reg, base, effects, before, after, iterations, verdict, tm)
+    return Result(opts, bench, inp, rp, obj, reg, base, effects, before, after, iterations, verdict, tm,
+                  mean_input=replayed, comparison=comparison)

@@ -135,8 +135,12 @@ class BrakeConfig:
     proportioning_knee: float = 2500.0    # kPa, rear pressure = line pressure up to here
     proportioning_ratio: float = 0.4      # -, rear pressure slope above the knee
     actuator: LagConfig = field(default_factory=_default_actuator)   # kPa, kPa/s
-    anchor_stiffness: float = 3.0e4       # N*m/rad, stick spring
-    anchor_damping: float = 250.0         # N*m*s/rad, stick damper
+    # stick spring: stands for the pads' and caliper's shear compliance. 1e5 N*m/rad is ~4x the tyre's
+    # contact spring seen at the wheel (Kx / sigma r^2 ~ 2.6e4), so a held wheel adds little compliance
+    # of its own to the car rocking on its tyres after a stop (3e4 doubled it); 3e5 stalls Newton at
+    # the validation's 2 ms fitting step. Damping ratio ~0.8 with the wheel's spin inertia.
+    anchor_stiffness: float = 1.0e5       # N*m/rad
+    anchor_damping: float = 450.0         # N*m*s/rad
     omega_eps: float = 0.05               # rad/s, sliding-law regularisation band
     omega_stick: float = 0.05             # rad/s, a slowing wheel sticks below this speed
 
