@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.channels import SENSOR_NAMES
-from rtsim.vehicle.dynamics import CMD_BRAKE, CMD_THROTTLE
+from rtsim.vehicle.dynamics import CMD_BRAKE, CMD_STEER, CMD_THROTTLE
 from rtsim.vehicle.sensors import NSENSOR
 from rtsim.vehicle.sim import VehicleSim
 
@@ -54,9 +54,12 @@ def pedal_profiles(rng: np.random.Generator | None):
     return (lambda t: float(np.interp(t, bt, bp))), (lambda t: float(np.interp(t, tt, tv)))
 
 
-def simulate(model, road, effects: dict | None, rng, duration: float = DURATION) -> tuple[np.ndarray, np.ndarray]:
-    """Noise-free sensor samples at RATE with the effects on: (time, (n, NSENSOR))."""
-    brake, throttle = pedal_profiles(rng)
+def simulate(model, road, effects: dict | None, rng, duration: float = DURATION,
+             profiles=pedal_profiles) -> tuple[np.ndarray, np.ndarray]:
+    """Noise-free sensor samples at RATE with the effects on: (time, (n, NSENSOR)). `profiles(rng)`
+    gives the commands as functions of time: brake (kPa), throttle (rad) and optionally the
+    steering-wheel angle (rad)."""
+    brake, throttle, *steer = profiles(rng)
     sim = VehicleSim(model, road, DT, brake_pressure=brake(0.0), effects=effects or {})
     sim.io.commands[CMD_BRAKE] = brake(0.0)
     sim.step(int(round(SETTLE / DT)))            # the car stood on the brake before the test began
@@ -70,6 +73,8 @@ def simulate(model, road, effects: dict | None, rng, duration: float = DURATION)
         tm = (k - 0.5) / RATE
         sim.io.commands[CMD_BRAKE] = brake(tm)
         sim.io.commands[CMD_THROTTLE] = throttle(tm)
+        if steer:
+            sim.io.commands[CMD_STEER] = steer[0](tm)
         sim.step(every)
         sim.sensors(row)
         out[k] = row
@@ -78,8 +83,10 @@ def simulate(model, road, effects: dict | None, rng, duration: float = DURATION)
 
 
 def write_runs(folder: Path, model, road, effects: dict | None = None, n: int = 7, seed: int = 0,
-               channels: tuple[str, ...] | None = None) -> list[Path]:
-    """n recordings of the manoeuvre with the hidden effects (a set_effects mapping), CSV files in `folder`."""
+               channels: tuple[str, ...] | None = None, profiles=pedal_profiles,
+               duration: float = DURATION) -> list[Path]:
+    """n recordings of the manoeuvre (`profiles`, see simulate) with the hidden effects (a set_effects
+    mapping), CSV files in `folder`."""
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     names = channels or tuple(c for c in SENSOR_NAMES if c in NOISE)
@@ -87,7 +94,7 @@ def write_runs(folder: Path, model, road, effects: dict | None = None, n: int = 
     noise = np.array([NOISE[c] for c in names])
     paths = []
     for i in range(n):
-        t, x = simulate(model, road, effects, rng)
+        t, x = simulate(model, road, effects, rng, duration, profiles)
         x = x[:, idx]
         x = x + rng.normal(0.0, 1.0, x.shape) * noise
         # the logger's own clock and trigger: start up to 0.25 s late, end up to 0.25 s early

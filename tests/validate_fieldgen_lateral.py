@@ -4,9 +4,9 @@ standing on the brake, release, a throttle press through the engine model to abo
 sine of the steering wheel (a lane change: +-1 rad at the wheel, about 3 m/s^2 and 0.25 rad/s at that
 speed; the steer-by-wire command range is +-11 rad), then braking to a stop. Run to run the pedal and
 steering timing (1 sigma 15 ms) and amplitudes (1.5 %) vary; sensors are sampled at 500 Hz with the
-white noise of the straight-line generator (tests/validate_fieldgen.py, whose NOISE, DT, RATE and
-SETTLE this one shares), and each recording starts and ends at a slightly different time on its own
-clock. Only the CSV files reach the workflow. `crop_runs` makes the same recordings start later, with
+white noise of the straight-line generator (tests/validate_fieldgen.py, which runs the model and
+writes the files from this module's command profiles), and each recording starts and ends at a
+slightly different time on its own clock. Only the CSV files reach the workflow. `crop_runs` makes the same recordings start later, with
 the car already moving (a logger triggered at speed).
 
 The steering-wheel angle recorded is the steer-by-wire column angle the model reports (the actuator's
@@ -19,12 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from validate_fieldgen import DT, NOISE, RATE, SETTLE
+import validate_fieldgen as fieldgen
 
-from rtsim.channels import SENSOR_NAMES
-from rtsim.vehicle.dynamics import CMD_BRAKE, CMD_STEER, CMD_THROTTLE
-from rtsim.vehicle.sensors import NSENSOR
-from rtsim.vehicle.sim import VehicleSim
 
 DURATION = 12.0
 #: brake line pressure command nodes (s, kPa): held, released, off, the stop
@@ -63,55 +59,11 @@ def profiles(rng: np.random.Generator | None):
     return (lambda t: float(np.interp(t, bt, bp))), (lambda t: float(np.interp(t, tt, tv))), steer
 
 
-def simulate(model, road, effects: dict | None, rng, duration: float = DURATION) -> tuple[np.ndarray, np.ndarray]:
-    """Noise-free sensor samples at RATE with the effects on: (time, (n, NSENSOR))."""
-    brake, throttle, steer = profiles(rng)
-    sim = VehicleSim(model, road, DT, brake_pressure=brake(0.0), effects=effects or {})
-    sim.io.commands[CMD_BRAKE] = brake(0.0)
-    sim.step(int(round(SETTLE / DT)))            # the car stood on the brake before the test began
-    every = int(round(1.0 / (RATE * DT)))
-    n = int(round(duration * RATE)) + 1
-    out = np.zeros((n, NSENSOR))
-    row = np.zeros(NSENSOR)
-    sim.sensors(row)
-    out[0] = row
-    for k in range(1, n):
-        tm = (k - 0.5) / RATE
-        sim.io.commands[CMD_BRAKE] = brake(tm)
-        sim.io.commands[CMD_THROTTLE] = throttle(tm)
-        sim.io.commands[CMD_STEER] = steer(tm)
-        sim.step(every)
-        sim.sensors(row)
-        out[k] = row
-    out[0, SENSOR_NAMES.index("brake_pressure")] = brake(0.0)
-    return np.arange(n) / RATE, out
-
-
 def write_runs(folder: Path, model, road, effects: dict | None = None, n: int = 7, seed: int = 0,
                channels: tuple[str, ...] | None = None) -> list[Path]:
     """n recordings of the lateral manoeuvre with the hidden effects (a set_effects mapping), CSV files
     in `folder` (the straight-line generator's format, noise and logger offsets)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(seed)
-    names = channels or tuple(c for c in SENSOR_NAMES if c in NOISE)
-    idx = [SENSOR_NAMES.index(c) for c in names]
-    noise = np.array([NOISE[c] for c in names])
-    paths = []
-    for i in range(n):
-        t, x = simulate(model, road, effects, rng)
-        x = x[:, idx]
-        x = x + rng.normal(0.0, 1.0, x.shape) * noise
-        # the logger's own clock and trigger: start up to 0.25 s late, end up to 0.25 s early
-        k0 = int(rng.integers(0, 125))
-        k1 = t.size - int(rng.integers(0, 125))
-        clock = 100.0 * (i + 1) + rng.uniform(0.0, 1.0)
-        tt = t[k0:k1] + clock
-        path = folder / f"run{i + 1}.csv"
-        with path.open("w") as fh:
-            fh.write(",".join(("time", *names)) + "\n")
-            np.savetxt(fh, np.column_stack([tt, x[k0:k1]]), delimiter=",", fmt="%.9g")
-        paths.append(path)
-    return paths
+    return fieldgen.write_runs(folder, model, road, effects, n, seed, channels, profiles, DURATION)
 
 
 def crop_runs(paths: list[Path], folder: Path, start: float) -> list[Path]:
