@@ -368,6 +368,8 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
     t3 = time.perf_counter()
     after = sensorfx.apply(rp.simulate(inp, [*base, *effects]), bench.t, [*base, *effects]) if effects else before
     replayed = {"before": before, "after": after}
+    if bench.n >= 2:
+        prog.stage("replaying every run before and after", None)
     ctx = Context(bench, obj, rp, inp, [*base, *effects], after, {}, 0.0, bench.n)
     ens_before, why = _replay_runs(ctx, base, workers)
     ens_after = (_replay_runs(ctx, [*base, *effects], workers)[0] if effects else ens_before) if ens_before else None
