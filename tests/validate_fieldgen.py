@@ -38,11 +38,12 @@ NOISE = {"accel_x": 0.1, "accel_y": 0.1, "accel_z": 0.05, "gyro_x": 0.002, "gyro
          "wheel_torque_rr": 1.0, "throttle_angle": 0.001, "steering_wheel_angle": 0.0005}
 
 
-def pedal_profiles(rng: np.random.Generator | None):
-    """Brake (kPa) and throttle (rad) commands as functions of time, varied run to run."""
-    bt = np.array(BRAKE_T)
-    bp = np.array(BRAKE_P)
-    t0, rise, width, fall, amp = THROTTLE
+def pedal_profiles(rng: np.random.Generator | None, brake_t=BRAKE_T, brake_p=BRAKE_P, throttle=THROTTLE):
+    """Brake (kPa) and throttle (rad) commands as functions of time (nodes and pulse as BRAKE_T, BRAKE_P,
+    THROTTLE), varied run to run."""
+    bt = np.array(brake_t)
+    bp = np.array(brake_p)
+    t0, rise, width, fall, amp = throttle
     if rng is not None:
         bt = bt + np.concatenate([[0.0], rng.normal(0.0, JITTER, bt.size - 1)])
         bp = bp * np.concatenate([[1.0] * (bp.size - 1), [1.0 + rng.normal(0.0, SPREAD)]])

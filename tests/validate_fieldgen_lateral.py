@@ -30,33 +30,25 @@ BRAKE_P = (2500.0, 2500.0, 0.0, 0.0, 3000.0)
 THROTTLE = (1.8, 0.5, 3.5, 0.5, 0.4)
 #: steering-wheel sine (start s, period s, amplitude rad; positive left): one full period
 STEER = (6.3, 2.5, 1.0)
-#: run-to-run variation of the by-wire commands: timing (s) and amplitude (relative), 1 sigma
-JITTER = 0.015
-SPREAD = 0.015
+#: run-to-run variation of the steering: timing (s) and amplitude (relative), 1 sigma, as the pedals'
+JITTER = fieldgen.JITTER
+SPREAD = fieldgen.SPREAD
 
 
 def profiles(rng: np.random.Generator | None):
     """Brake (kPa), throttle (rad) and steering-wheel (rad) commands as functions of time, varied run
-    to run."""
-    bt, bp = np.array(BRAKE_T), np.array(BRAKE_P)
-    t0, rise, width, fall, amp = THROTTLE
+    to run (the pedals as the straight-line generator varies them)."""
+    brake, throttle = fieldgen.pedal_profiles(rng, BRAKE_T, BRAKE_P, THROTTLE)
     s0, period, samp = STEER
     if rng is not None:
-        bt = bt + np.concatenate([[0.0], rng.normal(0.0, JITTER, bt.size - 1)])
-        bp = bp * np.concatenate([[1.0] * (bp.size - 1), [1.0 + rng.normal(0.0, SPREAD)]])
-        t0 += rng.normal(0.0, JITTER)
-        width += rng.normal(0.0, JITTER)
-        amp *= 1.0 + rng.normal(0.0, SPREAD)
         s0 += rng.normal(0.0, JITTER)
         period *= 1.0 + rng.normal(0.0, SPREAD / 3.0)
         samp *= 1.0 + rng.normal(0.0, SPREAD)
-    tt = np.array([t0, t0 + rise, t0 + rise + width, t0 + rise + width + fall])
-    tv = np.array([0.0, amp, amp, 0.0])
 
     def steer(t: float) -> float:
         return samp * math.sin(2.0 * math.pi * (t - s0) / period) if s0 < t < s0 + period else 0.0
 
-    return (lambda t: float(np.interp(t, bt, bp))), (lambda t: float(np.interp(t, tt, tv))), steer
+    return brake, throttle, steer
 
 
 def write_runs(folder: Path, model, road, effects: dict | None = None, n: int = 7, seed: int = 0,
