@@ -43,8 +43,12 @@ import math
 from pathlib import Path
 from typing import Iterable, Mapping, NamedTuple, Sequence
 
+import numpy as np
+
 from rtsim.channels import COMMAND_NAMES, SENSOR_NAMES
 from rtsim.errors import ConfigError
+
+from . import can_e2e as e2e
 
 DEFAULT_DBC = Path(__file__).resolve().parent.parent / "configs" / "can" / "xbw.dbc"
 
@@ -61,6 +65,9 @@ SAFE_POLICY = {
     "brake_pressure_cmd": "hold_pressure",
     "steering_wheel_angle_cmd": "hold_last",
 }
+#: The values of the SIM_STATUS signals, in the order the compiled step hands them to ``pack_frames``.
+STATUS_SOURCES = ("mode", "sim_time", "loop_overruns", *(f"fault_{f}" for f in FAULTS),
+                  *(f"rejected_{k}" for k in REJECT_KINDS))
 DEFAULT_HOLD_PRESSURE = 3000.0  # kPa, brake line pressure held when BRAKE_CMD times out
 TIMEOUT_PERIODS = 3
 
@@ -363,29 +370,44 @@ class Codec:
         word = int.from_bytes(bytes(data), "little")
         return ((word >> ts.start) & ts.mask) * ts.factor + ts.offset, (word >> cs.start) & cs.mask
 
-    def sensor_layout(self) -> dict[str, "np.ndarray"]:
-        """The sensor frames as flat arrays for the compiled packer (bridge.can_pack): per frame its
-        id and time-stamp position; per signal its frame, channel index and scaling."""
-        import numpy as np
-
+    def sensor_layout(self) -> dict[str, np.ndarray]:
+        """The sensor frames as flat arrays for the compiled packer (``bridge.can_e2e.pack_frames``):
+        per frame its id and time-stamp position; per signal its frame, channel index and scaling."""
         frames, sigs = [], []
         for k, (frame_id, tstart, tmask, items) in enumerate(self._sensor_plans):
             frames.append((frame_id, tstart, tmask))
-            for i, s_ in items:
-                sigs.append((k, i, s_.start, s_.mask, s_.factor, s_.offset, s_.minimum, s_.maximum,
-                             s_.raw_min, s_.raw_max, 1.0 if s_.wrap else 0.0))
-        fr = np.array(frames, dtype=np.int64)
-        sg = np.array(sigs, dtype=np.float64)
-        return {"frame_id": fr[:, 0].copy(), "time_start": fr[:, 1].copy(), "time_mask": fr[:, 2].copy(),
-                "sig_int": sg[:, [0, 1, 2, 3, 8, 9]].astype(np.int64), "sig_float": sg[:, [4, 5, 6, 7, 10]].copy()}
+            sigs += [(k, i, s_) for i, s_ in items]
+        return _layout(frames, sigs)
+
+    def frame_layout(self, name: str, sources: Sequence[str]) -> dict[str, np.ndarray]:
+        """One SIM frame (``SIM_STATUS``, ``SIM_STEP_ACK``) as arrays for ``pack_frames``: signal
+        ``sources[j]`` takes ``values[j]``; a signal not named in ``sources`` takes
+        ``values[len(sources)]`` (keep it 0). No time stamp."""
+        f = self.frames[name]
+        index = {n: j for j, n in enumerate(sources)}
+        return _layout([(f.frame_id, 0, 0)], [(0, index.get(s_.name, len(sources)), s_) for s_ in f.signals])
 
     def command_plan(self, name: str):
         """(FrameInfo, value signal, counter signal, crc signal, data id, fault prefix) of a command."""
         return self._cmd_plans[self._cmd_name(name)]
 
 
+def _layout(frames, sigs) -> dict[str, np.ndarray]:
+    """Arrays of ``pack_frames`` from (frame id, time start, time mask) per frame and (frame index,
+    value index, signal) per signal."""
+    fr = np.array(frames, dtype=np.int64).reshape(-1, 3)
+    return {"frame_id": fr[:, 0].copy(), "time_start": fr[:, 1].copy(), "time_mask": fr[:, 2].copy(),
+            "sig_int": np.array([(k, i, s_.start, s_.mask, s_.raw_min, s_.raw_max) for k, i, s_ in sigs],
+                                dtype=np.int64).reshape(-1, 6),
+            "sig_float": np.array([(s_.factor, s_.offset, s_.minimum, s_.maximum, 1.0 if s_.wrap else 0.0)
+                                   for _, _, s_ in sigs], dtype=np.float64).reshape(-1, 5)}
+
+
 class CommandReceiver:
-    """Decodes ECU command frames with end-to-end checks and a watchdog (see the module docstring)."""
+    """Decodes ECU command frames with end-to-end checks and a watchdog (see the module docstring).
+
+    The checks run in compiled code (``bridge.can_e2e``) over the arrays ``plan`` and ``state``: the
+    service's real-time step calls the same kernels on the same arrays inside its own compiled call."""
 
     def __init__(self, codec: Codec | str | Path | None = None, *, clamp: Iterable[str] = (),
                  hold_pressure: float = DEFAULT_HOLD_PRESSURE, timeouts: Mapping[str, float] | None = None,
@@ -399,146 +421,99 @@ class CommandReceiver:
             raise ValueError(f"clamp: unknown command signals {sorted(bad)}")
         self.hold_pressure = float(hold_pressure)
         self.max_counter_step = int(max_counter_step)
-        self.t0 = float(t0)
         self.names = tuple(COMMAND_NAMES)
         timeouts = dict(timeouts or {})
-        self._plans = {}
+        n = len(self.names)
+        ip = np.zeros((n, e2e.NRP), dtype=np.int64)
+        fp = np.zeros((n, e2e.NRF))
         self.timeout = {}
         self._fault_name = {}
         for i, name in enumerate(self.names):
             f, vs, cs, crcs, data_id, prefix = codec.command_plan(name)
             self.timeout[name] = float(timeouts.get(name, TIMEOUT_PERIODS * f.period))
             self._fault_name[name] = f"{prefix}_timeout"
-            sign_bit = (1 << (vs.length - 1)) if vs.signed else 0
-            self._plans[f.frame_id] = (
-                i, f.length, crcs.start // 8, CRC8_TABLE[0xFF ^ data_id],  # CRC state after the data ID
-                vs.start, vs.mask, sign_bit, 1 << vs.length, vs.factor, vs.offset, vs.raw_min, vs.raw_max,
-                vs.minimum, vs.maximum, name in self.clamp,
-                cs.start, cs.mask, self.timeout[name],
-            )
-        n = len(self.names)
-        self._timeout_by_index = [self.timeout[nm] for nm in self.names]
-        self._policy = [SAFE_POLICY.get(nm, "zero") for nm in self.names]
-        self.value: list[float | None] = [None] * n      # latest valid value
-        self.last_valid_t: list[float | None] = [None] * n
-        self._counter: list[int | None] = [None] * n
-        self.timed_out = [False] * n
-        self.accepted = 0
-        self.counters = {k: 0 for k in ("unknown_id",) + REJECT_KINDS + ("counter_repeated", "counter_jump", "clamped")}
+            ip[i] = (f.frame_id, f.length, crcs.start // 8, CRC8_TABLE[0xFF ^ data_id], vs.start, vs.mask,
+                     (1 << (vs.length - 1)) if vs.signed else 0, 1 << vs.length, vs.raw_min, vs.raw_max,
+                     name in self.clamp, cs.start, cs.mask, e2e.POLICIES[SAFE_POLICY.get(name, "zero")],
+                     self.max_counter_step)
+            fp[i] = (vs.factor, vs.offset, vs.minimum, vs.maximum, self.timeout[name])
+        req, steps, ctr, _, data_id = codec._step_req_plan
+        step = np.array((req.frame_id, req.length, CRC8_TABLE[0xFF ^ data_id], steps.start, steps.mask,
+                         steps.raw_min, steps.raw_max, ctr.start, ctr.mask), dtype=np.int64)
+        self.plan = e2e.RxPlan(ip, fp, np.array(CRC8_TABLE, dtype=np.int64), step)
+        self.state = e2e.make_state(n, self.hold_pressure)
+        self.state.g[e2e.G_T0] = float(t0)
+        self._buf = np.zeros(64, dtype=np.uint8)
+        self._out = np.zeros(n)
+        self.fault_names = tuple(self._fault_name[nm] for nm in self.names)   # per command, its fault flag
 
     def reset(self, t0: float = 0.0) -> None:
         """Forget every command (a new session starting at ``t0``); counters are kept."""
-        self.t0 = float(t0)
-        for i in range(len(self.names)):
-            self.value[i] = None
-            self.last_valid_t[i] = None
-            self._counter[i] = None
-            self.timed_out[i] = False
+        e2e.rx_reset(self.state, float(t0))
 
     def command_index(self, arbitration_id: int) -> int:
         """Index in COMMAND_NAMES of a command frame id (-1 for other ids)."""
-        p = self._plans.get(arbitration_id)
-        return -1 if p is None else p[0]
+        return int(e2e.rx_find(self.plan, int(arbitration_id)))
 
-    # -- hot path -----------------------------------------------------------------------------------
+    # -- one frame --------------------------------------------------------------------------------
     def receive(self, arbitration_id: int, data: bytes, t: float) -> bool:
         """Check and take one frame; True if accepted. Never raises (``data`` that is not bytes-like
         is counted as a wrong DLC)."""
-        p = self._plans.get(arbitration_id)
-        if p is None:
-            self.counters["unknown_id"] += 1
+        i = self.command_index(arbitration_id)
+        if i < 0:
+            self.state.counts[e2e.C_UNKNOWN] += 1
             return False
-        (i, dlc, crc_pos, crc0, vstart, vmask, sign_bit, span, factor, offset, raw_min, raw_max,
-         lo, hi, clamp, cstart, cmask, timeout) = p
         try:
-            if len(data) != dlc:
-                self.counters["dlc"] += 1
-                return False
-            table = CRC8_TABLE
-            crc = crc0
-            for b in data[:crc_pos]:
-                crc = table[crc ^ b]
-            if (crc ^ 0xFF) != data[crc_pos]:
-                self.counters["crc"] += 1
-                return False
-            word = int.from_bytes(data, "little")
+            if isinstance(data, (int, str)):
+                raise TypeError("not bytes-like")
+            raw = bytes(data)
         except Exception:  # noqa: BLE001  (data not bytes-like: count it as a bad frame)
-            self.counters["dlc"] += 1
+            self.state.counts[e2e.C_DLC] += 1
             return False
-        ctr = (word >> cstart) & cmask
-        last = self._counter[i]
-        last_t = self.last_valid_t[i]
-        if last is not None and last_t is not None and t - last_t <= timeout:
-            d = (ctr - last) & cmask
-            if d == 0:
-                self.counters["counter"] += 1
-                self.counters["counter_repeated"] += 1
-                return False
-            if d > self.max_counter_step:
-                self._counter[i] = ctr  # re-synchronise on the sender
-                self.counters["counter"] += 1
-                self.counters["counter_jump"] += 1
-                return False
-        raw = (word >> vstart) & vmask
-        if raw & sign_bit:
-            raw -= span
-        self._counter[i] = ctr
-        if raw < raw_min or raw > raw_max:
-            if not clamp:
-                self.counters["range"] += 1
-                return False
-            self.counters["clamped"] += 1
-            value = lo if raw < raw_min else hi
-        else:
-            value = raw * factor + offset
-        self.value[i] = value
-        self.last_valid_t[i] = t
-        self.timed_out[i] = False
-        self.accepted += 1
-        return True
+        buf = self._buf
+        m = min(len(raw), buf.shape[0])
+        if m:
+            buf[:m] = np.frombuffer(raw, dtype=np.uint8, count=m)
+        return bool(e2e.rx_command(self.plan, self.state, i, buf, len(raw), float(t)))
 
     # -- watchdog -----------------------------------------------------------------------------------
     def check_timeouts(self, t: float) -> dict[str, float]:
         """Update the timeout flags at time ``t`` and return the command values to apply."""
-        out = {}
-        for i, name in enumerate(self.names):
-            ref = self.last_valid_t[i]
-            age = t - (ref if ref is not None else self.t0)
-            self.timed_out[i] = age > self.timeout[name]
-            v = self.value[i]
-            out[name] = v if v is not None and not self.timed_out[i] else self._safe_value(i, v)
-        return out
+        self.apply_timeouts(t, self._out)
+        return {name: float(self._out[i]) for i, name in enumerate(self.names)}
 
     def apply_timeouts(self, t: float, out) -> int:
-        """As ``check_timeouts`` but writes the values into ``out[i]`` (COMMAND_NAMES order, e.g. the
-        vehicle's command array) without building a dict; returns a bit mask of timed-out commands
-        (bit i = COMMAND_NAMES[i]). The real-time loop calls this every step."""
-        mask = 0
-        for i in range(len(self.names)):
-            ref = self.last_valid_t[i]
-            timed_out = t - (ref if ref is not None else self.t0) > self._timeout_by_index[i]
-            self.timed_out[i] = timed_out
-            v = self.value[i]
-            if v is not None and not timed_out:
-                out[i] = v
-            else:
-                mask |= 1 << i
-                out[i] = self._safe_value(i, v)
-        return mask
+        """As ``check_timeouts`` but writes the values into ``out[i]`` (COMMAND_NAMES order, a float
+        array such as the vehicle's command array); returns a bit mask of timed-out commands (bit i =
+        COMMAND_NAMES[i])."""
+        return int(e2e.rx_watchdog(self.plan, self.state, float(t), out))
 
-    def _safe_value(self, i: int, v: float | None) -> float:
-        policy = self._policy[i]
-        if policy == "hold_pressure":
-            return self.hold_pressure
-        if policy == "hold_last":
-            return v if v is not None else 0.0
-        return 0.0
+    # -- reading --------------------------------------------------------------------------------------
+    @property
+    def counters(self) -> dict[str, int]:
+        """Rejections by kind (``unknown_id``, ``dlc``, ``crc``, ``counter``, ``range``,
+        ``counter_repeated``, ``counter_jump``, ``clamped``); a snapshot."""
+        return {k: int(v) for k, v in zip(e2e.COUNTER_NAMES[:e2e.C_ACCEPTED], self.state.counts)}
+
+    @property
+    def accepted(self) -> int:
+        return int(self.state.counts[e2e.C_ACCEPTED])
+
+    @property
+    def timed_out(self) -> list[bool]:
+        return [bool(v) for v in self.state.iv[:, e2e.IV_TIMED_OUT]]
+
+    @property
+    def value(self) -> list[float | None]:
+        """Latest valid value of each command, COMMAND_NAMES order (None before the first one)."""
+        st = self.state
+        return [float(st.fv[i, e2e.FV_VALUE]) if st.iv[i, e2e.IV_HAS_VALUE] else None for i in range(len(self.names))]
 
     @property
     def faults(self) -> dict[str, bool]:
         """Timeout flags by fault name (``throttle_timeout``...), as of the last ``check_timeouts``
         (a valid frame clears its flag at once)."""
-        return {self._fault_name[n]: self.timed_out[i] for i, n in enumerate(self.names)}
+        return {self._fault_name[n]: to for n, to in zip(self.names, self.timed_out)}
 
     @property
     def latest(self) -> dict[str, float | None]:

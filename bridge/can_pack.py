@@ -3,9 +3,8 @@
 ``SensorPacker`` turns one sensor sample (``rtsim.channels.SENSOR_NAMES`` order, SI units) and its
 simulation time into the payloads of every sensor frame with one numba call over layout arrays taken
 from the DBC (``Codec.sensor_layout``): no Python-level work per signal and no allocation per sample.
-The payloads land in a preallocated ``(nframes, 8)`` byte array, and ``messages`` holds one reusable
-``can.Message`` per frame whose ``data`` is refreshed in place by ``refresh_messages()``; python-can
-serialises a message inside ``send``, so reusing the objects is safe. The result is bit-identical to
+The payloads land in a preallocated ``(nframes, 8)`` byte array (the service's step packs them the same
+way, inside its own compiled call: ``rtsim.service.kernel``). The result is bit-identical to
 ``Codec.encode_sensors`` (saturation, NaN -> 0, wrapping signals, round half to even), which the tests
 check on random and out-of-range values.
 
@@ -20,60 +19,9 @@ import math
 import numpy as np
 
 from rtsim.channels import SENSOR_NAMES
-from rtsim.jit import inline_kernel, kernel
 
 from .can_codec import TIME_SIGNAL, Codec
-
-# column indices of Codec.sensor_layout()["sig_int"] / ["sig_float"]
-SI_FRAME, SI_CHANNEL, SI_START, SI_MASK, SI_RAW_MIN, SI_RAW_MAX = range(6)
-SF_FACTOR, SF_OFFSET, SF_MIN, SF_MAX, SF_WRAP = range(5)
-_BIG = 2.0 ** 52
-
-
-@inline_kernel
-def _round_half_even(x):
-    """Python's round(x) for a finite float, as an int."""
-    r = math.floor(x)
-    d = x - r
-    n = int(r)
-    if d > 0.5 or (d == 0.5 and n % 2 != 0):
-        n += 1
-    return n
-
-
-@kernel
-def pack_sensor_frames(values, t_s, time_start, time_mask, sig_int, sig_float, words):
-    """Payload words (little-endian int64, one per frame) of one sensor sample at time t_s (s)."""
-    t_raw = _round_half_even(t_s * 1000.0)
-    for k in range(words.shape[0]):
-        words[k] = (t_raw & time_mask[k]) << time_start[k]
-    for j in range(sig_int.shape[0]):
-        v = values[sig_int[j, SI_CHANNEL]]
-        factor = sig_float[j, SF_FACTOR]
-        offset = sig_float[j, SF_OFFSET]
-        mask = sig_int[j, SI_MASK]
-        if sig_float[j, SF_WRAP] != 0.0:
-            if not math.isfinite(v):
-                v = 0.0
-            x = (v - offset) / factor
-            if abs(x) > _BIG:      # keep the conversion to int exact; the wrap is modulo 2**length
-                span = float(mask + 1)             # anyway (exact: x is integral, span a power of 2)
-                x -= span * math.floor(x / span)
-            raw = _round_half_even(x) & mask
-        else:
-            lo = sig_float[j, SF_MIN]
-            hi = sig_float[j, SF_MAX]
-            if not (lo <= v <= hi):
-                if v != v:
-                    v = 0.0
-                v = min(max(v, lo), hi)
-            raw = _round_half_even((v - offset) / factor)
-            if raw < sig_int[j, SI_RAW_MIN]:
-                raw = sig_int[j, SI_RAW_MIN]
-            elif raw > sig_int[j, SI_RAW_MAX]:
-                raw = sig_int[j, SI_RAW_MAX]
-            raw &= mask
-        words[sig_int[j, SI_FRAME]] |= raw << sig_int[j, SI_START]
+from .can_e2e import pack_frames
 
 
 class SensorPacker:
@@ -88,28 +36,12 @@ class SensorPacker:
         self.sig_float = lay["sig_float"]
         self.words = np.zeros(len(self.frame_ids), dtype=np.int64)
         self.payload = self.words.view(np.uint8).reshape(len(self.frame_ids), 8)   # little-endian
-        self.messages = None
 
     def pack(self, values: np.ndarray, sim_time: float) -> np.ndarray:
         """Pack one sample; returns the (nframes, 8) payload array (a view, overwritten next call)."""
-        pack_sensor_frames(values, sim_time, self.time_start, self.time_mask, self.sig_int,
-                           self.sig_float, self.words)
+        pack_frames(values, sim_time, self.time_start, self.time_mask, self.sig_int, self.sig_float,
+                    self.words)
         return self.payload
-
-    def make_messages(self):
-        """One reusable can.Message per sensor frame (classic, standard id, 8 bytes)."""
-        import can
-
-        self.messages = [can.Message(arbitration_id=int(fid), data=bytes(8), is_extended_id=False)
-                         for fid in self.frame_ids]
-        self._rows = [memoryview(self.payload[k]) for k in range(len(self.frame_ids))]
-        return self.messages
-
-    def refresh_messages(self, timestamp: float = 0.0) -> None:
-        """Copy the last packed payloads into the reusable messages (in place)."""
-        for k, msg in enumerate(self.messages):
-            msg.data[:] = self._rows[k]
-            msg.timestamp = timestamp
 
 
 class SensorDecoder:

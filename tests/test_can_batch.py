@@ -8,7 +8,7 @@ import pytest
 can = pytest.importorskip("can")
 pytest.importorskip("can_remote")
 
-from bridge.can_batch import batch_sender  # noqa: E402
+from bridge.can_batch import batch_sender, frame_sender  # noqa: E402
 from bridge.can_bus import LoopbackHub  # noqa: E402
 
 
@@ -22,7 +22,7 @@ def test_batches_arrive_like_single_sends():
         a, b = hub.open_bus(), hub.open_bus()
         try:
             send_all = batch_sender(a)
-            assert send_all.__qualname__.startswith("_remote_fast_path")   # the fast path is used
+            assert frame_sender(a).__qualname__.startswith("_remote_fast_path")   # the fast path is used
             sent = []
             for k in range(50):
                 msgs = _frames(k)

@@ -8,7 +8,8 @@ import random
 import numpy as np
 import pytest
 
-from bridge.can_codec import Codec
+from bridge.can_codec import FAULTS, REJECT_KINDS, STATUS_SOURCES, Codec
+from bridge.can_e2e import pack_frames
 from bridge.can_pack import SensorDecoder, SensorPacker
 from rtsim.channels import SENSOR_NAMES
 
@@ -46,13 +47,23 @@ def test_packer_is_bit_identical_to_reference_encoder(codec):
             assert bytes(row) == data, (fid, vals, t)
 
 
-def test_reusable_messages_carry_the_packed_payload(codec):
-    packer = SensorPacker(codec)
-    msgs = packer.make_messages()
-    packer.pack(np.linspace(-1, 1, len(SENSOR_NAMES)), 1.234)
-    packer.refresh_messages(5.0)
-    ref = codec.encode_sensors(np.linspace(-1, 1, len(SENSOR_NAMES)), 1.234)
-    assert [(m.arbitration_id, bytes(m.data), m.timestamp) for m in msgs] == [(i, d, 5.0) for i, d in ref]
+def test_status_frame_packs_like_encode_status(codec):
+    """The compiled step packs SIM_STATUS from STATUS_SOURCES values: bit-identical to encode_status,
+    saturating counters and the time included."""
+    lay = codec.frame_layout("SIM_STATUS", STATUS_SOURCES)
+    rng = np.random.default_rng(3)
+    words = np.zeros(1, dtype=np.int64)
+    for _ in range(300):
+        mode = str(rng.choice(sorted(codec.modes)))
+        t = float(rng.choice([rng.uniform(0, 200.0), rng.uniform(0, 3e5), round(rng.uniform(0, 99), 2) + 0.005]))
+        overruns = int(rng.integers(0, 400))
+        faults = {f: bool(rng.integers(0, 2)) for f in FAULTS}
+        rejected = {k: int(rng.integers(0, 100)) for k in REJECT_KINDS}
+        _, ref = codec.encode_status(mode, t, overruns, faults, rejected)
+        vals = np.array([codec.modes[mode], t, overruns, *(float(faults[f]) for f in FAULTS),
+                         *(rejected[k] for k in REJECT_KINDS), 0.0])
+        pack_frames(vals, 0.0, lay["time_start"], lay["time_mask"], lay["sig_int"], lay["sig_float"], words)
+        assert words.tobytes() == ref, (mode, t, overruns, faults, rejected)
 
 
 def test_decoder_recovers_values_within_resolution_and_unwraps(codec):

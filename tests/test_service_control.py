@@ -47,8 +47,8 @@ def test_step_advances_exactly_and_publishes_every_sample(service):
     r = client.control("step", n=100, timeout=20)
     assert r["ok"] and r["sim_time"] == pytest.approx(t0 + 0.1)
     deadline = time.monotonic() + 5
-    while time.monotonic() < deadline and (not got["status"] or not got["sensors"]
-                                           or got["sensors"][-1]["time"] < t0 + 0.1 - 1e-9):
+    while time.monotonic() < deadline and (not got["status"] or any(
+            not got[k] or got[k][-1]["time"] < t0 + 0.1 - 1e-9 for k in ("sensors", "state"))):
         time.sleep(0.05)
     times = [m["time"] for m in got["sensors"] if m["time"] > t0]
     assert len(times) == 50 and times[-1] == pytest.approx(t0 + 0.1)     # 500 Hz: every 2 ms

@@ -1,38 +1,42 @@
-"""The service's CAN port: one python-can bus, a reader thread, error counting and reconnection.
+"""The service's CAN port: one python-can bus, a reader thread, a writer thread, error counting and
+reconnection.
 
-Received frames go into the service's inbox (a ``queue.SimpleQueue`` of ``("can", msg)`` items) from a
-reader thread, so the real-time thread never blocks on the bus and lockstep mode can wait on CAN and
-Zenoh requests alike. ``send``/``send_batch`` are called from the real-time thread: they copy the
-frames (id, payload, time stamp) into a transmit queue, in order, and a writer thread puts them on the
-bus (``bridge.can_batch``: one write per batch where the transport allows). So the socket work of
-sending (a system call that, on loopback, also delivers into the receiver) runs beside the loop, as a
-CAN controller's transmit path would, not inside its period; its CPU is measured in ``tx_cpu``. Nothing
-here raises: a failing send (bus error, vanished interface, hub gone) is counted, the port is marked
-down and the reader thread re-opens the bus every ``retry_interval`` seconds until it is back. Meanwhile
-frames are dropped and counted (the simulation keeps its pace), as are frames beyond ``tx_max`` waiting.
-Error frames on the bus are counted as bus errors too.
+The reader thread puts every received frame (id and payload bytes) into the receive ring of
+``rtsim.service.rings``, which the compiled step empties at its next step, so the real-time thread never
+blocks on the bus; ``notify`` (lockstep mode) is called after each frame to wake a waiting loop. The
+step queues the frames it sends (id, payload, time stamp) in the transmit ring and calls ``wake()``; the
+writer thread puts everything queued on the bus in one write where the transport allows
+(``bridge.can_batch``). So the socket work of sending (a system call that, on loopback, also delivers
+into the receiver) runs beside the loop, as a CAN controller's transmit path would, not inside its
+period; its CPU is measured in ``tx_cpu``. Nothing here raises: a failing send (bus error, vanished
+interface, hub gone) is counted, the port is marked down and the reader thread re-opens the bus every
+``retry_interval`` seconds until it is back. Meanwhile frames are dropped and counted (the simulation
+keeps its pace), as are frames the writer fell a ring's length behind on and frames received while the
+receive ring is full. Error frames on the bus are counted as bus errors too.
 """
 from __future__ import annotations
 
-import collections
 import threading
 import time
 
-from bridge.can_batch import batch_sender
+from bridge.can_batch import frame_sender
 from bridge.can_bus import open_bus
 from rtsim.errors import RtsimError
 
+from .rings import H_RX_DROPPED, H_TX, RingReader, Rings, RxWriter
+
 
 class BusPort:
-    def __init__(self, inbox, interface: str | None = None, channel: str | None = None,
-                 retry_interval: float = 1.0, recv_timeout: float = 0.05):
-        self.inbox = inbox
+    def __init__(self, rings: Rings, interface: str | None = None, channel: str | None = None,
+                 retry_interval: float = 1.0, recv_timeout: float = 0.05, notify=None):
+        self.rings = rings
+        self.notify = notify
         self.interface = interface
         self.channel = channel
         self.retry_interval = float(retry_interval)
         self.recv_timeout = float(recv_timeout)
         self.bus = open_bus(interface, channel)         # the first open must work: raises RtsimError
-        self._send_all = batch_sender(self.bus)
+        self._send_frames = frame_sender(self.bus)
         self.description = f"{self.bus.__class__.__name__} {getattr(self.bus, 'channel_info', channel)}"
         self.sent = 0
         self.received = 0
@@ -45,10 +49,9 @@ class BusPort:
         self._up = True
         self._closed = threading.Event()
         self._lock = threading.Lock()
-        self._tx: collections.deque = collections.deque()
+        self._rx = RxWriter(rings)
+        self._tx = RingReader(rings.heads, H_TX, rings.tx_id.shape[0])
         self._tx_ready = threading.Event()
-        self.tx_max = 20_000                    # batches waiting before new ones are dropped
-        self.tx_dropped = 0
         self.tx_cpu = 0.0                       # s of writer-thread CPU spent sending
         self._reader = threading.Thread(target=self._read_loop, name="can-reader", daemon=True)
         self._reader.start()
@@ -65,49 +68,52 @@ class BusPort:
         """Bus errors of every kind so far (send, receive, error frames)."""
         return self.send_errors + self.recv_errors + self.error_frames
 
-    # -- real-time side --------------------------------------------------------------------------
-    def send(self, msg) -> bool:
-        """Queue one frame for sending; False (counted) when the bus is down or the queue is full."""
-        return self.send_batch((msg,))
+    @property
+    def tx_dropped(self) -> int:
+        """Frames the writer fell more than the transmit ring behind on (lost)."""
+        return self._tx.skipped
 
-    def send_batch(self, msgs) -> bool:
-        """Queue several frames, sent in order in one write where the transport allows. The messages
-        are copied: the caller may reuse them at once. Never raises."""
-        if not self._up:
-            self.dropped_while_down += len(msgs)
-            return False
-        if len(self._tx) >= self.tx_max:
-            self.tx_dropped += len(msgs)
-            return False
-        self._tx.append(tuple((m.arbitration_id, bytes(m.data), m.timestamp) for m in msgs))
+    @property
+    def rx_dropped(self) -> int:
+        """Frames received while the receive ring was full (lost)."""
+        return int(self.rings.heads[H_RX_DROPPED])
+
+    # -- real-time side --------------------------------------------------------------------------
+    def wake(self) -> None:
+        """Frames were queued in the transmit ring: let the writer send them."""
         self._tx_ready.set()
-        return True
 
     # -- writer thread -----------------------------------------------------------------------------
     def _write_loop(self) -> None:
-        import can
-
-        tx = self._tx
         while True:
             self._tx_ready.wait(0.05)
             self._tx_ready.clear()
-            while tx:
-                batch = tx.popleft()
-                c0 = time.thread_time()
-                msgs = [can.Message(arbitration_id=i, data=d, is_extended_id=False, timestamp=t)
-                        for i, d, t in batch]
-                if not self._up:
-                    self.dropped_while_down += len(msgs)
-                else:
-                    try:
-                        self._send_all(msgs)
-                        self.sent += len(msgs)
-                    except Exception as exc:  # noqa: BLE001  (can.CanError, OSError, websocket errors...)
-                        self.send_errors += 1
-                        self._mark_down(exc)
-                self.tx_cpu += time.thread_time() - c0
-            if self._closed.is_set() and not tx:
+            closing = self._closed.is_set()         # what was queued before close() still goes out
+            c0 = time.thread_time()
+            self._send_pending()
+            self.tx_cpu += time.thread_time() - c0
+            if closing:
                 return
+
+    def _send_pending(self) -> None:
+        r = self.rings
+        cap = r.tx_id.shape[0]
+        todo = self._tx.take()
+        if not todo:
+            return
+        frames = [(int(r.tx_id[n % cap]), int(r.tx_word[n % cap]).to_bytes(8, "little", signed=True),
+                   float(r.tx_t[n % cap])) for n in todo]
+        if self._tx.overrun(todo.start):                # overwritten while being copied: lost
+            self._tx.skipped += len(frames)
+        elif not self._up:
+            self.dropped_while_down += len(frames)
+        else:
+            try:
+                self._send_frames(frames)
+                self.sent += len(frames)
+            except Exception as exc:  # noqa: BLE001  (can.CanError, OSError, websocket errors...)
+                self.send_errors += 1
+                self._mark_down(exc)
 
     # -- reader / reconnect thread ---------------------------------------------------------------
     def _mark_down(self, exc: BaseException) -> None:
@@ -116,7 +122,8 @@ class BusPort:
             self._up = False
 
     def _read_loop(self) -> None:
-        put = self.inbox.put
+        put = self._rx.put
+        notify = self.notify
         while not self._closed.is_set():
             if not self._up:
                 self._reconnect()
@@ -135,7 +142,9 @@ class BusPort:
                 self.error_frames += 1
                 continue
             self.received += 1
-            put(("can", msg))
+            put(msg.arbitration_id, msg.data)
+            if notify is not None:
+                notify()
 
     def _reconnect(self) -> None:
         try:
@@ -150,7 +159,7 @@ class BusPort:
                 continue
             with self._lock:
                 self.bus = bus
-                self._send_all = batch_sender(bus)
+                self._send_frames = frame_sender(bus)
                 self._up = True
                 self.reconnects += 1
             return
@@ -172,6 +181,7 @@ class BusPort:
         return {"interface": self.description, "up": self._up, "sent": self.sent, "received": self.received,
                 "send_errors": self.send_errors, "recv_errors": self.recv_errors,
                 "error_frames": self.error_frames, "dropped_while_down": self.dropped_while_down,
-                "reconnects": self.reconnects, "tx_dropped": self.tx_dropped, "tx_cpu_s": self.tx_cpu,
+                "reconnects": self.reconnects, "tx_dropped": self.tx_dropped, "rx_dropped": self.rx_dropped,
+                "tx_cpu_s": self.tx_cpu,
                 "last_error": self.last_error}
 

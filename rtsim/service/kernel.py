@@ -1,32 +1,260 @@
-"""The service's step as one compiled call: vehicle step, then (on sample steps) the sensor channels
-packed into the CAN payloads, and (on state steps) the observer state.
+"""The service's step as one compiled call: received frames in, vehicle step, frames and samples out.
 
-One call instead of three matters: every call from Python into numba unboxes the model and state
-named tuples (~75 arrays, several microseconds), which is more than the sensors and the packing cost.
+``loop_run`` does, with no Python in between and nothing allocated:
+
+1. (``take_frames``) every frame the CAN reader put in the receive ring since the last call, at time
+   ``t = k dt``: logged for the recording, then the E2E checks and counters of the command frames
+   (``bridge.can_e2e``), accepted values as command events; a SIM_STEP_REQ is checked (CRC, count,
+   repeated counter) and, in lockstep mode, stops the intake and is left in ``LI_PENDING_STEPS`` for the
+   caller, otherwise counted as ignored;
+2. ``nsteps`` times: the watchdog writes the command values (or the safe values of timed-out commands)
+   into the vehicle's command array (a change of its time-out mask is a command event), one vehicle
+   step, and at the DBC's periods: every sensor channel (with the vehicle's sensor effects and the
+   config's sensor model) packed into the sensor frames, queued for sending and handed to the
+   publisher; the observer state; the SIM_STATUS frame;
+3. (``ack_counter >= 0``) the SIM_STEP_ACK frame.
+
+One call instead of several matters: each call from Python unboxes the model and state tuples (about
+a hundred arrays, several microseconds), more than the checks, the sensors and the packing cost.
+Times are simulation times: ``k`` steps of ``dt`` s.
 """
 from __future__ import annotations
 
-from bridge.can_pack import pack_sensor_frames
-from rtsim.jit import kernel
+from typing import NamedTuple
+
+import numpy as np
+
+from bridge.can_e2e import (C_ACCEPTED, C_COUNTER, C_CRC, C_DLC, C_RANGE, C_STEP_IGNORED, C_STEP_REJECTED,
+                            C_UNKNOWN, FV_VALUE, IV_TIMED_OUT, RxPlan, RxState, pack_frames, rx_command,
+                            rx_find, rx_watchdog, step_request)
+from rtsim.jit import inline_kernel, kernel, read_cycles
 from rtsim.mbs.model import OK
 from rtsim.vehicle.dynamics import vehicle_step
 from rtsim.vehicle.effect_kernels import sensor_stage
+from rtsim.vehicle.sensors import sensor_model
 from rtsim.vehicle.state import vehicle_state_values
+
+from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SENSOR, H_STATE, H_TX, LOG_RX,
+                    LOG_TX, RX_DATA)
+
+# LoopParams.ints
+(PI_SENSOR_EVERY, PI_STATE_EVERY, PI_STATUS_EVERY, PI_LOCKSTEP, PI_MODE_CODE, PI_STEP_REQ_ID, PI_STATUS_ID,
+ PI_ACK_ID, PI_SENSOR_MODEL) = range(9)
+# LoopState.li
+(LI_K, LI_MASK, LI_SM_HEAD, LI_PENDING_STEPS, LI_PENDING_COUNTER, LI_STEP_COUNTER, LI_OVERRUNS, LI_BUS_ERROR,
+ LI_SENT) = range(9)
+NLI = 9
+# the SIM_STATUS values (bridge.can_codec.STATUS_SOURCES order; a last slot stays 0)
+ST_MODE, ST_TIME, ST_OVERRUNS, ST_FAULT0 = 0, 1, 2, 3
+NO_STEP_COUNTER = -1
+
+
+class LoopParams(NamedTuple):
+    """What the step needs besides the vehicle, fixed for a session (see ``make_loop``)."""
+    rx: RxPlan
+    ints: np.ndarray             # PI_* (int64)
+    dt: np.ndarray               # (1,) step, s
+    sensor_ids: np.ndarray       # sensor frame ids (int64)
+    sensor_time_start: np.ndarray
+    sensor_time_mask: np.ndarray
+    sensor_sig_int: np.ndarray
+    sensor_sig_float: np.ndarray
+    status_sig_int: np.ndarray
+    status_sig_float: np.ndarray
+    ack_sig_int: np.ndarray
+    ack_sig_float: np.ndarray
+    no_stamp: np.ndarray         # (1,) int64 zero: the status and ack frames carry no ms stamp
+    fault_slot: np.ndarray       # per command: its fault flag's index in the status values
+    sensor_model: np.ndarray     # (nsensor, NSM) bias, noise, quantum, delay of the config's sensor model
+
+
+class LoopState(NamedTuple):
+    rx: RxState
+    li: np.ndarray               # LI_* (int64)
+    true: np.ndarray             # sensor channels as the sensors see them (effects included)
+    values: np.ndarray           # after the config's sensor model
+    state: np.ndarray            # observer state
+    sm_buf: np.ndarray           # the sensor model's delay line (nsensor, nbuf)
+    status_values: np.ndarray
+    ack_values: np.ndarray       # (3,) time, counter, 0
+    words: np.ndarray            # sensor frame payloads (int64, one per frame)
+    frame_word: np.ndarray       # (1,) int64: the status or ack frame
+    cycles: np.ndarray           # int64 ring: processor cycles of each call, at [k % size] (k after it)
+
+
+@inline_kernel
+def _log(rg, t, fid, dlc, direction, data):
+    j = rg.heads[H_LOG] % rg.log_t.shape[0]
+    rg.log_t[j] = t
+    rg.log_meta[j, 0] = fid
+    rg.log_meta[j, 1] = dlc
+    rg.log_meta[j, 2] = direction
+    for b in range(min(dlc, RX_DATA)):
+        rg.log_data[j, b] = data[b]
+    rg.heads[H_LOG] += 1
+
+
+@inline_kernel
+def _send(rg, fid, word, t):
+    j = rg.heads[H_TX] % rg.tx_id.shape[0]
+    rg.tx_id[j] = fid
+    rg.tx_word[j] = word
+    rg.tx_t[j] = t
+    rg.heads[H_TX] += 1
+
+
+@inline_kernel
+def _send_logged(rg, fid, word, t):
+    """An event frame (status, ack): sent and logged."""
+    _send(rg, fid, word, t)
+    j = rg.heads[H_LOG] % rg.log_t.shape[0]
+    rg.log_t[j] = t
+    rg.log_meta[j, 0] = fid
+    rg.log_meta[j, 1] = 8
+    rg.log_meta[j, 2] = LOG_TX
+    for b in range(8):
+        rg.log_data[j, b] = (word >> (8 * b)) & 0xFF
+    rg.heads[H_LOG] += 1
+
+
+@inline_kernel
+def _command_event(rg, t, kind, arg, commands):
+    j = rg.heads[H_CMD] % rg.cmd_t.shape[0]
+    rg.cmd_t[j] = t
+    rg.cmd_meta[j, 0] = kind
+    rg.cmd_meta[j, 1] = arg
+    for i in range(rg.cmd_v.shape[1]):
+        rg.cmd_v[j, i] = commands[i]
+    rg.heads[H_CMD] += 1
 
 
 @kernel
-def service_step(m, d, veh, vd, road, parts, states, io, h, want_sensors, pack, sens, t_s, time_start,
-                 time_mask, sig_int, sig_float, words, want_state, state):
-    """One vehicle step of h s with the commands in io; then true sensors into ``sens`` (and, if
-    ``pack``, their frames into ``words`` stamped ``t_s``) when ``want_sensors``, and the observer
-    state into ``state`` when ``want_state``. Returns the step status (OK or an error code)."""
+def take_frames(lp, ls, rg):
+    """Step 1 of the module docstring."""
+    li, rx = ls.li, ls.rx
+    t = li[LI_K] * lp.dt[0]
+    cap = rg.rx_meta.shape[0]
+    tail = rg.heads[H_RX_TAIL]
+    head = rg.heads[H_RX]
+    while tail < head:
+        j = tail % cap
+        fid = rg.rx_meta[j, 0]
+        dlc = rg.rx_meta[j, 1]
+        data = rg.rx_data[j]
+        tail += 1
+        _log(rg, t, fid, dlc, LOG_RX, data)
+        if fid == lp.ints[PI_STEP_REQ_ID]:
+            steps, counter = step_request(lp.rx, data, dlc)
+            if steps < 0 or counter == li[LI_STEP_COUNTER]:
+                rx.counts[C_STEP_REJECTED] += 1        # bad DLC/CRC/count, or a repeated request
+                continue
+            li[LI_STEP_COUNTER] = counter
+            if not lp.ints[PI_LOCKSTEP]:
+                rx.counts[C_STEP_IGNORED] += 1
+                continue
+            li[LI_PENDING_STEPS] = steps
+            li[LI_PENDING_COUNTER] = counter
+            break
+        i = rx_find(lp.rx, fid)
+        if i < 0:
+            rx.counts[C_UNKNOWN] += 1
+        elif rx_command(lp.rx, rx, i, data, dlc, t):
+            _command_event(rg, t, CMD_ACCEPTED, i, rx.fv[:, FV_VALUE])     # (only value i is new)
+    rg.heads[H_RX_TAIL] = tail
+
+
+@inline_kernel
+def _status_frame(lp, ls, rg, t):
+    sv, li, rx = ls.status_values, ls.li, ls.rx
+    sv[ST_MODE] = lp.ints[PI_MODE_CODE]
+    sv[ST_TIME] = t
+    sv[ST_OVERRUNS] = li[LI_OVERRUNS]
+    for i in range(lp.fault_slot.shape[0]):
+        sv[lp.fault_slot[i]] = rx.iv[i, IV_TIMED_OUT]
+    nf = ST_FAULT0 + lp.fault_slot.shape[0]
+    sv[nf] = li[LI_BUS_ERROR]
+    sv[nf + 1] = rx.counts[C_DLC]
+    sv[nf + 2] = rx.counts[C_CRC]
+    sv[nf + 3] = rx.counts[C_COUNTER]
+    sv[nf + 4] = rx.counts[C_RANGE]
+    pack_frames(sv, 0.0, lp.no_stamp, lp.no_stamp, lp.status_sig_int, lp.status_sig_float, ls.frame_word)
+    _send_logged(rg, lp.ints[PI_STATUS_ID], ls.frame_word[0], t)
+
+
+@kernel
+def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
+    """Step 2 of the module docstring, once. Returns the vehicle step's status."""
+    li = ls.li
+    h = lp.dt[0]
+    k = li[LI_K]
+    t = k * h
+    mask = rx_watchdog(lp.rx, ls.rx, t, io.commands)
+    if mask != li[LI_MASK]:
+        li[LI_MASK] = mask
+        _command_event(rg, t, CMD_MASK, mask, io.commands)
     status = vehicle_step(m, d, veh, vd, road, parts, states, io, h)
     if status != OK:
         return status
-    if want_sensors:
-        sensor_stage(m, d, veh, io.signals, parts.effects, states.effects, sens)   # incl. sensor effects
-        if pack:
-            pack_sensor_frames(sens, t_s, time_start, time_mask, sig_int, sig_float, words)
-    if want_state:
-        vehicle_state_values(d, veh, vd, io.signals, state)
+    k += 1
+    li[LI_K] = k
+    t1 = k * h
+    ints = lp.ints
+    if k % ints[PI_SENSOR_EVERY] == 0:
+        sensor_stage(m, d, veh, io.signals, parts.effects, states.effects, ls.true)
+        vals = ls.true
+        if ints[PI_SENSOR_MODEL]:
+            li[LI_SM_HEAD] = sensor_model(lp.sensor_model, ls.sm_buf, li[LI_SM_HEAD], ls.true, ls.values)
+            vals = ls.values
+        pack_frames(vals, t1, lp.sensor_time_start, lp.sensor_time_mask, lp.sensor_sig_int,
+                    lp.sensor_sig_float, ls.words)
+        j = rg.heads[H_SENSOR] % rg.sensor_t.shape[0]
+        rg.sensor_t[j] = t1
+        for c in range(vals.shape[0]):
+            rg.sensor_v[j, c] = vals[c]
+        for f in range(ls.words.shape[0]):
+            rg.sensor_words[j, f] = ls.words[f]
+            _send(rg, lp.sensor_ids[f], ls.words[f], t1)
+        rg.heads[H_SENSOR] += 1
+        li[LI_SENT] += 1
+    if k % ints[PI_STATE_EVERY] == 0:
+        vehicle_state_values(d, veh, vd, io.signals, ls.state)
+        j = rg.heads[H_STATE] % rg.state_t.shape[0]
+        rg.state_t[j] = t1
+        for c in range(ls.state.shape[0]):
+            rg.state_v[j, c] = ls.state[c]
+        rg.heads[H_STATE] += 1
+    if k % ints[PI_STATUS_EVERY] == 0:
+        _status_frame(lp, ls, rg, t1)
+        li[LI_SENT] += 1
+    return OK
+
+
+@kernel
+def loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter):
+    """The module docstring's steps: frames in (if ``frames``), ``nsteps`` steps, the lockstep
+    acknowledgement (if ``ack_counter >= 0``). Returns OK or the failed step's status (the state is
+    then that of the last good step, ``LI_K`` its count). The call's own duration in processor cycles
+    goes to ``ls.cycles`` (how much of a loop period the compiled work takes)."""
+    c0 = read_cycles()
+    status = _loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter)
+    ls.cycles[ls.li[LI_K] % ls.cycles.shape[0]] = read_cycles() - c0
     return status
+
+
+@inline_kernel
+def _loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter):
+    if frames:
+        take_frames(lp, ls, rg)
+    for _ in range(nsteps):
+        status = one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg)
+        if status != OK:
+            return status
+    if ack_counter >= 0:
+        t = ls.li[LI_K] * lp.dt[0]
+        ls.ack_values[0] = t
+        ls.ack_values[1] = ack_counter
+        pack_frames(ls.ack_values, 0.0, lp.no_stamp, lp.no_stamp, lp.ack_sig_int, lp.ack_sig_float,
+                    ls.frame_word)
+        _send_logged(rg, lp.ints[PI_ACK_ID], ls.frame_word[0], t)
+        ls.li[LI_SENT] += 1
+    return OK

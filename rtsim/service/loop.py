@@ -1,26 +1,19 @@
 """The HIL service's fixed-step loop: commands in, one model step, sensor frames out.
 
-One step (``step_once``), all on the real-time thread, nothing allocated by the model side:
+Each step is one compiled call (``rtsim.service.kernel.loop_run``) over preallocated arrays: it takes
+the frames the CAN reader thread put in the receive ring (E2E checks, counters, watchdog), steps the
+vehicle, packs the sensor and status frames into the transmit ring and the samples into the
+publisher's rings (``rtsim.service.rings``). The Python here only moves between threads: control
+requests from Zenoh (a queue, looked at once per step), waking the CAN writer, the inputs of the
+status frame (loop overruns, bus errors; every status period) and model failures.
 
-1. in realtime/fast mode, take every frame the CAN reader queued (commands through the E2E checks of
-   ``CommandReceiver``; a lockstep request outside lockstep mode is counted and ignored) and every
-   control request (Zenoh);
-2. the watchdog (``CommandReceiver.apply_timeouts``) writes the command values, or the safe values of
-   timed-out commands, straight into the vehicle's command array;
-3. one compiled vehicle step (``VehicleSim.step``);
-4. at the sensor period of the DBC (2 ms): true sensor values (plus the vehicle config's sensor model,
-   if any), packed into all sensor frames by one compiled call and sent from reusable messages; the
-   sample goes to the outbox ring (Zenoh ``sensors``, MCAP ``sensors`` and ``can/tx``);
-5. at the state period (100 Hz default): the observer state (compiled) into the outbox ring;
-6. at the status frame's DBC period (100 ms): the SIM_STATUS frame.
-
-Times: everything the model and the watchdog see is simulation time ``t = steps * dt``; the pacer
-keeps it on the wall clock in realtime mode. Lockstep mode runs ``run_lockstep``: the thread waits on
-the inbox and processes CAN frames and control requests strictly in arrival order, so commands sent
-before a SIM_STEP_REQ apply to its steps; the run is deterministic (replayable bit for bit).
+Times: everything the model and the watchdog see is simulation time ``t = k * dt``; the pacer keeps
+it on the wall clock in realtime mode. Lockstep mode runs ``run_lockstep``: the thread waits for
+frames or control requests and takes them in order; a SIM_STEP_REQ runs its steps and is acknowledged,
+commands received before it apply to its steps; the run is deterministic (replayable bit for bit).
 
 Failures: a model failure (SimulationError) stops stepping (``run_state = "stopped"``, the error in
-``message``), the service keeps answering and publishing status until a ``reset`` or
+``message``), the service keeps taking frames and publishing status until a ``reset`` or
 ``load_scenario``. Bus errors are counted by the BusPort and flagged in the status frame.
 """
 from __future__ import annotations
@@ -31,18 +24,24 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bridge.can_codec import FAULTS, Codec, CommandReceiver
-from bridge.can_pack import SensorPacker
+from bridge.can_codec import FAULTS, STATUS_SOURCES, Codec, CommandReceiver
+from bridge.can_e2e import C_STEP_IGNORED, C_STEP_REJECTED
 from rtsim.channels import COMMAND_NAMES
 from rtsim.errors import RtsimError, SimulationError
-from rtsim.realtime.health import LoopHealth
-from rtsim.vehicle.sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_model, sensor_params
 from rtsim.mbs.model import OK
+from rtsim.realtime.health import LoopHealth
+from rtsim.vehicle.sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_params
 from rtsim.vehicle.state import NSTATE_OUT
 
-from .kernel import service_step
+from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_OVERRUNS, LI_PENDING_COUNTER, LI_PENDING_STEPS,
+                     LI_SM_HEAD, LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, PI_ACK_ID, PI_LOCKSTEP, PI_MODE_CODE,
+                     PI_SENSOR_EVERY, PI_SENSOR_MODEL, PI_STATE_EVERY, PI_STATUS_EVERY, PI_STATUS_ID,
+                     PI_STEP_REQ_ID, ST_FAULT0, LoopParams, LoopState, loop_run)
+from .rings import Rings, RxWriter, make_rings
 
 RUN_STATES = ("running", "paused", "stopped")
+CYCLE_WINDOW = 65536   # steps of compiled-call durations kept (as LoopHealth's window)
+CHUNK = 256            # steps per compiled call when many run back to back (lockstep, re-simulation)
 
 
 @dataclass
@@ -56,54 +55,80 @@ class Request:
 
 
 class HilLoop:
-    def __init__(self, sim, codec: Codec, port=None, outbox=None, *, mode: str = "realtime",
+    """The loop of one service (see the module docstring). ``rings`` are shared with the CAN port and
+    the publisher (made here if not given); ``on_chunk`` (optional) is called after every compiled call
+    (re-simulation reads the rings there)."""
+
+    def __init__(self, sim, codec: Codec, rings: Rings | None = None, *, mode: str = "realtime",
                  state_rate: float = 100.0, hold_pressure: float | None = None, inbox=None,
-                 health: LoopHealth | None = None, scenario_name: str | None = None, sim_factory=None):
+                 health: LoopHealth | None = None, scenario_name: str | None = None, on_chunk=None):
         self.codec = codec
-        self.port = port
-        self.outbox = outbox
+        self.port = None                 # set by the service: bus state for the status, writer wake-up
+        self.outbox = None               # set by the service: recorder/Zenoh figures for the status
         self.mode = mode
         self.inbox = inbox if inbox is not None else queue.SimpleQueue()
         self.health = health if health is not None else LoopHealth()
         self.scenario_name = scenario_name
-        self.sim_factory = sim_factory            # (scenario path | None) -> (VehicleSim, name); for reset
+        self.on_chunk = on_chunk
+        self.rings = rings if rings is not None else make_rings(
+            NSENSOR, len(codec.sensor_frames), NSTATE_OUT, len(COMMAND_NAMES))
         kw = {} if hold_pressure is None else {"hold_pressure": hold_pressure}
-        self.rx = CommandReceiver(codec, **kw)
-        self.packer = SensorPacker(codec)
-        self.sensor_msgs = self.packer.make_messages() if port is not None else None
-        self._step_req_id = codec.step_request.frame_id
-        self._step_req_counter: int | None = None
-        self.lockstep_rejected = 0
-        self.lockstep_ignored = 0
+        self.rx = CommandReceiver(codec, **kw)           # its arrays are the step's E2E state
+        self.rx_writer = RxWriter(self.rings)            # for feeding frames by hand (re-simulation)
+        self.state_rate = state_rate
         self.run_state = "running"
         self.message = ""
         self.stop_event = threading.Event()
-        self._install(sim, state_rate)
+        self.li = np.zeros(NLI, dtype=np.int64)
+        self.li[LI_STEP_COUNTER] = NO_STEP_COUNTER
+        self.cycles = np.zeros(CYCLE_WINDOW, dtype=np.int64)
+        self._install(sim)
 
     # -- set-up ------------------------------------------------------------------------------------
-    def _install(self, sim, state_rate: float | None = None) -> None:
-        """Take a (new) VehicleSim: step counters, sensor model, rates."""
+    def _install(self, sim) -> None:
+        """Take a (new) VehicleSim: step counters, sensor model, rates; the E2E counters carry on."""
         self.sim = sim
         self.dt = sim.dt
         self.k = 0
-        sensor_period = min(f.period for f in self.codec.sensor_frames)
-        status_period = self.codec.status_frame.period
-        self.sensor_every = self._every(sensor_period, "sensor period")
-        self.status_every = self._every(status_period, "status period")
-        if state_rate is not None:
-            self.state_every = max(1, int(round(1.0 / (state_rate * self.dt))))
-        self.true = np.zeros(NSENSOR)
-        self.values = np.zeros(NSENSOR)
-        self.state = np.zeros(NSTATE_OUT)
-        self.sm = sensor_params(sim.vm.config.sensors.channels, self.sensor_every * self.dt)
-        self.sm_on = bool(np.any(self.sm))
-        self.sm_buf = np.zeros((NSENSOR, int(self.sm[:, SM_DELAY_STEPS].max()) + 1))
-        self.sm_head = 0
-        if self.sm_on:
+        c = self.codec
+        self.sensor_every = self._every(min(f.period for f in c.sensor_frames), "sensor period")
+        self.status_every = self._every(c.status_frame.period, "status period")
+        self.state_every = max(1, int(round(1.0 / (self.state_rate * self.dt))))
+        sm = sensor_params(sim.vm.config.sensors.channels, self.sensor_every * self.dt)
+        sm_on = bool(np.any(sm))
+        if sm_on:
             seed_sensor_noise(0)          # reproducible noise: a session replays bit for bit
+        lay = c.sensor_layout()
+        status = c.frame_layout(c.status_frame.name, STATUS_SOURCES)
+        ack = c.frame_layout(c.step_ack.name, ("lockstep_sim_time", "lockstep_ack_counter"))
+        ints = np.zeros(9, dtype=np.int64)
+        ints[PI_SENSOR_EVERY], ints[PI_STATE_EVERY], ints[PI_STATUS_EVERY] = \
+            self.sensor_every, self.state_every, self.status_every
+        ints[PI_LOCKSTEP] = self.mode == "lockstep"
+        ints[PI_MODE_CODE] = c.modes[self.mode]
+        ints[PI_STEP_REQ_ID], ints[PI_STATUS_ID], ints[PI_ACK_ID] = \
+            c.step_request.frame_id, c.status_frame.frame_id, c.step_ack.frame_id
+        ints[PI_SENSOR_MODEL] = sm_on
+        faults = self.rx.fault_names
+        assert STATUS_SOURCES[ST_FAULT0 + len(faults)] == "fault_bus_error"
+        self.lp = LoopParams(self.rx.plan, ints, np.array([self.dt]), lay["frame_id"], lay["time_start"],
+                             lay["time_mask"], lay["sig_int"], lay["sig_float"], status["sig_int"],
+                             status["sig_float"], ack["sig_int"], ack["sig_float"], np.zeros(1, dtype=np.int64),
+                             np.array([STATUS_SOURCES.index(f"fault_{f}") for f in faults], dtype=np.int64), sm)
+        self.ls = LoopState(self.rx.state, self.li, np.zeros(NSENSOR), np.zeros(NSENSOR), np.zeros(NSTATE_OUT),
+                            np.zeros((NSENSOR, int(sm[:, SM_DELAY_STEPS].max()) + 1)),
+                            np.zeros(len(STATUS_SOURCES) + 1), np.zeros(3),
+                            np.zeros(len(lay["frame_id"]), dtype=np.int64), np.zeros(1, dtype=np.int64),
+                            self.cycles)
+        li = self.li
+        li[LI_K] = 0
+        li[LI_MASK] = -1
+        li[LI_SM_HEAD] = 0
+        li[LI_PENDING_STEPS] = 0
         self.rx.reset(0.0)                    # a new session: no command received yet
-        self._mask = -1
-        self._bus_errors_at_status = 0
+        self._bus_errors_at_status = self.port.errors if self.port is not None else 0
+        self._args = (sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, sim.io,
+                      self.lp, self.ls, self.rings)
 
     def _every(self, period: float, what: str) -> int:
         n = period / self.dt
@@ -116,86 +141,106 @@ class HilLoop:
     def sim_time(self) -> float:
         return self.k * self.dt
 
-    # -- one step ------------------------------------------------------------------------------------
-    def step_once(self) -> None:
-        """One fixed step (see the module docstring). In realtime/fast mode it first drains the inbox."""
-        if self.mode != "lockstep":
-            self.drain_inbox()
-        if self.run_state != "running":
-            return
-        t = self.k * self.dt
-        mask = self.rx.apply_timeouts(t, self.sim.io.commands)
-        if mask != self._mask:
-            self._mask = mask
-            if self.outbox is not None:
-                self.outbox.push_event("commands", t, self._commands_payload(
-                    "safe" if mask else "can"))
-        k = self.k + 1
-        t1 = k * self.dt
-        want_sensors = k % self.sensor_every == 0
-        want_state = k % self.state_every == 0
-        sim, p = self.sim, self.packer
-        status = service_step(sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states,
-                              sim.io, self.dt, want_sensors, not self.sm_on, self.true, t1, p.time_start,
-                              p.time_mask, p.sig_int, p.sig_float, p.words, want_state, self.state)
+    @property
+    def state(self) -> np.ndarray:
+        """The last observer state sample (STATE_NAMES order)."""
+        return self.ls.state
+
+    def compiled_seconds(self, cycles_per_second: float) -> np.ndarray:
+        """Duration (s) of the compiled call of each of the last steps (up to CYCLE_WINDOW), oldest
+        first: the part of the loop thread's time spent in compiled code."""
+        n = min(self.k, CYCLE_WINDOW)
+        idx = (np.arange(self.k - n, self.k) + 1) % CYCLE_WINDOW
+        return self.cycles[idx] / cycles_per_second
+
+    @property
+    def lockstep_rejected(self) -> int:
+        return int(self.rx.state.counts[C_STEP_REJECTED])
+
+    @property
+    def lockstep_ignored(self) -> int:
+        return int(self.rx.state.counts[C_STEP_IGNORED])
+
+    # -- compiled calls --------------------------------------------------------------------------------
+    def _call(self, frames: bool, nsteps: int, ack_counter: int = -1) -> bool:
+        """One compiled call; False (and the loop stopped, the reason in ``message``) on a model failure."""
+        status = loop_run(*self._args, frames, nsteps, ack_counter)
+        self.k = int(self.li[LI_K])
+        if self.on_chunk is not None:
+            self.on_chunk()
         if status != OK:
+            t = self.k * self.dt
             try:
-                sim.sim._raise(status, k)
+                self.sim.sim._raise(status, self.k + 1)
             except SimulationError as exc:
                 self.run_state = "stopped"
                 self.message = f"model stopped at t = {t:.3f} s: {exc}"
+            return False
+        return True
+
+    def step_once(self) -> None:
+        """One paced step (realtime and fast modes): control requests, received frames, one step."""
+        if not self.inbox.empty():
+            self.drain_inbox()
+        k = self.k + 1
+        if self.run_state != "running":
+            self._call(True, 0)              # frames are still checked and counted
             return
-        self.k = k
-        if want_sensors:
-            self._sensors(t1)
-        if want_state and self.outbox is not None:
-            self.outbox.push_state(t1, self.state)
         if k % self.status_every == 0:
-            self.send_status(t1)
+            self._status_inputs()
+        self._call(True, 1)
+        if self.port is not None and (k % self.sensor_every == 0 or k % self.status_every == 0):
+            self.port.wake()
 
     def run_steps(self, n: int) -> None:
+        """``n`` paced steps (what the pacer calls)."""
         for _ in range(int(n)):
             self.step_once()
 
-    def _sensors(self, t: float) -> None:
-        """Send and hand over the sample whose true values ``service_step`` computed (and packed,
-        unless the vehicle config has a sensor model, applied here first)."""
-        if self.sm_on:
-            self.sm_head = sensor_model(self.sm, self.sm_buf, self.sm_head, self.true, self.values)
-            vals = self.values
-            self.packer.pack(vals, t)
-        else:
-            vals = self.true
-        if self.port is not None:
-            self.packer.refresh_messages(t)
-            self.port.send_batch(self.sensor_msgs)
-        if self.outbox is not None:
-            self.outbox.push_sensor(t, vals, self.packer.words)
+    def advance(self, n: int) -> None:
+        """``n`` steps back to back without taking frames (lockstep requests, the ``step`` control,
+        re-simulation), in compiled chunks; a paused or stopped loop does not step."""
+        n = int(n)
+        while n > 0 and self.run_state == "running":
+            c = min(n, CHUNK)
+            k0 = self.k
+            if (k0 // self.status_every) != ((k0 + c) // self.status_every):
+                self._status_inputs()
+            if not self._call(False, c):
+                break
+            n -= c
+            if self.port is not None:
+                self.port.wake()
 
-    def send_status(self, t: float) -> None:
-        faults = self.faults()
+    def take_frames(self) -> None:
+        """Take every frame received so far, now (time ``k * dt``); in lockstep mode each SIM_STEP_REQ
+        among them runs its steps and is acknowledged before the frames after it are taken."""
+        li = self.li
+        while True:
+            self._call(True, 0)
+            steps = int(li[LI_PENDING_STEPS])
+            if steps == 0:
+                return
+            li[LI_PENDING_STEPS] = 0
+            self.advance(steps)
+            self._call(False, 0, int(li[LI_PENDING_COUNTER]))
+            if self.port is not None:
+                self.port.wake()
+
+    def _status_inputs(self) -> None:
+        """What the SIM_STATUS frame needs from outside the step: loop overruns, the bus state."""
+        self.li[LI_OVERRUNS] = self.health.overruns
+        self.li[LI_BUS_ERROR] = self._bus_error()
         self._bus_errors_at_status = self.port.errors if self.port is not None else 0
-        fid, data = self.codec.encode_status(self.mode, t, self.health.overruns, faults, self.rx.counters)
-        self._send_event_frame(t, fid, data)
 
-    def _send_event_frame(self, t: float, fid: int, data: bytes) -> None:
-        if self.port is not None:
-            import can
-
-            self.port.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False, timestamp=t))
-        if self.outbox is not None:
-            self.outbox.push_event("can/tx", t, (fid, data))
+    def _bus_error(self) -> bool:
+        return self.port is not None and ((not self.port.up) or self.port.errors > self._bus_errors_at_status)
 
     def faults(self) -> dict[str, bool]:
         f = {name: False for name in FAULTS}
         f.update(self.rx.faults)
-        if self.port is not None:
-            f["bus_error"] = (not self.port.up) or self.port.errors > self._bus_errors_at_status
+        f["bus_error"] = self._bus_error()
         return f
-
-    def _commands_payload(self, source: str) -> dict:
-        cmds = self.sim.io.commands
-        return {**{n: float(cmds[i]) for i, n in enumerate(COMMAND_NAMES)}, "source": source}
 
     # -- inbox ---------------------------------------------------------------------------------------
     def drain_inbox(self) -> None:
@@ -204,37 +249,13 @@ class HilLoop:
             self.handle(inbox.get_nowait())
 
     def handle(self, item) -> None:
+        """An inbox item: ``("can", None)`` (frames arrived: lockstep wake-up) or ``("ctl", Request)``.
+        Frames received before a request are taken before it."""
         kind, obj = item
-        if kind == "can":
-            self.on_frame(obj)
-        else:
+        if self.mode == "lockstep":
+            self.take_frames()
+        if kind == "ctl":
             self.on_request(obj)
-
-    def on_frame(self, msg) -> None:
-        t = self.k * self.dt
-        data = msg.data
-        if self.outbox is not None:
-            self.outbox.push_event("can/rx", t, (msg.arbitration_id, bytes(data)))
-        if msg.arbitration_id == self._step_req_id:
-            self.on_step_request(data)
-            return
-        if self.rx.receive(msg.arbitration_id, data, t) and self.outbox is not None:
-            i = self.rx.command_index(msg.arbitration_id)
-            self.outbox.push_event("commands", t, {COMMAND_NAMES[i]: self.rx.value[i], "source": "can"})
-
-    def on_step_request(self, data) -> None:
-        dec = self.codec.decode_step_request(data)
-        if dec is None or (self._step_req_counter is not None and dec[1] == self._step_req_counter):
-            self.lockstep_rejected += 1          # bad DLC/CRC/count, or a repeated request
-            return
-        steps, counter = dec
-        self._step_req_counter = counter
-        if self.mode != "lockstep":
-            self.lockstep_ignored += 1
-            return
-        self.run_steps(steps)
-        fid, ack = self.codec.encode_step_ack(self.sim_time, counter)
-        self._send_event_frame(self.sim_time, fid, ack)
 
     # -- control requests (from Zenoh) --------------------------------------------------------------
     def on_request(self, req: Request) -> None:
@@ -263,7 +284,7 @@ class HilLoop:
                 return {"ok": False, "error": f"step: n = {n} outside 1..1000000"}
             if self.run_state != "running":
                 return {"ok": False, "error": f"step: the simulation is {self.run_state}"}
-            self.run_steps(n)
+            self.advance(n)
             return {"ok": True, "sim_time": self.sim_time, "steps": self.k}
         if op in ("reset", "load_scenario", "_install"):
             sim, name = args["_sim"], args.get("_name")
@@ -276,7 +297,7 @@ class HilLoop:
 
     # -- lockstep ------------------------------------------------------------------------------------
     def run_lockstep(self) -> None:
-        """Lockstep mode: process inbox items in arrival order until ``stop_event``."""
+        """Lockstep mode: take frames and requests as they arrive until ``stop_event``."""
         inbox = self.inbox
         while not self.stop_event.is_set():
             try:
@@ -292,6 +313,7 @@ class HilLoop:
         rec = getattr(self.outbox, "recorder", None) if self.outbox is not None else None
         zen = getattr(self.outbox, "zenoh", None) if self.outbox is not None else None
         pct = h.recent_percentiles()
+        counters = self.rx.counters
         return {
             "time": self.sim_time,
             "vehicle_id": self.sim.vm.config.id,
@@ -311,7 +333,7 @@ class HilLoop:
             "cpu_max": h.max_cpu if h.samples else None,
             "steal": h.steal_seconds(),
             "faults": self.faults(),
-            "rejected": {k: self.rx.counters[k] for k in ("dlc", "crc", "counter", "range", "unknown_id")},
+            "rejected": {k: counters[k] for k in ("dlc", "crc", "counter", "range", "unknown_id")},
             "accepted_frames": self.rx.accepted,
             "bus_errors": self.port.errors if self.port is not None else 0,
             "recorder": None if rec is None else {"path": str(rec.path), "written": rec.written,

@@ -1,125 +1,142 @@
 """Hand-off from the real-time thread to the observers (Zenoh publishers and the MCAP recorder).
 
-The real-time thread only copies numbers into preallocated rings (sensor samples with the packed
-payloads of their CAN frames, state samples) or appends low-rate events (received frames, commands,
-event frames) to a deque. A publisher thread turns them into the JSON payloads of ``bridge.payloads``
-and hands each payload to Zenoh (congestion control DROP: never blocks) and to the recorder (a bounded
-queue: never blocks). So a slow or absent subscriber, or a slow disk, never delays the loop: when the
-publisher falls more than a ring's capacity behind, the oldest samples are skipped and counted in
-``dropped``.
+The compiled step writes sensor samples (with the packed payloads of their CAN frames), state
+samples, the frames it took or sent besides the sensor frames, and command events into the
+preallocated rings of ``rtsim.service.rings``. A publisher thread reads them and turns them into the
+JSON payloads of ``bridge.payloads``, handing each payload to Zenoh (congestion control DROP: never
+blocks) and to the recorder (a bounded queue: never blocks). So a slow or absent subscriber, or a slow
+disk, never delays the loop: when the publisher falls more than a ring's capacity behind, the oldest
+items are skipped and counted in ``dropped``.
 
 Each payload is encoded once and the same bytes go to both sinks, so Zenoh and MCAP carry identical
 messages. Log times in the recording are simulation times (ns).
 """
 from __future__ import annotations
 
-import collections
 import threading
 
-import numpy as np
-
 from bridge import payloads
+from rtsim.channels import COMMAND_NAMES
+
+from .rings import CMD_ACCEPTED, H_CMD, H_LOG, H_SENSOR, H_STATE, LOG_RX, RingReader, Rings
+
+
+class RingDrain:
+    """Reads the publisher's rings in order and calls ``emit(key, t, payload)`` per message: ``key``
+    'sensors', 'state' or 'commands' with JSON bytes; 'can/rx' or 'can/tx' with (id, payload bytes).
+    ``raw`` (optional) receives each sensor and state sample as (key, t, values array) without JSON:
+    re-simulation compares numbers."""
+
+    def __init__(self, rings: Rings, frame_ids, emit=None, raw=None, frames: bool = True):
+        self.r = rings
+        self.emit = emit
+        self.raw = raw
+        self.frames = frames
+        self.frame_ids = [int(f) for f in frame_ids]
+        h = rings.heads
+        self._sensors = RingReader(h, H_SENSOR, rings.sensor_t.shape[0])
+        self._state = RingReader(h, H_STATE, rings.state_t.shape[0])
+        self._log = RingReader(h, H_LOG, rings.log_t.shape[0])
+        self._cmd = RingReader(h, H_CMD, rings.cmd_t.shape[0])
+
+    @property
+    def dropped(self) -> int:
+        return sum(x.skipped for x in (self._sensors, self._state, self._log, self._cmd))
+
+    def drain(self) -> int:
+        """Everything written since the last call; returns the number of messages."""
+        return self._log_frames() + self._commands() + self._sensor_samples() + self._state_samples()
+
+    def _log_frames(self) -> int:
+        r, emit = self.r, self.emit
+        cap = r.log_t.shape[0]
+        todo = self._log.take()
+        if emit is None or not self.frames:
+            return 0
+        for n in todo:
+            j = n % cap
+            fid, size, direction = (int(x) for x in r.log_meta[j])
+            emit("can/rx" if direction == LOG_RX else "can/tx", float(r.log_t[j]),
+                 (fid, r.log_data[j, :min(size, r.log_data.shape[1])].tobytes()))
+        return len(todo)
+
+    def _commands(self) -> int:
+        r, emit = self.r, self.emit
+        cap = r.cmd_t.shape[0]
+        todo = self._cmd.take()
+        if emit is None:
+            return 0
+        for n in todo:
+            j = n % cap
+            kind, arg = (int(x) for x in r.cmd_meta[j])
+            t = float(r.cmd_t[j])
+            if kind == CMD_ACCEPTED:
+                body = {COMMAND_NAMES[arg]: float(r.cmd_v[j, arg]), "source": "can"}
+            else:
+                body = {**{nm: float(r.cmd_v[j, i]) for i, nm in enumerate(COMMAND_NAMES)},
+                        "source": "safe" if arg else "can"}
+            emit("commands", t, payloads.encode_json({"time": t, **body}))
+        return len(todo)
+
+    def _sensor_samples(self) -> int:
+        r, emit, raw = self.r, self.emit, self.raw
+        cap = r.sensor_t.shape[0]
+        todo = self._sensors.take()
+        for n in todo:
+            j = n % cap
+            t = float(r.sensor_t[j])
+            if raw is not None:
+                raw("sensors", t, r.sensor_v[j].copy())
+            if emit is not None:
+                emit("sensors", t, payloads.encode_sensors(t, r.sensor_v[j]))
+                if self.frames:
+                    words = r.sensor_words[j].tobytes()
+                    for k, fid in enumerate(self.frame_ids):
+                        emit("can/tx", t, (fid, words[8 * k:8 * k + 8]))
+        return len(todo)
+
+    def _state_samples(self) -> int:
+        r, emit, raw = self.r, self.emit, self.raw
+        cap = r.state_t.shape[0]
+        todo = self._state.take()
+        for n in todo:
+            j = n % cap
+            t = float(r.state_t[j])
+            if raw is not None:
+                raw("state", t, r.state_v[j].copy())
+            if emit is not None:
+                emit("state", t, payloads.encode_state(t, r.state_v[j]))
+        return len(todo)
 
 
 class Outbox:
-    def __init__(self, nsensor: int, nstate: int, frame_ids, zenoh=None, recorder=None, status_fn=None,
-                 status_period: float = 0.1, capacity: int = 8192, poll: float = 0.005):
+    """The publisher thread: drains the rings every ``poll`` s into Zenoh and the recorder, and
+    publishes the status (``status_fn()``) every ``status_period`` s."""
+
+    def __init__(self, rings: Rings, frame_ids, zenoh=None, recorder=None, status_fn=None,
+                 status_period: float = 0.1, poll: float = 0.005):
         self.zenoh = zenoh
         self.recorder = recorder
         self.status_fn = status_fn
         self.status_period = float(status_period)
-        self.capacity = int(capacity)
         self.poll = float(poll)
-        self.frame_ids = [int(f) for f in frame_ids]
-        cap = self.capacity
-        self.sensor_t = np.zeros(cap)
-        self.sensor_v = np.zeros((cap, nsensor))
-        self.sensor_words = np.zeros((cap, len(self.frame_ids)), dtype=np.int64)
-        self.state_t = np.zeros(cap)
-        self.state_v = np.zeros((cap, nstate))
-        self.sensor_head = 0          # samples written (real-time thread)
-        self.state_head = 0
-        self._sensor_tail = 0         # samples published (publisher thread)
-        self._state_tail = 0
-        self.events: collections.deque = collections.deque()
-        self.max_events = 100_000
-        self.dropped = 0
         self.published = 0
+        self._rings = RingDrain(rings, frame_ids, emit=self._emit, frames=recorder is not None)
         self._stop = threading.Event()
         self._status_due = 0.0
         self._thread = threading.Thread(target=self._run, name="rtsim-publisher", daemon=True)
         self._thread.start()
 
-    # -- real-time side (copies only) ------------------------------------------------------------
-    def push_sensor(self, t: float, values: np.ndarray, words: np.ndarray) -> None:
-        j = self.sensor_head % self.capacity
-        self.sensor_t[j] = t
-        self.sensor_v[j] = values
-        self.sensor_words[j] = words
-        self.sensor_head += 1
+    @property
+    def dropped(self) -> int:
+        return self._rings.dropped
 
-    def push_state(self, t: float, values: np.ndarray) -> None:
-        j = self.state_head % self.capacity
-        self.state_t[j] = t
-        self.state_v[j] = values
-        self.state_head += 1
-
-    def push_event(self, key: str, t: float, payload) -> None:
-        """A low-rate message: ``key`` 'can/rx' or 'can/tx' with payload (id, bytes), or 'commands'
-        with a dict. Dropped and counted beyond ``max_events`` waiting."""
-        if len(self.events) >= self.max_events:
-            self.dropped += 1
-            return
-        self.events.append((key, t, payload))
-
-    # -- publisher thread ------------------------------------------------------------------------
-    def _emit(self, key: str, t: float, data: bytes) -> None:
+    def _emit(self, key: str, t: float, data) -> None:
         if self.zenoh is not None and key in ("sensors", "state", "status", "commands"):
             self.zenoh.publish(key, data)
         if self.recorder is not None:
             self.recorder.record(key, int(round(t * 1e9)), data)
         self.published += 1
-
-    def _record_frame(self, key: str, t: float, can_id: int, data: bytes) -> None:
-        if self.recorder is not None:
-            self.recorder.record(key, int(round(t * 1e9)), (can_id, data))
-
-    def _pending(self, head: int, tail: int) -> int:
-        """Where to resume reading a ring: the oldest sample still in it (skipped ones counted)."""
-        if head - tail > self.capacity:
-            self.dropped += head - tail - self.capacity
-            return head - self.capacity
-        return tail
-
-    def _drain_sensors(self) -> None:
-        head, cap = self.sensor_head, self.capacity
-        tail = self._pending(head, self._sensor_tail)
-        for n in range(tail, head):
-            j = n % cap
-            t = float(self.sensor_t[j])
-            self._emit("sensors", t, payloads.encode_sensors(t, self.sensor_v[j]))
-            if self.recorder is not None:
-                raw = self.sensor_words[j].tobytes()
-                for k, fid in enumerate(self.frame_ids):
-                    self._record_frame("can/tx", t, fid, raw[8 * k:8 * k + 8])
-        self._sensor_tail = head
-
-    def _drain_state(self) -> None:
-        head, cap = self.state_head, self.capacity
-        for n in range(self._pending(head, self._state_tail), head):
-            j = n % cap
-            t = float(self.state_t[j])
-            self._emit("state", t, payloads.encode_state(t, self.state_v[j]))
-        self._state_tail = head
-
-    def _drain_events(self) -> None:
-        ev = self.events
-        while ev:
-            key, t, payload = ev.popleft()
-            if key in ("can/rx", "can/tx"):
-                self._record_frame(key, t, payload[0], payload[1])
-            else:
-                self._emit(key, t, payloads.encode_json({"time": t, **payload}))
 
     def _maybe_status(self, now: float) -> None:
         if self.status_fn is None or now < self._status_due:
@@ -130,9 +147,7 @@ class Outbox:
 
     def flush(self) -> None:
         """Publish everything pending now (publisher thread, or after it stopped)."""
-        self._drain_events()
-        self._drain_sensors()
-        self._drain_state()
+        self._rings.drain()
 
     def _run(self) -> None:
         import gc

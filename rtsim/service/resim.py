@@ -28,34 +28,21 @@ from rtsim.channels import SENSOR_NAMES, STATE_NAMES
 from rtsim.errors import ConfigError
 
 from .loop import HilLoop
+from .outbox import RingDrain
 from .server import build_sim, resolve_scenario
 
 
-class _Frame:
-    """The attributes of a can.Message the loop reads."""
-    __slots__ = ("arbitration_id", "data")
-
-    def __init__(self, can_id: int, data: bytes):
-        self.arbitration_id = can_id
-        self.data = data
-
-
 class Collector:
-    """Stands in for the Outbox: keeps every sample in memory."""
+    """Reads a re-run loop's rings after every compiled call: every sensor and state sample."""
 
-    def __init__(self):
+    def __init__(self, loop: HilLoop):
         self.sensors: list[tuple[float, np.ndarray]] = []
         self.state: list[tuple[float, np.ndarray]] = []
-        self.events: list[tuple[str, float, object]] = []
+        self._drain = RingDrain(loop.rings, loop.lp.sensor_ids, raw=self._raw)
+        loop.on_chunk = self._drain.drain
 
-    def push_sensor(self, t, values, words):
-        self.sensors.append((t, values.copy()))
-
-    def push_state(self, t, values):
-        self.state.append((t, values.copy()))
-
-    def push_event(self, key, t, payload):
-        self.events.append((key, t, payload))
+    def _raw(self, key, t, values):
+        (self.sensors if key == "sensors" else self.state).append((t, values))
 
 
 def _file_for(meta: dict, key: str, override: Path | None, tmp: Path) -> tuple[Path, str]:
@@ -100,23 +87,23 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         finally:
             for p in temps:
                 p.unlink(missing_ok=True)
-    col = Collector()
     mode = session["mode"]
-    loop = HilLoop(sim, Codec(), None, col, mode=mode, state_rate=float(session.get("state_rate", 100.0)),
+    loop = HilLoop(sim, Codec(), mode=mode, state_rate=float(session.get("state_rate", 100.0)),
                    hold_pressure=float(session["hold_pressure"]))
+    col = Collector(loop)
     rx = messages.get(f"rtsim/{vid}/can/rx", [])
     rec_sensors = messages.get(f"rtsim/{vid}/sensors", [])
     rec_state = messages.get(f"rtsim/{vid}/state", [])
     dt = sim.dt
     for m in rx:
-        f = _Frame(int(m.data["id"]), bytes.fromhex(m.data["data"]))
         if mode != "lockstep":
-            loop.run_steps(int(round(m.data["time"] / dt)) - loop.k)
-        loop.on_frame(f)
+            loop.advance(int(round(m.data["time"] / dt)) - loop.k)
+        loop.rx_writer.put(int(m.data["id"]), bytes.fromhex(m.data["data"]))
+        loop.take_frames()
         if loop.run_state == "stopped":
             break
     if mode != "lockstep" and rec_sensors:
-        loop.run_steps(int(round(rec_sensors[-1].data["time"] / dt)) - loop.k)
+        loop.advance(int(round(rec_sensors[-1].data["time"] / dt)) - loop.k)
     report = {"recording": str(path), "mode": mode, "dt": dt, "files": notes, "frames_replayed": len(rx),
               "sim_time": loop.sim_time, "run_state": loop.run_state, "message": loop.message,
               "sensors": _compare(rec_sensors, col.sensors, SENSOR_NAMES),
@@ -137,15 +124,16 @@ def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | N
 
     frames = read_frames(path)
     sim, sc = build_sim(scenario or DEFAULT_SCENARIO, vehicle, dt, models)
-    col = Collector()
-    loop = HilLoop(sim, Codec(), None, col, mode="fast")
+    loop = HilLoop(sim, Codec(), mode="fast")
+    col = Collector(loop)
     t_first = frames[0].time if frames else 0.0
     for f in frames:
-        loop.run_steps(int(round((f.time - t_first) / sim.dt)) - loop.k)
-        loop.on_frame(_Frame(f.can_id, bytes(f.data)))
+        loop.advance(int(round((f.time - t_first) / sim.dt)) - loop.k)
+        loop.rx_writer.put(f.can_id, bytes(f.data))
+        loop.take_frames()
         if loop.run_state == "stopped":
             break
-    loop.run_steps(int(round(0.5 / sim.dt)))       # half a second after the last frame
+    loop.advance(int(round(0.5 / sim.dt)))       # half a second after the last frame
     xs = np.array([v for _, v in col.state]) if col.state else np.zeros((0, len(STATE_NAMES)))
     ix, iy, isp = STATE_NAMES.index("pos_x"), STATE_NAMES.index("pos_y"), STATE_NAMES.index("speed")
     dist = float(np.sum(np.hypot(np.diff(xs[:, ix]), np.diff(xs[:, iy])))) if len(xs) > 1 else 0.0

@@ -146,6 +146,11 @@ class Service:
         self.vehicle_id = o.vehicle_id or self.model.config.id
         self.codec = Codec(o.dbc)
         self.inbox = queue.SimpleQueue()
+        from rtsim.channels import COMMAND_NAMES, SENSOR_NAMES, STATE_NAMES
+
+        from .rings import make_rings
+        self.rings = make_rings(len(SENSOR_NAMES), len(self.codec.sensor_frames), len(STATE_NAMES),
+                                len(COMMAND_NAMES))
         self._open_can()
         if o.record is not None:
             from bridge.mcap_recorder import Recorder
@@ -156,15 +161,13 @@ class Service:
             self.zenoh = ZenohLink(self.vehicle_id, listen=tuple(o.zenoh_listen),
                                    connect=tuple(o.zenoh_connect), allow_remote=o.zenoh_allow_remote)
         self.health = LoopHealth(period=self.sim.dt)
-        self.loop = HilLoop(self.sim, self.codec, self.port, None, mode=o.mode, state_rate=o.state_rate,
+        self.loop = HilLoop(self.sim, self.codec, self.rings, mode=o.mode, state_rate=o.state_rate,
                             hold_pressure=o.hold_pressure, inbox=self.inbox, health=self.health,
                             scenario_name=self.sc.name)
-        from rtsim.channels import SENSOR_NAMES, STATE_NAMES
-
+        self.loop.port = self.port
         from .outbox import Outbox
-        self.outbox = Outbox(len(SENSOR_NAMES), len(STATE_NAMES), self.loop.packer.frame_ids,
-                             zenoh=self.zenoh, recorder=self.recorder, status_fn=self.loop.status,
-                             status_period=1.0 / o.status_rate)
+        self.outbox = Outbox(self.rings, self.loop.lp.sensor_ids, zenoh=self.zenoh, recorder=self.recorder,
+                             status_fn=self.loop.status, status_period=1.0 / o.status_rate)
         self.loop.outbox = self.outbox
         self.pacer = Pacer(self.loop.run_steps, self.sim.dt, "fast" if o.mode == "fast" else (
             "lockstep" if o.mode == "lockstep" else "realtime"), max_catch_up=o.max_catch_up,
@@ -177,9 +180,12 @@ class Service:
         """Load every compiled kernel of the loop (numba loads a cached kernel at its first call:
         ~1 s for the vehicle step) on a throwaway copy, so the first paced step is not a stall."""
         sim, _ = build_sim(self.scenario_path, self.opts.vehicle, self.opts.dt, self.models)
-        scratch = HilLoop(sim, self.codec, None, None, mode="fast", state_rate=self.opts.state_rate)
-        scratch.run_steps(scratch.sensor_every * scratch.state_every)   # every branch of the step
-        scratch.packer.pack(scratch.true, 0.0)
+        scratch = HilLoop(sim, self.codec, mode=self.opts.mode, state_rate=self.opts.state_rate)
+        if scratch.mode == "lockstep":
+            scratch.advance(scratch.status_every)                 # every branch of the step
+            scratch.take_frames()
+        else:
+            scratch.run_steps(scratch.status_every)
         self.health.recent_percentiles()
 
     def _open_can(self) -> None:
@@ -198,7 +204,8 @@ class Service:
                              f"(python-can interface 'remote'; no SocketCAN in this kernel)")
                 iface, chan = "remote", chan or f"{HUB_HOST}:{port}"
         self.can_interface, self.can_channel = iface, chan
-        self.port = BusPort(self.inbox, iface, chan)
+        notify = (lambda: self.inbox.put(("can", None))) if o.mode == "lockstep" else None
+        self.port = BusPort(self.rings, iface, chan, notify=notify)
 
     def session_metadata(self) -> dict[str, dict[str, str]]:
         """What `rtsim resim` needs to rebuild this session: the files as they were, the step, the
