@@ -96,3 +96,15 @@ def test_decoder_ignores_foreign_frames(codec):
     assert dec.receive(0x80, bytes(8)) is False
     assert dec.receive(0x100, bytes(3)) is False
     assert dec.samples == 0
+
+
+def test_step_ack_packs_like_encode_step_ack(codec):
+    lay = codec.frame_layout("SIM_STEP_ACK", ("lockstep_sim_time", "lockstep_ack_counter"))
+    words = np.zeros(1, dtype=np.int64)
+    rng = np.random.default_rng(4)
+    for t in [0.0, 0.001, 12.3456785, 1099511.627775, 2e6, *rng.uniform(0, 5000, 100)]:
+        counter = int(rng.integers(0, 16))
+        _, ref = codec.encode_step_ack(float(t), counter)
+        pack_frames(np.array([t, counter, 0.0]), 0.0, lay["time_start"], lay["time_mask"], lay["sig_int"],
+                    lay["sig_float"], words)
+        assert words.tobytes() == ref, (t, counter)
