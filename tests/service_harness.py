@@ -1,6 +1,7 @@
 """Helpers for the service end-to-end tests: the CAN segment to use, the service as a child process,
-and a bus reader that keeps arrival times. Every process started here is stopped by the caller's
-``finally`` (``ServiceProcess.close`` kills what did not stop)."""
+and a bus reader that keeps every frame (with its arrival time, for printing only) and the latest
+simulation time the sensor frames carry. Every process started here is stopped by the caller's
+``finally`` (``ServiceProcess.close`` kills what did not stop). Timeouts bound waits only (waits.py)."""
 from __future__ import annotations
 
 import os
@@ -10,6 +11,8 @@ import sys
 import threading
 import time
 from pathlib import Path
+
+from waits import EVENT
 
 ROOT = Path(__file__).resolve().parent.parent
 READY = "stop with Ctrl-C"
@@ -46,8 +49,9 @@ class ServiceProcess:
             if READY in line:
                 self._ready.set()
 
-    def stop(self, sig=signal.SIGTERM, timeout: float = 10.0) -> tuple[int | None, float]:
-        """Send ``sig``; returns (exit code, seconds until the process ended)."""
+    def stop(self, sig=signal.SIGTERM, timeout: float = EVENT) -> tuple[int | None, float]:
+        """Send ``sig``; returns (exit code or None if it did not end within ``timeout`` s, seconds
+        until the process ended: for printing, not a criterion)."""
         t0 = time.monotonic()
         self.proc.send_signal(sig)
         try:
@@ -55,13 +59,13 @@ class ServiceProcess:
         except subprocess.TimeoutExpired:
             rc = None
         dt = time.monotonic() - t0
-        self._reader.join(5)
+        self._reader.join(EVENT)
         return rc, dt
 
     def close(self) -> None:
         if self.proc.poll() is None:
             self.proc.kill()
-            self.proc.wait(10)
+            self.proc.wait(EVENT)
 
     @property
     def output(self) -> str:
@@ -69,11 +73,15 @@ class ServiceProcess:
 
 
 class Listener:
-    """Reads a bus in a thread: every frame with its arrival time (monotonic s)."""
+    """Reads a bus in a thread: every frame with its arrival time (monotonic s). ``sim_ms`` is the
+    simulation time (ms) of the latest sensor frame seen, unwrapped from the frames' 16-bit
+    ``sim_time_ms`` (bytes 0-1), or None before the first; give ``sensor_ids`` to track it."""
 
-    def __init__(self, bus):
+    def __init__(self, bus, sensor_ids=()):
         self.bus = bus
         self.frames: list[tuple[float, int, bytes]] = []
+        self.sensor_ids = frozenset(sensor_ids)
+        self.sim_ms: int | None = None
         self._stop = threading.Event()
         self._t = threading.Thread(target=self._run, daemon=True)
         self._t.start()
@@ -85,8 +93,24 @@ class Listener:
             except Exception:  # noqa: BLE001  (bus closed under us at the end)
                 return
             if msg is not None:
-                self.frames.append((time.monotonic(), msg.arbitration_id, bytes(msg.data)))
+                data = bytes(msg.data)
+                self.frames.append((time.monotonic(), msg.arbitration_id, data))
+                if msg.arbitration_id in self.sensor_ids:
+                    ms = int.from_bytes(data[0:2], "little")
+                    if self.sim_ms is None:
+                        self.sim_ms = ms
+                    else:
+                        self.sim_ms += (ms - self.sim_ms) % 65536
+
+    def wait_sim_ms(self, ms: int, timeout: float = EVENT) -> bool:
+        """Wait until a sensor frame at simulation time ``ms`` or later has arrived (bounded wait)."""
+        deadline = time.monotonic() + timeout
+        while self.sim_ms is None or self.sim_ms < ms:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.01)
+        return True
 
     def close(self) -> None:
         self._stop.set()
-        self._t.join(2)
+        self._t.join(EVENT)

@@ -3,13 +3,12 @@ from __future__ import annotations
 
 import time
 
+import can
 import pytest
 
-can = pytest.importorskip("can")
-pytest.importorskip("can_remote")
-
-from bridge.can_batch import batch_sender, frame_sender  # noqa: E402
-from bridge.can_bus import LoopbackHub  # noqa: E402
+from bridge.can_batch import batch_sender, frame_sender
+from bridge.can_bus import LoopbackHub
+from waits import EVENT, HUB_START
 
 
 def _frames(k):
@@ -18,7 +17,7 @@ def _frames(k):
 
 
 def test_batches_arrive_like_single_sends():
-    with LoopbackHub(0) as hub:
+    with LoopbackHub(0, start_timeout=HUB_START) as hub:
         a, b = hub.open_bus(), hub.open_bus()
         try:
             send_all = batch_sender(a)
@@ -33,7 +32,7 @@ def test_batches_arrive_like_single_sends():
                         a.send(m)
                 sent += msgs
             got = []
-            deadline = time.monotonic() + 10
+            deadline = time.monotonic() + EVENT                        # a bound on the wait only
             while len(got) < len(sent) and time.monotonic() < deadline:
                 m = b.recv(0.2)
                 if m is not None:
@@ -52,7 +51,7 @@ def test_other_buses_fall_back_to_single_sends():
     b = can.Bus(interface="virtual", channel="batch-test")
     try:
         batch_sender(a)(_frames(3))
-        got = [b.recv(1.0) for _ in range(8)]
+        got = [b.recv(EVENT) for _ in range(8)]
         assert [bytes(m.data) for m in got] == [bytes(m.data) for m in _frames(3)]
     finally:
         a.shutdown()

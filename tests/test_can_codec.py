@@ -9,15 +9,12 @@ from __future__ import annotations
 import random
 import shutil
 
+import cantools
 import pytest
 
-cantools = pytest.importorskip("cantools")
-
-from bridge.can_codec import (  # noqa: E402
-    DEFAULT_DBC, FAULTS, Codec, CommandReceiver, crc8_j1850,
-)
-from rtsim.channels import BY_NAME, COMMAND_NAMES, COMMANDS, SENSOR_NAMES, SENSORS  # noqa: E402
-from rtsim.errors import ConfigError  # noqa: E402
+from bridge.can_codec import DEFAULT_DBC, FAULTS, Codec, CommandReceiver, crc8_j1850
+from rtsim.channels import BY_NAME, COMMAND_NAMES, COMMANDS, SENSOR_NAMES, SENSORS
+from rtsim.errors import ConfigError
 
 CMD_FRAMES = {"THROTTLE_CMD": "throttle_angle_cmd", "BRAKE_CMD": "brake_pressure_cmd",
               "STEER_CMD": "steering_wheel_angle_cmd"}

@@ -12,16 +12,14 @@ import gzip
 import math
 import shutil
 
+import can
 import pytest
 
-can = pytest.importorskip("can", reason="python-can is not installed (pip install python-can)")
-
-from bridge.can_codec import Codec  # noqa: E402
-from bridge.can_logs import (Frame, command_inputs, read_frames,  # noqa: E402
-                             write_frames)
-from bridge.mcap_recorder import Recorder  # noqa: E402
-from rtsim.channels import COMMAND_NAMES, SENSOR_NAMES  # noqa: E402
-from rtsim.errors import RtsimError  # noqa: E402
+from bridge.can_codec import Codec
+from bridge.can_logs import Frame, command_inputs, read_frames, write_frames
+from bridge.mcap_recorder import Recorder
+from rtsim.channels import COMMAND_NAMES, SENSOR_NAMES
+from rtsim.errors import RtsimError
 
 FORMAT_RESOLUTION = 1e-6   # s: ASC and candump write microseconds; frames below are on a 1 us grid
 

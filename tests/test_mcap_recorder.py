@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -17,6 +17,7 @@ from mcap.reader import make_reader
 from bridge.mcap_recorder import TOPIC_KEYS, Recorder, read_recording
 from rtsim.channels import COMMAND_NAMES, SENSOR_NAMES
 from rtsim.errors import ConfigError
+from waits import EVENT, PROCESS
 
 ROOT = Path(__file__).resolve().parent.parent
 VID = "car7"
@@ -119,15 +120,24 @@ def test_record_never_blocks_and_counts_drops(tmp_path):
         rec.pause()                      # writer stalled (as if the disk hung)
         costs = []
         results = []
-        for i in range(2000):
-            t0 = time.perf_counter()
-            results.append(rec.record("sensors", i * 1000, _sensors(i)))
-            costs.append(time.perf_counter() - t0)
+
+        def record_all():
+            for i in range(2000):
+                t0 = time.perf_counter()
+                results.append(rec.record("sensors", i * 1000, _sensors(i)))
+                costs.append(time.perf_counter() - t0)
+
+        # the writer stays stalled until every call has returned: a record() that waited for room in
+        # the queue would never return (bounded wait: a deadlock guard, not a timing criterion)
+        th = threading.Thread(target=record_all, daemon=True)
+        th.start()
+        th.join(EVENT)
+        assert not th.is_alive(), f"record() blocked behind a stalled writer after {len(results)} calls"
         assert results[:10] == [True] * 10 and not any(results[10:])
         assert rec.dropped == 1990 and rec.queued == 10
-        # returns at once while the writer is stalled (about 0.3 us a call here); the bounds are
-        # loose so that a preempted call on a loaded machine does not fail the test
-        assert sorted(costs)[len(costs) // 2] < 20e-6 and sum(costs) < 0.5
+        # the cost of a call is printed, not asserted (about 0.3 us here on a quiet machine)
+        print(f"\nrecord() with the writer stalled: median {sorted(costs)[len(costs) // 2] * 1e6:.2f} us, "
+              f"total {sum(costs) * 1e3:.2f} ms for {len(costs)} calls")
         rec.resume()
     finally:
         rec.close()
@@ -155,17 +165,27 @@ def test_payload_forms_and_errors(tmp_path):
     assert f"rtsim/{VID}/state" not in got and info.messages == 4
 
 
+def _wait(pred, timeout: float = EVENT) -> bool:
+    """Poll ``pred`` for up to ``timeout`` s (a bound on the wait, not a timing criterion)."""
+    deadline = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
 def test_time_bound_flushes_chunks(tmp_path):
     path = tmp_path / "slow.mcap"
     seen = []
     with Recorder(path, VID, flush_interval=0.1, on_chunk=lambda c, n: seen.append((c, n))) as rec:
-        for i in range(40):                       # tiny messages: never reach chunk_size
-            rec.record("sensors", i * 10_000_000, _sensors(i))
-            time.sleep(0.01)
-        deadline = time.monotonic() + 2
-        while rec.chunks < 2 and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert rec.chunks >= 2                    # flushed by age, while still recording
+        # tiny messages never reach chunk_size: a chunk closes only because its first message got old,
+        # while the recorder stays open (each batch is recorded after the previous chunk closed, so it
+        # ends up in a new chunk)
+        for k in range(1, 4):
+            for i in range(10 * (k - 1), 10 * k):
+                rec.record("sensors", i * 10_000_000, _sensors(i))
+            assert _wait(lambda: rec.chunks >= k), f"chunk {k} was not flushed by age ({rec.chunks} chunks)"
         # what on_chunk reports is on disk: a reader of the open file finds it
         _c, n_flushed = seen[-1]
         got, info = read_recording(path)
@@ -205,7 +225,7 @@ rec = Recorder(sys.argv[2], "car7", chunk_size=32 * 1024, flush_interval=0.3, on
 print("START", flush=True)
 t0 = time.monotonic()
 i = 0
-while time.monotonic() - t0 < 4.0:          # killed long before this ends
+while time.monotonic() - t0 < 600.0:        # killed long before this ends
     t_ns = i * 2_000_000
     rec.record("sensors", t_ns, {n: i * 0.001 + j for j, n in enumerate(SENSOR_NAMES)})
     if i % 5 == 0:
@@ -234,28 +254,38 @@ def test_sigkill_recovery(tmp_path):
     path = tmp_path / "killed.mcap"
     proc = subprocess.Popen([sys.executable, "-c", CHILD, str(ROOT), str(path)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: list[str] = []
+
+    def read_stdout():
+        for ln in proc.stdout:
+            lines.append(ln.strip())
+
+    reader = threading.Thread(target=read_stdout, daemon=True)
+    reader.start()
     try:
-        assert proc.stdout.readline().strip() == "START"
-        time.sleep(1.5)
-        os.kill(proc.pid, signal.SIGKILL)
-        out, err = proc.communicate(timeout=10)
+        # killed once it has reported three completed chunks (how long that takes is not the point;
+        # the wait is bounded so that a child that never flushes fails the test)
+        _wait(lambda: sum(ln.startswith("CHUNK") for ln in lines) >= 3 or proc.poll() is not None, PROCESS)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=EVENT)
+        reader.join(EVENT)
+        err = proc.stderr.read()
     finally:
         if proc.poll() is None:
             proc.kill()
-        proc.wait(timeout=10)
-    assert proc.returncode == -signal.SIGKILL, err
-    flushed = [tuple(map(int, ln.split()[1:])) for ln in out.splitlines() if ln.startswith("CHUNK")]
-    assert len(flushed) >= 3, out            # several chunks were completed before the kill
+            proc.wait(timeout=EVENT)
+    assert lines and lines[0] == "START" and proc.returncode == -signal.SIGKILL, (lines, err)
+    flushed = [tuple(map(int, ln.split()[1:])) for ln in lines if ln.startswith("CHUNK")]
+    assert len(flushed) >= 3, lines          # several chunks were completed before the kill
     on_disk = flushed[-1][1]                 # messages known to be on disk at the last boundary
 
     got, info = read_recording(path)
     assert not info.complete
-    assert info.chunks >= len(flushed)
-    assert info.messages >= on_disk
-    # about 1.5 s at 500 Hz = 750 steps = 900 messages were recorded; at most ~0.3 s is lost
-    assert info.messages >= 0.5 * 900
+    assert info.chunks >= len(flushed)       # every chunk reported complete is recovered ...
+    assert info.messages >= on_disk          # ... with every message it holds
     # the recovered messages are exactly the first N recorded, with their contents
-    _assert_same(got, _expected_child(800 + 2000)[:info.messages])
+    n_steps = info.messages                  # (at most one message per 2 ms step on each topic)
+    _assert_same(got, _expected_child(n_steps)[:info.messages])
 
 
 def test_not_mcap_is_config_error(tmp_path):

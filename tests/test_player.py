@@ -11,14 +11,14 @@ import io
 import socket
 import time
 
+import can
 import pytest
 
-can = pytest.importorskip("can", reason="python-can is not installed (pip install python-can)")
-
-from bridge.can_logs import Frame, write_frames  # noqa: E402
-from bridge.player import Player, add_arguments, main, median_interval, parse_ids  # noqa: E402
-from rtsim.errors import RtsimError  # noqa: E402
-from rtsim.realtime.clock import FakeClock  # noqa: E402
+from bridge.can_logs import Frame, write_frames
+from bridge.player import Player, add_arguments, main, median_interval, parse_ids
+from rtsim.errors import RtsimError
+from rtsim.realtime.clock import FakeClock
+from waits import EVENT, HUB_START
 
 
 class FakeBus:
@@ -162,11 +162,11 @@ def test_stop_from_another_thread_on_the_real_clock():
     bus = FakeBus(clock=None)
     p = Player(frames, bus)
     p.start()
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + EVENT                       # bounds on the waits only
     while not bus.sent and time.monotonic() < deadline:
         time.sleep(0.005)
     p.stop()
-    assert p.join(timeout=5), "run() did not return after stop()"
+    assert p.join(timeout=EVENT), "run() did not return after stop()"
     assert p.stats.sent == 1 and p.stats.ended == "stopped"
 
 
@@ -233,18 +233,13 @@ def test_main_without_a_hub_says_how_to_start_one(tmp_path, monkeypatch):
 
 @pytest.fixture
 def hub():
-    pytest.importorskip("can_remote", reason="python-can-remote is not installed (pip install python-can-remote)")
     from bridge.can_bus import LoopbackHub
 
-    try:
-        h = LoopbackHub()
-    except RtsimError as exc:
-        pytest.skip(f"the python-can-remote hub cannot start here: {exc}")
-    with h:
+    with LoopbackHub(start_timeout=HUB_START) as h:       # cannot start here: a failure, not a skip
         yield h
 
 
-def _recv_n(bus, n, deadline_s=20.0):
+def _recv_n(bus, n, deadline_s=EVENT):
     out = []
     deadline = time.monotonic() + deadline_s
     while len(out) < n and time.monotonic() < deadline:

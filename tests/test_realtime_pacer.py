@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from rtsim.realtime import FakeClock, MonotonicClock, Pacer
+from waits import EVENT
 
 P = 1e-3
 
@@ -263,11 +264,11 @@ def test_stop_from_other_thread_real_clock():
     pacer = Pacer(steps.append, period=2e-3, clock=MonotonicClock())
     t = threading.Thread(target=pacer.run, daemon=True)
     t.start()
-    deadline = time.monotonic() + 5.0
+    deadline = time.monotonic() + EVENT                # bounds on the waits, not timing criteria
     while not steps and time.monotonic() < deadline:
         time.sleep(1e-3)
     assert steps, "pacer did not start stepping"
     pacer.stop()
-    t.join(timeout=1.0)
+    t.join(timeout=EVENT)
     assert not t.is_alive()
     assert not pacer.running

@@ -1,7 +1,8 @@
 """The service's Zenoh side, in process: the control queryable (step, pause, resume, reset,
 load_scenario, errors), the config query, and the published topics, against a service in lockstep mode
 (so every expectation is exact). Zenoh on tcp/127.0.0.1 with a port chosen by the OS, scouting off;
-CAN on a loopback hub started here."""
+CAN on a loopback hub started here. Every request waits up to EVENT s for its reply (tests/waits.py:
+a bound on the wait, not a criterion; the replies come in milliseconds on a quiet machine)."""
 from __future__ import annotations
 
 import threading
@@ -9,30 +10,28 @@ import time
 
 import pytest
 
-pytest.importorskip("zenoh")
-pytest.importorskip("can_remote")
-
-from bridge import payloads  # noqa: E402
-from bridge.can_bus import LoopbackHub  # noqa: E402
-from bridge.zenoh_link import ZenohClient  # noqa: E402
-from rtsim.service.server import ServeOptions, Service  # noqa: E402
+from bridge import payloads
+from bridge.can_bus import LoopbackHub
+from bridge.zenoh_link import ZenohClient
+from rtsim.service.server import ServeOptions, Service
+from waits import EVENT, HUB_START
 
 
 @pytest.fixture(scope="module")
 def service():
-    hub = LoopbackHub(0)
+    hub = LoopbackHub(0, start_timeout=HUB_START)
     svc = Service(ServeOptions(mode="lockstep", can_interface="remote", can_channel=hub.channel, start_hub=False,
                                zenoh_listen=["tcp/127.0.0.1:0"]), out=lambda *a: None)
     th = threading.Thread(target=svc.run, daemon=True)
     th.start()
     client = ZenohClient(svc.vehicle_id, connect=tuple(svc.zenoh.endpoints))
-    client.control("step", n=1, timeout=30)            # first request: connection and first step done
+    client.control("step", n=1, timeout=EVENT)         # first request: connection and first step done
     try:
         yield svc, client
     finally:
         client.close()
         svc.stop()
-        th.join(10)
+        th.join(EVENT)
         hub.close()
     assert not th.is_alive()
 
@@ -42,16 +41,22 @@ def test_step_advances_exactly_and_publishes_every_sample(service):
     got = {"sensors": [], "state": [], "status": []}
     for kind in got:
         client.subscribe(kind, got[kind].append)
-    time.sleep(0.5)                                    # subscriptions reach the service
-    t0 = client.control("step", n=1, timeout=20)["sim_time"]
-    r = client.control("step", n=100, timeout=20)
+    # the subscriptions have reached the service once a step's samples arrive
+    deadline = time.monotonic() + EVENT
+    while not (got["sensors"] and got["state"] and got["status"]):
+        assert time.monotonic() < deadline, {k: len(v) for k, v in got.items()}
+        client.control("step", n=10, timeout=EVENT)
+        time.sleep(0.05)
+    t0 = client.control("step", n=1, timeout=EVENT)["sim_time"]
+    r = client.control("step", n=100, timeout=EVENT)
     assert r["ok"] and r["sim_time"] == pytest.approx(t0 + 0.1)
-    deadline = time.monotonic() + 5
-    while time.monotonic() < deadline and (not got["status"] or any(
-            not got[k] or got[k][-1]["time"] < t0 + 0.1 - 1e-9 for k in ("sensors", "state"))):
+    deadline = time.monotonic() + EVENT
+    while time.monotonic() < deadline and any(got[k][-1]["time"] < t0 + 0.1 - 1e-9 for k in ("sensors", "state")):
         time.sleep(0.05)
     times = [m["time"] for m in got["sensors"] if m["time"] > t0]
-    assert len(times) == 50 and times[-1] == pytest.approx(t0 + 0.1)     # 500 Hz: every 2 ms
+    # 500 Hz in simulated time: every sample of the 100 steps, exactly 2 ms apart
+    assert len(times) == 50 and times[-1] == pytest.approx(t0 + 0.1)
+    assert times == pytest.approx([t0 + 0.002 * (k + 1) for k in range(50)], abs=1e-9)
     for kind, msgs in got.items():
         assert msgs, kind
         assert payloads.validation_errors(kind, msgs[-1]) == [], kind
@@ -60,27 +65,27 @@ def test_step_advances_exactly_and_publishes_every_sample(service):
 
 def test_pause_resume_and_errors(service):
     svc, client = service
-    assert client.control("pause")["run_state"] == "paused"
-    r = client.control("step", n=5)
+    assert client.control("pause", timeout=EVENT)["run_state"] == "paused"
+    r = client.control("step", n=5, timeout=EVENT)
     assert not r["ok"] and "paused" in r["error"]
-    assert client.control("resume")["run_state"] == "running"
-    assert client.control("step", n=5)["ok"]
+    assert client.control("resume", timeout=EVENT)["run_state"] == "running"
+    assert client.control("step", n=5, timeout=EVENT)["ok"]
     for bad in ({"op": "step", "n": 0}, {"op": "warp"}, {"op": "load_scenario", "scenario": "no_such"}):
         op = bad.pop("op")
-        r = client.control(op, **bad)
+        r = client.control(op, **bad, timeout=EVENT)
         assert r["ok"] is False and r["error"], r
 
 
 def test_reset_and_load_scenario_restart_time(service):
     svc, client = service
-    client.control("step", n=20)
-    r = client.control("reset", timeout=20)
+    client.control("step", n=20, timeout=EVENT)
+    r = client.control("reset", timeout=EVENT)
     assert r["ok"] and r["sim_time"] == 0.0
-    assert client.control("step", n=10)["sim_time"] == pytest.approx(0.01)
-    r = client.control("load_scenario", scenario="step_steer_80kph", timeout=20)
+    assert client.control("step", n=10, timeout=EVENT)["sim_time"] == pytest.approx(0.01)
+    r = client.control("load_scenario", scenario="step_steer_80kph", timeout=EVENT)
     assert r["ok"] and r["scenario"] == "step_steer_80kph"
-    client.control("step", n=200)
-    cfg = client.config()
+    client.control("step", n=200, timeout=EVENT)
+    cfg = client.config(timeout=EVENT)
     assert cfg["scenario"]["name"] == "step_steer_80kph" and cfg["dt"] == 0.001
     assert cfg["vehicle"]["id"] == "xbw" and cfg["options"]["mode"] == "lockstep"
     # the new scenario starts at 80 km/h: the car is moving (the brake holds, so it slows down)

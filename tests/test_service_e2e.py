@@ -3,8 +3,15 @@
 The CAN segment is the embedded loopback hub (python-can-remote on 127.0.0.1) started per test, or the
 bus named by RTSIM_CAN_INTERFACE/RTSIM_CAN_CHANNEL (socketcan vcan0 inside the qemu VM of
 tests/test_vcan.py). Assertions are on counts, sample stamps and simulation times, which the service
-fixes; wall-clock timings (arrival gaps, transport latency, stop time) are printed for the notes and only
-bounded loosely, because this VM steals the CPU for 10-30 ms at times (../shared/notes/platform.md).
+fixes, so they hold on a loaded machine; wall-clock figures (arrival gaps, transport latency, stop time)
+are printed for the notes and never asserted (speed is `rtsim bench --suite service`'s business).
+Wall-clock timeouts only bound how long a test waits for something to happen (tests/waits.py).
+
+In real time a test that plays the ECU can itself be late on a loaded machine (or when this VM steals
+the CPU for 10-30 ms): commands then reach the service more than 30 ms of simulated time apart and the
+watchdog rightly applies the safe values for a while. The real-time tests read what happened from the
+recording (simulation times of every received frame and every watchdog change) and check the service
+against that, so a late test ECU cannot fail them and a wrong service cannot pass them.
 """
 from __future__ import annotations
 
@@ -17,17 +24,17 @@ import subprocess
 import sys
 import time
 
+import can
+import cantools
 import numpy as np
 import pytest
 
-can = pytest.importorskip("can")
-pytest.importorskip("can_remote")
-cantools = pytest.importorskip("cantools")
-
-from bridge.can_bus import LoopbackHub, open_bus  # noqa: E402
-from bridge.can_codec import DEFAULT_DBC, Codec  # noqa: E402
-from bridge.mcap_recorder import read_recording  # noqa: E402
-from service_harness import ROOT, Listener, ServiceProcess, segment_from_env  # noqa: E402
+from bridge.can_bus import LoopbackHub, open_bus
+from bridge.can_codec import DEFAULT_DBC, Codec
+from bridge.mcap_recorder import read_recording
+from rtsim.channels import COMMAND_NAMES
+from service_harness import ROOT, Listener, ServiceProcess, segment_from_env
+from waits import EVENT, HUB_START, PROCESS
 
 # can_e2e: also run over vcan0 inside the qemu VM (tests/test_vcan.py), where the emulated CPU is far too
 # slow for real time: only the lockstep tests (deterministic, function not timing) carry it.
@@ -46,7 +53,7 @@ def segment():
     if env is not None:
         yield env
         return
-    hub = LoopbackHub(0)
+    hub = LoopbackHub(0, start_timeout=HUB_START)
     try:
         yield "remote", hub.channel
     finally:
@@ -68,6 +75,16 @@ def _stamp_gaps_ms(stamps):
     return np.diff(ms) % 65536
 
 
+def _ms(t: float) -> int:
+    """A simulation time (s) on the service's 1 ms grid, as an integer number of ms."""
+    return int(round(t * 1000.0))
+
+
+def _recorded_tx(messages, fid):
+    """Payloads of the frames with id ``fid`` the service recorded as sent (``can/tx``), in order."""
+    return [bytes.fromhex(m.data["data"]) for m in messages["rtsim/xbw/can/tx"] if m.data["id"] == fid]
+
+
 @realtime
 def test_demo_ecu_drives_the_car_and_every_sensor_frame_keeps_its_period(segment, tmp_path):
     iface, chan = segment
@@ -78,8 +95,8 @@ def test_demo_ecu_drives_the_car_and_every_sensor_frame_keeps_its_period(segment
     listener = Listener(bus)
     try:
         ecu = subprocess.run([sys.executable, "-m", "drivers.ecu_demo", "--can-interface", iface, "--can-channel",
-                              chan, "--manoeuvre", "straight_line", "--duration", "12"], cwd=ROOT,
-                             capture_output=True, text=True, timeout=300)
+                              chan, "--manoeuvre", "straight_line", "--duration", "12", "--timeout", str(EVENT)],
+                             cwd=ROOT, capture_output=True, text=True, timeout=PROCESS)
         rc, stop_s = svc.stop(signal.SIGTERM)
     finally:
         listener.close()
@@ -88,8 +105,7 @@ def test_demo_ecu_drives_the_car_and_every_sensor_frame_keeps_its_period(segment
     assert ecu.returncode == 0, ecu.stderr
     result = json.loads(ecu.stdout.strip().splitlines()[-1])
     print(f"\nECU: {result}\nservice stopped {stop_s * 1e3:.0f} ms after SIGTERM\n{svc.output}")
-    assert rc == 0, svc.output
-    assert stop_s < 5.0                     # clean stop (measured typically well under 1 s; printed)
+    assert rc == 0, svc.output                 # a clean stop (how long it took is printed above)
 
     # the demo ECU's commands moved the car (the seed's straight line peaks near 23 km/h = 6.4 m/s when
     # every command arrives in time; on a loaded machine a late ECU trips the watchdog, which brakes)
@@ -97,30 +113,43 @@ def test_demo_ecu_drives_the_car_and_every_sensor_frame_keeps_its_period(segment
     assert info.complete
     assert {f"rtsim/xbw/{k}" for k in ALL_TOPICS} <= set(info.topics), info.topics
     speed = [m.data["speed"] for m in messages["rtsim/xbw/state"]]
-    safe = sum(m.data["source"] == "safe" for m in messages["rtsim/xbw/commands"])
+    cmds = [m.data for m in messages["rtsim/xbw/commands"]]
+    safe = sum(c["source"] == "safe" for c in cmds)
     print(f"recorded peak speed {max(speed):.2f} m/s, watchdog engaged {safe} times")
-    assert result["samples"] > 5000 and result["peak_speed_estimate"] > 2.0 and max(speed) > 2.0
-    assert sum(m.data["source"] == "can" for m in messages["rtsim/xbw/commands"]) > 1000
+    assert result["peak_speed_estimate"] > 2.0 and max(speed) > 2.0
+    # the ECU decoded every sample of its 12 s (simulated), and the service accepted every command frame
+    # it sent (one `commands` record per accepted frame; the watchdog's changes carry all three values)
+    assert result["samples"] > 5000 and result["samples"] == round(result["ecu_time"] / 0.002) + 1, result
+    accepted = [c for c in cmds if c["source"] == "can" and len(set(COMMAND_NAMES) & set(c)) == 1]
+    assert len(accepted) == result["frames_sent"], (len(accepted), result["frames_sent"])
 
-    # every sensor frame at 500 Hz over 10 s of the run, each sample present (stamps 2 ms apart)
+    # every sample recorded, at 500 Hz in simulated time (sensors) and 100 Hz (state), none missing
+    for topic, period_ms in (("sensors", 2), ("state", 10)):
+        ms = np.array([_ms(m.data["time"]) for m in messages[f"rtsim/xbw/{topic}"]])
+        assert ms[0] <= period_ms and np.all(np.diff(ms) == period_ms), topic
+
+    # every sensor frame on the bus: each id's stamps exactly 2 ms apart over the whole capture (at least
+    # the ECU's 12 s), and the frames are byte for byte the ones the service recorded as sent
     frames = listener.frames
-    t_start = frames[0][0] + 1.0
     report = []
     for fid in SENSOR_IDS:
         st = _stamps(frames, fid)
-        window = [s for s in st if t_start <= s[0] < t_start + 10.0]
-        gaps = _stamp_gaps_ms(window)
-        arrival = np.diff([t for t, _ in window])
-        report.append(f"0x{fid:03x}: {len(window)} in 10 s, stamp gaps {set(gaps.tolist())}, "
-                      f"arrival gap max {arrival.max() * 1e3:.1f} ms, p99 {np.percentile(arrival, 99) * 1e3:.2f} ms")
-        assert abs(len(window) - 5000) <= 50, report[-1]
-        assert gaps.max() <= 10 and gaps.min() >= 2, report[-1]
+        gaps = _stamp_gaps_ms(st)
+        arrival = np.diff([t for t, _ in st])
+        report.append(f"0x{fid:03x}: {len(st)} frames, {(st[-1][1] - st[0][1]) % 65536} ms simulated, stamp gaps "
+                      f"{set(gaps.tolist())}, arrival gap max {arrival.max() * 1e3:.1f} ms, "
+                      f"p99 {np.percentile(arrival, 99) * 1e3:.2f} ms (wall clock, printed only)")
+        assert len(st) >= result["samples"] and np.all(gaps == 2), report[-1]
+        on_bus = [d for _, i, d in frames if i == fid]
+        recorded = _recorded_tx(messages, fid)
+        j = recorded.index(on_bus[0])
+        assert recorded[j:j + len(on_bus)] == on_bus, report[-1]
     print("\n".join(report))
 
 
 def _ecu_sender(bus, codec, schedule, period=0.01):
     """Send (throttle, brake, steer) commands every ``period`` s from schedule(t) until it returns
-    None; returns [(wall time, brake value)] of what was sent."""
+    None; returns [(wall time, brake value)] of what was sent (wall times for printing only)."""
     ctr = [0, 0, 0]
     names = ("throttle_angle_cmd", "brake_pressure_cmd", "steering_wheel_angle_cmd")
     sent = []
@@ -140,6 +169,32 @@ def _ecu_sender(bus, codec, schedule, period=0.01):
         time.sleep(max(0.0, t0 + k * period - time.monotonic()))
 
 
+def _watchdog_records(cmds):
+    """The recorded changes of the watchdog: whenever it changes, the service records the applied values
+    of all three commands with source "safe" (some command timed out) or "can" (all fresh again); the
+    record of a received frame names its one command only."""
+    return [c for c in cmds if set(COMMAND_NAMES) <= set(c)]
+
+
+def _frame_records(cmds, name):
+    """[(ms, value)] of the accepted frames of one command, in the order the service took them."""
+    return [(_ms(c["time"]), c[name]) for c in cmds
+            if c["source"] == "can" and name in c and len(set(COMMAND_NAMES) & set(c)) == 1]
+
+
+def _engaged_at(changes, ms) -> bool:
+    """Whether the watchdog held any command at its safe value in the step that started at ``ms``."""
+    state = True                                   # before the first command: everything safe
+    for k, engaged in changes:
+        if k > ms:
+            break
+        state = engaged
+    return state
+
+
+BRAKE_STEPS = 3          # brake steps in the real-time test: 0.5 s released, then 0.4 s at STEP_KPA each
+
+
 @realtime
 def test_brake_step_latency_and_watchdog_safe_states(segment, tmp_path, db):
     iface, chan = segment
@@ -147,17 +202,17 @@ def test_brake_step_latency_and_watchdog_safe_states(segment, tmp_path, db):
     codec = Codec()
     svc = ServiceProcess(iface, chan, "--no-zenoh", "--record", str(rec))
     bus = open_bus(iface, chan)
-    listener = Listener(bus)
+    listener = Listener(bus, SENSOR_IDS)
     try:
         def schedule(t):
-            if t < 1.5:
-                return (0.1, 0.0, 0.5)
-            if t < 2.5:
-                return (0.1, STEP_KPA, 0.5)
-            return None
+            if t >= 1.0 + 0.9 * BRAKE_STEPS:
+                return None
+            pressed = t >= 1.0 and (t - 1.0) % 0.9 >= 0.5
+            return (0.1, STEP_KPA if pressed else 0.0, 0.5)
         sent = _ecu_sender(bus, codec, schedule)
-        t_last_sent = sent[-1][0]
-        time.sleep(1.0)
+        # the ECU goes quiet: let 2 s of simulated time pass (the safe values act and settle)
+        quiet_ms = listener.sim_ms
+        assert quiet_ms is not None and listener.wait_sim_ms(quiet_ms + 2000), "the sensor frames stopped"
         rc, _ = svc.stop(signal.SIGTERM)
     finally:
         listener.close()
@@ -166,43 +221,71 @@ def test_brake_step_latency_and_watchdog_safe_states(segment, tmp_path, db):
     assert rc == 0, svc.output
     messages, info = read_recording(rec)
     cmds = [m.data for m in messages["rtsim/xbw/commands"]]
-    sensors = messages["rtsim/xbw/sensors"]
+    sensors = [m.data for m in messages["rtsim/xbw/sensors"]]
+    wd = _watchdog_records(cmds)
+    changes = [(_ms(c["time"]), c["source"] == "safe") for c in wd]
+    frames = {n: _frame_records(cmds, n) for n in COMMAND_NAMES}
 
-    # latency: the brake step (simulation time the service applied it) to the first sensor sample at
-    # 63.2 % of the step; bound: one actuator time constant (configs/vehicles/xbw.toml) plus 2 ms. The
-    # step stays under the actuator's rate limit (40000 kPa/s > STEP_KPA / tau), where the lag is linear.
+    # latency: a brake step (the simulation time the service took the command) to the first sensor
+    # sample at 63.2 % of the step; bound: one actuator time constant (configs/vehicles/xbw.toml) plus
+    # 2 ms. The step stays under the actuator's rate limit (40000 kPa/s > STEP_KPA / tau), where the lag
+    # is linear. Measured on every step the service received as sent: from released brakes (pressure
+    # below 1 % of the step) and with fresh commands until the 63 % sample (if this test's ECU thread
+    # was late, the watchdog's hold pressure would be the input instead; such a step is reported).
     tau = 0.045
-    t_cmd = next(c["time"] for c in cmds if c.get("brake_pressure_cmd") == STEP_KPA and c["source"] == "can")
-    t63 = next(m.data["time"] for m in sensors if m.data["time"] >= t_cmd
-               and m.data["brake_pressure"] >= 0.632 * STEP_KPA)
-    # the same on the wire: sending the step to receiving the sensor frame that shows it (printed)
+    brake = frames["brake_pressure_cmd"]
+    measured, disturbed = [], []
+    for (k0, v0), (k1, v1) in zip(brake, brake[1:]):
+        if not (v0 == 0.0 and v1 == STEP_KPA):
+            continue
+        before = [m for m in sensors if _ms(m["time"]) <= k1]
+        t63 = next((_ms(m["time"]) for m in sensors if _ms(m["time"]) >= k1
+                    and m["brake_pressure"] >= 0.632 * STEP_KPA), None)
+        clean = (t63 is not None and before and before[-1]["brake_pressure"] < 0.01 * STEP_KPA
+                 and not any(_engaged_at(changes, k) for k in range(k1, t63))
+                 and all(v == STEP_KPA for k, v in brake if k1 <= k <= t63))
+        (measured if clean else disturbed).append((k1, t63))
+    print(f"\nbrake steps: 63 % after {[t63 - k1 for k1, t63 in measured]} ms simulated (tau {tau * 1e3:.0f} ms); "
+          f"not measured (commands late, watchdog acted): {disturbed}")
+    # the same on the wire (wall clock, printed only): sending the first step to receiving the sensor frame
+    # that shows it
     t_step_sent = next(t for t, b in sent if b == STEP_KPA)
     pid = db.get_message_by_name("SIM_POWERTRAIN_BRAKE").frame_id
-    wire = next(t for t, i, d in listener.frames if i == pid and t > t_step_sent
-                and db.decode_message(pid, d)["brake_pressure"] >= 0.632 * STEP_KPA)
-    print(f"\nbrake step: 63 % after {(t63 - t_cmd) * 1e3:.1f} ms simulated, {(wire - t_step_sent) * 1e3:.1f} ms "
-          f"on the wire (tau {tau * 1e3:.0f} ms)")
-    assert 0.0 < t63 - t_cmd <= tau + 0.002 + 1e-9
+    wire = next((t for t, i, d in listener.frames if i == pid and t > t_step_sent
+                 and db.decode_message(pid, d)["brake_pressure"] >= 0.632 * STEP_KPA), None)
+    if wire is not None:
+        print(f"first brake step on the wire: {(wire - t_step_sent) * 1e3:.1f} ms (wall clock)")
+    assert measured, f"no brake step reached the service undisturbed: {disturbed}"
+    for k1, t63 in measured:
+        assert 0 < t63 - k1 <= (tau + 0.002) * 1000 + 1e-6, (k1, t63)
 
-    # watchdog: the safe values take over within the timeout (3 periods = 30 ms) of the last frame
-    t_last_rx = max(c["time"] for c in cmds if c["source"] == "can")
-    safe = [c for c in cmds if c["source"] == "safe" and c["time"] > t_last_rx]
-    assert safe, cmds[-5:]
-    assert safe[0]["time"] - t_last_rx <= 0.030 + 0.001 + 1e-9
-    assert safe[0]["throttle_angle_cmd"] == 0.0             # throttle closed
-    assert safe[0]["brake_pressure_cmd"] == 3000.0          # hold pressure (default)
-    assert safe[0]["steering_wheel_angle_cmd"] == 0.5       # steering held at its last value
-    last = sensors[-1].data
-    assert last["throttle_angle"] < 0.01 and abs(last["brake_pressure"] - 3000.0) < 50.0
-    assert abs(last["steering_wheel_angle"] - 0.5) < 0.02
-    # ... and the status frames on the bus flag all three timeouts after the ECU went quiet
+    # watchdog: each command goes to its safe value within its timeout (3 periods = 30 ms) of its last
+    # frame, in simulated time
+    last = {n: v[-1][0] for n, v in frames.items()}
+    after = [c for c in wd if _ms(c["time"]) > min(last.values())]
+    assert after and all(c["source"] == "safe" for c in after), after
+    assert _ms(after[0]["time"]) - min(last.values()) <= 31, (after[0], last)
+    final = after[-1]
+    k_safe = _ms(final["time"])
+    assert k_safe - max(last.values()) <= 31, (final, last)
+    assert final["throttle_angle_cmd"] == 0.0             # throttle closed
+    assert final["brake_pressure_cmd"] == 3000.0          # hold pressure (default)
+    assert final["steering_wheel_angle_cmd"] == 0.5       # steering held at its last value
+    end = sensors[-1]
+    assert _ms(end["time"]) >= k_safe + 500                # > 10 brake time constants of quiet simulated
+    assert end["throttle_angle"] < 0.01 and abs(end["brake_pressure"] - 3000.0) < 50.0
+    assert abs(end["steering_wheel_angle"] - 0.5) < 0.02
+    # ... and every status frame on the bus flags the timeouts exactly when the watchdog acted (a status
+    # at simulation time T reports the step that started at T - 1 ms): all three once the ECU went quiet
     sid = db.get_message_by_name("SIM_STATUS").frame_id
-    status = [db.decode_message(sid, d) for t, i, d in listener.frames if i == sid and t > t_last_sent + 0.2]
-    assert status and all(s["fault_throttle_timeout"] and s["fault_brake_timeout"] and s["fault_steer_timeout"]
-                          for s in status)
-    before = [db.decode_message(sid, d) for t, i, d in listener.frames
-              if i == sid and t_last_sent - 0.5 < t < t_last_sent - 0.1]
-    assert before and not any(s["fault_throttle_timeout"] for s in before)
+    status = [db.decode_message(sid, d) for _, i, d in listener.frames if i == sid]
+    flags = ("fault_throttle_timeout", "fault_brake_timeout", "fault_steer_timeout")
+    for st in status:
+        k = _ms(st["sim_time"])
+        assert any(st[f] for f in flags) == _engaged_at(changes, k - 1), (k, st, changes)
+    quiet = [st for st in status if _ms(st["sim_time"]) > k_safe]
+    assert quiet and all(st[f] for st in quiet for f in flags)
+    assert any(not st["fault_throttle_timeout"] for st in status if _ms(st["sim_time"]) < min(last.values()))
 
 
 @realtime
@@ -219,14 +302,17 @@ def test_fuzz_100k_frames_at_full_rate(segment):
     client = ZenohClient("xbw", connect=(endpoint,))
     client.subscribe("status", status.append)
     bus = open_bus(iface, chan)
-    listener = Listener(bus)
+    listener = Listener(bus, SENSOR_IDS)
     rng = random.Random(2026)
     expect = {"unknown_id": 0, "dlc": 0, "crc": 0}
     valid = 0
     ctr = 0
+    assert listener.wait_sim_ms(0), "no sensor frame from the service"
+    next_cmd_ms = listener.sim_ms
     try:
         for n in range(100_000):
-            if n % 200 == 0:               # a valid throttle command about every 10 ms
+            if listener.sim_ms >= next_cmd_ms:   # a valid throttle command every 10 ms of simulated time
+                next_cmd_ms = listener.sim_ms + 10
                 ctr = (ctr + 1) & 0xF
                 fid, data = codec.encode_command("throttle_angle_cmd", 0.3, ctr)
                 bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
@@ -249,7 +335,7 @@ def test_fuzz_100k_frames_at_full_rate(segment):
                 expect["unknown_id"] += 1
             bus.send(can.Message(arbitration_id=fid, data=bytes(data), is_extended_id=False, dlc=dlc))
         total = valid + sum(expect.values())
-        deadline = time.monotonic() + 120.0          # the hub may still be delivering a backlog
+        deadline = time.monotonic() + 2 * PROCESS    # the hub may still be delivering a backlog
         while time.monotonic() < deadline:
             st = status[-1] if status else None
             if st and st["accepted_frames"] + sum(st["rejected"].values()) >= total:
@@ -269,9 +355,11 @@ def test_fuzz_100k_frames_at_full_rate(segment):
         assert summary["rejected"][kind] == n, (kind, summary["rejected"])
     assert summary["rejected"]["counter"] == 0 and summary["rejected"]["range"] == 0
     assert summary["accepted_frames"] == valid
-    # no stall: the sensor stream stayed complete during the fuzz, and the valid throttle command acted
-    st = _stamps(listener.frames, SENSOR_IDS[0])
-    assert len(st) > 1000 and _stamp_gaps_ms(st).max() <= 10
+    # no stall: the sensor stream stayed complete during the fuzz (every sample, stamps exactly 2 ms
+    # apart; the capture spans the whole fuzz), and the valid throttle command acted
+    for fid in SENSOR_IDS:
+        st = _stamps(listener.frames, fid)
+        assert len(st) > 1000 and np.all(_stamp_gaps_ms(st) == 2), (hex(fid), len(st), set(_stamp_gaps_ms(st)))
     pid = codec.frames["SIM_POWERTRAIN_BRAKE"].frame_id
     thr = [int.from_bytes(d[4:6], "little") * 1e-4 for t, i, d in listener.frames if i == pid]
     assert max(thr) == pytest.approx(0.3, abs=0.01)    # (it closes again once the valid commands stop)
@@ -292,9 +380,11 @@ def test_sigkill_leaves_every_completed_chunk_readable(segment, tmp_path):
     rec = tmp_path / "killed.mcap"
     svc = ServiceProcess(iface, chan, "--no-zenoh", "--record", str(rec))
     try:
-        time.sleep(3.5)                    # a few 1 s chunks are flushed
+        deadline = time.monotonic() + EVENT   # killed once a few 1 s chunks are on disk (bounded wait)
+        while read_recording(rec)[1].chunks < 2 and time.monotonic() < deadline:
+            time.sleep(0.2)
         svc.proc.send_signal(signal.SIGKILL)
-        svc.proc.wait(10)
+        svc.proc.wait(EVENT)
     finally:
         svc.close()
     messages, info = read_recording(rec)
@@ -319,8 +409,9 @@ def test_lockstep_session_resimulates_bit_identically(segment, tmp_path):
     svc = ServiceProcess(iface, chan, "--no-zenoh", "--mode", "lockstep", "--record", str(rec))
     try:
         ecu = subprocess.run([sys.executable, "-m", "drivers.ecu_demo", "--can-interface", iface, "--can-channel",
-                              chan, "--lockstep", "--duration", str(LOCKSTEP_S), "--manoeuvre", "straight_line"],
-                             cwd=ROOT, capture_output=True, text=True, timeout=300)
+                              chan, "--lockstep", "--duration", str(LOCKSTEP_S), "--manoeuvre", "straight_line",
+                              "--timeout", str(EVENT)],
+                             cwd=ROOT, capture_output=True, text=True, timeout=PROCESS)
         rc, _ = svc.stop(signal.SIGTERM)
     finally:
         svc.close()
@@ -337,7 +428,9 @@ def test_lockstep_session_resimulates_bit_identically(segment, tmp_path):
 @realtime
 def test_vanished_bus_is_reported_retried_and_the_loop_keeps_its_pace(tmp_path):
     """The hub disappears for ~2 s and comes back on the same port: the service counts the bus
-    errors, keeps stepping in real time, reconnects and sends sensor frames again."""
+    errors, keeps stepping (the samples of the outage are dropped and counted, not queued or waited
+    for), reconnects and sends the complete sensor stream again. How closely simulated time followed
+    the wall clock meanwhile is printed, not asserted (a loaded machine makes the pacer skip steps)."""
     if segment_from_env() is not None:
         pytest.skip("needs the loopback hub (the test stops and restarts it)")
     import socket
@@ -345,21 +438,21 @@ def test_vanished_bus_is_reported_retried_and_the_loop_keeps_its_pace(tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    hub = LoopbackHub(port)
+    hub = LoopbackHub(port, start_timeout=HUB_START)
     svc = ServiceProcess("remote", hub.channel, "--no-zenoh", "--json")
     hub2 = bus = None
     try:
         time.sleep(1.0)
         hub.close()                        # the interface vanishes
         time.sleep(2.0)
-        hub2 = LoopbackHub(port)           # ... and comes back
+        hub2 = LoopbackHub(port, start_timeout=HUB_START)   # ... and comes back
         bus = open_bus("remote", hub2.channel)
-        deadline = time.monotonic() + 30.0
-        got = None
-        while time.monotonic() < deadline and got is None:
+        deadline = time.monotonic() + EVENT
+        got = []                           # 100 samples of one sensor frame after the reconnection
+        while time.monotonic() < deadline and len(got) < 100:
             msg = bus.recv(0.5)
-            if msg is not None and msg.arbitration_id in SENSOR_IDS:
-                got = msg
+            if msg is not None and msg.arbitration_id == SENSOR_IDS[0]:
+                got.append((0.0, int.from_bytes(msg.data[0:2], "little")))
         rc, _ = svc.stop(signal.SIGTERM)
     finally:
         if bus is not None:
@@ -371,14 +464,15 @@ def test_vanished_bus_is_reported_retried_and_the_loop_keeps_its_pace(tmp_path):
     assert rc == 0, svc.output
     summary = json.loads(svc.output[svc.output.index("\n{") + 1:])
     print(f"\nbus outage: {summary['can']}; sim {summary['sim_time']:.2f} s in {summary['wall_s']:.2f} s wall")
-    assert got is not None, "no sensor frame after the bus came back"
+    h = summary["health"]
+    print(f"sim time + skipped steps {summary['sim_time'] + h['skipped_steps'] * 1e-3:.2f} s vs "
+          f"{summary['wall_s']:.2f} s wall ({h['skipped_steps']} steps skipped)")
+    assert len(got) == 100, f"{len(got)} sensor frames after the bus came back"
+    assert np.all(_stamp_gaps_ms(got) == 2)  # the stream is complete again
     assert summary["can"]["reconnects"] >= 1
     assert summary["can"]["send_errors"] + summary["can"]["recv_errors"] >= 1
-    assert summary["can"]["dropped_while_down"] > 0
+    assert summary["can"]["dropped_while_down"] > 0     # the loop kept stepping while the bus was down
     assert summary["run_state"] == "running"
-    # the loop kept its pace through the outage: simulated time tracks wall time (minus skipped stalls)
-    h = summary["health"]
-    assert summary["sim_time"] + h["skipped_steps"] * 1e-3 == pytest.approx(summary["wall_s"], abs=0.5)
 
 
 class _LockstepEcu:
@@ -404,7 +498,7 @@ class _LockstepEcu:
         self.ctr[3] = (self.ctr[3] + 1) & 0xF
         fid, data = self.codec.encode_step_request(steps, self.ctr[3])
         self.bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
-        deadline = time.monotonic() + 60.0
+        deadline = time.monotonic() + EVENT
         while time.monotonic() < deadline:
             msg = self.bus.recv(1.0)
             if msg is None:
@@ -417,7 +511,7 @@ class _LockstepEcu:
                 self.status.append(self.db.decode_message(msg.arbitration_id, msg.data))
             elif self.dec.receive(msg.arbitration_id, msg.data):
                 self.samples.append((self.dec.time, self.dec.values.copy()))
-        raise AssertionError("no SIM_STEP_ACK within 60 s")
+        raise AssertionError(f"no SIM_STEP_ACK within {EVENT:g} s")
 
 
 @pytest.mark.can_e2e

@@ -1,6 +1,7 @@
 """`rtsim watch` (rtsim.watch): message rates, the rendered snapshot, and `--once` against a test
 publisher over tcp/127.0.0.1 (all topics heard -> 0; silent topics named -> 1), in-process and as a
-separate process."""
+separate process. Rates are checked on a fake clock; `--timeout` only bounds how long `--once` waits
+for the topics (tests/waits.py), it is generous because the machine may be loaded."""
 from __future__ import annotations
 
 import argparse
@@ -19,6 +20,7 @@ from bridge.zenoh_link import ZenohLink
 from rtsim import watch
 from rtsim.channels import SENSOR_NAMES, STATE_NAMES
 from rtsim.errors import RtsimError
+from waits import EVENT, PROCESS
 
 ROOT = Path(__file__).resolve().parent.parent
 VID = "xbw"
@@ -126,7 +128,8 @@ def test_render_shows_every_section():
 
 def test_once_against_a_publisher(link, capsys):
     with Publisher(link):
-        rc = watch.main(parse(["--connect", link.endpoints[0], "--vehicle-id", VID, "--once"]))
+        rc = watch.main(parse(["--connect", link.endpoints[0], "--vehicle-id", VID, "--once",
+                               "--timeout", str(EVENT)]))
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "silent" not in out
@@ -137,12 +140,14 @@ def test_once_against_a_publisher(link, capsys):
 
 
 def test_once_names_silent_topics(link, capsys):
+    # --once waits the whole --timeout for the silent topics: long enough for the sensors to be heard
+    # on a loaded machine, short enough not to slow the suite
     with Publisher(link, kinds=("sensors",)):
-        rc = watch.main(parse(["--connect", link.endpoints[0], "--once", "--timeout", "0.5"]))
+        rc = watch.main(parse(["--connect", link.endpoints[0], "--once", "--timeout", "10"]))
     out = capsys.readouterr().out
     assert rc == 1
-    assert "silent topics (no message within 0.5 s from" in out
-    assert out.strip().endswith("state, status, commands")
+    assert "silent topics (no message within 10 s from" in out
+    assert " ".join(out.split()).endswith("): state, status, commands")     # the sensors were heard
 
 
 def test_live_view_for_a_duration(link, capsys):
@@ -171,7 +176,7 @@ sys.exit(watch.main(p.parse_args(sys.argv[2:])))
 def test_once_in_a_separate_process(link):
     with Publisher(link):
         proc = subprocess.run([sys.executable, "-c", WATCH_CHILD, str(ROOT), "--connect",
-                               link.endpoints[0], "--once", "--timeout", "20"],
-                              capture_output=True, text=True, timeout=60)
+                               link.endpoints[0], "--once", "--timeout", str(EVENT)],
+                              capture_output=True, text=True, timeout=PROCESS)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "step_steer_80kph" in proc.stdout and "\x1b[" not in proc.stdout   # plain text, no ANSI

@@ -17,12 +17,13 @@ from bridge.payloads import encode_json, encode_sensors, encode_state
 from bridge.zenoh_link import ZenohClient, ZenohLink, check_endpoint, parse_request, zenoh_config
 from rtsim.channels import SENSOR_NAMES, STATE_NAMES
 from rtsim.errors import RtsimError
+from waits import EVENT
 
 VID = "xbw"
 ANY_PORT = "tcp/127.0.0.1:0"
 
 
-def wait_for(pred, timeout=10.0, what="condition"):
+def wait_for(pred, timeout=EVENT, what="condition"):
     """Poll ``pred`` (a deadlock guard, not a timing assertion)."""
     deadline = time.monotonic() + timeout
     while not pred():
@@ -169,7 +170,7 @@ def test_sessions_open_only_loopback_tcp_sockets():
         cl = ZenohClient(VID, connect=lk.endpoints)
         wait_for(lambda: cl.connected, what="client connected")
         lk.serve(lambda r: {}, lambda: {})
-        cl.control("pause")
+        cl.control("pause", timeout=EVENT)
         table = _inet_sockets()
         new = [table[i] for i in _socket_inodes() - before if i in table]
         assert any(proto.startswith("tcp") for proto, _l, _r in new)
@@ -205,12 +206,13 @@ def test_publish_subscribe_every_kind(link, client):
     for k in TOPIC_KEYS:
         client.subscribe(k, got[k].append)
     i = 0
-    while not all(got.values()):       # the subscriptions reach the link within milliseconds
+    deadline = time.monotonic() + EVENT
+    while not all(got.values()):       # the subscriptions reach the link (milliseconds when quiet)
         for k, b in _payloads(i).items():
             assert link.publish(k, b)
         i += 1
         time.sleep(0.005)
-        assert i < 2000, {k: len(v) for k, v in got.items()}
+        assert time.monotonic() < deadline, {k: len(v) for k, v in got.items()}
     sent = {k: [decode(_payloads(j)[k]) for j in range(i)] for k in TOPIC_KEYS}
     for k, msgs in got.items():
         first = sent[k].index(msgs[0])
@@ -252,7 +254,7 @@ def test_blocked_subscriber_does_not_block_publish(link, client):
     def blocking(msg):
         got.append(msg["i"])
         if msg["i"] >= 0:
-            gate.wait(30)                       # the subscriber's Zenoh thread hangs here
+            gate.wait(10 * EVENT)               # the subscriber's Zenoh thread hangs here
 
     client.subscribe("state", blocking)
     wait_for(lambda: (link.publish("state", b'{"i":-1}'), got)[1], what="subscription")
@@ -267,12 +269,12 @@ def test_blocked_subscriber_does_not_block_publish(link, client):
     th = threading.Thread(target=publish_all, daemon=True)
     try:
         th.start()
-        th.join(60)                             # deadlock guard: with BLOCK this would hang
+        th.join(2 * EVENT)                      # deadlock guard: with BLOCK this would hang
         assert not th.is_alive(), "publish blocked behind a stalled subscriber"
         assert not gate.is_set() and max(got) >= 0        # the subscriber was stalled all along
     finally:
         gate.set()
-        th.join(10)
+        th.join(EVENT)
     assert done == [n]                          # every put was accepted by Zenoh ...
     marker = n + 1
     wait_for(lambda: (link.publish("state", b'{"i":%d}' % marker), marker in got)[1],
@@ -308,13 +310,14 @@ def test_control_round_trip_and_errors(link, client):
         return {"sim_time": 1.25, "op": req["op"], "n": req.get("n")}
 
     link.serve(handler, lambda: {"vehicle_id": VID, "dt": 0.002, "inf": float("inf")})
-    assert client.control("step", n=10) == {"ok": True, "sim_time": 1.25, "op": "step", "n": 10}
+    assert client.control("step", n=10, timeout=EVENT) == {"ok": True, "sim_time": 1.25, "op": "step",
+                                                           "n": 10}
     assert seen[-1] == {"op": "step", "n": 10}
-    r = client.control("load_scenario", name="missing")
+    r = client.control("load_scenario", name="missing", timeout=EVENT)
     assert r == {"ok": False, "error": "FileNotFoundError: no scenario 'missing'"}
-    r = client.control("reset")
+    r = client.control("reset", timeout=EVENT)
     assert r["ok"] is False and "returned list" in r["error"]
-    r = client.control("explode")
+    r = client.control("explode", timeout=EVENT)
     assert r["ok"] is False and "unknown control op 'explode'" in r["error"]
     n_calls = len(seen)
     # raw queries: selector parameters, malformed payloads, no op
@@ -322,7 +325,7 @@ def test_control_round_trip_and_errors(link, client):
     s = client._session
 
     def raw(selector, payload=None):
-        replies = list(s.get(selector, payload=payload, timeout=5))
+        replies = list(s.get(selector, payload=payload, timeout=EVENT))
         assert len(replies) == 1 and replies[0].ok is not None
         return decode(replies[0].ok.payload.to_bytes())
 
@@ -334,8 +337,8 @@ def test_control_round_trip_and_errors(link, client):
         r = raw(f"rtsim/{VID}/control", payload)
         assert r["ok"] is False and msg in r["error"]
     assert len(seen) == n_calls + 2             # malformed requests never reached the handler
-    assert client.control("resume") ["ok"] is True                  # still serving
-    assert client.config() == {"vehicle_id": VID, "dt": 0.002, "inf": None}
+    assert client.control("resume", timeout=EVENT)["ok"] is True     # still serving
+    assert client.config(timeout=EVENT) == {"vehicle_id": VID, "dt": 0.002, "inf": None}
     with pytest.raises(RtsimError, match="twice"):
         link.serve(handler, dict)
 
@@ -359,11 +362,11 @@ def test_control_handler_calls_are_serialised(link, client):
     results = []
     try:
         ths = [threading.Thread(target=lambda c=c, k=k: results.extend(
-            c.control("step", timeout=10, i=10 * k + j) for j in range(4))) for k, c in enumerate(clients)]
+            c.control("step", timeout=EVENT, i=10 * k + j) for j in range(4))) for k, c in enumerate(clients)]
         for t in ths:
             t.start()
         for t in ths:
-            t.join(30)
+            t.join(2 * EVENT)
     finally:
         for c in clients:
             c.close()
@@ -376,7 +379,7 @@ def test_config_provider_error_and_no_service(link, client):
         raise RuntimeError("config not loaded")
 
     link.serve(lambda r: {}, broken)
-    assert client.config() == {"ok": False, "error": "RuntimeError: config not loaded"}
+    assert client.config(timeout=EVENT) == {"ok": False, "error": "RuntimeError: config not loaded"}
     other = ZenohClient("other_car", connect=link.endpoints)
     try:
         with pytest.raises(RtsimError, match="no reply within 0.3 s.*other_car"):
