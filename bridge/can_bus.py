@@ -14,6 +14,8 @@
 
 Every failure (unknown interface, package missing, hub not reachable, device missing) is raised as
 ``rtsim.errors.RtsimError`` with a one-line message naming the interface, the channel and what to do.
+A failure that may pass by itself, because the hub is not (yet) there, is a :class:`BusUnavailable`
+(a client waiting for a starting service retries those and nothing else).
 
 ``LoopbackHub(port=0)`` runs a python-can-remote hub (``can_remote.RemoteServer``) that listens on
 **127.0.0.1 only** (never 0.0.0.0), by default in a child process (``mode="subprocess"``) or in a
@@ -44,6 +46,15 @@ HUB_HOST = "127.0.0.1"
 DEFAULT_HUB_PORT = 54701  # can_remote.DEFAULT_PORT
 HUB_PORT_ENV = "RTSIM_CAN_HUB_PORT"
 SOCKETCAN_DEFAULT_CHANNEL = "vcan0"
+
+
+class BusUnavailable(RtsimError):
+    """The bus could not be opened because its hub is not reachable (yet): worth retrying while a
+    service starts. ``reason`` is the short cause (e.g. ``[Errno 111] Connection refused``)."""
+
+    def __init__(self, message: str, reason: str):
+        super().__init__(message)
+        self.reason = reason
 
 
 def _one_line(text: object) -> str:
@@ -119,9 +130,10 @@ def open_bus(interface: str | None = None, channel: str | None = None, **kw):
         try:  # bounded reachability check first: a clear message instead of a hang or a traceback
             socket.create_connection(hp, timeout=2.0).close()
         except OSError as exc:
-            raise RtsimError(f"{where}: hub not reachable ({_one_line(exc)}); start one with "
-                             f"bridge.can_bus.LoopbackHub(port={hp[1]}) or "
-                             f"`python -m can_remote -H 127.0.0.1 -p {hp[1]} -i virtual -c rtsim`") from None
+            raise BusUnavailable(f"{where}: hub not reachable ({_one_line(exc)}); start one with "
+                                 f"bridge.can_bus.LoopbackHub(port={hp[1]}) or "
+                                 f"`python -m can_remote -H 127.0.0.1 -p {hp[1]} -i virtual -c rtsim`",
+                                 _one_line(exc)) from None
     try:
         return can.Bus(interface=interface, channel=channel, **kw)
     except can.CanInterfaceNotImplementedError as exc:
@@ -133,6 +145,9 @@ def open_bus(interface: str | None = None, channel: str | None = None, **kw):
                              "SocketCAN: use the embedded hub (interface='remote')",
                 "remote": "check the hub is running (bridge.can_bus.LoopbackHub)"}.get(
             interface, "check the interface's driver, device and channel")
+        if interface == "remote":   # reachable a moment ago: a hub starting or stopping
+            raise BusUnavailable(f"{where}: cannot open ({type(exc).__name__}: {_one_line(exc)}); {hint}",
+                                 f"{type(exc).__name__}: {_one_line(exc)}") from None
         raise RtsimError(f"{where}: cannot open ({type(exc).__name__}: {_one_line(exc)}); {hint}") from None
 
 

@@ -20,7 +20,10 @@ The manoeuvre (``--manoeuvre demo``, the default) has two phases:
 the 10 ms until its next cycle and waits for SIM_STEP_ACK (deterministic runs: CI, SIL).
 
 Run as a separate process (``python -m drivers.ecu_demo --can-interface remote --can-channel
-127.0.0.1:54701``); it prints a one-line JSON summary last.
+127.0.0.1:54701``); it prints a one-line JSON summary last. Started beside a service that is still
+starting (a first run compiles for a minute or more), it waits for the service's bus and then its
+first sensor frames, up to ``--connect-timeout`` (600 s) in all, saying so every ``--report-every``
+(10 s) on stderr; every failure is one ``ecu_demo: error: ...`` line on stderr and a non-zero exit.
 """
 from __future__ import annotations
 
@@ -33,10 +36,11 @@ from pathlib import Path
 
 import numpy as np
 
-from bridge.can_bus import open_bus
+from bridge.bus_wait import Waiting, bus_name, wait_for_bus
 from bridge.can_codec import Codec
 from bridge.can_pack import SensorDecoder
 from rtsim.channels import COMMAND_NAMES, SENSOR_NAMES
+from rtsim.errors import RtsimError
 
 from .base import I_BRAKE, I_STEER, I_THROTTLE, NSTATE, S_SPEED, S_X, S_Y, S_YAW
 from .driver import Driver
@@ -174,9 +178,11 @@ class DemoEcu:
 
 
 def run(bus, ecu: DemoEcu, duration: float | None = None, lockstep: bool = False,
-        timeout: float = 5.0) -> dict:
+        timeout: float = 5.0, first_frame_timeout: float = 60.0, waiting: Waiting | None = None) -> dict:
     """Drive until the manoeuvre is done, ``duration`` s of ECU (simulation) time, or no sensor frame
-    for ``timeout`` s of wall time. Returns the ECU summary plus bus counters."""
+    for ``timeout`` s of wall time once frames flowed (``first_frame_timeout`` s before the first: the
+    service may still be warming up; ``waiting`` reports that wait). Returns the ECU summary plus bus
+    counters. A bus that fails under the ECU (the service's hub gone) raises RtsimError."""
     import can
 
     sent = received = 0
@@ -185,7 +191,10 @@ def run(bus, ecu: DemoEcu, duration: float | None = None, lockstep: bool = False
 
     def send(fid, data):
         nonlocal sent
-        bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+        try:
+            bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+        except Exception as exc:  # noqa: BLE001  (backends raise many types)
+            raise _lost(exc) from None
         sent += 1
 
     def request_steps():
@@ -200,14 +209,20 @@ def run(bus, ecu: DemoEcu, duration: float | None = None, lockstep: bool = False
         request_steps()
     ack_id = ecu.codec.step_ack.frame_id
     last_rx = time.monotonic()
-    first_wait = max(timeout, 60.0)     # the service may still be starting when the ECU is up
     while not ecu.done and (duration is None or ecu.t < duration):
-        msg = bus.recv(0.1)
+        try:
+            msg = bus.recv(0.1)
+        except Exception as exc:  # noqa: BLE001
+            raise _lost(exc) from None
         if msg is None:
-            if time.monotonic() - last_rx > (timeout if received else first_wait):
+            if time.monotonic() - last_rx > (timeout if received else first_frame_timeout):
                 break
+            if not received and waiting is not None:
+                waiting.tick("the service's first sensor frames")
             continue
         last_rx = time.monotonic()
+        if not received and waiting is not None:
+            waiting.done("first frames from the service")
         received += 1
         if msg.arbitration_id == ack_id and lockstep:
             _, ctr = ecu.codec.decode_step_ack(msg.data)
@@ -223,39 +238,66 @@ def run(bus, ecu: DemoEcu, duration: float | None = None, lockstep: bool = False
     return out
 
 
+def _lost(exc: Exception) -> RtsimError:
+    return RtsimError(f"lost the CAN bus ({type(exc).__name__}: {' '.join(str(exc).split())}); "
+                      f"the service stopped or its hub went away")
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number of seconds")
+    return v
+
+
+def _say(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m drivers.ecu_demo", description=__doc__.split("\n\n")[0])
     p.add_argument("--can-interface")
     p.add_argument("--can-channel")
-    p.add_argument("--duration", type=float, help="stop after this much simulated time, s")
+    p.add_argument("--duration", type=_positive, help="stop after this much simulated time, s")
     p.add_argument("--manoeuvre", choices=["demo", "straight_line", "lane_change"], default="demo")
     p.add_argument("--lockstep", action="store_true", help="request the steps (service in --mode lockstep)")
-    p.add_argument("--timeout", type=float, default=5.0,
-                   help="give up after this long without frames once they flowed (60 s before the first), s")
-    p.add_argument("--connect-timeout", type=float, default=60.0,
-                   help="keep trying to open the bus this long (the service may still be starting), s")
+    p.add_argument("--timeout", type=_positive, default=5.0,
+                   help="give up after this long without frames once they flowed, s (default 5)")
+    p.add_argument("--connect-timeout", type=_positive, default=600.0,
+                   help="wait at most this long for the service: its CAN bus, then its first sensor frames "
+                        "(a first run on a fresh machine compiles for a minute or more), s (default 600)")
+    p.add_argument("--report-every", type=_positive, default=10.0,
+                   help="while waiting for the service, say so this often, s (default 10)")
     args = p.parse_args(argv)
-    from rtsim.errors import RtsimError
 
-    ecu = DemoEcu(Codec(), manoeuvre=args.manoeuvre)   # everything slow before the bus: no backlog
-    deadline = time.monotonic() + args.connect_timeout
-    while True:
-        try:
-            bus = open_bus(args.can_interface, args.can_channel)
-            break
-        except RtsimError as exc:
-            if time.monotonic() > deadline:
-                print(f"ecu_demo: error: {exc}", file=sys.stderr)
-                return 2
-            time.sleep(0.2)
+    from rtsim.compile_status import CompileProgress
+
     try:
-        result = run(bus, ecu, args.duration, args.lockstep, args.timeout)
+        with CompileProgress("ecu_demo", _say, what="driver kernels", expect_s=None, every=None, predict=()):
+            ecu = DemoEcu(Codec(), manoeuvre=args.manoeuvre)   # everything slow before the bus: no backlog
+        waiting = Waiting("ecu_demo", _say, args.report_every)
+        bus = wait_for_bus(args.can_interface, args.can_channel, waiting.start + args.connect_timeout, waiting)
+        try:
+            first = max(1.0, waiting.start + args.connect_timeout - time.monotonic())
+            result = run(bus, ecu, args.duration, args.lockstep, args.timeout, first, waiting)
+        finally:
+            bus.shutdown()
+    except RtsimError as exc:
+        _say(f"ecu_demo: error: {exc}")
+        return 2
     except KeyboardInterrupt:
         return 130
-    finally:
-        bus.shutdown()
     print(json.dumps(result), flush=True)
-    return 0 if result["samples"] > 0 else 1
+    if result["samples"] == 0:
+        n = result["frames_received"]
+        what = "no frames from the service" if n == 0 else f"{n} frames but no complete sensor sample"
+        _say(f"ecu_demo: error: {what} on {bus_name(args.can_interface, args.can_channel)} after "
+             f"{waiting.elapsed:.0f} s (waits up to --connect-timeout {args.connect_timeout:g} s)")
+        return 2
+    return 0
 
 
 if __name__ == "__main__":

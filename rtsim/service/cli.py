@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from .server import DEFAULT_ZENOH_LISTEN, ServeOptions, Service
@@ -64,7 +65,13 @@ def options(args) -> ServeOptions:
 
 
 def main(args) -> int:
-    svc = Service(options(args))
+    from rtsim.compile_status import CompileProgress
+
+    if hasattr(sys.stdout, "reconfigure"):
+        sys.stdout.reconfigure(line_buffering=True)     # start-up and progress lines show at once in a pipe
+    opts = options(args)
+    with CompileProgress("rtsim", lambda line: print(line, flush=True)):
+        svc = Service(opts)
     summary = svc.run()
     if args.json:
         print(json.dumps(summary, indent=2, default=str))

@@ -1,26 +1,45 @@
 """`rtsim demo`: the service on embedded defaults plus the demo ECU in its own process, recorded.
 
 The service runs on this process's main thread; the demo ECU (``drivers.ecu_demo``) is a child process
-that talks to it over CAN only (the same bus the service opened). When the ECU finishes its manoeuvre
-(or ``--duration`` of simulated time) the service stops, the recording is finalised and a summary is
-printed: distance and peak speed (from the recorded state), the ECU's own estimates, loop health and
-the file written.
+that talks to it over CAN only (the same bus the service opened). The ECU starts first and waits,
+bounded and saying so, for the service's bus and first frames (a first run compiles the kernels for a
+minute or more; the service shows that progress). When the ECU finishes its manoeuvre (or
+``--duration`` of simulated time) the service stops, the recording is finalised and a summary is
+printed: commands accepted, distance and peak speed (from the recorded state), whether the lane change
+was reached, loop health and the file written; exit 0.
+
+The demo is supervised both ways: if the ECU process ends any other way (killed, crashed, could not
+reach the service) the service stops at once, during its build as well as while it runs, and one line
+``rtsim demo: error: the demo ECU process (pid N) exited with code C after T s; its last stderr line:
+...`` ends a non-zero exit (the ECU's stderr is passed on as it comes and its last lines kept); if the
+service fails to start or is stopped by a signal, the ECU is stopped.
 """
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
+import math
+import os
+import shlex
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
 
 from bridge.can_bus import HUB_HOST, default_hub_port, socketcan_available
 
+from rtsim.compile_status import CompileProgress
+from rtsim.errors import RtsimError
+
 from .cli import format_summary
+from .ecu_process import EcuProcess
 from .server import ServeOptions, Service
+
+ROOT = Path(__file__).resolve().parents[2]
+#: tests: the ECU command to run instead of ``python -m drivers.ecu_demo`` (shell words; the bus,
+#: manoeuvre and duration arguments are appended)
+ECU_COMMAND_ENV = "RTSIM_DEMO_ECU"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -51,50 +70,117 @@ def recorded_motion(path: Path, vehicle_id: str) -> dict:
             "state_messages": len(msgs), "final_position": [float(v) for v in xy[-1]]}
 
 
+class _Supervisor:
+    """Ends the service when the ECU process ends (``ecu_exited``, from the ECU's watcher thread).
+
+    While the loop runs, ``Service.stop`` is called until ``run()`` has returned (a stop that lands
+    just before the pacer starts would be forgotten by it). During the build, numba may be compiling
+    for a minute and cannot be interrupted safely (an exception thrown into its compiler surfaces as
+    an unrelated error), so the demo reports the ECU's end and exits at once: the hub child process
+    ends with it (its stdin closes) and a recording begun is readable like a killed one."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.phase = "building"             # building -> running -> done
+        self.svc: Service | None = None
+
+    def ecu_exited(self, ecu: EcuProcess) -> None:
+        with self.lock:
+            if self.phase == "building":
+                _fail(ecu.describe_end(", while the service was starting"))
+                sys.stdout.flush()
+                os._exit(1)
+            if self.phase == "running":
+                threading.Thread(target=self._stop_loop, daemon=True, name="demo-stop").start()
+
+    def _stop_loop(self) -> None:
+        while True:
+            with self.lock:
+                if self.phase != "running":
+                    return
+                self.svc.stop()
+            time.sleep(0.05)
+
+    def start_running(self, svc: Service) -> None:
+        """Main thread, after the build: from now on the ECU's end stops ``svc``."""
+        with self.lock:
+            self.phase, self.svc = "running", svc
+
+    def finish(self) -> None:
+        with self.lock:
+            self.phase = "done"
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)
+
+
+def _fail(line: str) -> int:
+    print(f"rtsim demo: error: {line}", file=sys.stderr, flush=True)
+    return 1
+
+
 def main(args) -> int:
+    if hasattr(sys.stdout, "reconfigure"):
+        sys.stdout.reconfigure(line_buffering=True)     # progress lines show at once in a pipe too
     opts = ServeOptions(mode=args.mode, record=Path(args.record), zenoh=not args.no_zenoh,
                         can_interface=args.can_interface, can_channel=args.can_channel)
+    opts.check()                # bad options fail before any process starts
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        raise RtsimError(f"--duration {args.duration}: must be a positive number of seconds")
     iface, chan = args.can_interface, args.can_channel
     if iface is None:       # the service's default choice, known before it starts
         iface, chan = ("socketcan", chan or "vcan0") if socketcan_available(chan or "vcan0") else \
             ("remote", chan or f"{HUB_HOST}:{default_hub_port()}")
-    # the ECU starts first (its imports take seconds) and connects once the service's bus is up
-    cmd = [sys.executable, "-m", "drivers.ecu_demo", "--can-interface", iface, "--can-channel", chan,
-           "--manoeuvre", args.manoeuvre]
+    # the ECU starts first (its imports and its own kernels take seconds) and waits for the service's
+    # bus and first frames (bounded, saying so); the service ends when the ECU does
+    cmd = shlex.split(os.environ.get(ECU_COMMAND_ENV, "")) or [sys.executable, "-m", "drivers.ecu_demo"]
+    cmd = cmd + ["--can-interface", iface, "--can-channel", chan, "--manoeuvre", args.manoeuvre]
     if args.duration is not None:
         cmd += ["--duration", str(args.duration)]
     if args.mode == "lockstep":
         cmd += ["--lockstep"]
-    print(f"rtsim demo: demo ECU process: {' '.join(cmd[1:])}")
-    ecu = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[2])
+    sup = _Supervisor()
+    ecu = None
+    ecu_ended_first = False             # the ECU ended before the service stopped (its normal end)
     try:
-        svc = Service(opts)
-    except BaseException:
-        ecu.kill()
-        raise
-    result: dict = {}
-
-    def watch():
-        out, _ = ecu.communicate()
-        lines = [ln for ln in out.splitlines() if ln.startswith("{")]
-        if lines:
-            result.update(json.loads(lines[-1]))
-        svc.stop()
-    threading.Thread(target=watch, daemon=True).start()
-    try:
+        ecu = EcuProcess(cmd, cwd=ROOT, on_exit=sup.ecu_exited)
+        _say(f"rtsim demo: demo ECU process (pid {ecu.pid}): {' '.join(cmd[1:])}")
+        with CompileProgress("rtsim", _say):
+            svc = Service(opts, out=_say)
+        sup.start_running(svc)
         summary = svc.run()
     finally:
-        if ecu.poll() is None:
-            ecu.terminate()
-            try:
-                ecu.wait(5)
-            except subprocess.TimeoutExpired:
-                ecu.kill()
+        sup.finish()
+        if ecu is not None:
+            ecu_ended_first = ecu.ended
+            if not ecu_ended_first:
+                ecu.stop()
     print(format_summary(summary))
+    if not ecu_ended_first:             # a signal (Ctrl-C, SIGTERM) stopped the service
+        print("rtsim demo: stopped before the demo ECU finished; the ECU was stopped", file=sys.stderr,
+              flush=True)
+        return 130
+    ecu.wait(5.0)
+    if ecu.returncode != 0:
+        return _fail(ecu.describe_end())
+    return _report(args, svc, summary, ecu.result)
+
+
+def _report(args, svc: Service, summary: dict, result: dict) -> int:
+    """The closing lines of a demo whose ECU finished: what the car did, from the recording."""
     motion = recorded_motion(Path(args.record), svc.vehicle_id)
-    print(f"rtsim demo: {result.get('phase', '?')} phase reached, ECU {'finished' if result.get('done') else 'stopped'} "
-          f"after {result.get('ecu_time', 0):.1f} s; distance {motion['distance']:.1f} m, peak speed "
-          f"{motion['peak_speed'] * 3.6:.1f} km/h (recorded state); ECU estimates: distance "
-          f"{result.get('distance_estimate', 0):.1f} m, lane offset {result.get('lane_offset_estimate', 0):.2f} m")
+    accepted = summary.get("accepted_frames", 0) or 0
+    lane = any(p.get("phase") == "lane_change" for p in result.get("phases", []))
+    print(f"rtsim demo: ECU {'finished' if result.get('done') else 'stopped'} after "
+          f"{result.get('ecu_time', 0):.1f} s in its {result.get('phase', '?')} phase; "
+          f"{accepted} commands accepted; distance {motion['distance']:.1f} m, peak speed "
+          f"{motion['peak_speed'] * 3.6:.1f} km/h (recorded state); " + (
+              f"lane change reached (lateral offset {result.get('lane_offset_estimate', 0):.2f} m, ECU estimate)"
+              if lane else "lane change not reached"))
     print(f"rtsim demo: recording written to {args.record}")
-    return 0 if result.get("samples", 0) > 0 else 1
+    if result.get("samples", 0) <= 0:
+        return _fail("the demo ECU received no sensor sample from the service")
+    if accepted <= 0:
+        return _fail("the service accepted no command from the demo ECU (see the rejection counters above)")
+    return 0

@@ -1,0 +1,176 @@
+"""Tell the user when a process compiles the numba kernels, and show progress while it does.
+
+The kernels (``rtsim/jit.py``: ``njit(cache=True)``) compile lazily at their first call and are cached
+in ``__pycache__`` beside their sources, so only the first run on a machine (or after a source change)
+compiles: about ``FIRST_COMPILE_S`` seconds for the service on a 2-core machine, during which nothing
+else is printed. ``CompileProgress`` wraps the code that may compile (building the service and its
+warm-up): it prints one line when compiling starts, a line every few seconds with the elapsed time
+and the kernel being compiled (plain lines, no terminal codes), and one line at the end; when every
+kernel is already cached it prints nothing.
+
+Two sources of truth: ``kernels_cached`` reads numba's cache index of the main kernels before
+anything runs (so the first line appears at once, before the seconds of model building that precede
+the first compilation); numba's ``numba:compile`` event, which fires only on a cache miss, catches
+anything the index check did not predict.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import threading
+import time
+from typing import Callable, Iterable
+
+#: s; the service's first build and compile on a fresh clone (2-core machine, the demo ECU compiling
+#: its own kernels beside it): measured 77-86 s for `rtsim demo` with empty caches (see the README)
+FIRST_COMPILE_S = 80
+
+#: the kernels the service calls from Python, "module:name"; the largest compile (~90 % of the time)
+SERVICE_KERNELS = ("rtsim.service.kernel:service_step", "rtsim.vehicle.dynamics:vehicle_mbs_step",
+                   "rtsim.vehicle.powertrain:powertrain_step")
+
+
+def kernel_cached(dispatcher) -> bool:
+    """True when numba's on-disk cache holds machine code of ``dispatcher`` that this process would
+    load: the index file exists, was written by this numba version for the current source file, and
+    has an entry for this CPU and this function's bytecode whose data file exists. False otherwise,
+    also when the cache layout is not the one expected (numba internals: checked by a test)."""
+    try:
+        cache = dispatcher._cache
+        index_file = cache._cache_file
+        overloads = index_file._load_index()
+        if not overloads:
+            return False
+        _, magic, code = cache._index_key(None, dispatcher.targetctx.codegen())
+        folder = os.path.dirname(index_file._index_path)
+        return any(key[1] == magic and key[2] == code and os.path.exists(os.path.join(folder, name))
+                   for key, name in overloads.items())
+    except Exception:  # noqa: BLE001  (an unexpected layout means "unknown": say it compiles)
+        return False
+
+
+def kernels_cached(names: Iterable[str] = SERVICE_KERNELS) -> bool:
+    """True when every kernel named ``"module:function"`` is cached for this machine."""
+    for name in names:
+        module, _, attr = name.partition(":")
+        if not kernel_cached(getattr(importlib.import_module(module), attr)):
+            return False
+    return True
+
+
+def _is_project_kernel(dispatcher) -> bool:
+    """False for numba's own helpers (overloads of builtins it compiles along the way)."""
+    module = getattr(getattr(dispatcher, "py_func", None), "__module__", "") or ""
+    return module.split(".", 1)[0] != "numba"
+
+
+def _listener_class():
+    from numba.core import event
+
+    class _Listener(event.Listener):
+        """Forwards numba's compile start/end events (cache misses only) to a CompileProgress."""
+
+        def __init__(self, progress: "CompileProgress"):
+            self.progress = progress
+
+        def on_start(self, ev):
+            self.progress._started(ev.data["dispatcher"])
+
+        def on_end(self, ev):
+            self.progress._ended(ev.data["dispatcher"])
+
+    return _Listener
+
+
+class CompileProgress:
+    """Context manager: progress lines while the body compiles numba kernels, nothing if it does not.
+
+    ``prefix``: the program name the lines start with (``rtsim``, ``ecu_demo``); ``out``: prints one
+    line; ``what``: what compiles (``"kernels"``); ``expect_s``: the announced duration, s (None: not
+    announced); ``every``: s between progress lines (None: only the first and last line);
+    ``predict``: ``"module:function"`` kernels whose cache is checked on entry (empty: wait for the
+    first compilation to say anything).
+    """
+
+    def __init__(self, prefix: str = "rtsim", out: Callable[[str], None] = print, *, what: str = "kernels",
+                 expect_s: float | None = FIRST_COMPILE_S, every: float | None = 5.0,
+                 predict: Iterable[str] = SERVICE_KERNELS):
+        self.prefix, self.out, self.what = prefix, out, what
+        self.expect_s, self.every, self.predict = expect_s, every, tuple(predict)
+        self.compiled = 0                   # project kernels compiled so far (cache misses)
+        self.announced = False
+        self._stack: list[str] = []         # project kernels being compiled, outermost first
+        self._lock = threading.Lock()
+        self._done = threading.Event()
+        self._ticker: threading.Thread | None = None
+        self._listener = None
+        self._t0 = 0.0
+
+    # -- context -------------------------------------------------------------------------------------
+    def __enter__(self) -> "CompileProgress":
+        from numba.core import event
+
+        self._t0 = time.monotonic()
+        self._listener = _listener_class()(self)
+        event.register("numba:compile", self._listener)
+        if self.predict and not kernels_cached(self.predict):
+            self._announce()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        from numba.core import event
+
+        event.unregister("numba:compile", self._listener)
+        self._done.set()
+        if self._ticker is not None:
+            self._ticker.join(1.0)
+        if self.announced and exc_type is None:
+            self.out(f"{self.prefix}: {self.what} compiled in {self.elapsed:.0f} s "
+                     f"({self.compiled} compiled; cached for the next runs)")
+
+    @property
+    def elapsed(self) -> float:
+        """s since the context was entered."""
+        return time.monotonic() - self._t0
+
+    # -- events (the compiling thread) ----------------------------------------------------------------
+    def _started(self, dispatcher) -> None:
+        if not _is_project_kernel(dispatcher):
+            return
+        with self._lock:
+            self._stack.append(dispatcher.py_func.__name__)
+        if not self.announced:
+            self._announce()
+
+    def _ended(self, dispatcher) -> None:
+        if not _is_project_kernel(dispatcher):
+            return
+        with self._lock:
+            name = dispatcher.py_func.__name__
+            if name in self._stack:
+                del self._stack[len(self._stack) - 1 - self._stack[::-1].index(name)]
+            self.compiled += 1
+
+    # -- output --------------------------------------------------------------------------------------
+    def _announce(self) -> None:
+        with self._lock:
+            if self.announced:
+                return
+            self.announced = True
+        about = "" if self.expect_s is None else f", about {self.expect_s:.0f} s on a 2-core machine"
+        self.out(f"{self.prefix}: compiling {self.what} (first run only{about})...")
+        if self.every is not None:
+            self._ticker = threading.Thread(target=self._tick, name="compile-progress", daemon=True)
+            self._ticker.start()
+
+    def status(self) -> str:
+        """One progress line: elapsed s, kernels compiled, the kernel being compiled."""
+        with self._lock:
+            stack = list(self._stack)
+            n = self.compiled
+        now = "" if not stack else f"; now {stack[0]}" + (f" > {stack[-1]}" if len(stack) > 1 else "")
+        return f"{self.prefix}: compiling {self.what}: {self.elapsed:.0f} s, {n} compiled{now}"
+
+    def _tick(self) -> None:
+        while not self._done.wait(self.every):
+            self.out(self.status())
