@@ -26,7 +26,7 @@ from typing import Callable, Iterable
 FIRST_COMPILE_S = 80
 
 #: the kernels the service calls from Python, "module:name"; the largest compile (~90 % of the time)
-SERVICE_KERNELS = ("rtsim.service.kernel:service_step", "rtsim.vehicle.dynamics:vehicle_mbs_step",
+SERVICE_KERNELS = ("rtsim.service.kernel:loop_run", "rtsim.vehicle.dynamics:vehicle_mbs_step",
                    "rtsim.vehicle.powertrain:powertrain_step")
 
 
