@@ -272,3 +272,14 @@ def test_stop_from_other_thread_real_clock():
     t.join(timeout=EVENT)
     assert not t.is_alive()
     assert not pacer.running
+
+
+def test_owner_stop_event_set_before_run_still_stops_it():
+    """A service that is told to stop while it is still starting must not then run on alone."""
+    stop = threading.Event()
+    calls = []
+    p = Pacer(lambda n: calls.append(n), 1e-3, "realtime", clock=FakeClock(), stop_event=stop)
+    stop.set()
+    assert p.run() == 0 and calls == []
+    stop.clear()                                   # the owner clears it; the pacer never does
+    assert p.run(steps=3) == 3 and calls == [1, 1, 1]

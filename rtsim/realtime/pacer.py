@@ -35,7 +35,8 @@ Stopping
 --------
 ``stop()`` (thread-safe) makes ``run()`` return before its next step; since a wait never exceeds one
 period, ``run()`` ends within one period plus the duration of the step in progress. ``run()`` clears
-the stop flag when it starts. When ``run()`` ends on ``duration``/``until``/``steps`` in realtime mode
+the stop flag when it starts, unless the pacer was given the owner's ``stop_event``: then a stop that
+came before ``run()`` still counts, and only the owner clears it. When ``run()`` ends on ``duration``/``until``/``steps`` in realtime mode
 it first waits for the boundary after its last step, so ``run(steps=k)`` occupies exactly ``k``
 periods and successive runs join up without a gap.
 
@@ -70,6 +71,7 @@ class Pacer:
         spin: float = 0.0002,
         max_catch_up: int = 20,
         health: LoopHealth | None = None,
+        stop_event: threading.Event | None = None,
     ):
         if mode not in MODES:
             raise ValueError(f"Pacer: mode must be one of {MODES}, got {mode!r}")
@@ -89,7 +91,9 @@ class Pacer:
         if self.health.period is None:
             self.health.period = self.period
         self.steps = 0                      # steps run in total (all runs and advances)
-        self._stop = threading.Event()
+        # an owner's stop_event is the owner's to clear: a stop() before run() then still stops it
+        self._own_stop = stop_event is None
+        self._stop = threading.Event() if stop_event is None else stop_event
         self._running = threading.Event()
 
     # -- state --------------------------------------------------------------------------------
@@ -136,7 +140,8 @@ class Pacer:
         """
         if self.mode == "lockstep":
             raise RuntimeError("Pacer.run is not available in lockstep mode; use advance(n)")
-        self._stop.clear()
+        if self._own_stop:
+            self._stop.clear()
         self._running.set()
         self.health.begin()
         try:

@@ -22,7 +22,6 @@ import os
 import shlex
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -73,8 +72,8 @@ def recorded_motion(path: Path, vehicle_id: str) -> dict:
 class _Supervisor:
     """Ends the service when the ECU process ends (``ecu_exited``, from the ECU's watcher thread).
 
-    While the loop runs, ``Service.stop`` is called until ``run()`` has returned (a stop that lands
-    just before the pacer starts would be forgotten by it). During the build, numba may be compiling
+    While the loop runs, ``Service.stop`` ends it (a stop that lands before ``run()`` starts counts
+    too). During the build, numba may be compiling
     for a minute and cannot be interrupted safely (an exception thrown into its compiler surfaces as
     an unrelated error), so the demo reports the ECU's end and exits at once: the hub child process
     ends with it (its stdin closes) and a recording begun is readable like a killed one."""
@@ -91,15 +90,7 @@ class _Supervisor:
                 sys.stdout.flush()
                 os._exit(1)
             if self.phase == "running":
-                threading.Thread(target=self._stop_loop, daemon=True, name="demo-stop").start()
-
-    def _stop_loop(self) -> None:
-        while True:
-            with self.lock:
-                if self.phase != "running":
-                    return
                 self.svc.stop()
-            time.sleep(0.05)
 
     def start_running(self, svc: Service) -> None:
         """Main thread, after the build: from now on the ECU's end stops ``svc``."""

@@ -171,7 +171,7 @@ class Service:
         self.loop.outbox = self.outbox
         self.pacer = Pacer(self.loop.run_steps, self.sim.dt, "fast" if o.mode == "fast" else (
             "lockstep" if o.mode == "lockstep" else "realtime"), max_catch_up=o.max_catch_up,
-            health=self.health, spin=o.spin)
+            health=self.health, spin=o.spin, stop_event=self._stopping)
         if self.zenoh is not None:
             self.zenoh.serve(self.control, self.config)
         self._warm_up()
