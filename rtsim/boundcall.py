@@ -63,7 +63,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SOURCE_TREES = ("rtsim", "bridge", "drivers")       # hashed into every generated file's name
 PRUNE_DAYS = 30                                      # generated files unused this long are removed
 
-_DTYPES = {np.dtype(n): n for n in ("bool", "int8", "int16", "int32", "int64", "uint8", "uint16",
+_DTYPES = {np.dtype(n): n for n in ("bool_", "int8", "int16", "int32", "int64", "uint8", "uint16",
                                     "uint32", "uint64", "float32", "float64", "complex64", "complex128")}
 _INT64 = (-2 ** 63, 2 ** 63 - 1)
 
