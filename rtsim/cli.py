@@ -37,6 +37,11 @@ def _bench(args) -> int:
                                 spin=args.spin)
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
+    if args.suite == "dispatch":
+        from rtsim.benchmarks.dispatch import dispatch_costs, format_report
+        res = dispatch_costs()
+        print(json.dumps(res, indent=2) if args.json else format_report(res))
+        return 0
     if args.suite == "vehicle":
         from rtsim.benchmarks.vehicle import suite
         results = suite()
@@ -137,9 +142,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--t-end", type=float, help="end time, s (default: the problem's)")
     b.add_argument("--json", action="store_true", help="print a JSON list, one object per problem")
     b.add_argument("--scaling", action="store_true", help="also time the N-four-bar for N = 1, 2, 10, 40, 100")
-    b.add_argument("--suite", choices=["mbs", "vehicle", "service"], default="mbs",
+    b.add_argument("--suite", choices=["mbs", "vehicle", "service", "dispatch"], default="mbs",
                    help="mbs: the IFToMM benchmark problems (default); vehicle: the vehicle model's cost per "
-                        "step; service: the HIL service's real-time budget under load (CAN, Zenoh, MCAP, ECU)")
+                        "step; service: the HIL service's real-time budget under load (CAN, Zenoh, MCAP, ECU); "
+                        "dispatch: the cost of a call into a kernel, direct and bound (rtsim.boundcall)")
     b.add_argument("--duration", type=float, default=60.0, help="service suite: wall seconds to run (60)")
     b.add_argument("--no-record", action="store_true", help="service suite: without the MCAP recording")
     b.add_argument("--no-zenoh", action="store_true", help="service suite: without Zenoh")
