@@ -79,33 +79,31 @@ class RingDrain:
         return len(todo)
 
     def _sensor_samples(self) -> int:
-        r, emit, raw = self.r, self.emit, self.raw
-        cap = r.sensor_t.shape[0]
-        todo = self._sensors.take()
-        for n in todo:
-            j = n % cap
-            t = float(r.sensor_t[j])
-            if raw is not None:
-                raw("sensors", t, r.sensor_v[j].copy())
-            if emit is not None:
-                emit("sensors", t, payloads.encode_sensors(t, r.sensor_v[j]))
-                if self.frames:
-                    words = r.sensor_words[j].tobytes()
-                    for k, fid in enumerate(self.frame_ids):
-                        emit("can/tx", t, (fid, words[8 * k:8 * k + 8]))
-        return len(todo)
+        r = self.r
+        return self._samples(self._sensors, "sensors", r.sensor_t, r.sensor_v, payloads.encode_sensors,
+                             r.sensor_words if self.frames else None)
 
     def _state_samples(self) -> int:
-        r, emit, raw = self.r, self.emit, self.raw
-        cap = r.state_t.shape[0]
-        todo = self._state.take()
+        r = self.r
+        return self._samples(self._state, "state", r.state_t, r.state_v, payloads.encode_state)
+
+    def _samples(self, reader, key, times, values, encode, words=None) -> int:
+        """One sample ring: (t, values) to ``raw`` and as JSON to ``emit``; with ``words``, each
+        sample's packed sensor frames as 'can/tx' records."""
+        emit, raw = self.emit, self.raw
+        cap = times.shape[0]
+        todo = reader.take()
         for n in todo:
             j = n % cap
-            t = float(r.state_t[j])
+            t = float(times[j])
             if raw is not None:
-                raw("state", t, r.state_v[j].copy())
+                raw(key, t, values[j].copy())
             if emit is not None:
-                emit("state", t, payloads.encode_state(t, r.state_v[j]))
+                emit(key, t, encode(t, values[j]))
+                if words is not None:
+                    row = words[j].tobytes()
+                    for k, fid in enumerate(self.frame_ids):
+                        emit("can/tx", t, (fid, row[8 * k:8 * k + 8]))
         return len(todo)
 
 
