@@ -181,7 +181,7 @@ class LoopbackHub:
 
     host = HUB_HOST
 
-    def __init__(self, port: int = 0, *, mode: str = "subprocess", start_timeout: float = 10.0,
+    def __init__(self, port: int = 0, *, mode: str = "subprocess", start_timeout: float = 60.0,
                  backend: str = "virtual", backend_channel: str | None = None):
         if mode not in ("subprocess", "thread"):
             raise ValueError(f"mode {mode!r}: expected 'subprocess' or 'thread'")

@@ -352,12 +352,12 @@ class ZenohClient:
         raise RtsimError(f"{key}: no reply within {timeout:g} s (is `rtsim serve` running for "
                          f"vehicle {self.vehicle_id!r} and reachable at {', '.join(self.connect)}?)")
 
-    def control(self, op: str, timeout: float = 2.0, **args) -> dict:
+    def control(self, op: str, timeout: float = 10.0, **args) -> dict:
         """Send ``{"op": op, **args}`` to ``rtsim/<vid>/control``; returns the reply dict (check
         ``reply["ok"]``). Raises RtsimError when no service answers within ``timeout`` s."""
         return self._query("control", encode_json({"op": op, **args}), timeout)
 
-    def config(self, timeout: float = 2.0) -> dict:
+    def config(self, timeout: float = 10.0) -> dict:
         """The service's configuration (reply of ``rtsim/<vid>/config``)."""
         return self._query("config", None, timeout)
 
