@@ -11,7 +11,7 @@ Arrays (built by ``bridge.can_codec.CommandReceiver`` from the DBC):
   CRC table, and ``step`` (``SP_*``: the SIM_STEP_REQ frame's layout);
 * ``RxState``: per command ``fv`` (value, time of the last valid frame, s) and ``iv`` (flags, last
   counter), ``counts`` (``C_*``: rejections by kind, accepted frames) and ``g`` (``G_*``: the session
-  start t0 in s, the brake hold pressure in kPa, the last step request's counter).
+  start t0 in s, the brake hold pressure in kPa).
 
 A frame's payload is a uint8 row and its length; nothing here allocates or raises.
 """
@@ -46,7 +46,7 @@ COUNTER_NAMES = ("unknown_id", "dlc", "crc", "counter", "range", "counter_repeat
 (C_UNKNOWN, C_DLC, C_CRC, C_COUNTER, C_RANGE, C_REPEATED, C_JUMP, C_CLAMPED, C_ACCEPTED, C_STEP_REJECTED,
  C_STEP_IGNORED) = range(len(COUNTER_NAMES))
 # globals
-G_T0, G_HOLD_PRESSURE, G_STEP_COUNTER = range(3)
+G_T0, G_HOLD_PRESSURE = range(2)
 
 # results of rx_command
 RX_REJECTED = -1          # counted rejection (or an unknown id)
@@ -63,14 +63,13 @@ class RxState(NamedTuple):
     fv: np.ndarray        # (ncmd, 2) float64
     iv: np.ndarray        # (ncmd, 5) int64
     counts: np.ndarray    # (len(COUNTER_NAMES),) int64
-    g: np.ndarray         # (3,) float64
+    g: np.ndarray         # (2,) float64
 
 
 def make_state(ncmd: int, hold_pressure: float) -> RxState:
     st = RxState(np.zeros((ncmd, 2)), np.zeros((ncmd, 5), dtype=np.int64),
-                 np.zeros(len(COUNTER_NAMES), dtype=np.int64), np.zeros(3))
+                 np.zeros(len(COUNTER_NAMES), dtype=np.int64), np.zeros(2))
     st.g[G_HOLD_PRESSURE] = hold_pressure
-    st.g[G_STEP_COUNTER] = -1.0
     return st
 
 

@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from bridge.can_e2e import (C_ACCEPTED, C_COUNTER, C_CRC, C_DLC, C_RANGE, C_STEP_IGNORED, C_STEP_REJECTED,
+from bridge.can_e2e import (C_COUNTER, C_CRC, C_DLC, C_RANGE, C_STEP_IGNORED, C_STEP_REJECTED,
                             C_UNKNOWN, FV_VALUE, IV_TIMED_OUT, RxPlan, RxState, pack_frames, rx_command,
                             rx_find, rx_watchdog, step_request)
 from rtsim.jit import inline_kernel, kernel, read_cycles
@@ -40,6 +40,7 @@ from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SEN
 # LoopParams.ints
 (PI_SENSOR_EVERY, PI_STATE_EVERY, PI_STATUS_EVERY, PI_LOCKSTEP, PI_MODE_CODE, PI_STEP_REQ_ID, PI_STATUS_ID,
  PI_ACK_ID, PI_SENSOR_MODEL) = range(9)
+NPI = 9
 # LoopState.li
 (LI_K, LI_MASK, LI_SM_HEAD, LI_PENDING_STEPS, LI_PENDING_COUNTER, LI_STEP_COUNTER, LI_OVERRUNS, LI_BUS_ERROR,
  LI_SENT) = range(9)

@@ -35,8 +35,8 @@ from rtsim.vehicle.sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, se
 from rtsim.vehicle.state import NSTATE_OUT
 
 from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_OVERRUNS, LI_PENDING_COUNTER, LI_PENDING_STEPS,
-                     LI_SM_HEAD, LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, PI_ACK_ID, PI_LOCKSTEP, PI_MODE_CODE,
-                     PI_SENSOR_EVERY, PI_SENSOR_MODEL, PI_STATE_EVERY, PI_STATUS_EVERY, PI_STATUS_ID,
+                     LI_SM_HEAD, LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, PI_ACK_ID, PI_LOCKSTEP,
+                     PI_MODE_CODE, PI_SENSOR_EVERY, PI_SENSOR_MODEL, PI_STATE_EVERY, PI_STATUS_EVERY, PI_STATUS_ID,
                      PI_STEP_REQ_ID, ST_FAULT0, LoopParams, LoopState, loop_run)
 from .rings import Rings, RxWriter, make_rings
 
@@ -102,7 +102,7 @@ class HilLoop:
         lay = c.sensor_layout()
         status = c.frame_layout(c.status_frame.name, STATUS_SOURCES)
         ack = c.frame_layout(c.step_ack.name, ("lockstep_sim_time", "lockstep_ack_counter"))
-        ints = np.zeros(9, dtype=np.int64)
+        ints = np.zeros(NPI, dtype=np.int64)
         ints[PI_SENSOR_EVERY], ints[PI_STATE_EVERY], ints[PI_STATUS_EVERY] = \
             self.sensor_every, self.state_every, self.status_every
         ints[PI_LOCKSTEP] = self.mode == "lockstep"
