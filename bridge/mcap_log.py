@@ -25,7 +25,7 @@ def _schema(title: str, fields: list[str], units: dict[str, str]) -> bytes:
 
 
 def write_run(path: str | Path, columns: tuple[str, ...], rows, vehicle_id: str) -> None:
-    """Write the rows of a run (columns as rtsim.vehicle.run.COLUMNS) to an MCAP file."""
+    """Write the rows of a run (columns as rtsim.vehicle.offline.COLUMNS) to an MCAP file."""
     sensors = [c for c in columns if c in SENSOR_NAMES]
     state = [c for c in columns if c not in SENSOR_NAMES and c != "time"]
     units = {n: BY_NAME[n].unit for n in sensors}

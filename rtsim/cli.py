@@ -88,7 +88,7 @@ def _bench(args) -> int:
 def _run(args) -> int:
     from pathlib import Path
 
-    from rtsim.vehicle.run import prepare, run, write_csv
+    from rtsim.vehicle.offline import prepare, run, write_csv
 
     out = args.out
     kind = Path(out).suffix.lower()
@@ -117,10 +117,10 @@ def _run(args) -> int:
 
 def _describe(args) -> int:
     from rtsim.road.model import make_plane
-    from rtsim.vehicle.config import load_vehicle
-    from rtsim.vehicle.model import build_vehicle
-    from rtsim.vehicle.run import default_vehicle_path, describe
-    from rtsim.vehicle.sim import VehicleSim
+    from rtsim.vehicle.car.config import load_vehicle
+    from rtsim.vehicle.car.build import build_vehicle
+    from rtsim.vehicle.offline import default_vehicle_path, describe
+    from rtsim.vehicle.car.sim import VehicleSim
 
     cfg, base = load_vehicle(args.vehicle or default_vehicle_path())
     model = build_vehicle(cfg, base)

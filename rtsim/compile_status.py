@@ -26,8 +26,8 @@ from typing import Callable, Iterable
 FIRST_COMPILE_S = 80
 
 #: the kernels the service calls from Python, "module:name"; the largest compile (~90 % of the time)
-SERVICE_KERNELS = ("rtsim.service.kernel:loop_run", "rtsim.vehicle.dynamics:vehicle_mbs_step",
-                   "rtsim.vehicle.powertrain:powertrain_step")
+SERVICE_KERNELS = ("rtsim.service.kernel:loop_run", "rtsim.vehicle.car.step:vehicle_mbs_step",
+                   "rtsim.vehicle.kit.powertrain:powertrain_step")
 
 
 def kernel_cached(dispatcher) -> bool:

@@ -60,7 +60,7 @@ def _assert_bit_identical(a, b):
 
 def test_vehicle_advance_bound_is_bit_identical_to_the_direct_call():
     from rtsim.service.server import DEFAULT_SCENARIO, build_sim
-    from rtsim.vehicle.dynamics import CMD_STEER, CMD_THROTTLE, vehicle_advance
+    from rtsim.vehicle.car.step import CMD_STEER, CMD_THROTTLE, vehicle_advance
 
     sim, _ = build_sim(DEFAULT_SCENARIO)
     fixed = (sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, sim.io)

@@ -1,4 +1,4 @@
-"""The switchable physical effects (rtsim.vehicle.effects): each against an analytic or independent
+"""The switchable physical effects (rtsim.vehicle.car.effects): each against an analytic or independent
 reference (coast-down and braking decelerations from Newton's law with the model's own masses, wheel
 inertias and radii; a real 5 % grade road for the tilted gravity; first-order and oscillator responses;
 the MF slip law), config validation errors, runtime switching, and the nominal model left bit-identical
@@ -17,17 +17,17 @@ from rtsim.channels import SENSOR_NAMES
 from rtsim.errors import ConfigError
 from rtsim.road.config import load_road
 from rtsim.road.model import make_plane
-from rtsim.vehicle.actuators import LAG_RATE, LAG_TAU
-from rtsim.vehicle.brake import BP_ACT, BP_BREAK_RATIO, BP_GAIN, BP_K, BS_MODE
-from rtsim.vehicle.config import load_vehicle
-from rtsim.vehicle.dynamics import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR, TO_FX, TO_FZ, \
+from rtsim.vehicle.kit.actuators import LAG_RATE, LAG_TAU
+from rtsim.vehicle.kit.brake import BP_ACT, BP_BREAK_RATIO, BP_GAIN, BP_K, BS_MODE
+from rtsim.vehicle.car.config import load_vehicle
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR, TO_FX, TO_FZ, \
     TO_OMEGA, TO_RE, TO_VX
-from rtsim.vehicle.effect_kernels import (BRAKE_STICTION_PRESSURE, DRIVELINE_DAMPING_RATIO, DRIVELINE_INERTIA,
+from rtsim.vehicle.car.effect_kernels import (BRAKE_STICTION_PRESSURE, DRIVELINE_DAMPING_RATIO, DRIVELINE_INERTIA,
                                           FS_DL)
-from rtsim.vehicle.effects import EFFECTS, effects_toml, validate_effects
-from rtsim.vehicle.model import build_vehicle
-from rtsim.vehicle.sim import VehicleSim
-from rtsim.vehicle.tyre.magic_formula import (advance_deflections_relaxed, effective_rolling_radius, loaded_radius,
+from rtsim.vehicle.car.effects import EFFECTS, effects_toml, validate_effects
+from rtsim.vehicle.car.build import build_vehicle
+from rtsim.vehicle.car.sim import VehicleSim
+from rtsim.vehicle.kit.tyre.magic_formula import (advance_deflections_relaxed, effective_rolling_radius, loaded_radius,
                                               new_slip_state, relaxation_lengths, slip_stiffnesses,
                                               transient_slip_relaxed)
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from rtsim.vehicle.config import load_vehicle
-from rtsim.vehicle.kinematics_cache import cache_key, cached_corner_kinematics
-from rtsim.vehicle.model import corner_kinematics
-from rtsim.vehicle.run import default_vehicle_path
+from rtsim.vehicle.car.config import load_vehicle
+from rtsim.vehicle.kit.linkage_cache import cache_key, cached_corner_kinematics
+from rtsim.vehicle.car.build import corner_kinematics
+from rtsim.vehicle.offline import default_vehicle_path
 
 
 def test_cache_round_trip_key_and_damage(tmp_path, monkeypatch):

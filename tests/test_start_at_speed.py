@@ -4,7 +4,7 @@
 v / r_e: at 22 m/s the converter, overrun by a turbine at 9.6 times the wheel speed, dragged the rear
 wheels from 79 to 28 rad/s in 0.1 s. Now the gear is the shift schedule's, the turbine turns with the
 wheels and the engine runs where its closed-throttle torque balances the converter
-(rtsim.vehicle.powertrain.powertrain_state_rolling). References here are independent: the schedule and
+(rtsim.vehicle.kit.powertrain.powertrain_state_rolling). References here are independent: the schedule and
 the overrun equilibrium from the config's tables (numpy interpolation, scipy root finding), and an
 analytic coasting deceleration (aero drag + MF 5.2 rolling resistance + engine braking over the
 effective mass)."""
@@ -18,10 +18,10 @@ from scipy.optimize import brentq
 
 from rtsim.road.model import make_plane
 from rtsim.vehicle import powertrain as P
-from rtsim.vehicle.config import load_vehicle
-from rtsim.vehicle.model import build_vehicle
-from rtsim.vehicle.sim import VehicleSim
-from rtsim.vehicle.tyre.tir import P_LMY, P_LONGVL, P_QSY1, P_QSY3, P_QSY4, P_UNLOADED_RADIUS, load_tir
+from rtsim.vehicle.car.config import load_vehicle
+from rtsim.vehicle.car.build import build_vehicle
+from rtsim.vehicle.car.sim import VehicleSim
+from rtsim.vehicle.kit.tyre.tir import P_LMY, P_LONGVL, P_QSY1, P_QSY3, P_QSY4, P_UNLOADED_RADIUS, load_tir
 
 DT = 1e-3
 G = 9.81

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from rtsim.vehicle.tyre import linear_forces, mf52_forces, rolling_resistance_moment, slip_stiffnesses
-from rtsim.vehicle.tyre.tir import P_LIN_CALPHA, P_LIN_CX, P_LIN_MUX, P_LIN_MUY
+from rtsim.vehicle.kit.tyre import linear_forces, mf52_forces, rolling_resistance_moment, slip_stiffnesses
+from rtsim.vehicle.kit.tyre.tir import P_LIN_CALPHA, P_LIN_CX, P_LIN_MUX, P_LIN_MUY
 from test_tyre_mf import CLEAN, FZ0, P, TYRE, drive_from_rest, sign_changes
 
 C = TYRE.coefficients

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtsim.vehicle.tyre import (advance_deflections, deflection_rates, describe, effective_rolling_radius, load_tir,
+from rtsim.vehicle.kit.tyre import (advance_deflections, deflection_rates, describe, effective_rolling_radius, load_tir,
                                 loaded_radius, mf52_forces, new_slip_state, peak_slips, relaxation_lengths,
                                 rolling_resistance_moment, slip_stiffnesses, steady_slip, transient_slip,
                                 vertical_force)
-from rtsim.vehicle.tyre import tir as T
-from rtsim.vehicle.tyre.magic_formula import S_U, S_V
+from rtsim.vehicle.kit.tyre import tir as T
+from rtsim.vehicle.kit.tyre.magic_formula import S_U, S_V
 
 SHIPPED = Path(__file__).resolve().parents[1] / "configs" / "tyres" / "michelin_155_80_r13.tir"
 TYRE = load_tir(SHIPPED)

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from rtsim.errors import ConfigError
-from rtsim.vehicle.tyre import tir
-from rtsim.vehicle.tyre.tir import (N_PARAMS, PARAM_NAMES, P_FNOMIN, P_LIN_CALPHA, P_LIN_CX, P_PDX1, P_PKY1,
+from rtsim.vehicle.kit.tyre import tir
+from rtsim.vehicle.kit.tyre.tir import (N_PARAMS, PARAM_NAMES, P_FNOMIN, P_LIN_CALPHA, P_LIN_CX, P_PDX1, P_PKY1,
                                     P_UNLOADED_RADIUS, SCHEMA, format_tir, load_tir, parse_tir)
 
 SHIPPED = Path(__file__).resolve().parents[1] / "configs" / "tyres" / "michelin_155_80_r13.tir"
@@ -130,7 +130,7 @@ def test_missing_optional_keys_take_the_mf_defaults():
         assert t[key] == 1.0 and key in t.defaulted
     assert t.vxlow == 1.0 and t.longvl == pytest.approx(16.7)
     # no BREFF/DREFF/FREFF: Re = R0 - rho/3
-    from rtsim.vehicle.tyre import effective_rolling_radius
+    from rtsim.vehicle.kit.tyre import effective_rolling_radius
     assert effective_rolling_radius(t.params, 3000.0) == pytest.approx(0.3 - 3000 / 200000 / 3)
 
 

@@ -14,7 +14,7 @@ from validate_fieldgen import write_runs
 
 from rtsim.validate.cli import _standalone
 from rtsim.validate.replay import Replayer
-from rtsim.vehicle.config import load_vehicle
+from rtsim.vehicle.car.config import load_vehicle
 
 VEHICLE = Path(__file__).resolve().parents[1] / "configs" / "vehicles" / "xbw.toml"
 

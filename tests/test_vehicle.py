@@ -9,13 +9,13 @@ import pytest
 
 from rtsim.errors import ConfigError
 from rtsim.road.model import make_grade, make_plane
-from rtsim.vehicle.config import load_vehicle, validate, VehicleConfig, load_toml
-from rtsim.vehicle.dynamics import TO_FZ
-from rtsim.vehicle.kinematics import (
+from rtsim.vehicle.car.config import load_vehicle, validate, VehicleConfig, load_toml
+from rtsim.vehicle.car.step import TO_FZ
+from rtsim.vehicle.kit.linkages import (
     OUT_AXIS, OUT_CENTRE, _pose_points, _solve_double_wishbone, _solve_macpherson, solve_corner,
 )
-from rtsim.vehicle.model import _geometry, build_vehicle
-from rtsim.vehicle.sim import VehicleSim
+from rtsim.vehicle.car.build import _geometry, build_vehicle
+from rtsim.vehicle.car.sim import VehicleSim
 from rtsim.mbs.model import ST_MAX_PHI, ST_MAX_PHID
 
 G = 9.81
@@ -117,7 +117,7 @@ def test_steady_turn_is_kinematically_consistent():
     """step_steer_80kph (35 deg at the steering wheel from 80 km/h, speed held): at its steady state
     the lateral acceleration of the centre of mass (horizontal, normal to its velocity) equals yaw
     rate x speed within 2 %, and the outer (right) wheels carry more load than the inner ones."""
-    from rtsim.vehicle.run import prepare, run
+    from rtsim.vehicle.offline import prepare, run
     sim, sc = prepare(None, "configs/scenarios/step_steer_80kph.toml")
     run(sim, sc)
     d = sim.data
@@ -174,12 +174,12 @@ def test_linear_tyre_model_is_used_when_configured():
     """tyres.model = "linear" in the vehicle file switches every tyre to the seed's linearised law:
     in a steady turn each tyre's lateral force is -C_alpha x slip angle (mirrored on the right side),
     with C_alpha from the same .tir at FNOMIN."""
-    from rtsim.vehicle.dynamics import TO_ALPHA, TO_FY
-    from rtsim.vehicle.tyre.tir import P_LIN_CALPHA
+    from rtsim.vehicle.car.step import TO_ALPHA, TO_FY
+    from rtsim.vehicle.kit.tyre.tir import P_LIN_CALPHA
     cfg, base = load_vehicle(VEHICLE)
     lin = cfg.model_copy(update={"tyres": cfg.tyres.model_copy(update={"model": "linear"})})
     sim = VehicleSim(build_vehicle(lin, base), make_plane(), 1e-3, speed=15.0)
-    from rtsim.vehicle.dynamics import CMD_STEER
+    from rtsim.vehicle.car.step import CMD_STEER
     sim.io.commands[CMD_STEER] = 0.3
     sim.step(3000)
     t = sim.vd.tyre

@@ -9,11 +9,11 @@ import pytest
 
 from rtsim.mbs.model import ST_MAX_PHI, ST_MAX_PHID
 from rtsim.road.model import make_plane
-from rtsim.vehicle.config import load_vehicle
-from rtsim.vehicle.dynamics import CMD_BRAKE, CMD_STEER, TO_FZ, TO_KAPPA
-from rtsim.vehicle.model import build_vehicle
-from rtsim.vehicle.run import describe, prepare, run
-from rtsim.vehicle.sim import VehicleSim
+from rtsim.vehicle.car.config import load_vehicle
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, TO_FZ, TO_KAPPA
+from rtsim.vehicle.car.build import build_vehicle
+from rtsim.vehicle.offline import describe, prepare, run
+from rtsim.vehicle.car.sim import VehicleSim
 
 G = 9.81
 
@@ -112,7 +112,7 @@ def test_rear_lock_in_a_panic_stop_is_set_by_the_brakes_not_the_powertrain(model
     each rear wheel in the first 1.5 s (measured: 27 N m at most at 10 MPa, 49 N m at 12 MPa; the rear
     brake gives 370 and 424 N m), so it moves the rear slip by less than 0.02. Whether the rears lock is the brake balance: the
     proportioning valve's rear torque against the rear tyres' peak braking torque under load transfer."""
-    from rtsim.vehicle.dynamics import EX_SELECTOR
+    from rtsim.vehicle.car.step import EX_SELECTOR
     kappa = []
     for selector in (1.0, 0.0):
         sim = VehicleSim(model, make_plane(), 1e-3, speed=22.22)
@@ -131,8 +131,8 @@ def test_panic_stop_at_full_pressure_locks_all_four_and_the_converter_only_creep
     engine at its idle speed against the stalled converter, whose output is then the creep torque
     0.5 eta i_1 i_fd TR(0) (w_idle / K(0))^2 per rear wheel (about 99 N m), a quarter of the rear brake
     torque: the held car does not move."""
-    from rtsim.vehicle.brake import rear_pressure
-    from rtsim.vehicle.powertrain import PO_ENGINE_SPEED, PO_GEAR, PO_TORQUE_RL
+    from rtsim.vehicle.kit.brake import rear_pressure
+    from rtsim.vehicle.kit.powertrain import PO_ENGINE_SPEED, PO_GEAR, PO_TORQUE_RL
     sim = VehicleSim(model, make_plane(), 1e-3, speed=22.22)
     p_line = sim.bcfg.actuator.max
     sim.io.commands[CMD_BRAKE] = p_line

@@ -4,7 +4,7 @@ oscillation at standstill)."""
 import numpy as np
 import pytest
 
-from rtsim.vehicle.run import prepare, run, write_csv, COLUMNS
+from rtsim.vehicle.offline import prepare, run, write_csv, COLUMNS
 
 SEED_DISTANCE = 63.5      # m, xbw-vehicle-mbs-validation sec. 2.3
 SEED_PEAK_SPEED = 23 / 3.6  # m/s

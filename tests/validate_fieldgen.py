@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.channels import SENSOR_NAMES
-from rtsim.vehicle.dynamics import CMD_BRAKE, CMD_STEER, CMD_THROTTLE
-from rtsim.vehicle.sensors import NSENSOR
-from rtsim.vehicle.sim import VehicleSim
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE
+from rtsim.vehicle.car.sensors import NSENSOR
+from rtsim.vehicle.car.sim import VehicleSim
 
 DT = 1e-3
 RATE = 500.0

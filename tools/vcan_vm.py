@@ -106,7 +106,7 @@ class VMResult(NamedTuple):
 # cache layout
 
 def cache_root() -> Path:
-    """rtsim's cache root, as ``rtsim.vehicle.kinematics_cache`` uses it: ``$RTSIM_CACHE`` or
+    """rtsim's cache root, as ``rtsim.vehicle.kit.linkage_cache`` uses it: ``$RTSIM_CACHE`` or
     ``~/.cache/rtsim`` (also when ``RTSIM_CACHE=off``: the VM image is not a cached result)."""
     raw = os.environ.get(CACHE_ENV, "").strip()
     if raw and raw.lower() != "off":

@@ -32,7 +32,7 @@ def dispatch_costs(reps: int = 20000, repeats: int = 7) -> dict:
     """Microseconds per call (median and best of ``repeats`` interleaved rounds of ``reps`` calls, the
     vehicle steps ``reps // 4``), with the times to bind and to load (or compile) the wrappers."""
     from rtsim.service.server import DEFAULT_SCENARIO, build_sim
-    from rtsim.vehicle.dynamics import vehicle_advance
+    from rtsim.vehicle.car.step import vehicle_advance
 
     sim, _ = build_sim(DEFAULT_SCENARIO)                 # at rest, held by the brake
     fixed = (sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, sim.io)

@@ -12,14 +12,15 @@ import numpy as np
 from rtsim.road.config import load_road
 from rtsim.road.model import make_plane
 from rtsim.road.query import NCONTACT, wheel_contact
-from rtsim.vehicle.brake import brake_step
-from rtsim.vehicle.config import load_vehicle
-from rtsim.vehicle.dynamics import CMD_STEER, CMD_THROTTLE, TO_FZ, vehicle_forces
-from rtsim.vehicle.model import CI_WX, build_vehicle
-from rtsim.vehicle.powertrain import powertrain_step
-from rtsim.vehicle.sim import VehicleSim
-from rtsim.vehicle.steering import steering_step
-from rtsim.vehicle.tyre.magic_formula import mf52_forces, transient_slip
+from rtsim.vehicle.kit.brake import brake_step
+from rtsim.vehicle.car.config import load_vehicle
+from rtsim.vehicle.car.step import CMD_STEER, CMD_THROTTLE, TO_FZ, vehicle_forces
+from rtsim.vehicle.car.build import build_vehicle
+from rtsim.vehicle.car.layout import CI_WX
+from rtsim.vehicle.kit.powertrain import powertrain_step
+from rtsim.vehicle.car.sim import VehicleSim
+from rtsim.vehicle.kit.steering import steering_step
+from rtsim.vehicle.kit.tyre.magic_formula import mf52_forces, transient_slip
 
 ROOT = Path(__file__).resolve().parents[2]
 

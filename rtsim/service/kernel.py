@@ -29,10 +29,10 @@ from bridge.can_e2e import (C_COUNTER, C_CRC, C_DLC, C_RANGE, C_STEP_IGNORED, C_
                             rx_find, rx_watchdog, step_request)
 from rtsim.jit import inline_kernel, kernel, read_cycles
 from rtsim.mbs.model import OK
-from rtsim.vehicle.dynamics import vehicle_step
-from rtsim.vehicle.effect_kernels import sensor_stage
-from rtsim.vehicle.sensors import sensor_model
-from rtsim.vehicle.state import vehicle_state_values
+from rtsim.vehicle.car.step import vehicle_step
+from rtsim.vehicle.car.effect_kernels import sensor_stage
+from rtsim.vehicle.car.sensors import sensor_model
+from rtsim.vehicle.car.observer import vehicle_state_values
 
 from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SENSOR, H_STATE, H_TX, LOG_RX,
                     LOG_TX, RX_DATA)

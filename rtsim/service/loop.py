@@ -31,8 +31,8 @@ from rtsim.channels import COMMAND_NAMES
 from rtsim.errors import RtsimError, SimulationError
 from rtsim.mbs.model import OK
 from rtsim.realtime.health import LoopHealth
-from rtsim.vehicle.sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_params
-from rtsim.vehicle.state import NSTATE_OUT
+from rtsim.vehicle.car.sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_params
+from rtsim.vehicle.car.observer import NSTATE_OUT
 
 from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_OVERRUNS, LI_PENDING_COUNTER, LI_PENDING_STEPS,
                      LI_SM_HEAD, LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, PI_ACK_ID, PI_LOCKSTEP,

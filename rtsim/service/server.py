@@ -97,10 +97,10 @@ def build_sim(scenario: Path, vehicle: Path | None = None, dt: float | None = No
     resolved config path (a build solves the suspension linkages: seconds)."""
     from drivers.scenario import load_scenario
     from rtsim.road.config import load_road
-    from rtsim.vehicle.config import load_vehicle
-    from rtsim.vehicle.model import build_vehicle
-    from rtsim.vehicle.run import default_vehicle_path
-    from rtsim.vehicle.sim import VehicleSim
+    from rtsim.vehicle.car.config import load_vehicle
+    from rtsim.vehicle.car.build import build_vehicle
+    from rtsim.vehicle.offline import default_vehicle_path
+    from rtsim.vehicle.car.sim import VehicleSim
 
     sc = load_scenario(scenario, check_files=True)
     vpath = Path(vehicle) if vehicle is not None else (sc.vehicle_path or default_vehicle_path())
@@ -210,7 +210,7 @@ class Service:
     def session_metadata(self) -> dict[str, dict[str, str]]:
         """What `rtsim resim` needs to rebuild this session: the files as they were, the step, the
         mode and the watchdog's hold pressure (MCAP metadata records)."""
-        from rtsim.vehicle.run import default_vehicle_path
+        from rtsim.vehicle.offline import default_vehicle_path
 
         vpath = Path(self.opts.vehicle) if self.opts.vehicle else (self.sc.vehicle_path or default_vehicle_path())
         return {

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.channels import SENSOR_NAMES
-from rtsim.vehicle.dynamics import CMD_BRAKE, CMD_STEER, CMD_THROTTLE
-from rtsim.vehicle.sensors import NSENSOR
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE
+from rtsim.vehicle.car.sensors import NSENSOR
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "configs" / "scenarios" / "straight_line.toml"
@@ -31,10 +31,10 @@ def generate(out: Path, effects: dict, n: int = 7, seed: int = 0) -> list[Path]:
     from drivers.base import I_BRAKE, I_STEER, I_THROTTLE, NSTATE
     from drivers.scenario import load_scenario
     from rtsim.road.config import load_road
-    from rtsim.vehicle.config import load_vehicle
-    from rtsim.vehicle.model import build_vehicle
-    from rtsim.vehicle.run import default_vehicle_path
-    from rtsim.vehicle.sim import VehicleSim
+    from rtsim.vehicle.car.config import load_vehicle
+    from rtsim.vehicle.car.build import build_vehicle
+    from rtsim.vehicle.offline import default_vehicle_path
+    from rtsim.vehicle.car.sim import VehicleSim
 
     sc = load_scenario(SCENARIO, check_files=True)
     cfg, base = load_vehicle(sc.vehicle_path or default_vehicle_path())
@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     effects = {}
     if args.effect != "none":
-        from rtsim.vehicle.effects import EFFECTS
+        from rtsim.vehicle.car.effects import EFFECTS
         name, value = args.effect.split("=")
         effects = {name: {EFFECTS[name].params[0].name: float(value)}}
     t0 = time.perf_counter()

@@ -17,7 +17,7 @@ import tomllib
 from pathlib import Path
 
 from rtsim.errors import ConfigError
-from rtsim.vehicle.config import load_vehicle
+from rtsim.vehicle.car.config import load_vehicle
 
 from .effectset import Effect
 

@@ -1,5 +1,5 @@
 """Effects as the workflow handles them: a name from the model's catalogue
-(rtsim.vehicle.effects.EFFECTS) with its parameter values, and the conversions to the mapping that
+(rtsim.vehicle.car.effects.EFFECTS) with its parameter values, and the conversions to the mapping that
 `VehicleSim.set_effects` and the vehicle config's `[effects]` tables take:
 {"rolling_resistance": {"coefficient": 0.012}, "sensor_bias": [{"channel": "accel_x", "bias": 0.1}]}.
 Model effects go to the model; sensor effects are applied to the model's outputs (sensorfx)."""
@@ -15,9 +15,9 @@ SENSOR_EFFECTS = ("sensor_delay", "sensor_bias", "sensor_scale")
 def catalogue() -> dict:
     """The model's effect catalogue: name -> EffectSpec (ConfigError when the model has none)."""
     try:
-        from rtsim.vehicle.effects import EFFECTS
+        from rtsim.vehicle.car.effects import EFFECTS
     except ImportError as exc:
-        raise ConfigError(f"the vehicle model has no effect catalogue (rtsim.vehicle.effects: {exc})") from None
+        raise ConfigError(f"the vehicle model has no effect catalogue (rtsim.vehicle.car.effects: {exc})") from None
     return EFFECTS
 
 

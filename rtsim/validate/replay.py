@@ -48,15 +48,15 @@ import numpy as np
 from rtsim.channels import SENSOR_NAMES
 from rtsim.errors import ConfigError
 from rtsim.road.config import load_road
-from rtsim.vehicle.actuators import LAG_RATE, LAG_TAU
-from rtsim.vehicle.brake import BP_ACT
-from rtsim.vehicle.config import load_vehicle
-from rtsim.vehicle.dynamics import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR
-from rtsim.vehicle.model import build_vehicle
-from rtsim.vehicle.powertrain import PP_THR
-from rtsim.vehicle.sensors import NSENSOR
-from rtsim.vehicle.sim import VehicleSim
-from rtsim.vehicle.tyre.magic_formula import effective_rolling_radius
+from rtsim.vehicle.kit.actuators import LAG_RATE, LAG_TAU
+from rtsim.vehicle.kit.brake import BP_ACT
+from rtsim.vehicle.car.config import load_vehicle
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR
+from rtsim.vehicle.car.build import build_vehicle
+from rtsim.vehicle.kit.powertrain import PP_THR
+from rtsim.vehicle.car.sensors import NSENSOR
+from rtsim.vehicle.car.sim import VehicleSim
+from rtsim.vehicle.kit.tyre.magic_formula import effective_rolling_radius
 
 from . import sensorfx
 from .benchmark import Benchmark

@@ -19,7 +19,7 @@ from rtsim.channels import SENSOR_NAMES
 from rtsim.jit import kernel
 from rtsim.mbs.constraints import poly_eval
 
-from .model import CI_PHI, CI_S, CI_Z
+from .layout import CI_PHI, CI_S, CI_Z
 
 # channel indices, in rtsim.channels.SENSOR_NAMES order
 (S_ACCEL_X, S_ACCEL_Y, S_ACCEL_Z, S_GYRO_X, S_GYRO_Y, S_GYRO_Z, S_ROLL, S_PITCH, S_WHEEL_FL, S_WHEEL_FR,

@@ -13,8 +13,8 @@ from math import asin, atan2, sqrt
 from rtsim.channels import STATE_NAMES, WHEELS
 from rtsim.jit import kernel
 
-from .dynamics import TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_KAPPA
-from .model import CI_PHI, CI_S
+from .step import TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_KAPPA
+from .layout import CI_PHI, CI_S
 from .sensors import SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_SW_ANGLE, SG_THROTTLE
 
 NSTATE_OUT = len(STATE_NAMES)

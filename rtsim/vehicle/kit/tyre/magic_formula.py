@@ -2,7 +2,7 @@
 that makes them usable from standstill in a fixed-step 1 ms loop.
 
 All kernels are `rtsim.jit.kernel`s (numba, NRT off): they take the packed parameter array `p` of
-`rtsim.vehicle.tyre.tir` (indices `P_*`) and scalars, and return tuples of floats or write into
+`rtsim.vehicle.kit.tyre.tir` (indices `P_*`) and scalars, and return tuples of floats or write into
 caller-provided arrays; none allocates.
 
 Axes and signs: ISO 8855 / TYDEX W-axes of the wheel: x forward along the wheel heading (in the road
@@ -447,7 +447,7 @@ def transient_slip(p, state, i, fz, gamma, vx, vsy, omega, re):
 @kernel
 def transient_slip_relaxed(p, state, i, fz, gamma, vx, vsy, omega, re, extra):
     """transient_slip with both relaxation lengths lengthened by `extra` (m): the tyre_relaxation
-    effect (rtsim.vehicle.effects)."""
+    effect (rtsim.vehicle.car.effects)."""
     return _transient_slip(p, state, i, fz, gamma, vx, vsy, omega, re, extra)
 
 

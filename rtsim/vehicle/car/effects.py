@@ -23,7 +23,7 @@ rtsim.channels.SENSOR_NAMES in the sensor stage (``VehicleSim.sensors``): y = sc
 Wheel speeds are not sensor channels (the workflow derives them from ``wheel_angle_*``): a scale or
 delay of a wheel angle carries over to its speed, and a bias of a speed has no meaning for an angle
 counter, so there are no ``wheel_speed_*`` sensor effects. The formulations are in
-rtsim.vehicle.effect_kernels.
+rtsim.vehicle.car.effect_kernels.
 
 Mass at run time. The multibody model's mass matrix is constant and compiled into ``Model.m_env``,
 which every VehicleSim of one VehicleModel shares, and the integrator reuses its Cholesky factor across
@@ -53,7 +53,7 @@ from .effect_kernels import (
     FX_HIST, FX_M_CHASSIS, FX_M_CORNER, FX_MASS, FX_ON, FX_RELAX, FX_RR, FX_SENS, FX_SENS_ON, FX_SIN, FX_SLIP,
     FXS_BIAS, FXS_DELAY, FXS_SCALE, neutral_params,
 )
-from .model import G
+from .layout import G
 
 
 @dataclass(frozen=True)
@@ -310,7 +310,7 @@ def history_slots(effects: dict, dt: float) -> int:
 
 
 def pack_effects(effects: dict, dt: float, chassis_mass: float, unsprung_masses) -> np.ndarray:
-    """The kernels' parameter array (rtsim.vehicle.effect_kernels FX_*) of a validated effects mapping,
+    """The kernels' parameter array (rtsim.vehicle.car.effect_kernels FX_*) of a validated effects mapping,
     for integrator step dt (s), sprung mass (kg) and the four unsprung masses (kg)."""
     fx = neutral_params()
     model_on = False

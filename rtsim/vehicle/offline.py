@@ -17,14 +17,14 @@ from rtsim.channels import SENSOR_NAMES, WHEELS
 from rtsim.errors import ConfigError
 from rtsim.road.config import load_road
 
-from .brake import brake_gains
-from .config import load_vehicle
-from .dynamics import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR, TO_FX, TO_FY, TO_FZ
-from .kinematics import OUT_AXIS
-from .model import VehicleModel, build_vehicle
-from .sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_model, sensor_params
-from .sim import VehicleSim
-from .tyre.magic_formula import effective_rolling_radius, slip_stiffnesses
+from .kit.brake import brake_gains
+from .car.config import load_vehicle
+from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR, TO_FX, TO_FY, TO_FZ
+from .kit.linkages import OUT_AXIS
+from .car.build import VehicleModel, build_vehicle
+from .car.sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_model, sensor_params
+from .car.sim import VehicleSim
+from .kit.tyre.magic_formula import effective_rolling_radius, slip_stiffnesses
 
 STATE_COLUMNS = ("pos_x", "pos_y", "pos_z", "yaw", "speed",
                  *(f"tyre_{c}_{w}" for c in ("fx", "fy", "fz") for w in WHEELS), "constraint_violation")

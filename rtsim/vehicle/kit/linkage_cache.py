@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .kinematics import CornerKinematics
+from .linkages import CornerKinematics
 
 _FIELDS = ("exponents", "vec_coef", "spring_coef", "z_range", "s_range", "fit_error", "steered")
 

@@ -15,7 +15,6 @@ depend on z only; all corners share one exponent table (rtsim.mbs poly_point).
 """
 from __future__ import annotations
 
-from collections import namedtuple
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,36 +25,14 @@ from rtsim.mbs import Mechanism, MechanismBuilder, Settings
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import VehicleConfig
-from .kinematics_cache import cached_corner_kinematics
-from .kinematics import (
+from .layout import (CI_S, NSP, RACK_MASS, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE,
+                     SP_K, SP_PARTNER, TYRE_LINEAR, TYRE_MAGIC_FORMULA, G, Vehicle)
+from ..kit.linkage_cache import cached_corner_kinematics
+from ..kit.linkages import (
     OUT_AXIS, OUT_CENTRE, OUT_ROT_S, OUT_ROT_Z, CornerKinematics, DoubleWishbone, MacPherson, mirror,
     solve_corner,
 )
 
-G = 9.81
-RACK_MASS = 2.0     # kg, rack and tie rods
-
-# Corner coordinate index table (Vehicle.corner_idx[w, :]).
-CI_WX, CI_WY, CI_WZ, CI_Z, CI_PHI, CI_S = range(6)
-# Chassis coordinate index table (Vehicle.chassis_idx): r (0..2), u (3..5), v (6..8), w (9..11).
-
-# Per-corner suspension parameters (Vehicle.susp[w, :]).
-SP_K, SP_FREE, SP_BS_LEN, SP_BS_K, SP_C_BUMP, SP_C_REB, SP_ARB, SP_PARTNER = range(8)
-NSP = 8
-
-Vehicle = namedtuple("Vehicle", [
-    "chassis_idx",     # (12,) int
-    "corner_idx",      # (4, 6) int, CI_*
-    "axis_coef", "rotz_coef", "rots_coef",   # (4, 3, nterm) polynomials in (z, s), body frame
-    "spring_coef",     # (4, nterm) spring/damper length polynomial, m
-    "susp",            # (4, NSP) float
-    "rack_driver",     # () int driver index of the rack constraint
-    "rack_con",        # () int constraint row of the rack (its multiplier is the rack force)
-    "imu_local",       # (3,) IMU position in the body frame relative to the CG, m
-    "aero",            # (2,) drag area m^2, air density kg/m^3
-    "tyre_model",      # (1,) int: TYRE_MAGIC_FORMULA or TYRE_LINEAR
-])
-TYRE_MAGIC_FORMULA, TYRE_LINEAR = 0, 1
 
 
 @dataclass
@@ -134,7 +111,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         corner_idx[i] = [*wc.idx, z.index, phi.index, rack.index if front else -1]
         axis_coef[i], rotz_coef[i], rots_coef[i] = vec[OUT_AXIS], vec[OUT_ROT_Z], vec[OUT_ROT_S]
         spring_coef[i] = _pad_scalar(kin, full_exps)
-    # the tangent entries rtsim.vehicle.dynamics adds: each wheel centre's 3x3 block (tyre stiffness
+    # the tangent entries rtsim.vehicle.car.step adds: each wheel centre's 3x3 block (tyre stiffness
     # and damping, already coupled by its mass), each spin and travel diagonal, and the anti-roll bars
     # between the travels of an axle
     b.couple(zs[0], zs[1])

@@ -6,7 +6,7 @@ for the left corners; the right ones are their mirror images. SI units throughou
 key's name or comment).
 
 Optional ``[effects.<name>]`` tables (sensor effects: ``[[effects.<name>]]`` arrays of tables, one per
-channel) switch on effects of the catalogue rtsim.vehicle.effects; absent: none (the nominal model).
+channel) switch on effects of the catalogue rtsim.vehicle.car.effects; absent: none (the nominal model).
 """
 from __future__ import annotations
 
@@ -17,6 +17,8 @@ from pydantic import Field, field_validator, model_validator
 
 from rtsim.configfile import Strict, load_toml, validate
 from rtsim.errors import ConfigError
+
+from .effects import validate_effects
 
 Vec3 = tuple[float, float, float]
 
@@ -125,16 +127,15 @@ class VehicleConfig(Strict):
     tyres: Tyres
     aero: Aero = Aero()
     sensors: Sensors
-    brakes: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.brake")
-    powertrain: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.powertrain")
-    steering: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.steering")
+    brakes: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.kit.brake")
+    powertrain: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.kit.powertrain")
+    steering: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.kit.steering")
     effects: dict = Field(default_factory=dict, description="switchable effects, validated by "
-                          "rtsim.vehicle.effects (canonical form after loading)")
+                          "rtsim.vehicle.car.effects (canonical form after loading)")
 
     @field_validator("effects", mode="before")
     @classmethod
     def _effects(cls, v):
-        from .effects import validate_effects     # here: effects imports the model, which imports this
         try:
             return validate_effects(v, "effects")
         except ConfigError as exc:
@@ -156,7 +157,6 @@ class VehicleConfig(Strict):
 def load_vehicle(path: str | Path) -> tuple[VehicleConfig, Path]:
     """The validated vehicle config and the folder its relative paths refer to. The [effects] tables
     are checked first, so that their errors name the file and the full key (effects.<name>.<param>)."""
-    from .effects import validate_effects
     path = Path(path)
     data = load_toml(path)
     if "effects" in data:

@@ -36,7 +36,7 @@ Chain, per 1 ms step (``powertrain_step``):
 Initial states: ``powertrain_state`` (engine speed and gear as given) and ``powertrain_state_rolling``
 (the steady state under wheels already turning: the schedule's gear, the engine where its torque
 balances the converter at that turbine speed, the idle controller settled), which a car started at
-speed uses (rtsim.vehicle.sim). In a panic stop from speed the converter does not hold the braked
+speed uses (rtsim.vehicle.car.sim). In a panic stop from speed the converter does not hold the braked
 wheels up: slipping, it passes the engine's spin-down as a few tens of N m per rear wheel, and at stall
 with the engine idling only the creep torque 0.5 eta i_1 i_fd TR(0) (omega_idle / K(0))^2 (about
 99 N m per wheel in 1st with the defaults), well below the rear brakes' torque.

@@ -1,7 +1,7 @@
-"""Compiled parts of the switchable physical effects (rtsim.vehicle.effects has the catalogue): the
+"""Compiled parts of the switchable physical effects (rtsim.vehicle.car.effects has the catalogue): the
 array layouts and the kernels the vehicle step calls when an effect is on.
 
-Parameter array ``Parts.effects`` (float64, FX_SIZE), packed by ``rtsim.vehicle.effects.pack_effects``;
+Parameter array ``Parts.effects`` (float64, FX_SIZE), packed by ``rtsim.vehicle.car.effects.pack_effects``;
 all zeros (but the neutral scales, 1.0) is the nominal model, and with ``FX_ON`` = 0 the vehicle step
 runs exactly the nominal code. State array ``States.effects`` (float64, ``state_size(slots)``): brake
 lag, driveline nodes, the sensor history ring. Units SI; brake torques N*m, pressures kPa.
@@ -30,7 +30,7 @@ Formulations (each chosen so that the multibody step stays implicit and allocati
 - bearing_drag: -T sat(omega_rel / BEARING_OMEGA_EPS) between wheel and knuckle (implicit, with its
   damping in the tangent).
 - mass: a point mass dm at the sprung centre of mass: generalized force -dm r'' - dm g e_z with its
-  exact tangent dm on W (rtsim.vehicle.dynamics); the constant mass matrix of the model is untouched.
+  exact tangent dm on W (rtsim.vehicle.car.step); the constant mass matrix of the model is untouched.
 - sensor_*: y = scale x(t - delay) + bias per channel, with x from a per-step history ring (linear
   interpolation between steps) (``effect_sensors``).
 """
@@ -42,9 +42,9 @@ import numpy as np
 
 from rtsim.jit import inline_kernel, kernel
 
-from .brake import BO_TAU_BREAK, BO_TAU_SLIDE, BP_BREAK_RATIO, BP_GAIN, BS_P_FRONT, BS_P_REAR, BS_TAU_BREAK, \
+from ..kit.brake import BO_TAU_BREAK, BO_TAU_SLIDE, BP_BREAK_RATIO, BP_GAIN, BS_P_FRONT, BS_P_REAR, BS_TAU_BREAK, \
     BS_TAU_SLIDE
-from .model import CI_PHI
+from .layout import CI_PHI
 from .sensors import NSENSOR, S_ACCEL_X, S_PITCH, S_ROLL, true_sensors
 
 # ---- constants of the formulations ------------------------------------------------------------------
@@ -144,7 +144,7 @@ def driveline_torque(fx, fs, j, t_src, phi, phid, h):
 @kernel
 def effects_brake(fx, fs, bp, bs, out):
     """Brake lag, friction scale and added stiction on each wheel's sliding and breakaway torques, after
-    brake_step set them from the line pressure (rtsim.vehicle.brake state BS_*, outputs BO_*)."""
+    brake_step set them from the line pressure (rtsim.vehicle.kit.brake state BS_*, outputs BO_*)."""
     a = fx[FX_B_LAG]
     scale = fx[FX_B_SCALE]
     t_break = fx[FX_B_BREAK]

@@ -1,6 +1,6 @@
 """A vehicle on a road: builds everything from the configuration, places the car on the road in
 static equilibrium, and steps it (compiled) with the subsystems' states. The switchable effects of
-rtsim.vehicle.effects (the config's [effects], or `effects=`) can be replaced at any time between steps
+rtsim.vehicle.car.effects (the config's [effects], or `effects=`) can be replaced at any time between steps
 with `set_effects`, without rebuilding the model."""
 from __future__ import annotations
 
@@ -16,19 +16,20 @@ from rtsim.mbs.model import OK, Data
 from rtsim.road.model import Road
 from rtsim.road.query import NQUERY, Q_NX, Q_NZ, Q_Z, road_query
 
-from .brake import BP_GAIN, BS_P_FRONT, BS_P_REAR, brake_config, brake_params, brake_state
-from .dynamics import (CMD_BRAKE, EX_SELECTOR, Parts, States, VehicleData, make_io, make_vehicle_data,
+from ..kit.brake import BP_GAIN, BS_P_FRONT, BS_P_REAR, brake_config, brake_params, brake_state
+from .step import (CMD_BRAKE, EX_SELECTOR, Parts, States, VehicleData, make_io, make_vehicle_data,
                        vehicle_advance, vehicle_mbs_step)
 from .effect_kernels import (FS_DL, FS_HIST, FS_LAG, FX_B_LAG, FX_DL, FX_DL_K, FX_HIST, FX_MASS, FX_ON, fill_history,
                              neutral_params, sensor_stage, state_size)
 from .effects import pack_effects, validate_effects
-from .model import CI_PHI, VehicleModel
-from .powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PO_TORQUE_RL, PO_TORQUE_RR, PP_MEASURED,
+from .build import VehicleModel
+from .layout import CI_PHI
+from ..kit.powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PO_TORQUE_RL, PO_TORQUE_RR, PP_MEASURED,
                          powertrain_config, powertrain_params, powertrain_state_rolling, powertrain_step)
 from .sensors import NSENSOR
-from .steering import steering_config, steering_params, steering_state
-from .tyre.magic_formula import effective_rolling_radius
-from .tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
+from ..kit.steering import steering_config, steering_params, steering_state
+from ..kit.tyre.magic_formula import effective_rolling_radius
+from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
 
 
 def _align_z(n: np.ndarray) -> np.ndarray:
@@ -50,8 +51,8 @@ class VehicleSim:
                  position=(0.0, 0.0), yaw: float = 0.0, speed: float = 0.0, effects=None):
         """A car at `position` (m), heading `yaw` (rad), rolling straight at `speed` (m/s) with the
         powertrain in steady motion with it (D, closed throttle: the schedule's gear, the engine where the
-        converter holds it; rtsim.vehicle.powertrain.powertrain_state_rolling), so a start at speed has
-        no transient. effects: a mapping of rtsim.vehicle.effects (validated) that replaces the config's
+        converter holds it; rtsim.vehicle.kit.powertrain.powertrain_state_rolling), so a start at speed has
+        no transient. effects: a mapping of rtsim.vehicle.car.effects (validated) that replaces the config's
         [effects]; None keeps the config's."""
         self.vm = model
         self.road = road
@@ -161,7 +162,7 @@ class VehicleSim:
 
     @property
     def effects(self) -> dict:
-        """The active effects (canonical mapping of rtsim.vehicle.effects.validate_effects; a copy)."""
+        """The active effects (canonical mapping of rtsim.vehicle.car.effects.validate_effects; a copy)."""
         return {k: ([dict(r) for r in v] if isinstance(v, list) else dict(v)) for k, v in self._effects.items()}
 
     def set_effects(self, mapping) -> None:
@@ -218,7 +219,7 @@ class VehicleSim:
         """Noise-free sensor channels of the current state, rtsim.channels.SENSOR_NAMES order, with the
         active sensor effects (scale x(t - delay) + bias) and what model effects change in the sensing
         (the grade's tilted gravity); the config's noise model ([sensors.channels]) comes on top of
-        these (rtsim.vehicle.run)."""
+        these (rtsim.vehicle.offline)."""
         out = np.zeros(NSENSOR) if out is None else out
         sensor_stage(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, self.states.effects,
                      out)

@@ -190,7 +190,7 @@ P_LONGITUDINAL_STIFFNESS = 127
 P_LATERAL_STIFFNESS = 128
 P_DAMP_RESIDUAL = 129
 P_DAMP_VLOW = 130
-# derived at load time for rtsim.vehicle.tyre.linear (Fz = FNOMIN, gamma = 0, no offsets)
+# derived at load time for rtsim.vehicle.kit.tyre.linear (Fz = FNOMIN, gamma = 0, no offsets)
 P_LIN_CX = 131        # longitudinal slip stiffness Kxk(FNOMIN) [N]
 P_LIN_CALPHA = 132    # cornering stiffness -Kya(FNOMIN) > 0 [N/rad]
 P_LIN_MUX = 133       # PDX1 * LMUX
@@ -571,7 +571,7 @@ def _fmt(v) -> str:
 def format_tir(props: TyreProperties) -> str:
     """The property file text of `props` (every section and key as read, tables included); parsing
     it gives the same coefficients and parameter array."""
-    lines = ["$ written by rtsim.vehicle.tyre.tir.format_tir", f"$ from {props.source}"]
+    lines = ["$ written by rtsim.vehicle.kit.tyre.tir.format_tir", f"$ from {props.source}"]
     for sec, entries in props.sections.items():
         lines.append(f"[{sec}]")
         for k, v in entries.items():

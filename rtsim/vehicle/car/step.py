@@ -12,10 +12,10 @@ stiffness and damping to W:
   rotation rates with z and s (the kinematic polynomials);
 - suspension spring (with bump stop) and damper along the element, whose length is a polynomial of
   (z, s): Q_z = F dL/dz, Q_s = F dL/ds; anti-roll bars on the travel difference;
-- brakes: torque on the spin coordinate with stiction (rtsim.vehicle.brake), reaction on the knuckle;
+- brakes: torque on the spin coordinate with stiction (rtsim.vehicle.kit.brake), reaction on the knuckle;
 - drive torques (set per step by the powertrain) on the spin coordinate, reacting on the chassis;
 - aerodynamic drag at the centre of mass;
-- the switchable effects of rtsim.vehicle.effects when any is on (parameters fx = Parts.effects, states
+- the switchable effects of rtsim.vehicle.car.effects when any is on (parameters fx = Parts.effects, states
   fs = States.effects; with fx[FX_ON] = 0 none of their code runs and the step is the nominal one).
 """
 from __future__ import annotations
@@ -39,21 +39,21 @@ from .effect_kernels import (BEARING_OMEGA_EPS, FS_DL, FX_BEARING, FX_BRAKE, FX_
                              FX_G_1MCOS, FX_G_SIN, FX_GRADE, FX_HIST, FX_M_CHASSIS, FX_M_CORNER, FX_MASS, FX_ON,
                              FX_RELAX, FX_RR, FX_SLIP, RR_SPEED_EPS, driveline_commit, driveline_torque,
                              effects_brake, record_sensors, smooth_sign)
-from .brake import BI_SIZE, BO_LINE, BO_SIZE, BP_EPS, BS_TAU_SLIDE, brake_commit, brake_step, brake_wheel_torque
-from .powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PI_THROTTLE_CMD, PI_TORQUE_RL, PI_TORQUE_RR,
+from ..kit.brake import BI_SIZE, BO_LINE, BO_SIZE, BP_EPS, BS_TAU_SLIDE, brake_commit, brake_step, brake_wheel_torque
+from ..kit.powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PI_THROTTLE_CMD, PI_TORQUE_RL, PI_TORQUE_RR,
                          PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_RL, PO_TORQUE_RR, powertrain_step)
 from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_SW_ANGLE, SG_THROTTLE,
                       SG_TORQUE_RL, SG_TORQUE_RR)
-from .steering import SI_CMD, SI_RACK_FORCE, SI_SIZE, SO_RACK_ACC, SO_RACK_POS, SO_RACK_VEL, SO_SIZE, SO_SW_ANGLE, \
+from ..kit.steering import SI_CMD, SI_RACK_FORCE, SI_SIZE, SO_RACK_ACC, SO_RACK_POS, SO_RACK_VEL, SO_SIZE, SO_SW_ANGLE, \
     SO_TORQUE, steering_step
-from .model import (
+from .layout import (
     G, TYRE_LINEAR,
     CI_PHI, CI_S, CI_WX, CI_Z, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE, SP_K, SP_PARTNER,
 )
-from .tyre.magic_formula import (advance_deflections, advance_deflections_relaxed, effective_rolling_radius,
+from ..kit.tyre.magic_formula import (advance_deflections, advance_deflections_relaxed, effective_rolling_radius,
                                  mf52_forces, transient_slip, transient_slip_relaxed, vertical_force)
-from .tyre.linear import linear_forces
-from .tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_DAMPING, P_VERTICAL_STIFFNESS
+from ..kit.tyre.linear import linear_forces
+from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_DAMPING, P_VERTICAL_STIFFNESS
 
 # Per-tyre outputs (VehicleData.tyre[w, :]) for logging and sensors.
 TO_FX, TO_FY, TO_FZ, TO_MZ, TO_KAPPA, TO_ALPHA, TO_PX, TO_PY, TO_PZ, TO_VX, TO_GAMMA, TO_OMEGA, TO_RE, \
@@ -129,7 +129,7 @@ def _poly3(coef, exps, z, s):
 @kernel
 def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, fx, fs, tangent, bq, hc):
     """Add the vehicle's forces to d.force (and with `tangent` their K, C to d.w_env, scaled by
-    bq = h^2/4 and hc = h/2), with the effects of fx, fs (rtsim.vehicle.effect_kernels). Returns the
+    bq = h^2/4 and hc = h/2), with the effects of fx, fs (rtsim.vehicle.car.effect_kernels). Returns the
     index of a non-finite generalized force, or -1."""
     q = d.q
     qd = d.qd
@@ -380,7 +380,7 @@ def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, fx, fs, h):
     return finish_project(m, d, h)
 
 
-# parameter arrays; effects: rtsim.vehicle.effect_kernels FX_* (neutral_params() for the nominal model)
+# parameter arrays; effects: rtsim.vehicle.car.effect_kernels FX_* (neutral_params() for the nominal model)
 Parts = namedtuple("Parts", ["tyre", "brake", "powertrain", "steering", "effects"])
 # subsystem state arrays; effects: FS_* (brake lag, driveline nodes, sensor history)
 States = namedtuple("States", ["brake", "powertrain", "steering", "effects"])

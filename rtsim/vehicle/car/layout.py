@@ -1,0 +1,31 @@
+"""Array layouts of the four-wheel car assembly (no imports of its builder or config, so the kernels,
+the effects and the config can all use them without an import cycle): the Vehicle tuple of model
+arrays the kernels read, and the index tables into it."""
+from __future__ import annotations
+
+from collections import namedtuple
+
+G = 9.81
+RACK_MASS = 2.0     # kg, rack and tie rods
+
+# Corner coordinate index table (Vehicle.corner_idx[w, :]).
+CI_WX, CI_WY, CI_WZ, CI_Z, CI_PHI, CI_S = range(6)
+# Chassis coordinate index table (Vehicle.chassis_idx): r (0..2), u (3..5), v (6..8), w (9..11).
+
+# Per-corner suspension parameters (Vehicle.susp[w, :]).
+SP_K, SP_FREE, SP_BS_LEN, SP_BS_K, SP_C_BUMP, SP_C_REB, SP_ARB, SP_PARTNER = range(8)
+NSP = 8
+
+Vehicle = namedtuple("Vehicle", [
+    "chassis_idx",     # (12,) int
+    "corner_idx",      # (4, 6) int, CI_*
+    "axis_coef", "rotz_coef", "rots_coef",   # (4, 3, nterm) polynomials in (z, s), body frame
+    "spring_coef",     # (4, nterm) spring/damper length polynomial, m
+    "susp",            # (4, NSP) float
+    "rack_driver",     # () int driver index of the rack constraint
+    "rack_con",        # () int constraint row of the rack (its multiplier is the rack force)
+    "imu_local",       # (3,) IMU position in the body frame relative to the CG, m
+    "aero",            # (2,) drag area m^2, air density kg/m^3
+    "tyre_model",      # (1,) int: TYRE_MAGIC_FORMULA or TYRE_LINEAR
+])
+TYRE_MAGIC_FORMULA, TYRE_LINEAR = 0, 1
