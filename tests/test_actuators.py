@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rtsim.errors import ConfigError
-from rtsim.vehicle import actuators as A
+from rtsim.vehicle.kit import actuators as A
 
 
 def response(p, u, n, dt, y0=0.0):

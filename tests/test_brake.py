@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rtsim.errors import ConfigError
-from rtsim.vehicle import brake as B
+from rtsim.vehicle.kit import brake as B
 
 DT = 1e-3
 G = 9.81

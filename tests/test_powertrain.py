@@ -11,7 +11,7 @@ from scipy.interpolate import RegularGridInterpolator
 from scipy.optimize import brentq
 
 from rtsim.errors import ConfigError
-from rtsim.vehicle import powertrain as P
+from rtsim.vehicle.kit import powertrain as P
 
 DT = 1e-3
 

@@ -17,7 +17,7 @@ import pytest
 from scipy.optimize import brentq
 
 from rtsim.road.model import make_plane
-from rtsim.vehicle import powertrain as P
+from rtsim.vehicle.kit import powertrain as P
 from rtsim.vehicle.car.config import load_vehicle
 from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.car.sim import VehicleSim

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rtsim.errors import ConfigError
-from rtsim.vehicle import steering as S
+from rtsim.vehicle.kit import steering as S
 
 DT = 1e-3
 
