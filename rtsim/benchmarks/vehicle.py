@@ -19,7 +19,7 @@ from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.car.layout import CI_WX
 from rtsim.vehicle.kit.powertrain import powertrain_step
 from rtsim.vehicle.car.sim import VehicleSim
-from rtsim.vehicle.kit.steering import steering_step
+from rtsim.vehicle.kit.steering import steering_control
 from rtsim.vehicle.kit.tyre.magic_formula import mf52_forces, transient_slip
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -100,7 +100,7 @@ def _shares(sim: VehicleSim) -> dict:
 def _subsystems(parts, states, io, vd, h, n):
     for _ in range(n):
         brake_step(parts.brake, states.brake, vd.brake_in, h, vd.brake_out)
-        steering_step(parts.steering, states.steering, io.st_in, h, io.st_out)
+        steering_control(parts.steering, states.steering, io.commands[2], 0.0, 0.0, h)
         powertrain_step(parts.powertrain, states.powertrain, io.pt_in, h, io.pt_out)
 
 
@@ -126,8 +126,8 @@ def _forces(m, d, veh, vd, road, parts, states, bq, hc, n):
     for _ in range(n):
         for i in range(m.nq):
             d.force[i] = 0.0
-        vehicle_forces(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, parts.effects, states.effects,
-                       False, bq, hc)
+        vehicle_forces(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, parts.steering, states.steering,
+                       parts.effects, states.effects, False, bq, hc)
 
 
 def suite() -> list[dict]:

@@ -1,16 +1,16 @@
-"""Building the vehicle's multibody model from its configuration.
+"""Building the four-wheel car's multibody model from its configuration and the kit's parts.
 
-Mixed natural coordinates, 14 degrees of freedom:
+Mixed natural coordinates, 16 degrees of freedom:
 - chassis (sprung mass): its centre of mass r and the unit vectors u, v, w of its axes (12
   coordinates, 6 rigid-body constraints; 6 dof);
 - per corner: the wheel centre W (3 coordinates, carrying the unsprung mass), the suspension travel z
   (m, a relative distance) and the wheel spin angle phi (rad, relative to the knuckle, with the wheel's
   spin inertia); W moves along the linkage path W = r + [u v w] p(z, s) (3 constraints; 1 dof per
   corner for travel, 1 for spin);
-- the rack displacement s (m), kinematically guided by a rheonomic constraint s = s_cmd(t) from the
-  steering system, so each front wheel gets its own, geometrically exact steer angle; the constraint's
-  multiplier is the rack force.
-In all 12 + 4 x 5 + 1 = 33 coordinates and 6 + 4 x 3 + 1 = 19 constraints: 14 dof. The rear fits
+- the steering (rtsim.vehicle.kit.steering): the rack travel s (m), which the front wheels' paths
+  depend on, so each front wheel gets its own, geometrically exact steer angle, and the column angle
+  (rad), joined to the rack by the torsion bar and driven by the steer-by-wire motor.
+In all 12 + 4 x 5 + 2 = 34 coordinates and 6 + 4 x 3 = 18 constraints: 16 dof. The rear fits
 depend on z only; all corners share one exponent table (rtsim.mbs poly_point).
 """
 from __future__ import annotations
@@ -25,8 +25,9 @@ from rtsim.mbs import Mechanism, MechanismBuilder, Settings
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import VehicleConfig
-from .layout import (CI_S, NSP, RACK_MASS, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE,
+from .layout import (CI_S, NSP, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE,
                      SP_K, SP_PARTNER, TYRE_LINEAR, TYRE_MAGIC_FORMULA, G, Vehicle)
+from ..kit.steering import add_steering, steering_config, steering_params
 from ..kit.linkage_cache import cached_corner_kinematics
 from ..kit.linkages import (
     OUT_AXIS, OUT_CENTRE, OUT_ROT_S, OUT_ROT_Z, CornerKinematics, DoubleWishbone, MacPherson, mirror,
@@ -44,7 +45,6 @@ class VehicleModel:
     corners: list[CornerKinematics]
     static_loads: np.ndarray       # N, per wheel, from the weight split
     design_wheel_centre: np.ndarray
-    rack_inertia: float            # kg, the guided linkage's inertia seen at the rack (steering model)
 
 
 def _geometry(cfg_axle, right: bool):
@@ -80,9 +80,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     ixz = cfg.chassis.ixz_kgm2
     b.body("chassis", r, [u, v, w], cfg.chassis.mass_kg, cg, np.array([[ixx, 0, -ixz], [0, iyy, 0], [-ixz, 0, izz]]))
     rack = b.length("rack", 0.0, velocity=0.0)
-    b.scalar_inertia(rack, RACK_MASS)   # the rack is guided: its mass only conditions the tangent
-    rack_driver = b.drive(rack, external=True, name="steering rack guidance")
-    rack_con = len(b._cons) - 1
+    column = add_steering(b, steering_params(steering_config(cfg.steering or None, "steering")), rack)
     full_exps = _common_exponents(corners)
     corner_idx = np.zeros((4, 6), dtype=np.int64)
     axis_coef = np.zeros((4, 3, full_exps.shape[0]))
@@ -143,16 +141,12 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     veh = Vehicle(
         chassis_idx=np.array([*r.idx, *u.idx, *v.idx, *w.idx], dtype=np.int64),
         corner_idx=corner_idx, axis_coef=axis_coef, rotz_coef=rotz_coef, rots_coef=rots_coef,
-        spring_coef=spring_coef, susp=susp, rack_driver=np.int64(rack_driver), rack_con=np.int64(rack_con),
+        spring_coef=spring_coef, susp=susp, steer_idx=np.array([column.index, rack.index], dtype=np.int64),
         imu_local=np.array(cfg.sensors.imu_position_m, dtype=float) - cg,
         aero=np.array([cfg.aero.drag_area_m2, cfg.aero.air_density_kg_m3]),
         tyre_model=np.array([TYRE_LINEAR if cfg.tyres.model == "linear" else TYRE_MAGIC_FORMULA], dtype=np.int64),
     )
-    # inertia at the rack: the rack itself and the front unsprung masses the rack drags along
-    j = full_exps.tolist().index([0, 1])
-    rack_inertia = RACK_MASS + sum(cfg.front.unsprung_mass_kg * float(np.sum(_pad(corners[i], full_exps)[OUT_CENTRE][:, j] ** 2))
-                                   for i in (0, 1))
-    return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w, rack_inertia)
+    return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w)
 
 
 def _basis(exps: np.ndarray, z: float, s: float) -> np.ndarray:

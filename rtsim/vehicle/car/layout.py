@@ -6,7 +6,6 @@ from __future__ import annotations
 from collections import namedtuple
 
 G = 9.81
-RACK_MASS = 2.0     # kg, rack and tie rods
 
 # Corner coordinate index table (Vehicle.corner_idx[w, :]).
 CI_WX, CI_WY, CI_WZ, CI_Z, CI_PHI, CI_S = range(6)
@@ -22,10 +21,10 @@ Vehicle = namedtuple("Vehicle", [
     "axis_coef", "rotz_coef", "rots_coef",   # (4, 3, nterm) polynomials in (z, s), body frame
     "spring_coef",     # (4, nterm) spring/damper length polynomial, m
     "susp",            # (4, NSP) float
-    "rack_driver",     # () int driver index of the rack constraint
-    "rack_con",        # () int constraint row of the rack (its multiplier is the rack force)
+    "steer_idx",       # (2,) int coordinate indices of the steering column angle and the rack travel
     "imu_local",       # (3,) IMU position in the body frame relative to the CG, m
     "aero",            # (2,) drag area m^2, air density kg/m^3
     "tyre_model",      # (1,) int: TYRE_MAGIC_FORMULA or TYRE_LINEAR
 ])
 TYRE_MAGIC_FORMULA, TYRE_LINEAR = 0, 1
+STEER_COLUMN, STEER_RACK = 0, 1     # Vehicle.steer_idx

@@ -12,13 +12,12 @@ from rtsim.channels import WHEELS
 from rtsim.errors import ConfigError
 from rtsim.mbs import Simulation
 from rtsim.mbs.integrator import NEED_FACTOR
-from rtsim.mbs.model import OK, Data
+from rtsim.mbs.model import OK
 from rtsim.road.model import Road
 from rtsim.road.query import NQUERY, Q_NX, Q_NZ, Q_Z, road_query
 
 from ..kit.brake import BP_GAIN, BS_P_FRONT, BS_P_REAR, brake_config, brake_params, brake_state
-from .step import (CMD_BRAKE, EX_SELECTOR, Parts, States, VehicleData, make_io, make_vehicle_data,
-                       vehicle_advance, vehicle_mbs_step)
+from .step import CMD_BRAKE, EX_SELECTOR, Parts, States, make_io, make_vehicle_data, vehicle_advance
 from .effect_kernels import (FS_DL, FS_HIST, FS_LAG, FX_B_LAG, FX_DL, FX_DL_K, FX_HIST, FX_MASS, FX_ON, fill_history,
                              neutral_params, sensor_stage, state_size)
 from .effects import pack_effects, validate_effects
@@ -70,21 +69,15 @@ class VehicleSim:
         names = mech.coordinate_names
         w_rear = 0.5 * float(qd0[names.index("spin_rl")] + qd0[names.index("spin_rr")])
         ps = powertrain_state_rolling(pp, self.dt, w_rear, throttle=0.0, selector=1.0)
+        self.stcfg = steering_config(cfg.steering or None, "steering")
+        sp = steering_params(self.stcfg)
         self.vd = make_vehicle_data()
-        self.parts = Parts(self.tp, bp, pp, np.zeros(0), neutral_params())
-        self.states = States(bs, ps, np.zeros(0), np.zeros(state_size(0)))
+        self.parts = Parts(self.tp, bp, pp, sp, neutral_params())
+        self.states = States(bs, ps, steering_state(sp, self.dt), np.zeros(state_size(0)))
         self._effects: dict = {}
         self.sim = Simulation(mech, self.dt, q0=q0, qd0=qd0)
         self.data = self.sim.data
         self.m = mech.model
-        steer = dict(cfg.steering)
-        self.rack_inertia = self._probe_rack_inertia()
-        steer.setdefault("linkage_mass", self.rack_inertia)
-        self.stcfg = steering_config(steer, "steering")
-        sp = steering_params(self.stcfg)
-        ss = steering_state(sp, self.dt)
-        self.parts = Parts(self.tp, bp, pp, sp, self.parts.effects)
-        self.states = States(bs, ps, ss, self.states.effects)
         self.io = make_io()
         self.io.commands[CMD_BRAKE] = brake_pressure
         self._prime_drive(w_rear)
@@ -138,27 +131,6 @@ class VehicleSim:
         powertrain_step(self.parts.powertrain, self.states.powertrain.copy(), pt_in, self.dt, io.pt_out)
         self.vd.drive[2] = io.pt_out[PO_TORQUE_RL]
         self.vd.drive[3] = io.pt_out[PO_TORQUE_RR]
-
-    def _probe_rack_inertia(self, accel: float = 0.2, steps: int = 20) -> float:
-        """The inertia (kg) the guided linkage presents at the rack, measured on copies of the state:
-        the change of the rack reaction per unit of imposed rack acceleration. The steering model
-        needs it to take the inertial part out of the (one step late) rack force."""
-        lam = []
-        for a in (0.0, accel):
-            d = Data(*[x.copy() for x in self.data])
-            vd = VehicleData(*[x.copy() for x in self.vd])
-            bs = self.states.brake.copy()
-            k = self.vm.vehicle.rack_driver
-            fx, fs = neutral_params(), np.zeros(state_size(0))       # a property of the nominal linkage
-            for n in range(1, steps + 1):
-                t = n * self.dt
-                d.drv_ext[k] = (0.5 * a * t * t, a * t, a)
-                status = vehicle_mbs_step(self.m, d, self.vm.vehicle, vd, self.road, self.tp, self.parts.brake,
-                                          bs, fx, fs, self.dt)
-                if status != OK:
-                    self.sim._raise(status, n)
-            lam.append(float(d.lam[self.vm.vehicle.rack_con]))
-        return abs(lam[1] - lam[0]) / accel
 
     @property
     def effects(self) -> dict:

@@ -44,11 +44,11 @@ from ..kit.powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PI
                          PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_RL, PO_TORQUE_RR, powertrain_step)
 from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_SW_ANGLE, SG_THROTTLE,
                       SG_TORQUE_RL, SG_TORQUE_RR)
-from ..kit.steering import SI_CMD, SI_RACK_FORCE, SI_SIZE, SO_RACK_ACC, SO_RACK_POS, SO_RACK_VEL, SO_SIZE, SO_SW_ANGLE, \
-    SO_TORQUE, steering_step
+from ..kit.steering import SO_SIZE, SO_SW_ANGLE, SO_TORQUE, steering_control, steering_forces, steering_outputs, \
+    steering_tangent
 from .layout import (
     G, TYRE_LINEAR,
-    CI_PHI, CI_S, CI_WX, CI_Z, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE, SP_K, SP_PARTNER,
+    CI_PHI, CI_S, CI_WX, CI_Z, STEER_COLUMN, STEER_RACK, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE, SP_K, SP_PARTNER,
 )
 from ..kit.tyre.magic_formula import (advance_deflections, advance_deflections_relaxed, effective_rolling_radius,
                                  mf52_forces, transient_slip, transient_slip_relaxed, vertical_force)
@@ -127,9 +127,10 @@ def _poly3(coef, exps, z, s):
 
 
 @kernel
-def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, fx, fs, tangent, bq, hc):
+def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, bq, hc):
     """Add the vehicle's forces to d.force (and with `tangent` their K, C to d.w_env, scaled by
-    bq = h^2/4 and hc = h/2), with the effects of fx, fs (rtsim.vehicle.car.effect_kernels). Returns the
+    bq = h^2/4 and hc = h/2): tyres, suspensions, brakes (parameters bp, state bs), drive torques, the
+    steering (parameters stp, state sts), aero, and the effects of fx, fs (rtsim.vehicle.car.effect_kernels). Returns the
     index of a non-finite generalized force, or -1."""
     q = d.q
     qd = d.qd
@@ -291,6 +292,12 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, fx, fs, tangent, bq, hc):
                 for b in range(a, 3):
                     val = bq * kzt * nvec[a] * nvec[b] + hc * czt * nvec[a] * nvec[b]
                     add_entry(d.w_env, m.first, m.ptr, m.pinv, kw + a, kw + b, val)
+    # ---- steering column and rack --------------------------------------------------------------
+    ic = veh.steer_idx[STEER_COLUMN]
+    ir = veh.steer_idx[STEER_RACK]
+    steering_forces(stp, sts, q, qd, f, ic, ir)
+    if tangent:
+        steering_tangent(m, d.w_env, stp, ic, ir, bq, hc)
     # ---- aerodynamic drag at the centre of mass -------------------------------------------------
     ci = veh.chassis_idx
     vx, vy, vz = qd[ci[0]], qd[ci[1]], qd[ci[2]]
@@ -349,7 +356,7 @@ def _mass_and_grade(m, d, veh, fx, tangent):
 
 
 @kernel
-def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, fx, fs, h):
+def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, h):
     """One ALI3-P step of the vehicle: the multibody stages with the vehicle's forces added."""
     bq = 0.25 * h * h
     hc = 0.5 * h
@@ -359,7 +366,7 @@ def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, fx, fs, h):
         if status != OK:
             return status
         tangent = wants_tangent(m, d)
-        bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, fx, fs, tangent, bq, hc)
+        bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, bq, hc)
         if bad >= 0:
             d.stats[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE
@@ -373,7 +380,7 @@ def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, fx, fs, h):
     status = finish_prepare(m, d, h)
     if status != OK:
         return status
-    bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, fx, fs, True, bq, hc)
+    bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, True, bq, hc)
     if bad >= 0:
         d.stats[ST_FAIL_INDEX] = bad
         return ERR_NONFINITE_FORCE
@@ -387,27 +394,27 @@ States = namedtuple("States", ["brake", "powertrain", "steering", "effects"])
 IO = namedtuple("IO", [
     "commands",     # (3,) throttle_angle_cmd rad, brake_pressure_cmd kPa, steering_wheel_angle_cmd rad
     "extra",        # (4,) measured wheel torque rl, rr (N m), selector (+1 D, 0 N, -1 R), spare
-    "pt_in", "pt_out", "st_in", "st_out",
+    "pt_in", "pt_out",
+    "st_out",       # (SO_SIZE,) steering outputs after the step (rtsim.vehicle.kit.steering SO_*)
     "signals",      # (NSIGNAL,) subsystem values handed to the sensors
 ])
 CMD_THROTTLE, CMD_BRAKE, CMD_STEER = 0, 1, 2
-RACK_FORCE_TAU = 0.015   # s, low-pass of the rack force fed back to the steering model
 EX_TORQUE_RL, EX_TORQUE_RR, EX_SELECTOR = 0, 1, 2
 
 
 def make_io() -> IO:
     return IO(commands=np.zeros(3), extra=np.array([0.0, 0.0, 1.0, 0.0]), pt_in=np.zeros(PI_SIZE),
-              pt_out=np.zeros(PO_SIZE), st_in=np.zeros(SI_SIZE), st_out=np.zeros(SO_SIZE),
+              pt_out=np.zeros(PO_SIZE), st_out=np.zeros(SO_SIZE),
               signals=np.zeros(NSIGNAL))
 
 
 @kernel
 def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     """A full vehicle step at fixed step h:
-    1. subsystems to t + h from the commands: brake pressure (actuator), steer-by-wire (the rack
-       position, velocity and acceleration for the guided rack, loaded by last step's rack force),
-       powertrain (drive torques from the current wheel speeds);
-    2. the multibody step with tyre, suspension, brake, drive and aero forces implicit;
+    1. subsystems to t + h from the commands: brake pressure (actuator), steer-by-wire controller and
+       motor (the column torque held over the step), powertrain (drive torques from the current wheel
+       speeds);
+    2. the multibody step with tyre, suspension, steering, brake, drive and aero forces implicit;
     3. between-step commits: brake stick/slide modes, tyre contact deflections; signals for sensors.
     Effects (parts.effects) act in 1 (brake torques, driveline speeds), 2 and 3 (driveline nodes,
     relaxation, sensor history)."""
@@ -418,17 +425,8 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     brake_step(parts.brake, states.brake, vd.brake_in, h, vd.brake_out)
     if fx_on and fx[FX_BRAKE] > 0.5:
         effects_brake(fx, fs, parts.brake, states.brake, vd.brake_out)
-    io.st_in[SI_CMD] = io.commands[CMD_STEER]
-    # The rack reaction of the guided rack (its multiplier) reaches the steering model one step late;
-    # low-pass it (RACK_FORCE_TAU) so the tyres' stiffness and damping at the rack do not close a
-    # delayed, unstable loop at the step frequency. Below ~10 Hz it passes unchanged.
-    beta = h / (RACK_FORCE_TAU + h)
-    io.st_in[SI_RACK_FORCE] += beta * (-d.lam[veh.rack_con] - io.st_in[SI_RACK_FORCE])
-    steering_step(parts.steering, states.steering, io.st_in, h, io.st_out)
-    k = veh.rack_driver
-    d.drv_ext[k, 0] = io.st_out[SO_RACK_POS]
-    d.drv_ext[k, 1] = io.st_out[SO_RACK_VEL]
-    d.drv_ext[k, 2] = io.st_out[SO_RACK_ACC]
+    ic = veh.steer_idx[STEER_COLUMN]
+    steering_control(parts.steering, states.steering, io.commands[CMD_STEER], d.q[ic], d.qd[ic], h)
     io.pt_in[PI_THROTTLE_CMD] = io.commands[CMD_THROTTLE]
     if fx_on and fx[FX_DL] > 0.5:       # the gearbox turns with the driveline nodes
         io.pt_in[PI_OMEGA_RL] = fs[FS_DL + 1]
@@ -442,7 +440,8 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     powertrain_step(parts.powertrain, states.powertrain, io.pt_in, h, io.pt_out)
     vd.drive[2] = io.pt_out[PO_TORQUE_RL]
     vd.drive[3] = io.pt_out[PO_TORQUE_RR]
-    status = vehicle_mbs_step(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, fx, fs, h)
+    status = vehicle_mbs_step(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, parts.steering,
+                              states.steering, fx, fs, h)
     if status != OK:
         return status
     for i in range(4):
@@ -461,6 +460,7 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
         else:
             advance_deflections(parts.tyre, vd.slip, i, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY],
                                 t[TO_OMEGA], t[TO_RE], h)
+    steering_outputs(parts.steering, states.steering, d.q, ic, veh.steer_idx[STEER_RACK], io.st_out)
     io.signals[SG_BRAKE_PRESSURE] = vd.brake_out[BO_LINE]
     io.signals[SG_SW_ANGLE] = io.st_out[SO_SW_ANGLE]
     io.signals[SG_STEERING_TORQUE] = io.st_out[SO_TORQUE]

@@ -5,7 +5,7 @@ Solving the four linkages over their travel and rack grids and fitting the polyn
 fits depend only on the axle configuration (hardpoints, camber, toe, suspension type, travel) and on
 the solver's code, so they are stored as ``.npz`` files under ``$RTSIM_CACHE/kinematics`` (default
 ``~/.cache/rtsim/kinematics``), named by a SHA-256 of exactly those inputs: the configuration as JSON
-plus the source text of ``kinematics.py`` and ``model.py``. A changed hardpoint or a changed solver
+plus the source text of the linkage solver and of the assembly's builder. A changed hardpoint or a changed solver
 makes a new key; nothing is ever reused across different inputs. Writes are atomic (temporary file,
 then rename); an unreadable or foreign file is ignored and recomputed. Set ``RTSIM_CACHE=off`` to
 disable the cache.
@@ -13,6 +13,7 @@ disable the cache.
 from __future__ import annotations
 
 import hashlib
+import inspect
 import json
 import os
 import tempfile
@@ -20,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import linkages
 from .linkages import CornerKinematics
 
 _FIELDS = ("exponents", "vec_coef", "spring_coef", "z_range", "s_range", "fit_error", "steered")
@@ -32,13 +34,17 @@ def cache_dir() -> Path | None:
     return (Path(root) if root else Path.home() / ".cache" / "rtsim") / "kinematics"
 
 
-def cache_key(cfg) -> str:
-    here = Path(__file__).resolve().parent
+def cache_key(cfg, solve=None) -> str:
+    """SHA-256 of the axles' configuration, the linkage solver's source and the source of the module
+    that defines `solve` (the assembly's builder, which turns the config into linkages)."""
     h = hashlib.sha256()
     h.update(json.dumps({"front": cfg.front.model_dump(mode="json"), "rear": cfg.rear.model_dump(mode="json")},
                         sort_keys=True).encode())
-    for name in ("kinematics.py", "model.py"):
-        h.update((here / name).read_bytes())
+    sources = {Path(linkages.__file__)}
+    if solve is not None:
+        sources.add(Path(inspect.getsourcefile(solve)))
+    for path in sorted(sources):
+        h.update(path.read_bytes())
     return h.hexdigest()[:32]
 
 
@@ -78,7 +84,7 @@ def cached_corner_kinematics(cfg, solve) -> list[CornerKinematics]:
     folder = cache_dir()
     if folder is None:
         return solve(cfg)
-    path = folder / f"{cache_key(cfg)}.npz"
+    path = folder / f"{cache_key(cfg, solve)}.npz"
     corners = _load(path) if path.exists() else None
     if corners is None:
         corners = solve(cfg)
