@@ -20,7 +20,7 @@ from rtsim.road.model import make_plane
 from rtsim.vehicle.kit.actuators import LAG_RATE, LAG_TAU
 from rtsim.vehicle.kit.brake import BP_ACT, BP_BREAK_RATIO, BP_GAIN, BP_K, BS_MODE
 from rtsim.vehicle.car.config import load_vehicle
-from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR, TO_FX, TO_FZ, \
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT, TO_FX, TO_FZ, \
     TO_OMEGA, TO_RE, TO_VX
 from rtsim.vehicle.car.effect_kernels import (BRAKE_STICTION_PRESSURE, DRIVELINE_DAMPING_RATIO, DRIVELINE_INERTIA,
                                           FS_DL)
@@ -73,8 +73,8 @@ def _coasting(model, road, speed, effects=None, torque=0.0, pressure=0.0, **kw) 
     """A car rolling straight at `speed` with the measured wheel torques (0: coasting, no engine drag)."""
     sim = VehicleSim(model, road, DT, speed=speed, effects=effects, **kw)
     sim.set_torque_mode(True)
-    sim.io.extra[EX_TORQUE_RL] = torque
-    sim.io.extra[EX_TORQUE_RR] = torque
+    sim.io.extra[EX_TORQUE_LEFT] = torque
+    sim.io.extra[EX_TORQUE_RIGHT] = torque
     sim.io.commands[CMD_BRAKE] = pressure
     return sim
 
@@ -199,7 +199,7 @@ def test_brake_stiction_raises_the_breakaway_torque(model, road, pressure):
         best = 0.0
         for n in range(4000):
             torque = 0.1 * n                       # 100 N*m/s ramp
-            sim.io.extra[EX_TORQUE_RL] = sim.io.extra[EX_TORQUE_RR] = torque
+            sim.io.extra[EX_TORQUE_LEFT] = sim.io.extra[EX_TORQUE_RIGHT] = torque
             sim.step(1)
             best = max(best, abs(sim.vd.brake_torque[2]))     # (the step that slips ends on the limit)
             if sim.states.brake[BS_MODE + 2] < 0.5:
@@ -222,7 +222,7 @@ def test_driveline_compliance_oscillates_at_sqrt_k_over_j(model, road):
                     brake_pressure=3000.0)
     sim.parts.brake[BP_K] = 3e6                      # a rigid hold: the wheel is the fixed end
     sim.step(100)
-    sim.io.extra[EX_TORQUE_RL] = sim.io.extra[EX_TORQUE_RR] = 100.0
+    sim.io.extra[EX_TORQUE_LEFT] = sim.io.extra[EX_TORQUE_RIGHT] = 100.0
     shaft = []
     for _ in range(400):
         sim.step(1)
@@ -275,7 +275,7 @@ def test_tyre_relaxation_delays_the_yaw_response_but_not_its_steady_state(model,
     rates = {}
     for name, eff in (("relaxed", {"tyre_relaxation": {"length": L}}), ("nominal", None)):
         sim = _coasting(model, road, speed, eff)
-        sim.io.extra[EX_TORQUE_RL] = sim.io.extra[EX_TORQUE_RR] = 40.0      # about the rolling losses
+        sim.io.extra[EX_TORQUE_LEFT] = sim.io.extra[EX_TORQUE_RIGHT] = 40.0      # about the rolling losses
         sim.step(200)
         sim.io.commands[CMD_STEER] = math.radians(30.0)
         r = []

@@ -26,11 +26,11 @@ def setup(data=None, dt=DT, **state):
 def inputs(throttle=0.0, w_rl=0.0, w_rr=None, selector=1.0, t_rl=0.0, t_rr=0.0):
     u = np.zeros(P.PI_SIZE)
     u[P.PI_THROTTLE_CMD] = throttle
-    u[P.PI_OMEGA_RL] = w_rl
-    u[P.PI_OMEGA_RR] = w_rl if w_rr is None else w_rr
+    u[P.PI_OMEGA_LEFT] = w_rl
+    u[P.PI_OMEGA_RIGHT] = w_rl if w_rr is None else w_rr
     u[P.PI_SELECTOR] = selector
-    u[P.PI_TORQUE_RL] = t_rl
-    u[P.PI_TORQUE_RR] = t_rr
+    u[P.PI_TORQUE_LEFT] = t_rl
+    u[P.PI_TORQUE_RIGHT] = t_rr
     return u
 
 
@@ -162,7 +162,7 @@ def test_stall_speed_held_by_brake_is_stable(dt):
     assert np.all(np.diff(ws[int(0.5 / dt):]) >= -1e-12)  # monotone approach, no oscillation
     ratio = cfg.gearbox.ratios[0] * cfg.gearbox.final_drive
     tt = cfg.converter.torque_ratio[0] * (w_stall / k0) ** 2
-    assert out[P.PO_TORQUE_RL] == pytest.approx(0.5 * cfg.gearbox.efficiency * ratio * tt, rel=1e-5)
+    assert out[P.PO_TORQUE_LEFT] == pytest.approx(0.5 * cfg.gearbox.efficiency * ratio * tt, rel=1e-5)
 
 
 def test_lockup_clutch_stiff_coupling_is_stable():
@@ -196,7 +196,7 @@ def drive_speed_profile(p, s, throttle, v_of_t, t_end, rw):
     for k in range(int(round(t_end / DT))):
         t = (k + 1) * DT
         v = v_of_t(t)
-        u[P.PI_OMEGA_RL] = u[P.PI_OMEGA_RR] = v / rw
+        u[P.PI_OMEGA_LEFT] = u[P.PI_OMEGA_RIGHT] = v / rw
         P.powertrain_step(p, s, u, DT, out)
         ts.append(t)
         vs.append(v)
@@ -254,10 +254,10 @@ def test_open_differential_equal_torques_and_ratio():
     for w_rl, w_rr, eta_pow in ((15.0, 18.0, 1), (30.0, 36.0, -1)):
         cfg, p, s = setup(throttle=0.8, engine_speed=300.0)
         out = run(p, s, inputs(0.8, w_rl, w_rr), 1)
-        assert out[P.PO_TORQUE_RL] == out[P.PO_TORQUE_RR]
+        assert out[P.PO_TORQUE_LEFT] == out[P.PO_TORQUE_RIGHT]
         rtot = cfg.gearbox.ratios[0] * cfg.gearbox.final_drive
         assert out[P.PO_TURBINE_SPEED] == pytest.approx(rtot * 0.5 * (w_rl + w_rr))
-        total = out[P.PO_TORQUE_RL] + out[P.PO_TORQUE_RR]
+        total = out[P.PO_TORQUE_LEFT] + out[P.PO_TORQUE_RIGHT]
         assert np.sign(total) == eta_pow
         eff = cfg.gearbox.efficiency ** eta_pow
         assert total == pytest.approx(eff * rtot * out[P.PO_TURBINE_TORQUE], rel=1e-12)
@@ -268,20 +268,20 @@ def test_open_differential_equal_torques_and_ratio():
             _, p2, s2 = setup(throttle=0.8, engine_speed=300.0)
             o = np.zeros(P.PO_SIZE)
             P.powertrain_step(p2, s2, inputs(0.8, w_rl + dw, w_rr), DT, o)
-            outs.append(o[P.PO_TORQUE_RL])
+            outs.append(o[P.PO_TORQUE_LEFT])
         fd = (outs[0] - outs[1]) / (2 * h)
         assert out[P.PO_DTDW] == pytest.approx(fd, rel=0.02)   # (the engine's own response is excluded)
     # neutral transmits nothing; reverse drives backwards
     _, p, s = setup(gear=0)
-    assert run(p, s, inputs(0.3, 0.0, selector=0.0), 200)[P.PO_TORQUE_RL] == 0.0
+    assert run(p, s, inputs(0.3, 0.0, selector=0.0), 200)[P.PO_TORQUE_LEFT] == 0.0
     _, p, s = setup(gear=-1, throttle=0.3)
-    assert run(p, s, inputs(0.3, 0.0, selector=-1.0), 500)[P.PO_TORQUE_RL] < -50.0
+    assert run(p, s, inputs(0.3, 0.0, selector=-1.0), 500)[P.PO_TORQUE_LEFT] < -50.0
 
 
 def test_measured_torque_mode_passes_through():
     cfg, p, s = setup({"wheel_torque_source": "measured"})
     out = run(p, s, inputs(0.5, 10.0, 11.0, t_rl=123.4, t_rr=-56.7), 50)
-    assert out[P.PO_TORQUE_RL] == 123.4 and out[P.PO_TORQUE_RR] == -56.7 and out[P.PO_DTDW] == 0.0
+    assert out[P.PO_TORQUE_LEFT] == 123.4 and out[P.PO_TORQUE_RIGHT] == -56.7 and out[P.PO_DTDW] == 0.0
     assert out[P.PO_ENGINE_SPEED] > 0.0   # the engine still runs for its sensor channel
 
 

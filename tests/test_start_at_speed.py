@@ -78,17 +78,17 @@ def test_rolling_state_is_a_fixed_point_of_the_step(v, throttle):
     s0 = s.copy()
     u = np.zeros(P.PI_SIZE)
     u[P.PI_THROTTLE_CMD] = throttle
-    u[P.PI_OMEGA_RL] = u[P.PI_OMEGA_RR] = w
+    u[P.PI_OMEGA_LEFT] = u[P.PI_OMEGA_RIGHT] = w
     u[P.PI_SELECTOR] = 1.0
     out = np.zeros(P.PO_SIZE)
     P.powertrain_step(p, s, u, DT, out)
-    t_first = out[P.PO_TORQUE_RL]
+    t_first = out[P.PO_TORQUE_LEFT]
     for _ in range(999):
         P.powertrain_step(p, s, u, DT, out)
     assert s[P.PS_GEAR] == s0[P.PS_GEAR]
     assert s[P.PS_OMEGA_E] == pytest.approx(s0[P.PS_OMEGA_E], rel=1e-7, abs=1e-7)
     assert s[P.PS_IDLE_I] == pytest.approx(s0[P.PS_IDLE_I], abs=1e-9)
-    assert out[P.PO_TORQUE_RL] == pytest.approx(t_first, rel=1e-6, abs=1e-6)
+    assert out[P.PO_TORQUE_LEFT] == pytest.approx(t_first, rel=1e-6, abs=1e-6)
     # steady: engine torque = pump torque
     assert out[P.PO_ENGINE_TORQUE] == pytest.approx(out[P.PO_PUMP_TORQUE], abs=1e-6)
 
@@ -108,10 +108,10 @@ def test_coasting_state_matches_the_overrun_equilibrium():
         assert s[P.PS_IDLE_I] == 0.0
         out = np.zeros(P.PO_SIZE)
         u = np.zeros(P.PI_SIZE)
-        u[P.PI_OMEGA_RL] = u[P.PI_OMEGA_RR] = w
+        u[P.PI_OMEGA_LEFT] = u[P.PI_OMEGA_RIGHT] = w
         u[P.PI_SELECTOR] = 1.0
         P.powertrain_step(p, s, u, DT, out)
-        assert out[P.PO_TORQUE_RL] == pytest.approx(t_wheel, rel=1e-6)
+        assert out[P.PO_TORQUE_LEFT] == pytest.approx(t_wheel, rel=1e-6)
         assert t_wheel < 0.0
 
 
@@ -132,7 +132,7 @@ def test_at_rest_in_drive_the_engine_idles_against_the_stalled_converter():
     assert out[P.PO_ENGINE_TORQUE] == pytest.approx(t_stall, rel=1e-9)
     assert out[P.PO_IDLE_OPENING] == pytest.approx(s[P.PS_IDLE_I], rel=1e-12)
     creep = 0.5 * g.efficiency * g.ratios[0] * g.final_drive * c.torque_ratio[0] * t_stall
-    assert out[P.PO_TORQUE_RL] == pytest.approx(creep, rel=1e-9)
+    assert out[P.PO_TORQUE_LEFT] == pytest.approx(creep, rel=1e-9)
 
 
 def test_rolling_state_with_lockup_engaged():
@@ -147,7 +147,7 @@ def test_rolling_state_with_lockup_engaged():
     w0 = s[P.PS_OMEGA_E]
     u = np.zeros(P.PI_SIZE)
     u[P.PI_THROTTLE_CMD] = 0.3
-    u[P.PI_OMEGA_RL] = u[P.PI_OMEGA_RR] = w
+    u[P.PI_OMEGA_LEFT] = u[P.PI_OMEGA_RIGHT] = w
     u[P.PI_SELECTOR] = 1.0
     out = np.zeros(P.PO_SIZE)
     for _ in range(500):

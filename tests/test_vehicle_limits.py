@@ -132,7 +132,7 @@ def test_panic_stop_at_full_pressure_locks_all_four_and_the_converter_only_creep
     0.5 eta i_1 i_fd TR(0) (w_idle / K(0))^2 per rear wheel (about 99 N m), a quarter of the rear brake
     torque: the held car does not move."""
     from rtsim.vehicle.kit.brake import rear_pressure
-    from rtsim.vehicle.kit.powertrain import PO_ENGINE_SPEED, PO_GEAR, PO_TORQUE_RL
+    from rtsim.vehicle.kit.powertrain import PO_ENGINE_SPEED, PO_GEAR, PO_TORQUE_LEFT
     sim = VehicleSim(model, make_plane(), 1e-3, speed=22.22)
     p_line = sim.bcfg.actuator.max
     sim.io.commands[CMD_BRAKE] = p_line
@@ -146,7 +146,7 @@ def test_panic_stop_at_full_pressure_locks_all_four_and_the_converter_only_creep
     out = sim.io.pt_out
     assert out[PO_GEAR] == 1
     assert out[PO_ENGINE_SPEED] == pytest.approx(e.idle_speed, rel=1e-2)
-    assert out[PO_TORQUE_RL] == pytest.approx(creep, rel=1e-2)
+    assert out[PO_TORQUE_LEFT] == pytest.approx(creep, rel=1e-2)
     rear_brake = sim.bcfg.rear.gain() * rear_pressure(sim.bcfg, p_line)
     assert creep < 0.3 * rear_brake
     x0 = sim.data.q[model.mech.coordinate_names.index("chassis.x")]

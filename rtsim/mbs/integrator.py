@@ -21,7 +21,7 @@ rtsim.mbs.simulation.penalty_factors). Kernels return a status code; they never 
 from __future__ import annotations
 
 import numpy as np
-from rtsim.jit import kernel
+from rtsim.jit import inline_kernel, kernel
 
 from .constraints import eval_constraints, eval_drivers, eval_hqd, jac_matvec, jac_t_matvec_add
 from .envelope import add_entry, cholesky, matvec_add, solve
@@ -385,16 +385,30 @@ def finish_project(m, d, h):
     return OK
 
 
-@kernel
-def step(m, d, h):
-    """Advance d by one ALI3-P step of h seconds. Returns a status code (model.OK on success).
-    A model with forces of its own (the vehicle) runs the same stages and adds its forces after
-    newton_prepare and its tangent after finish_prepare."""
+@inline_kernel
+def no_forces(m, d, args, tangent, bq, hc):
+    """The applied forces of a model that has none besides its own (step_with's add_forces)."""
+    return -1
+
+
+@inline_kernel
+def step_with(m, d, h, add_forces, args):
+    """Advance d by one ALI3-P step of h seconds with the caller's applied forces inside the Newton
+    iteration: ``add_forces(m, d, args, tangent, bq, hc)`` adds generalized forces to d.force (and, when
+    `tangent`, their stiffness scaled by bq = h^2/4 and damping by hc = h/2 to d.w_env), and returns
+    the index of a non-finite force or -1. `add_forces` is a compiled function fixed at compile time
+    (an assembly's force kernel), `args` a tuple of its arrays. Returns a status code (model.OK)."""
+    bq = 0.25 * h * h
+    hc = 0.5 * h
     step_begin(m, d, h)
     for _ in range(m.iset[IS_MAX_ITER]):
         status = newton_prepare(m, d, h)
         if status != OK:
             return status
+        bad = add_forces(m, d, args, wants_tangent(m, d), bq, hc)
+        if bad >= 0:
+            d.stats[ST_FAIL_INDEX] = bad
+            return ERR_NONFINITE_FORCE
         status = newton_update(m, d, h)
         if status == CONVERGED:
             break
@@ -405,7 +419,17 @@ def step(m, d, h):
     status = finish_prepare(m, d, h)
     if status != OK:
         return status
+    bad = add_forces(m, d, args, True, bq, hc)
+    if bad >= 0:
+        d.stats[ST_FAIL_INDEX] = bad
+        return ERR_NONFINITE_FORCE
     return finish_project(m, d, h)
+
+
+@kernel
+def step(m, d, h):
+    """Advance d by one ALI3-P step of h seconds. Returns a status code (model.OK on success)."""
+    return step_with(m, d, h, no_forces, ())
 
 
 @kernel

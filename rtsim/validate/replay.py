@@ -51,7 +51,7 @@ from rtsim.road.config import load_road
 from rtsim.vehicle.kit.actuators import LAG_RATE, LAG_TAU
 from rtsim.vehicle.kit.brake import BP_ACT
 from rtsim.vehicle.car.config import load_vehicle
-from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT
 from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.kit.powertrain import PP_THR
 from rtsim.vehicle.car.sensors import NSENSOR
@@ -257,8 +257,8 @@ class Replayer:
         if inp.brake is not None:                  # the first inputs, held through the settling
             cmd[CMD_BRAKE] = max(0.0, float(inp.brake[0]))
         if inp.torque_rl is not None:
-            extra[EX_TORQUE_RL] = float(inp.torque_rl[0])
-            extra[EX_TORQUE_RR] = float(inp.torque_rr[0])
+            extra[EX_TORQUE_LEFT] = float(inp.torque_rl[0])
+            extra[EX_TORQUE_RIGHT] = float(inp.torque_rr[0])
         if inp.throttle is not None:
             cmd[CMD_THROTTLE] = max(0.0, float(inp.throttle[0]))
         if steer is not None:
@@ -271,8 +271,8 @@ class Replayer:
             if inp.brake is not None:
                 cmd[CMD_BRAKE] = max(0.0, mid(inp.brake, k))
             if inp.torque_rl is not None:
-                extra[EX_TORQUE_RL] = mid(inp.torque_rl, k)
-                extra[EX_TORQUE_RR] = mid(inp.torque_rr, k)
+                extra[EX_TORQUE_LEFT] = mid(inp.torque_rl, k)
+                extra[EX_TORQUE_RIGHT] = mid(inp.torque_rr, k)
             if inp.throttle is not None:
                 cmd[CMD_THROTTLE] = max(0.0, mid(inp.throttle, k))
             if steer is not None:

@@ -19,7 +19,7 @@ from rtsim.road.config import load_road
 
 from .kit.brake import brake_gains
 from .car.config import load_vehicle
-from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_RL, EX_TORQUE_RR, TO_FX, TO_FY, TO_FZ
+from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT, TO_FX, TO_FY, TO_FZ
 from .kit.linkages import OUT_AXIS
 from .car.build import VehicleModel, build_vehicle
 from .car.sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_model, sensor_params
@@ -109,8 +109,8 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
         io.commands[CMD_THROTTLE] = cmd[I_THROTTLE]
         io.commands[CMD_BRAKE] = cmd[I_BRAKE]
         io.commands[CMD_STEER] = cmd[I_STEER]
-        io.extra[EX_TORQUE_RL] = cmd[I_TORQUE_RL]
-        io.extra[EX_TORQUE_RR] = cmd[I_TORQUE_RR]
+        io.extra[EX_TORQUE_LEFT] = cmd[I_TORQUE_RL]
+        io.extra[EX_TORQUE_RIGHT] = cmd[I_TORQUE_RR]
         sim.step(1)
     wall = time.perf_counter() - t0
     return RunResult(COLUMNS, rows[:nrow], wall, nsteps)

@@ -20,17 +20,17 @@ from pathlib import Path
 
 import numpy as np
 
-from rtsim.channels import WHEELS
 from rtsim.mbs import Mechanism, MechanismBuilder, Settings
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import VehicleConfig
 from .layout import (CI_S, NSP, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE,
-                     SP_K, SP_PARTNER, TYRE_LINEAR, TYRE_MAGIC_FORMULA, G, Vehicle)
+                     SP_K, SP_PARTNER, TYRE_LINEAR, TYRE_MAGIC_FORMULA, G, Vehicle, FRONT_AXLE,
+                     REAR_AXLE, WHEELS)
 from ..kit.steering import add_steering, steering_config, steering_params
 from ..kit.linkage_cache import cached_corner_kinematics
 from ..kit.linkages import (
-    OUT_AXIS, OUT_CENTRE, OUT_ROT_S, OUT_ROT_Z, CornerKinematics, DoubleWishbone, MacPherson, mirror,
+    OUT_AXIS, OUT_CENTRE, OUT_ROT_S, OUT_ROT_Z, CornerKinematics, DoubleWishbone, MacPherson, VerticalSlider, mirror,
     solve_corner,
 )
 
@@ -48,13 +48,14 @@ class VehicleModel:
 
 
 def _geometry(cfg_axle, right: bool):
-    hp = {k: np.array(v, dtype=float) for k, v in cfg_axle.hardpoints.model_dump().items()}
+    hp = {k: None if v is None else np.array(v, dtype=float) for k, v in cfg_axle.hardpoints.model_dump().items()}
     camber, toe = cfg_axle.static_camber_rad, cfg_axle.static_toe_rad
     # left wheel: axis points left (+y); toe-in turns the front of the wheel inwards (axis tilts back),
     # positive camber tilts the top outwards (axis tilts down).
     axis = np.array([-np.sin(toe), np.cos(toe) * np.cos(camber), -np.sin(camber)])
     hp["spin_axis"] = axis / np.linalg.norm(axis)
-    geom = DoubleWishbone(**hp) if cfg_axle.suspension == "double_wishbone" else MacPherson(**hp)
+    geom = {"double_wishbone": DoubleWishbone, "macpherson": MacPherson,
+            "vertical_slider": VerticalSlider}[cfg_axle.suspension](**hp)
     return mirror(geom) if right else geom
 
 
@@ -92,7 +93,6 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     zs = []
     for i, (name, kin) in enumerate(zip(WHEELS, corners)):
         axle = cfg.front if i < 2 else cfg.rear
-        front = i < 2
         vec = _pad(kin, full_exps)
         w0 = vec[OUT_CENTRE] @ _basis(full_exps, 0.0, 0.0)
         design_w[i] = w0
@@ -101,19 +101,19 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         b.point_mass(wc, axle.unsprung_mass_kg)
         path = vec[OUT_CENTRE].copy()
         path[:, 0] -= cg      # relative to the chassis origin r (constant term of the polynomial)
-        b.poly_point(wc, r, (u, v, w), path, full_exps, z, rack if front else None, name=f"suspension {name}")
+        b.poly_point(wc, r, (u, v, w), path, full_exps, z, rack if kin.steered else None, name=f"suspension {name}")
         phi = b.angle(f"spin_{name}", 0.0, velocity=0.0)
         b.scalar_inertia(phi, axle.wheel_spin_inertia_kgm2)
         zs.append(z)
         b.couple(wc)           # the tyre's 3x3 stiffness/damping block on the wheel centre
-        corner_idx[i] = [*wc.idx, z.index, phi.index, rack.index if front else -1]
+        corner_idx[i] = [*wc.idx, z.index, phi.index, rack.index if kin.steered else -1]
         axis_coef[i], rotz_coef[i], rots_coef[i] = vec[OUT_AXIS], vec[OUT_ROT_Z], vec[OUT_ROT_S]
         spring_coef[i] = _pad_scalar(kin, full_exps)
     # the tangent entries rtsim.vehicle.car.step adds: each wheel centre's 3x3 block (tyre stiffness
     # and damping, already coupled by its mass), each spin and travel diagonal, and the anti-roll bars
     # between the travels of an axle
-    b.couple(zs[0], zs[1])
-    b.couple(zs[2], zs[3])
+    for a, b_ in (FRONT_AXLE, REAR_AXLE):
+        b.couple(zs[a], zs[b_])
     b.gravity((0.0, 0.0, -G))
     mech = b.compile()
     mech.model.iset[IS_TANGENT_FORCES] = 1
@@ -138,6 +138,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         susp[i, SP_C_REB] = sp.damping_rebound_ns_per_m
         susp[i, SP_ARB] = axle.anti_roll_bar_n_per_m
         susp[i, SP_PARTNER] = i ^ 1
+    driven = list(FRONT_AXLE if cfg.driven_axle == "front" else REAR_AXLE)
     veh = Vehicle(
         chassis_idx=np.array([*r.idx, *u.idx, *v.idx, *w.idx], dtype=np.int64),
         corner_idx=corner_idx, axis_coef=axis_coef, rotz_coef=rotz_coef, rots_coef=rots_coef,
@@ -145,6 +146,9 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         imu_local=np.array(cfg.sensors.imu_position_m, dtype=float) - cg,
         aero=np.array([cfg.aero.drag_area_m2, cfg.aero.air_density_kg_m3]),
         tyre_model=np.array([TYRE_LINEAR if cfg.tyres.model == "linear" else TYRE_MAGIC_FORMULA], dtype=np.int64),
+        driven=np.array(driven, dtype=np.int64),
+        drive_slot=np.array([driven.index(i) if i in driven else -1 for i in range(len(WHEELS))], dtype=np.int64),
+        side=np.array([1.0 if i in (FRONT_AXLE[0], REAR_AXLE[0]) else -1.0 for i in range(len(WHEELS))]),
     )
     return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w)
 

@@ -63,6 +63,33 @@ class MacPhersonHardpoints(Strict):
     wheel_centre: Vec3
 
 
+class VerticalSliderHardpoints(Strict):
+    """The wheel slides along the body's vertical axis. Steered: it turns about the vertical kingpin
+    axis through `kingpin`, the steering arm's end `tie_outer` held by a tie rod from `tie_inner` on the
+    rack; unsteered: leave the three out."""
+    wheel_centre: Vec3
+    spring_lower: Vec3 = Field(description="spring/damper mount on the slider")
+    spring_upper: Vec3 = Field(description="spring/damper mount on the body")
+    kingpin: Vec3 | None = None
+    tie_outer: Vec3 | None = None
+    tie_inner: Vec3 | None = None
+
+    @model_validator(mode="after")
+    def _steering_points(self):
+        given = [k for k in ("kingpin", "tie_outer", "tie_inner") if getattr(self, k) is not None]
+        if given and len(given) != 3:
+            raise ValueError("a steered slider needs kingpin, tie_outer and tie_inner (an unsteered one none)")
+        return self
+
+    @property
+    def steered(self) -> bool:
+        return self.tie_outer is not None
+
+
+SUSPENSIONS = {"double_wishbone": DoubleWishboneHardpoints, "macpherson": MacPhersonHardpoints,
+               "vertical_slider": VerticalSliderHardpoints}
+
+
 class SpringDamper(Strict):
     """Along the spring/damper element. Force in compression positive."""
     stiffness_n_per_m: float = Field(gt=0, le=1e6)
@@ -75,8 +102,8 @@ class SpringDamper(Strict):
 
 
 class Axle(Strict):
-    suspension: Literal["double_wishbone", "macpherson"]
-    hardpoints: DoubleWishboneHardpoints | MacPhersonHardpoints
+    suspension: Literal["double_wishbone", "macpherson", "vertical_slider"]
+    hardpoints: DoubleWishboneHardpoints | MacPhersonHardpoints | VerticalSliderHardpoints
     static_camber_rad: float = Field(default=0.0, ge=-0.1, le=0.1, description="positive: top leans out")
     static_toe_rad: float = Field(default=0.0, ge=-0.05, le=0.05, description="positive: toe-in")
     unsprung_mass_kg: float = Field(gt=1, le=200, description="per corner")
@@ -88,10 +115,15 @@ class Axle(Strict):
 
     @model_validator(mode="after")
     def _hardpoints_match(self):
-        want = DoubleWishboneHardpoints if self.suspension == "double_wishbone" else MacPhersonHardpoints
-        if not isinstance(self.hardpoints, want):
+        if not isinstance(self.hardpoints, SUSPENSIONS[self.suspension]):
             raise ValueError(f"hardpoints do not match suspension '{self.suspension}'")
         return self
+
+    @property
+    def steered(self) -> bool:
+        """Linked to the rack: a double wishbone, or a vertical slider with tie rods."""
+        return self.suspension == "double_wishbone" or (self.suspension == "vertical_slider"
+                                                        and self.hardpoints.steered)
 
 
 class Tyres(Strict):
@@ -124,6 +156,8 @@ class VehicleConfig(Strict):
     chassis: Chassis
     front: Axle
     rear: Axle
+    driven_axle: Literal["front", "rear"] = Field(
+        default="rear", description="the axle the powertrain drives through its open differential")
     tyres: Tyres
     aero: Aero = Aero()
     sensors: Sensors
@@ -143,8 +177,9 @@ class VehicleConfig(Strict):
 
     @model_validator(mode="after")
     def _axles(self):
-        if self.front.suspension != "double_wishbone" or self.rear.suspension != "macpherson":
-            raise ValueError("this vehicle template has a double wishbone front and a MacPherson rear")
+        if not self.front.steered or self.rear.steered:
+            raise ValueError("the car steers its front axle through the rack: front double_wishbone or "
+                             "vertical_slider with tie rods; rear macpherson or vertical_slider without")
         wf = self.front.hardpoints.wheel_centre
         wr = self.rear.hardpoints.wheel_centre
         if wf[0] <= wr[0]:

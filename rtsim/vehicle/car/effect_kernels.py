@@ -120,7 +120,7 @@ def smooth_sign(x, eps):
 
 @inline_kernel
 def driveline_torque(fx, fs, j, t_src, phi, phid, h):
-    """Shaft torque on driven wheel j (0 rl, 1 rr) at the end of a step h for the wheel's spin angle phi
+    """Shaft torque on driven wheel j (0 left, 1 right) at the end of a step h for the wheel's spin angle phi
     and rate phid at that instant, with the node's trapezoidal step condensed out:
         x = x_n + h/2 (w_n + w),  J (w - w_n) = h T_src - h/2 (T_n + T),  T = k (x - phi) + c (w - phid).
     Returns (T, node speed w, node angle x, dT/d(-phi) = k g, dT/d(-phid) = c g) with g = J / (J + h/2 B)."""
@@ -175,8 +175,9 @@ def effects_brake(fx, fs, bp, bs, out):
 def driveline_commit(fx, fs, d, veh, drive, h):
     """Advance the driveline nodes over the converged step (drive: source torques, N*m)."""
     for j in range(2):
-        kp = veh.corner_idx[2 + j, CI_PHI]
-        t, w, x, _k, _c = driveline_torque(fx, fs, j, drive[2 + j], d.q[kp], d.qd[kp], h)
+        i = veh.driven[j]
+        kp = veh.corner_idx[i, CI_PHI]
+        t, w, x, _k, _c = driveline_torque(fx, fs, j, drive[i], d.q[kp], d.qd[kp], h)
         o = FS_DL + 3 * j
         fs[o] = x
         fs[o + 1] = w

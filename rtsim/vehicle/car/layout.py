@@ -6,6 +6,8 @@ from __future__ import annotations
 from collections import namedtuple
 
 G = 9.81
+WHEELS = ("fl", "fr", "rl", "rr")   # corner order of every per-wheel array: front axle first, left first
+FRONT_AXLE, REAR_AXLE = (0, 1), (2, 3)
 
 # Corner coordinate index table (Vehicle.corner_idx[w, :]).
 CI_WX, CI_WY, CI_WZ, CI_Z, CI_PHI, CI_S = range(6)
@@ -25,6 +27,9 @@ Vehicle = namedtuple("Vehicle", [
     "imu_local",       # (3,) IMU position in the body frame relative to the CG, m
     "aero",            # (2,) drag area m^2, air density kg/m^3
     "tyre_model",      # (1,) int: TYRE_MAGIC_FORMULA or TYRE_LINEAR
+    "driven",          # (2,) int corners of the driven axle, left then right
+    "drive_slot",      # (4,) int per corner: its index in `driven`, or -1
+    "side",            # (4,) float per corner: +1 left, -1 right (mirrors the tyre property file)
 ])
 TYRE_MAGIC_FORMULA, TYRE_LINEAR = 0, 1
 STEER_COLUMN, STEER_RACK = 0, 1     # Vehicle.steer_idx

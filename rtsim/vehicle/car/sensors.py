@@ -29,7 +29,7 @@ NSENSOR = 21
 assert len(SENSOR_NAMES) == NSENSOR and SENSOR_NAMES[S_WHEEL_TORQUE_RR] == "wheel_torque_rr"
 
 # subsystem signals handed to the sensors (Signals array)
-SG_BRAKE_PRESSURE, SG_SW_ANGLE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_THROTTLE, SG_TORQUE_RL, SG_TORQUE_RR = range(7)
+SG_BRAKE_PRESSURE, SG_SW_ANGLE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_THROTTLE, SG_TORQUE_LEFT, SG_TORQUE_RIGHT = range(7)
 NSIGNAL = 7
 
 # sensor model parameters per channel
@@ -90,8 +90,8 @@ def true_sensors(m, d, veh, signals, out):
     out[S_ENGINE_SPEED] = signals[SG_ENGINE_SPEED]
     out[S_STEERING_TORQUE] = signals[SG_STEERING_TORQUE]
     out[S_THROTTLE] = signals[SG_THROTTLE]
-    out[S_WHEEL_TORQUE_RL] = signals[SG_TORQUE_RL]
-    out[S_WHEEL_TORQUE_RR] = signals[SG_TORQUE_RR]
+    out[S_WHEEL_TORQUE_RL] = signals[SG_TORQUE_LEFT]
+    out[S_WHEEL_TORQUE_RR] = signals[SG_TORQUE_RIGHT]
 
 
 @kernel

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 
-from rtsim.channels import WHEELS
 from rtsim.errors import ConfigError
 from rtsim.mbs import Simulation
 from rtsim.mbs.integrator import NEED_FACTOR
@@ -22,8 +21,8 @@ from .effect_kernels import (FS_DL, FS_HIST, FS_LAG, FX_B_LAG, FX_DL, FX_DL_K, F
                              neutral_params, sensor_stage, state_size)
 from .effects import pack_effects, validate_effects
 from .build import VehicleModel
-from .layout import CI_PHI
-from ..kit.powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PO_TORQUE_RL, PO_TORQUE_RR, PP_MEASURED,
+from .layout import CI_PHI, WHEELS
+from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT, PP_MEASURED,
                          powertrain_config, powertrain_params, powertrain_state_rolling, powertrain_step)
 from .sensors import NSENSOR
 from ..kit.steering import steering_config, steering_params, steering_state
@@ -67,8 +66,8 @@ class VehicleSim:
         mech = model.mech
         q0, qd0 = self._placed(mech.q0.copy(), position, yaw, speed)
         names = mech.coordinate_names
-        w_rear = 0.5 * float(qd0[names.index("spin_rl")] + qd0[names.index("spin_rr")])
-        ps = powertrain_state_rolling(pp, self.dt, w_rear, throttle=0.0, selector=1.0)
+        w_driven = float(np.mean([qd0[names.index(f"spin_{WHEELS[i]}")] for i in model.vehicle.driven]))
+        ps = powertrain_state_rolling(pp, self.dt, w_driven, throttle=0.0, selector=1.0)
         self.stcfg = steering_config(cfg.steering or None, "steering")
         sp = steering_params(self.stcfg)
         self.vd = make_vehicle_data()
@@ -80,7 +79,7 @@ class VehicleSim:
         self.m = mech.model
         self.io = make_io()
         self.io.commands[CMD_BRAKE] = brake_pressure
-        self._prime_drive(w_rear)
+        self._prime_drive(w_driven)
         start = cfg.effects if effects is None else effects
         if start:
             self.set_effects(start)
@@ -120,17 +119,18 @@ class VehicleSim:
             vel[names.index(f"spin_{w}")] = speed / re
         return res, vel
 
-    def _prime_drive(self, w_rear: float) -> None:
+    def _prime_drive(self, w_driven: float) -> None:
         """Drive torques of the steady powertrain (closed throttle, D) put in place before the first
         step, so that effects started with the car (a driveline's wound-up shafts) start from them.
         Evaluated on a copy: the powertrain state itself is left at t = 0."""
         io = self.io
         pt_in = np.zeros(PI_SIZE)
-        pt_in[PI_OMEGA_RL] = pt_in[PI_OMEGA_RR] = w_rear
+        pt_in[PI_OMEGA_LEFT] = pt_in[PI_OMEGA_RIGHT] = w_driven
         pt_in[PI_SELECTOR] = io.extra[EX_SELECTOR]
         powertrain_step(self.parts.powertrain, self.states.powertrain.copy(), pt_in, self.dt, io.pt_out)
-        self.vd.drive[2] = io.pt_out[PO_TORQUE_RL]
-        self.vd.drive[3] = io.pt_out[PO_TORQUE_RR]
+        left, right = self.vm.vehicle.driven
+        self.vd.drive[left] = io.pt_out[PO_TORQUE_LEFT]
+        self.vd.drive[right] = io.pt_out[PO_TORQUE_RIGHT]
 
     @property
     def effects(self) -> dict:
@@ -167,8 +167,9 @@ class VehicleSim:
         if fx[FX_DL] > 0.5:
             for j in range(2):
                 o = FS_DL + 3 * j
-                kp = self.vm.vehicle.corner_idx[2 + j, CI_PHI]
-                t, w = (fs[o + 2], fs[o + 1]) if dl_on else (float(self.vd.drive[2 + j]), self.data.qd[kp])
+                i = self.vm.vehicle.driven[j]
+                kp = self.vm.vehicle.corner_idx[i, CI_PHI]
+                t, w = (fs[o + 2], fs[o + 1]) if dl_on else (float(self.vd.drive[i]), self.data.qd[kp])
                 fs[o:o + 3] = (self.data.q[kp] + t / fx[FX_DL_K], w, t)
         if slots and slots != old_slots:
             fill_history(self.m, self.data, self.vm.vehicle, self.io.signals, fx, fs)

@@ -13,7 +13,8 @@ stiffness and damping to W:
 - suspension spring (with bump stop) and damper along the element, whose length is a polynomial of
   (z, s): Q_z = F dL/dz, Q_s = F dL/ds; anti-roll bars on the travel difference;
 - brakes: torque on the spin coordinate with stiction (rtsim.vehicle.kit.brake), reaction on the knuckle;
-- drive torques (set per step by the powertrain) on the spin coordinate, reacting on the chassis;
+- drive torques (set per step by the powertrain, on the driven axle's wheels) on the spin coordinate,
+  reacting on the chassis;
 - aerodynamic drag at the centre of mass;
 - the switchable effects of rtsim.vehicle.car.effects when any is on (parameters fx = Parts.effects, states
   fs = States.effects; with fx[FX_ON] = 0 none of their code runs and the step is the nominal one).
@@ -28,11 +29,8 @@ import numpy as np
 from rtsim.jit import inline_kernel, kernel
 from rtsim.mbs.constraints import poly_eval, poly_value
 from rtsim.mbs.envelope import add_entry
-from rtsim.mbs.integrator import (
-    CONTINUE, CONVERGED, finish_prepare, finish_project, newton_failed, newton_prepare, newton_update,
-    step_begin, wants_tangent,
-)
-from rtsim.mbs.model import ERR_NONFINITE_FORCE, IS_MAX_ITER, OK, ST_FAIL_INDEX
+from rtsim.mbs.integrator import step_with
+from rtsim.mbs.model import OK
 from rtsim.road.query import CT_D, CT_EX, CT_GAMMA, CT_MU, CT_NX, CT_PX, CT_RR, NCONTACT, wheel_contact
 
 from .effect_kernels import (BEARING_OMEGA_EPS, FS_DL, FX_BEARING, FX_BRAKE, FX_CDA, FX_DL,
@@ -40,10 +38,10 @@ from .effect_kernels import (BEARING_OMEGA_EPS, FS_DL, FX_BEARING, FX_BRAKE, FX_
                              FX_RELAX, FX_RR, FX_SLIP, RR_SPEED_EPS, driveline_commit, driveline_torque,
                              effects_brake, record_sensors, smooth_sign)
 from ..kit.brake import BI_SIZE, BO_LINE, BO_SIZE, BP_EPS, BS_TAU_SLIDE, brake_commit, brake_step, brake_wheel_torque
-from ..kit.powertrain import (PI_OMEGA_RL, PI_OMEGA_RR, PI_SELECTOR, PI_SIZE, PI_THROTTLE_CMD, PI_TORQUE_RL, PI_TORQUE_RR,
-                         PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_RL, PO_TORQUE_RR, powertrain_step)
+from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZE, PI_THROTTLE_CMD, PI_TORQUE_LEFT, PI_TORQUE_RIGHT,
+                         PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT, powertrain_step)
 from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_SW_ANGLE, SG_THROTTLE,
-                      SG_TORQUE_RL, SG_TORQUE_RR)
+                      SG_TORQUE_LEFT, SG_TORQUE_RIGHT)
 from ..kit.steering import SO_SIZE, SO_SW_ANGLE, SO_TORQUE, steering_control, steering_forces, steering_outputs, \
     steering_tangent
 from .layout import (
@@ -193,8 +191,9 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
         k_fx = 0.0         # stiffness and damping of the effects on the spin coordinate
         c_fx = 0.0
         if fx_on:
-            if fx[FX_DL] > 0.5 and i >= 2:
-                drive, _w, _x, k_fx, c_fx = driveline_torque(fx, fs, i - 2, vd.drive[i], q[kp], qd[kp], 2.0 * hc)
+            if fx[FX_DL] > 0.5 and veh.drive_slot[i] >= 0:
+                drive, _w, _x, k_fx, c_fx = driveline_torque(fx, fs, veh.drive_slot[i], vd.drive[i], q[kp], qd[kp],
+                                                             2.0 * hc)
             if fx[FX_BEARING] != 0.0:
                 sb, dsb = smooth_sign(qd[kp], BEARING_OMEGA_EPS)
                 f[kp] -= fx[FX_BEARING] * sb
@@ -238,7 +237,7 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
             kappa, alpha = transient_slip(tp, vd.slip, i, fz, gamma, vx, vsy, omega, re)
         # the property file describes a left-side tyre; a right-side one is its mirror image
         # (MF-Tyre convention): Fy(alpha, gamma) -> -Fy(-alpha, -gamma), likewise Mz
-        side = 1.0 if i % 2 == 0 else -1.0
+        side = veh.side[i]
         kap_in = kappa
         alp_in = side * alpha
         if fx_on and fx[FX_SLIP] != 1.0:
@@ -355,36 +354,15 @@ def _mass_and_grade(m, d, veh, fx, tangent):
             f[j + 2] += mass * gc
 
 
+@inline_kernel
+def _car_forces(m, d, a, tangent, bq, hc):
+    return vehicle_forces(m, d, a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8], a[9], tangent, bq, hc)
+
+
 @kernel
 def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, h):
     """One ALI3-P step of the vehicle: the multibody stages with the vehicle's forces added."""
-    bq = 0.25 * h * h
-    hc = 0.5 * h
-    step_begin(m, d, h)
-    for _ in range(m.iset[IS_MAX_ITER]):
-        status = newton_prepare(m, d, h)
-        if status != OK:
-            return status
-        tangent = wants_tangent(m, d)
-        bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, bq, hc)
-        if bad >= 0:
-            d.stats[ST_FAIL_INDEX] = bad
-            return ERR_NONFINITE_FORCE
-        status = newton_update(m, d, h)
-        if status == CONVERGED:
-            break
-        if status != CONTINUE:
-            return status
-    else:
-        return newton_failed(m, d)
-    status = finish_prepare(m, d, h)
-    if status != OK:
-        return status
-    bad = vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, True, bq, hc)
-    if bad >= 0:
-        d.stats[ST_FAIL_INDEX] = bad
-        return ERR_NONFINITE_FORCE
-    return finish_project(m, d, h)
+    return step_with(m, d, h, _car_forces, (veh, vd, road, tp, bp, bs, stp, sts, fx, fs))
 
 
 # parameter arrays; effects: rtsim.vehicle.car.effect_kernels FX_* (neutral_params() for the nominal model)
@@ -393,13 +371,14 @@ Parts = namedtuple("Parts", ["tyre", "brake", "powertrain", "steering", "effects
 States = namedtuple("States", ["brake", "powertrain", "steering", "effects"])
 IO = namedtuple("IO", [
     "commands",     # (3,) throttle_angle_cmd rad, brake_pressure_cmd kPa, steering_wheel_angle_cmd rad
-    "extra",        # (4,) measured wheel torque rl, rr (N m), selector (+1 D, 0 N, -1 R), spare
+    "extra",        # (4,) measured drive torque on the driven axle's left, right wheel (N m), selector
+                    # (+1 D, 0 N, -1 R), spare
     "pt_in", "pt_out",
     "st_out",       # (SO_SIZE,) steering outputs after the step (rtsim.vehicle.kit.steering SO_*)
     "signals",      # (NSIGNAL,) subsystem values handed to the sensors
 ])
 CMD_THROTTLE, CMD_BRAKE, CMD_STEER = 0, 1, 2
-EX_TORQUE_RL, EX_TORQUE_RR, EX_SELECTOR = 0, 1, 2
+EX_TORQUE_LEFT, EX_TORQUE_RIGHT, EX_SELECTOR = 0, 1, 2
 
 
 def make_io() -> IO:
@@ -429,17 +408,17 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     steering_control(parts.steering, states.steering, io.commands[CMD_STEER], d.q[ic], d.qd[ic], h)
     io.pt_in[PI_THROTTLE_CMD] = io.commands[CMD_THROTTLE]
     if fx_on and fx[FX_DL] > 0.5:       # the gearbox turns with the driveline nodes
-        io.pt_in[PI_OMEGA_RL] = fs[FS_DL + 1]
-        io.pt_in[PI_OMEGA_RR] = fs[FS_DL + 4]
+        io.pt_in[PI_OMEGA_LEFT] = fs[FS_DL + 1]
+        io.pt_in[PI_OMEGA_RIGHT] = fs[FS_DL + 4]
     else:
-        io.pt_in[PI_OMEGA_RL] = d.qd[veh.corner_idx[2, CI_PHI]]
-        io.pt_in[PI_OMEGA_RR] = d.qd[veh.corner_idx[3, CI_PHI]]
-    io.pt_in[PI_TORQUE_RL] = io.extra[EX_TORQUE_RL]
-    io.pt_in[PI_TORQUE_RR] = io.extra[EX_TORQUE_RR]
+        io.pt_in[PI_OMEGA_LEFT] = d.qd[veh.corner_idx[veh.driven[0], CI_PHI]]
+        io.pt_in[PI_OMEGA_RIGHT] = d.qd[veh.corner_idx[veh.driven[1], CI_PHI]]
+    io.pt_in[PI_TORQUE_LEFT] = io.extra[EX_TORQUE_LEFT]
+    io.pt_in[PI_TORQUE_RIGHT] = io.extra[EX_TORQUE_RIGHT]
     io.pt_in[PI_SELECTOR] = io.extra[EX_SELECTOR]
     powertrain_step(parts.powertrain, states.powertrain, io.pt_in, h, io.pt_out)
-    vd.drive[2] = io.pt_out[PO_TORQUE_RL]
-    vd.drive[3] = io.pt_out[PO_TORQUE_RR]
+    vd.drive[veh.driven[0]] = io.pt_out[PO_TORQUE_LEFT]
+    vd.drive[veh.driven[1]] = io.pt_out[PO_TORQUE_RIGHT]
     status = vehicle_mbs_step(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, parts.steering,
                               states.steering, fx, fs, h)
     if status != OK:
@@ -466,8 +445,8 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     io.signals[SG_STEERING_TORQUE] = io.st_out[SO_TORQUE]
     io.signals[SG_ENGINE_SPEED] = io.pt_out[PO_ENGINE_SPEED]
     io.signals[SG_THROTTLE] = io.pt_out[PO_THROTTLE]
-    io.signals[SG_TORQUE_RL] = io.pt_out[PO_TORQUE_RL]
-    io.signals[SG_TORQUE_RR] = io.pt_out[PO_TORQUE_RR]
+    io.signals[SG_TORQUE_LEFT] = io.pt_out[PO_TORQUE_LEFT]
+    io.signals[SG_TORQUE_RIGHT] = io.pt_out[PO_TORQUE_RIGHT]
     if fx[FX_HIST] > 0.5:
         record_sensors(m, d, veh, io.signals, fx, fs)
     return OK

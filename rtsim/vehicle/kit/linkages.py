@@ -1,4 +1,6 @@
-"""Suspension kinematics from hardpoints: double wishbone (front) and MacPherson strut (rear).
+"""Suspension kinematics from hardpoints: double wishbone (steered, tie rod to the rack), MacPherson strut
+(unsteered, toe link to the body) and vertical slider (the wheel slides along the body's vertical axis;
+steered about a vertical kingpin through a steering arm and a tie rod to the rack, or unsteered).
 
 At build time the real linkage is solved for the knuckle pose over a grid of wheel travel z (m, wheel
 centre rise relative to the body, positive in bump) and, for the steered front, rack displacement s
@@ -58,6 +60,25 @@ class MacPherson:
     spin_axis: np.ndarray
 
 
+@dataclass(frozen=True)
+class VerticalSlider:
+    """The knuckle slides along the body's z axis (wheel travel z is the slide); a steered one also
+    turns about the vertical kingpin axis through `kingpin`, its steering arm's end `tie_outer` held by
+    a tie rod from `tie_inner` on the rack (crank-rod kinematics). Unsteered: the tie points are None."""
+    wheel_centre: np.ndarray
+    spring_lower: np.ndarray  # spring/damper mount on the slider (moves with z)
+    spring_upper: np.ndarray  # spring/damper mount on the body
+    spin_axis: np.ndarray
+    kingpin: np.ndarray | None = None     # a point of the vertical steering axis (knuckle)
+    tie_outer: np.ndarray | None = None   # steering arm end (knuckle)
+    tie_inner: np.ndarray | None = None   # tie rod inner end on the rack at s = 0
+
+
+def is_steered(geom) -> bool:
+    """A linkage with a tie rod to the rack."""
+    return isinstance(geom, DoubleWishbone) or (isinstance(geom, VerticalSlider) and geom.tie_outer is not None)
+
+
 @dataclass
 class CornerKinematics:
     """Polynomial fits p(z, s) = sum_j c_j z^ez_j s^es_j of one corner's kinematic outputs."""
@@ -81,7 +102,7 @@ def _pose_points(x: np.ndarray, pts: np.ndarray, w0: np.ndarray) -> np.ndarray:
     return w0 + x[3:] + (pts - w0) @ rot.T
 
 
-def rack_direction(g: DoubleWishbone) -> np.ndarray:
+def rack_direction(g: DoubleWishbone | VerticalSlider) -> np.ndarray:
     """Unit rack motion for positive s: steering arms ahead of the axle pull the rack to the left
     (+y) to steer left, arms behind push it to the right (-y)."""
     return np.array([0.0, 1.0 if g.tie_outer[0] > g.wheel_centre[0] else -1.0, 0.0])
@@ -132,6 +153,32 @@ def _solve_macpherson(g: MacPherson, z: float, x0: np.ndarray) -> np.ndarray:
     return sol.x
 
 
+def _solve_vertical_slider(g: VerticalSlider, z: float, s: float, x0: np.ndarray) -> np.ndarray:
+    """Pose (rotation vector, translation) of the knuckle: slide z along the body z axis, and for a
+    steered one the turn delta about the vertical kingpin that keeps the tie rod's length."""
+    if g.tie_outer is None:
+        return np.array([0.0, 0.0, 0.0, 0.0, 0.0, z])
+    kp = g.kingpin
+    arm = (g.tie_outer - kp)[:2]
+    d_tie = np.linalg.norm(g.tie_outer - g.tie_inner)
+    tie_inner = g.tie_inner + s * rack_direction(g)
+
+    def outer(delta):
+        c, sn = np.cos(delta), np.sin(delta)
+        return np.array([kp[0] + c * arm[0] - sn * arm[1], kp[1] + sn * arm[0] + c * arm[1], g.tie_outer[2] + z])
+
+    sol = least_squares(lambda x: [np.linalg.norm(outer(x[0]) - tie_inner) - d_tie], [x0[2]],
+                        xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    if abs(sol.fun[0]) > 1e-10:
+        raise ModelError(f"vertical slider cannot reach rack s = {s:.3f} m (residual {abs(sol.fun[0]):.2e} m): "
+                         "check the steering arm and tie rod hardpoints")
+    delta = float(sol.x[0])
+    rot = Rotation.from_rotvec([0.0, 0.0, delta]).as_matrix()
+    r = kp - g.wheel_centre
+    t = r - rot @ r + np.array([0.0, 0.0, z])
+    return np.array([0.0, 0.0, delta, *t])
+
+
 def _spring_length_dw(g: DoubleWishbone, x: np.ndarray) -> float:
     """The spring's lower mount rides on the lower arm: rotate it about the arm's pivot axis by the
     arm's rotation, found from the lower ball joint's motion."""
@@ -168,10 +215,10 @@ def _fit(zs: np.ndarray, ss: np.ndarray, values: np.ndarray, exps: np.ndarray) -
     return coef, err
 
 
-def solve_corner(geom: DoubleWishbone | MacPherson, z_range=(-0.08, 0.08), s_range=(-0.07, 0.07),
-                 nz: int = 33, ns: int = 29, deg_z: int = 5, deg_s: int = 7) -> CornerKinematics:
+def solve_corner(geom: DoubleWishbone | MacPherson | VerticalSlider, z_range=(-0.08, 0.08),
+                 s_range=(-0.07, 0.07), nz: int = 33, ns: int = 29, deg_z: int = 5, deg_s: int = 7) -> CornerKinematics:
     """Solve the linkage over the travel (and rack) grid and fit the polynomials."""
-    steered = isinstance(geom, DoubleWishbone)
+    steered = is_steered(geom)
     zg = np.linspace(*z_range, nz)
     sg = np.linspace(*s_range, ns) if steered else np.zeros(1)
     poses = np.zeros((nz, sg.size, 6))
@@ -187,7 +234,10 @@ def solve_corner(geom: DoubleWishbone | MacPherson, z_range=(-0.08, 0.08), s_ran
                 guess = poses[iz0, j - 1 if j > is0 else min(j + 1, sg.size - 1)] if j != is0 else np.zeros(6)
             else:
                 guess = poses[i - 1 if i > iz0 else i + 1, j]
-            if steered:
+            if isinstance(geom, VerticalSlider):
+                x = _solve_vertical_slider(geom, zg[i], sg[j], guess)
+                spring[i, j] = float(np.linalg.norm(geom.spring_upper - geom.spring_lower - [0.0, 0.0, zg[i]]))
+            elif steered:
                 x = _solve_double_wishbone(geom, zg[i], sg[j], guess)
                 spring[i, j] = _spring_length_dw(geom, x)
             else:
@@ -222,6 +272,6 @@ def mirror(geom):
     """The right-hand corner from a left-hand one: y -> -y for every point; the mirrored spin axis is
     negated so that it still points to the vehicle's left."""
     flip = np.array([1.0, -1.0, 1.0])
-    kw = {name: val * flip for name, val in geom.__dict__.items()}
+    kw = {name: None if val is None else val * flip for name, val in geom.__dict__.items()}
     kw["spin_axis"] = -kw["spin_axis"]
     return type(geom)(**kw)

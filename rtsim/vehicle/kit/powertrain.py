@@ -115,17 +115,17 @@ PS_THR = 8           # lag block state (3 + delay steps); LAG_Y is the throttle 
 
 # ----------------------------------------------------------------------------------- inputs
 PI_THROTTLE_CMD = 0  # rad
-PI_OMEGA_RL = 1      # rad/s
-PI_OMEGA_RR = 2      # rad/s
-PI_TORQUE_RL = 3     # N*m, measured drive torque (used in measured mode)
-PI_TORQUE_RR = 4     # N*m
+PI_OMEGA_LEFT = 1    # rad/s, spin rate of the driven axle's left wheel
+PI_OMEGA_RIGHT = 2   # rad/s, and of its right wheel
+PI_TORQUE_LEFT = 3   # N*m, measured drive torque (used in measured mode)
+PI_TORQUE_RIGHT = 4  # N*m
 PI_SELECTOR = 5      # +1 drive, 0 neutral, -1 reverse
 PI_SIZE = 6
 
 # ---------------------------------------------------------------------------------- outputs
-PO_TORQUE_RL = 0     # N*m, drive torque on the rear-left wheel
-PO_TORQUE_RR = 1     # N*m
-PO_DTDW = 2          # N*m*s/rad, d T_rl/d omega_rl (= d T_rl/d omega_rr = the rr row)
+PO_TORQUE_LEFT = 0   # N*m, drive torque on the driven axle's left wheel
+PO_TORQUE_RIGHT = 1  # N*m, and on its right wheel
+PO_DTDW = 2          # N*m*s/rad, d T_left/d omega_left (= d T_left/d omega_right = the right row)
 PO_ENGINE_SPEED = 3  # rad/s
 PO_THROTTLE = 4      # rad, throttle plate angle
 PO_GEAR = 5          # gear number (0 N, -1 R)
@@ -721,7 +721,7 @@ def powertrain_step(p, s, inp, dt, out):
     """Advance throttle actuator, gearbox logic and engine speed by one step; write drive torques and
     sensor values into out (PO_*). Returns the engine speed (rad/s)."""
     thr = lag_step(p, PP_THR, s, PS_THR, inp[PI_THROTTLE_CMD], dt)
-    w_carrier = 0.5 * (inp[PI_OMEGA_RL] + inp[PI_OMEGA_RR])
+    w_carrier = 0.5 * (inp[PI_OMEGA_LEFT] + inp[PI_OMEGA_RIGHT])
     v = p[PP_RW] * w_carrier
     ratio = _gearbox(p, s, inp[PI_SELECTOR], v, thr, dt)
     gear = int(s[PS_GEAR])
@@ -759,12 +759,12 @@ def powertrain_step(p, s, inp, dt, out):
     t_wheel = 0.5 * eff * rtot * shaft
     dtdw = 0.25 * eff * rtot * rtot * dtt if coupled else 0.0
     if p[PP_MEASURED] > 0.5:
-        out[PO_TORQUE_RL] = inp[PI_TORQUE_RL]
-        out[PO_TORQUE_RR] = inp[PI_TORQUE_RR]
+        out[PO_TORQUE_LEFT] = inp[PI_TORQUE_LEFT]
+        out[PO_TORQUE_RIGHT] = inp[PI_TORQUE_RIGHT]
         out[PO_DTDW] = 0.0
     else:
-        out[PO_TORQUE_RL] = t_wheel
-        out[PO_TORQUE_RR] = t_wheel
+        out[PO_TORQUE_LEFT] = t_wheel
+        out[PO_TORQUE_RIGHT] = t_wheel
         out[PO_DTDW] = dtdw
     out[PO_ENGINE_SPEED] = w
     out[PO_THROTTLE] = thr
