@@ -47,6 +47,7 @@ import numpy as np
 
 from rtsim.jit import kernel
 
+from .layout import offsets
 from .actuators import (LAG_NPAR, LAG_Y, LagConfig, check, from_mapping, lag_init, lag_state_size,
                         lag_step)
 
@@ -55,41 +56,42 @@ FRONT = (0, 1)
 REAR = (2, 3)
 
 # Parameter layout (float64 array).
-BP_GAIN = 0          # [4] N*m per kPa of wheel-cylinder pressure, n mu A R * 1000
-BP_BREAK_RATIO = 4   # [4] mu_s / mu
-BP_KNEE = 8          # kPa, proportioning valve knee pressure
-BP_RATIO = 9         # -, proportioning valve slope above the knee
-BP_K = 10            # N*m/rad, stick anchor stiffness
-BP_C = 11            # N*m*s/rad, stick anchor damping
-BP_EPS = 12          # rad/s, regularisation band of the sliding law
-BP_STICK = 13        # rad/s, speed below which a slowing wheel sticks
-BP_ACT = 14          # lag block (LAG_NPAR floats): pressure actuator, kPa
-BP_SIZE = BP_ACT + LAG_NPAR
+(BP_GAIN,         # [4] N*m per kPa of wheel-cylinder pressure, n mu A R * 1000
+ BP_BREAK_RATIO,  # [4] mu_s / mu
+ BP_KNEE,         # kPa, proportioning valve knee pressure
+ BP_RATIO,        # -, proportioning valve slope above the knee
+ BP_K,            # N*m/rad, stick anchor stiffness
+ BP_C,            # N*m*s/rad, stick anchor damping
+ BP_EPS,          # rad/s, regularisation band of the sliding law
+ BP_STICK,        # rad/s, speed below which a slowing wheel sticks
+ BP_ACT,          # lag block (LAG_NPAR floats): pressure actuator, kPa
+ BP_SIZE) = offsets(NWHEEL, NWHEEL, *(1,) * 6, LAG_NPAR)
 
 # State layout.
-BS_MODE = 0          # [4] 1.0 stick, 0.0 slide
-BS_ANCHOR = 4        # [4] rad, anchor angle (meaningful in stick)
-BS_OMEGA_PREV = 8    # [4] rad/s, wheel speed at the last commit
-BS_TAU_SLIDE = 12    # [4] N*m, sliding torque tau_s at the current pressure
-BS_TAU_BREAK = 16    # [4] N*m, breakaway torque tau_b
-BS_P_FRONT = 20      # kPa, front wheel-cylinder pressure
-BS_P_REAR = 21       # kPa, rear wheel-cylinder pressure
-BS_ACT = 22          # lag block state (3 + delay steps); its LAG_Y is the line pressure, kPa
+(BS_MODE,        # [4] 1.0 stick, 0.0 slide
+ BS_ANCHOR,      # [4] rad, anchor angle (meaningful in stick)
+ BS_OMEGA_PREV,  # [4] rad/s, wheel speed at the last commit
+ BS_TAU_SLIDE,   # [4] N*m, sliding torque tau_s at the current pressure
+ BS_TAU_BREAK,   # [4] N*m, breakaway torque tau_b
+ BS_P_FRONT,     # kPa, front wheel-cylinder pressure
+ BS_P_REAR,      # kPa, rear wheel-cylinder pressure
+ BS_ACT,         # lag block state (3 + delay steps); its LAG_Y is the line pressure, kPa
+ _) = offsets(NWHEEL, NWHEEL, NWHEEL, NWHEEL, NWHEEL, 1, 1, 3)
 
 # Inputs.
-BI_PRESSURE_CMD = 0  # kPa, brake_pressure_cmd
-BI_SIZE = 1
+(BI_PRESSURE_CMD,  # kPa, brake_pressure_cmd
+ BI_SIZE) = offsets(1)
 
 # Outputs.
-BO_LINE = 0          # kPa, line pressure (the brake_pressure sensor)
-BO_FRONT = 1         # kPa
-BO_REAR = 2          # kPa
-BO_TAU_SLIDE = 3     # [4] N*m
-BO_TAU_BREAK = 7     # [4] N*m
-BO_TORQUE = 11       # [4] N*m, brake torque on each wheel (brake_torques)
-BO_DTDW = 15         # [4] N*m*s/rad, d torque / d omega
-BO_DTDTH = 19        # [4] N*m/rad, d torque / d theta
-BO_SIZE = 23
+(BO_LINE,       # kPa, line pressure (the brake_pressure sensor)
+ BO_FRONT,      # kPa
+ BO_REAR,       # kPa
+ BO_TAU_SLIDE,  # [4] N*m
+ BO_TAU_BREAK,  # [4] N*m
+ BO_TORQUE,     # [4] N*m, brake torque on each wheel (brake_torques)
+ BO_DTDW,       # [4] N*m*s/rad, d torque / d omega
+ BO_DTDTH,      # [4] N*m/rad, d torque / d theta
+ BO_SIZE) = offsets(1, 1, 1, NWHEEL, NWHEEL, NWHEEL, NWHEEL, NWHEEL)
 
 STICK = 1.0
 SLIDE = 0.0

@@ -56,88 +56,90 @@ import numpy as np
 
 from rtsim.jit import inline_kernel, kernel
 
+from .layout import offsets
 from .actuators import (LAG_NPAR, LAG_Y, LagConfig, check, from_mapping, lag_init,
                         lag_state_size, lag_step, saturate)
 
 RPM = 2.0 * math.pi / 60.0   # rad/s per rpm
 
 # ----------------------------------------------------------------------------- parameter layout
-PP_MEASURED = 0      # 1.0: drive torques are the measured inputs
-PP_J = 1             # kg m^2, engine + pump + converter fluid inertia
-PP_IDLE = 2          # rad/s, idle speed target
-PP_IDLE_KP = 3       # rad per rad/s, idle controller proportional gain
-PP_IDLE_KI = 4       # rad per rad, idle controller integral gain
-PP_IDLE_MAX = 5      # rad, largest idle bypass opening (equivalent throttle)
-PP_REV = 6           # rad/s, rev limiter: fuel cut complete here
-PP_REV_BAND = 7      # rad/s, throttle faded to 0 over [rev - band, rev]
-PP_TH_OFF = 8        # offset of the map's throttle nodes (rad)
-PP_TH_N = 9
-PP_W_OFF = 10        # offset of the map's speed nodes (rad/s)
-PP_W_N = 11
-PP_MAP_OFF = 12      # offset of the map, row-major [throttle][speed], N*m
-PP_SR_OFF = 13       # offset of the K-factor speed-ratio nodes
-PP_SR_N = 14
-PP_K_OFF = 15        # offset of the K factors, (rad/s)/sqrt(N*m)
-PP_TRN_OFF = 16      # offset of the torque-ratio speed-ratio nodes
-PP_TRN_N = 17
-PP_TR_OFF = 18       # offset of the torque ratios
-PP_OVERRUN = 19      # overrun capacity scale
-PP_LOCKUP = 20       # 1.0 if a lock-up clutch is fitted
-PP_LU_GEAR = 21      # gear number in which it may engage
-PP_LU_SPEED = 22     # m/s, vehicle speed above which it engages (disengages 10 % below)
-PP_LU_CAP = 23       # N*m, clutch torque capacity
-PP_LU_C = 24         # N*m*s/rad, slip damping
-PP_NGEAR = 25        # number of forward gears
-PP_RATIO_OFF = 26    # offset of the forward ratios
-PP_REV_RATIO = 27    # reverse ratio (positive number)
-PP_FD = 28           # final drive ratio
-PP_EFF = 29          # gearbox + final drive efficiency
-PP_RW = 30           # m, wheel radius used by the shift schedule
-PP_SCH_OFF = 31      # offset of the schedule's throttle nodes
-PP_SCH_N = 32
-PP_UP_OFF = 33       # offset of upshift speeds, row k-1 for k -> k+1, m/s
-PP_DN_OFF = 34       # offset of downshift speeds, row k-1 for k+1 -> k, m/s
-PP_SHIFT_DELAY = 35  # s
-PP_SHIFT_TIME = 36   # s
-PP_THR = 37          # lag block: throttle actuator, rad
-PP_HEADER = PP_THR + LAG_NPAR
+(PP_MEASURED,     # 1.0: drive torques are the measured inputs
+ PP_J,            # kg m^2, engine + pump + converter fluid inertia
+ PP_IDLE,         # rad/s, idle speed target
+ PP_IDLE_KP,      # rad per rad/s, idle controller proportional gain
+ PP_IDLE_KI,      # rad per rad, idle controller integral gain
+ PP_IDLE_MAX,     # rad, largest idle bypass opening (equivalent throttle)
+ PP_REV,          # rad/s, rev limiter: fuel cut complete here
+ PP_REV_BAND,     # rad/s, throttle faded to 0 over [rev - band, rev]
+ PP_TH_OFF,       # offset of the map's throttle nodes (rad)
+ PP_TH_N,
+ PP_W_OFF,        # offset of the map's speed nodes (rad/s)
+ PP_W_N,
+ PP_MAP_OFF,      # offset of the map, row-major [throttle][speed], N*m
+ PP_SR_OFF,       # offset of the K-factor speed-ratio nodes
+ PP_SR_N,
+ PP_K_OFF,        # offset of the K factors, (rad/s)/sqrt(N*m)
+ PP_TRN_OFF,      # offset of the torque-ratio speed-ratio nodes
+ PP_TRN_N,
+ PP_TR_OFF,       # offset of the torque ratios
+ PP_OVERRUN,      # overrun capacity scale
+ PP_LOCKUP,       # 1.0 if a lock-up clutch is fitted
+ PP_LU_GEAR,      # gear number in which it may engage
+ PP_LU_SPEED,     # m/s, vehicle speed above which it engages (disengages 10 % below)
+ PP_LU_CAP,       # N*m, clutch torque capacity
+ PP_LU_C,         # N*m*s/rad, slip damping
+ PP_NGEAR,        # number of forward gears
+ PP_RATIO_OFF,    # offset of the forward ratios
+ PP_REV_RATIO,    # reverse ratio (positive number)
+ PP_FD,           # final drive ratio
+ PP_EFF,          # gearbox + final drive efficiency
+ PP_RW,           # m, wheel radius used by the shift schedule
+ PP_SCH_OFF,      # offset of the schedule's throttle nodes
+ PP_SCH_N,
+ PP_UP_OFF,       # offset of upshift speeds, row k-1 for k -> k+1, m/s
+ PP_DN_OFF,       # offset of downshift speeds, row k-1 for k+1 -> k, m/s
+ PP_SHIFT_DELAY,  # s
+ PP_SHIFT_TIME,   # s
+ PP_THR,          # lag block: throttle actuator, rad
+ PP_HEADER) = offsets(*(1,) * 37, LAG_NPAR)
 
 # --------------------------------------------------------------------------------- state layout
-PS_OMEGA_E = 0       # rad/s, engine speed
-PS_IDLE_I = 1        # rad, idle controller integral
-PS_GEAR = 2          # current gear: 1..n in D, 0 neutral, -1 reverse
-PS_RATIO_FROM = 3    # ratio at the start of the current shift
-PS_SHIFT_T = 4       # s since the current shift started
-PS_REQ = 5           # gear requested by the schedule
-PS_REQ_T = 6         # s the request has persisted
-PS_LOCKED = 7        # 1.0 lock-up engaged
-PS_THR = 8           # lag block state (3 + delay steps); LAG_Y is the throttle angle
+(PS_OMEGA_E,     # rad/s, engine speed
+ PS_IDLE_I,      # rad, idle controller integral
+ PS_GEAR,        # current gear: 1..n in D, 0 neutral, -1 reverse
+ PS_RATIO_FROM,  # ratio at the start of the current shift
+ PS_SHIFT_T,     # s since the current shift started
+ PS_REQ,         # gear requested by the schedule
+ PS_REQ_T,       # s the request has persisted
+ PS_LOCKED,      # 1.0 lock-up engaged
+ PS_THR,         # lag block state (3 + delay steps); LAG_Y is the throttle angle
+ _) = offsets(*(1,) * 8, 3)
 
 # ----------------------------------------------------------------------------------- inputs
-PI_THROTTLE_CMD = 0  # rad
-PI_OMEGA_LEFT = 1    # rad/s, spin rate of the driven axle's left wheel
-PI_OMEGA_RIGHT = 2   # rad/s, and of its right wheel
-PI_TORQUE_LEFT = 3   # N*m, measured drive torque (used in measured mode)
-PI_TORQUE_RIGHT = 4  # N*m
-PI_SELECTOR = 5      # +1 drive, 0 neutral, -1 reverse
-PI_SIZE = 6
+(PI_THROTTLE_CMD,  # rad
+ PI_OMEGA_LEFT,    # rad/s, spin rate of the driven axle's left wheel
+ PI_OMEGA_RIGHT,   # rad/s, and of its right wheel
+ PI_TORQUE_LEFT,   # N*m, measured drive torque (used in measured mode)
+ PI_TORQUE_RIGHT,  # N*m
+ PI_SELECTOR,      # +1 drive, 0 neutral, -1 reverse
+ PI_SIZE) = offsets(*(1,) * 6)
 
 # ---------------------------------------------------------------------------------- outputs
-PO_TORQUE_LEFT = 0   # N*m, drive torque on the driven axle's left wheel
-PO_TORQUE_RIGHT = 1  # N*m, and on its right wheel
-PO_DTDW = 2          # N*m*s/rad, d T_left/d omega_left (= d T_left/d omega_right = the right row)
-PO_ENGINE_SPEED = 3  # rad/s
-PO_THROTTLE = 4      # rad, throttle plate angle
-PO_GEAR = 5          # gear number (0 N, -1 R)
-PO_RATIO = 6         # effective gearbox ratio (signed)
-PO_ENGINE_TORQUE = 7  # N*m, engine brake torque
-PO_PUMP_TORQUE = 8   # N*m
-PO_TURBINE_TORQUE = 9  # N*m (converter only, lock-up clutch excluded)
-PO_TURBINE_SPEED = 10  # rad/s
-PO_SPEED_RATIO = 11  # turbine / pump speed
-PO_IDLE_OPENING = 12  # rad, idle bypass opening
-PO_LOCKUP_TORQUE = 13  # N*m
-PO_SIZE = 14
+(PO_TORQUE_LEFT,     # N*m, drive torque on the driven axle's left wheel
+ PO_TORQUE_RIGHT,    # N*m, and on its right wheel
+ PO_DTDW,            # N*m*s/rad, d T_left/d omega_left (= d T_left/d omega_right = the right row)
+ PO_ENGINE_SPEED,    # rad/s
+ PO_THROTTLE,        # rad, throttle plate angle
+ PO_GEAR,            # gear number (0 N, -1 R)
+ PO_RATIO,           # effective gearbox ratio (signed)
+ PO_ENGINE_TORQUE,   # N*m, engine brake torque
+ PO_PUMP_TORQUE,     # N*m
+ PO_TURBINE_TORQUE,  # N*m (converter only, lock-up clutch excluded)
+ PO_TURBINE_SPEED,   # rad/s
+ PO_SPEED_RATIO,     # turbine / pump speed
+ PO_IDLE_OPENING,    # rad, idle bypass opening
+ PO_LOCKUP_TORQUE,   # N*m
+ PO_SIZE) = offsets(*(1,) * 14)
 
 
 # ------------------------------------------------------------------------------------------ config
