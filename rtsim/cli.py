@@ -119,7 +119,8 @@ def _describe(args) -> int:
     from rtsim.road.model import make_plane
     from rtsim.vehicle.car.config import load_vehicle
     from rtsim.vehicle.car.build import build_vehicle
-    from rtsim.vehicle.offline import default_vehicle_path, describe
+    from rtsim.vehicle.car.describe import describe
+    from rtsim.vehicle.offline import default_vehicle_path
     from rtsim.vehicle.car.sim import VehicleSim
 
     cfg, base = load_vehicle(args.vehicle or default_vehicle_path())

@@ -24,7 +24,7 @@ from rtsim.mbs import Mechanism, MechanismBuilder, Settings
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import VehicleConfig
-from .layout import (CI_S, NSP, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE,
+from .layout import (NSP, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE,
                      SP_K, SP_PARTNER, TYRE_LINEAR, TYRE_MAGIC_FORMULA, G, Vehicle, FRONT_AXLE,
                      REAR_AXLE, WHEELS)
 from ..kit.steering import add_steering, steering_config, steering_params
