@@ -12,7 +12,8 @@ from rtsim.road.model import make_plane
 from rtsim.vehicle.car.config import load_vehicle
 from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, TO_FZ, TO_KAPPA
 from rtsim.vehicle.car.build import build_vehicle
-from rtsim.vehicle.offline import describe, prepare, run
+from rtsim.vehicle.car.describe import describe
+from rtsim.vehicle.offline import prepare, run
 from rtsim.vehicle.car.sim import VehicleSim
 
 G = 9.81
