@@ -119,9 +119,9 @@ def test_unloaded_steady_state_follows_command():
     h = rig.run(np.full(6000, 0.5))
     last = h[-1]
     assert last[S.SO_SW_ANGLE] == pytest.approx(0.5, abs=1e-7)
-    assert abs(last[S.SO_TORQUE]) < 1e-6
-    assert abs(last[S.SO_MOTOR_TORQUE]) < 1e-6
-    assert last[S.SO_RACK_POS] == pytest.approx(0.5 * rig.cfg.rack_travel_per_rad, rel=1e-6)
+    assert abs(last[S.SO_TORQUE]) < 1e-9
+    assert abs(last[S.SO_MOTOR_TORQUE]) < 1e-9
+    assert last[S.SO_RACK_POS] == pytest.approx(0.5 * rig.cfg.rack_travel_per_rad, rel=1e-9)
     # a reasonably quick, well damped position loop
     assert np.argmax(h[:, S.SO_SW_ANGLE] > 0.45) * DT < 0.1
     assert h[:, S.SO_SW_ANGLE].max() < 0.5 * 1.1
@@ -133,14 +133,15 @@ def test_rack_force_static_torque(force):
     c = rig.cfg
     last = rig.run(np.full(6000, 0.3))[-1]
     rp = c.rack_travel_per_rad
-    assert last[S.SO_TORQUE] == pytest.approx(force * rp, rel=1e-6)
+    assert last[S.SO_TORQUE] == pytest.approx(force * rp, rel=1e-2)
+    assert last[S.SO_TORQUE] == pytest.approx(force * rp, rel=1e-8)        # (exactly, in fact)
     # the integral action keeps the steering wheel on the command; the pinion lags by the twist
     assert last[S.SO_SW_ANGLE] == pytest.approx(0.3, abs=1e-7)
     twist = force * rp / c.torsion_bar_stiffness
-    assert last[S.SO_PINION_ANGLE] == pytest.approx(0.3 - twist, abs=1e-6)
+    assert last[S.SO_PINION_ANGLE] == pytest.approx(0.3 - twist, abs=1e-7)
     # the motor carries it through the reduction
     motor = force * rp / (c.reduction_ratio * c.reduction_efficiency)
-    assert last[S.SO_MOTOR_TORQUE] == pytest.approx(motor, rel=1e-6)
+    assert last[S.SO_MOTOR_TORQUE] == pytest.approx(motor, rel=1e-8)
 
 
 def test_motor_torque_limit_respected():
