@@ -31,7 +31,6 @@ from rtsim.jit import inline_kernel, kernel, read_cycles
 from rtsim.mbs.model import OK
 from rtsim.vehicle.car.step import vehicle_step
 from rtsim.vehicle.car.effect_kernels import sensor_stage
-from rtsim.vehicle.car.sensors import sensor_model
 from rtsim.vehicle.car.observer import vehicle_state_values
 
 from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SENSOR, H_STATE, H_TX, LOG_RX,
@@ -39,12 +38,12 @@ from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SEN
 
 # LoopParams.ints
 (PI_SENSOR_EVERY, PI_STATE_EVERY, PI_STATUS_EVERY, PI_LOCKSTEP, PI_MODE_CODE, PI_STEP_REQ_ID, PI_STATUS_ID,
- PI_ACK_ID, PI_SENSOR_MODEL) = range(9)
-NPI = 9
+ PI_ACK_ID) = range(8)
+NPI = 8
 # LoopState.li
-(LI_K, LI_MASK, LI_SM_HEAD, LI_PENDING_STEPS, LI_PENDING_COUNTER, LI_STEP_COUNTER, LI_OVERRUNS, LI_BUS_ERROR,
- LI_SENT) = range(9)
-NLI = 9
+(LI_K, LI_MASK, LI_PENDING_STEPS, LI_PENDING_COUNTER, LI_STEP_COUNTER, LI_OVERRUNS, LI_BUS_ERROR,
+ LI_SENT) = range(8)
+NLI = 8
 # the SIM_STATUS values (bridge.can_codec.STATUS_SOURCES order; a last slot stays 0)
 ST_MODE, ST_TIME, ST_OVERRUNS, ST_FAULT0 = 0, 1, 2, 3
 NO_STEP_COUNTER = -1
@@ -66,16 +65,13 @@ class LoopParams(NamedTuple):
     ack_sig_float: np.ndarray
     no_stamp: np.ndarray         # (1,) int64 zero: the status and ack frames carry no ms stamp
     fault_slot: np.ndarray       # per command: its fault flag's index in the status values
-    sensor_model: np.ndarray     # (nsensor, NSM) bias, noise, quantum, delay of the config's sensor model
 
 
 class LoopState(NamedTuple):
     rx: RxState
     li: np.ndarray               # LI_* (int64)
-    true: np.ndarray             # sensor channels as the sensors see them (effects included)
-    values: np.ndarray           # after the config's sensor model
+    values: np.ndarray           # sensor channels as the sensors report them (the vehicle's sensor model)
     state: np.ndarray            # observer state
-    sm_buf: np.ndarray           # the sensor model's delay line (nsensor, nbuf)
     status_values: np.ndarray
     ack_values: np.ndarray       # (3,) time, counter, 0
     words: np.ndarray            # sensor frame payloads (int64, one per frame)
@@ -201,11 +197,8 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
     t1 = k * h
     ints = lp.ints
     if k % ints[PI_SENSOR_EVERY] == 0:
-        sensor_stage(m, d, veh, io.signals, parts.effects, states.effects, ls.true)
-        vals = ls.true
-        if ints[PI_SENSOR_MODEL]:
-            li[LI_SM_HEAD] = sensor_model(lp.sensor_model, ls.sm_buf, li[LI_SM_HEAD], ls.true, ls.values)
-            vals = ls.values
+        sensor_stage(m, d, veh, io.signals, parts.effects, parts.sensors, states.sensors, ls.values)
+        vals = ls.values
         pack_frames(vals, t1, lp.sensor_time_start, lp.sensor_time_mask, lp.sensor_sig_int,
                     lp.sensor_sig_float, ls.words)
         j = rg.heads[H_SENSOR] % rg.sensor_t.shape[0]

@@ -31,12 +31,13 @@ from rtsim.channels import COMMAND_NAMES
 from rtsim.errors import RtsimError, SimulationError
 from rtsim.mbs.model import OK
 from rtsim.realtime.health import LoopHealth
-from rtsim.vehicle.car.sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_params
+from rtsim.vehicle.car.sensors import NSENSOR
+from rtsim.vehicle.kit.sensor_model import seed_noise
 from rtsim.vehicle.car.observer import NSTATE_OUT
 
 from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_OVERRUNS, LI_PENDING_COUNTER, LI_PENDING_STEPS,
-                     LI_SM_HEAD, LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, PI_ACK_ID, PI_LOCKSTEP,
-                     PI_MODE_CODE, PI_SENSOR_EVERY, PI_SENSOR_MODEL, PI_STATE_EVERY, PI_STATUS_EVERY, PI_STATUS_ID,
+                     LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, PI_ACK_ID, PI_LOCKSTEP,
+                     PI_MODE_CODE, PI_SENSOR_EVERY, PI_STATE_EVERY, PI_STATUS_EVERY, PI_STATUS_ID,
                      PI_STEP_REQ_ID, ST_FAULT0, LoopParams, LoopState, loop_run)
 from .rings import Rings, RxWriter, make_rings
 
@@ -95,10 +96,7 @@ class HilLoop:
         self.sensor_every = self._every(min(f.period for f in c.sensor_frames), "sensor period")
         self.status_every = self._every(c.status_frame.period, "status period")
         self.state_every = max(1, int(round(1.0 / (self.state_rate * self.dt))))
-        sm = sensor_params(sim.vm.config.sensors.channels, self.sensor_every * self.dt)
-        sm_on = bool(np.any(sm))
-        if sm_on:
-            seed_sensor_noise(0)          # reproducible noise: a session replays bit for bit
+        seed_noise(0)                     # reproducible sensor noise: a session replays bit for bit
         lay = c.sensor_layout()
         status = c.frame_layout(c.status_frame.name, STATUS_SOURCES)
         ack = c.frame_layout(c.step_ack.name, ("lockstep_sim_time", "lockstep_ack_counter"))
@@ -109,22 +107,19 @@ class HilLoop:
         ints[PI_MODE_CODE] = c.modes[self.mode]
         ints[PI_STEP_REQ_ID], ints[PI_STATUS_ID], ints[PI_ACK_ID] = \
             c.step_request.frame_id, c.status_frame.frame_id, c.step_ack.frame_id
-        ints[PI_SENSOR_MODEL] = sm_on
         faults = self.rx.fault_names
         assert STATUS_SOURCES[ST_FAULT0 + len(faults)] == "fault_bus_error"
         self.lp = LoopParams(self.rx.plan, ints, np.array([self.dt]), lay["frame_id"], lay["time_start"],
                              lay["time_mask"], lay["sig_int"], lay["sig_float"], status["sig_int"],
                              status["sig_float"], ack["sig_int"], ack["sig_float"], np.zeros(1, dtype=np.int64),
-                             np.array([STATUS_SOURCES.index(f"fault_{f}") for f in faults], dtype=np.int64), sm)
-        self.ls = LoopState(self.rx.state, self.li, np.zeros(NSENSOR), np.zeros(NSENSOR), np.zeros(NSTATE_OUT),
-                            np.zeros((NSENSOR, int(sm[:, SM_DELAY_STEPS].max()) + 1)),
+                             np.array([STATUS_SOURCES.index(f"fault_{f}") for f in faults], dtype=np.int64))
+        self.ls = LoopState(self.rx.state, self.li, np.zeros(NSENSOR), np.zeros(NSTATE_OUT),
                             np.zeros(len(STATUS_SOURCES) + 1), np.zeros(3),
                             np.zeros(len(lay["frame_id"]), dtype=np.int64), np.zeros(1, dtype=np.int64),
                             self.cycles)
         li = self.li
         li[LI_K] = 0
         li[LI_MASK] = -1
-        li[LI_SM_HEAD] = 0
         li[LI_PENDING_STEPS] = 0
         self.rx.reset(0.0)                    # a new session: no command received yet
         self._bus_errors_at_status = self.port.errors if self.port is not None else 0

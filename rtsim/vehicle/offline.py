@@ -20,7 +20,8 @@ from rtsim.road.config import load_road
 from .car.config import load_vehicle
 from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT, TO_FX, TO_FY, TO_FZ
 from .car.build import build_vehicle
-from .car.sensors import NSENSOR, SM_DELAY_STEPS, seed_sensor_noise, sensor_model, sensor_params
+from .car.sensors import NSENSOR
+from .kit.sensor_model import seed_noise
 from .car.sim import VehicleSim
 
 STATE_COLUMNS = ("pos_x", "pos_y", "pos_z", "yaw", "speed",
@@ -71,8 +72,9 @@ def vehicle_state(sim: VehicleSim, out: np.ndarray) -> None:
 
 def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None = None,
         seed: int = 0) -> RunResult:
-    """Run the scenario to its duration; rows at the scenario's output rate. Sensor channels carry the
-    vehicle config's sensor model ([sensors.channels]: bias, noise, quantisation, delay) if any."""
+    """Run the scenario to its duration; rows at the scenario's output rate. Sensor channels are what the
+    sensors report (the vehicle's sensor model: the config's [sensors.channels] and sensor effects);
+    `seed` seeds its noise."""
     dt = sc.dt
     nsteps = int(round(sc.duration / dt))
     every = max(1, int(round(1.0 / (sc.spec.output_rate * dt))))
@@ -82,20 +84,11 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
     sens = np.zeros(NSENSOR)
     io = sim.io
     nrow = 0
-    # optional sensor model (bias, noise, quantisation, delay) on the logged samples
-    sm = sensor_params(sim.vm.config.sensors.channels, every * dt)
-    sm_on = bool(np.any(sm))
-    buf = np.zeros((NSENSOR, int(sm[:, SM_DELAY_STEPS].max()) + 1))
-    head = 0
-    noisy = np.zeros(NSENSOR)
-    seed_sensor_noise(seed)
+    seed_noise(seed)                    # the sensor model's noise, reproducible
     t0 = time.perf_counter()
     for n in range(nsteps + 1):
         if n % every == 0:
             _log(sim, sens, rows[nrow])
-            if sm_on:
-                head = sensor_model(sm, buf, head, rows[nrow, 1:1 + NSENSOR].copy(), noisy)
-                rows[nrow, 1:1 + NSENSOR] = noisy
             nrow += 1
             if progress is not None and nrow % 50 == 0:
                 progress(n / nsteps)

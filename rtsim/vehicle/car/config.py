@@ -15,6 +15,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
+from rtsim.channels import SENSOR_NAMES
 from rtsim.configfile import Strict, load_toml, validate
 from rtsim.errors import ConfigError
 
@@ -137,8 +138,10 @@ class Aero(Strict):
 
 
 class SensorNoise(Strict):
+    """What one sensor reports of its physical value (rtsim.vehicle.kit.sensor_model), channel units."""
     noise_std: float = Field(default=0.0, ge=0)
     bias: float = 0.0
+    scale: float = Field(default=1.0, gt=0, le=10)
     quantum: float = Field(default=0.0, ge=0)
     delay_s: float = Field(default=0.0, ge=0, le=0.5)
 
@@ -148,6 +151,14 @@ class Sensors(Strict):
     rate_hz: float = Field(default=500.0, gt=0, le=10000)
     channels: dict[str, SensorNoise] = Field(default_factory=dict,
                                             description="per channel noise, bias, quantisation, delay (off by default)")
+
+    @field_validator("channels")
+    @classmethod
+    def _known_channels(cls, v):
+        unknown = [k for k in v if k not in SENSOR_NAMES]
+        if unknown:
+            raise ValueError(f"unknown sensor channel {unknown[0]!r}; channels are {', '.join(SENSOR_NAMES)}")
+        return v
 
 
 class VehicleConfig(Strict):

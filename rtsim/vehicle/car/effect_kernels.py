@@ -3,8 +3,8 @@ array layouts and the kernels the vehicle step calls when an effect is on.
 
 Parameter array ``Parts.effects`` (float64, FX_SIZE), packed by ``rtsim.vehicle.car.effects.pack_effects``;
 all zeros (but the neutral scales, 1.0) is the nominal model, and with ``FX_ON`` = 0 the vehicle step
-runs exactly the nominal code. State array ``States.effects`` (float64, ``state_size(slots)``): brake
-lag, driveline nodes, the sensor history ring. Units SI; brake torques N*m, pressures kPa.
+runs exactly the nominal code. State array ``States.effects`` (float64, FS_SIZE): brake lag, driveline
+nodes. Units SI; brake torques N*m, pressures kPa.
 
 Formulations (each chosen so that the multibody step stays implicit and allocation-free):
 
@@ -31,8 +31,8 @@ Formulations (each chosen so that the multibody step stays implicit and allocati
   damping in the tangent).
 - mass: a point mass dm at the sprung centre of mass: generalized force -dm r'' - dm g e_z with its
   exact tangent dm on W (rtsim.vehicle.car.step); the constant mass matrix of the model is untouched.
-- sensor_*: y = scale x(t - delay) + bias per channel, with x from a per-step history ring (linear
-  interpolation between steps) (``effect_sensors``).
+- sensor_*: parameters of the one sensor model (rtsim.vehicle.kit.sensor_model), packed there; the
+  vehicle step records the physical values into its history ring (``record_sensors``) for the delays.
 """
 from __future__ import annotations
 
@@ -44,6 +44,8 @@ from rtsim.jit import inline_kernel, kernel
 
 from ..kit.brake import BO_TAU_BREAK, BO_TAU_SLIDE, BP_BREAK_RATIO, BP_GAIN, BS_P_FRONT, BS_P_REAR, BS_TAU_BREAK, \
     BS_TAU_SLIDE
+from ..kit.layout import offsets
+from ..kit.sensor_model import sensor_apply, sensor_fill, sensor_next_row
 from .layout import CI_PHI
 from .sensors import NSENSOR, S_ACCEL_X, S_PITCH, S_ROLL, true_sensors
 
@@ -55,40 +57,34 @@ DRIVELINE_INERTIA = 0.1       # kg*m^2 per driven wheel: propshaft, differential
 DRIVELINE_DAMPING_RATIO = 0.1  # zeta of the node on the spring against a held wheel
 
 # ---- parameter array layout (Parts.effects) -----------------------------------------------------------
-FX_ON = 0             # 1.0: a model effect is on (nothing below FX_SENS_ON is read otherwise)
-FX_RR = 1             # rolling resistance coefficient added, 1
-FX_CDA = 2            # drag area added, m^2
-FX_GRADE = 3          # 1.0: road grade on
-FX_G_SIN = 4          # g sin(theta), m/s^2
-FX_G_1MCOS = 5        # g (1 - cos(theta)), m/s^2
-FX_SIN = 6            # sin(theta)
-FX_COS = 7            # cos(theta)
-FX_BRAKE = 8          # 1.0: a brake effect is on
-FX_B_SCALE = 9        # brake friction scale (1 nominal)
-FX_B_BREAK = 10       # added breakaway torque per wheel, N*m
-FX_B_LAG = 11         # 1 - exp(-h / tau) of the brake lag (0: no lag)
-FX_DL = 12            # 1.0: driveline compliance on
-FX_DL_K = 13          # N*m/rad
-FX_DL_C = 14          # N*m*s/rad
-FX_DL_J = 15          # kg*m^2
-FX_SLIP = 16          # tyre slip stiffness scale (1 nominal)
-FX_RELAX = 17         # relaxation length added, m
-FX_BEARING = 18       # bearing drag per wheel, N*m
-FX_MASS = 19          # added mass at the sprung centre of mass, kg
-FX_M_CHASSIS = 20     # sprung mass + added mass, kg (for the grade)
-FX_M_CORNER = 21      # [4] unsprung masses, kg (for the grade)
-FX_SENS_ON = 25       # 1.0: the sensor stage must apply effects (sensor effects or the grade)
-FX_HIST = 26          # slots of the sensor history ring (0: no delay, no history kept)
-FX_SENS = 27          # [NSENSOR x 3] per channel: delay in steps, scale, bias
-FXS_DELAY, FXS_SCALE, FXS_BIAS = 0, 1, 2
-FX_SIZE = FX_SENS + 3 * NSENSOR
+(FX_ON,           # 1.0: a model effect is on (nothing else is read otherwise)
+ FX_RR,           # rolling resistance coefficient added, 1
+ FX_CDA,          # drag area added, m^2
+ FX_GRADE,        # 1.0: road grade on
+ FX_G_SIN,        # g sin(theta), m/s^2
+ FX_G_1MCOS,      # g (1 - cos(theta)), m/s^2
+ FX_SIN,          # sin(theta)
+ FX_COS,          # cos(theta)
+ FX_BRAKE,        # 1.0: a brake effect is on
+ FX_B_SCALE,      # brake friction scale (1 nominal)
+ FX_B_BREAK,      # added breakaway torque per wheel, N*m
+ FX_B_LAG,        # 1 - exp(-h / tau) of the brake lag (0: no lag)
+ FX_DL,           # 1.0: driveline compliance on
+ FX_DL_K,         # N*m/rad
+ FX_DL_C,         # N*m*s/rad
+ FX_DL_J,         # kg*m^2
+ FX_SLIP,         # tyre slip stiffness scale (1 nominal)
+ FX_RELAX,        # relaxation length added, m
+ FX_BEARING,      # bearing drag per wheel, N*m
+ FX_MASS,         # added mass at the sprung centre of mass, kg
+ FX_M_CHASSIS,    # sprung mass + added mass, kg (for the grade)
+ FX_M_CORNER,     # [4] unsprung masses, kg (for the grade)
+ FX_SIZE) = offsets(*(1,) * 21, 4)
 
 # ---- state array layout (States.effects) ---------------------------------------------------------------
-FS_LAG = 0            # [4] lagged nominal sliding torque, N*m
-FS_DL = 4             # [2 x 3] driven wheels rl, rr: node angle rad, node speed rad/s, shaft torque N*m
-FS_HEAD = 10          # slot of the latest sample in the history ring
-FS_HIST = 11          # [slots x NSENSOR] history of the sensor values at the end of each step
-DRIVEN = (2, 3)       # rl, rr (rear-wheel drive)
+(FS_LAG,          # [4] lagged nominal sliding torque, N*m
+ FS_DL,           # [2 x 3] driven wheels left, right: node angle rad, node speed rad/s, shaft torque N*m
+ FS_SIZE) = offsets(4, 2 * 3)
 
 
 def neutral_params() -> np.ndarray:
@@ -97,13 +93,7 @@ def neutral_params() -> np.ndarray:
     fx[FX_B_SCALE] = 1.0
     fx[FX_SLIP] = 1.0
     fx[FX_COS] = 1.0
-    for c in range(NSENSOR):
-        fx[FX_SENS + 3 * c + FXS_SCALE] = 1.0
     return fx
-
-
-def state_size(slots: int) -> int:
-    return FS_HIST + slots * NSENSOR
 
 
 # ---- helpers -----------------------------------------------------------------------------------------
@@ -221,53 +211,24 @@ def physical_sensors(m, d, veh, signals, fx, out):
 
 
 @kernel
-def record_sensors(m, d, veh, signals, fx, fs):
-    """Append this step's physical sensor values to the history ring (sensor delays)."""
-    slots = int(fx[FX_HIST])
-    head = (int(fs[FS_HEAD]) + 1) % slots
-    fs[FS_HEAD] = head
-    row = fs[FS_HIST + head * NSENSOR:FS_HIST + (head + 1) * NSENSOR]
-    physical_sensors(m, d, veh, signals, fx, row)
+def record_sensors(m, d, veh, signals, fx, sm_state):
+    """Append this step's physical sensor values to the sensor model's history ring (for its delays)."""
+    o = sensor_next_row(sm_state, NSENSOR)
+    physical_sensors(m, d, veh, signals, fx, sm_state[o:o + NSENSOR])
 
 
 @kernel
-def fill_history(m, d, veh, signals, fx, fs):
-    """Fill the whole history ring with the current values (before the first step nothing older is
-    known: the signal is held)."""
-    slots = int(fx[FX_HIST])
-    row = fs[FS_HIST:FS_HIST + NSENSOR]
-    physical_sensors(m, d, veh, signals, fx, row)
-    for s in range(1, slots):
-        for c in range(NSENSOR):
-            fs[FS_HIST + s * NSENSOR + c] = row[c]
-    fs[FS_HEAD] = 0.0
+def fill_history(m, d, veh, signals, fx, sm_state, scratch):
+    """Fill the sensor model's whole history ring with the current physical values (before the first
+    step nothing older is known: the signal is held)."""
+    physical_sensors(m, d, veh, signals, fx, scratch)
+    sensor_fill(sm_state, scratch)
 
 
 @kernel
-def effect_sensors(m, d, veh, signals, fx, fs, out):
-    """The sensor stage with effects: physical values, then per channel y = scale x(t - delay) + bias,
-    x(t - delay) linear between the per-step samples of the history ring."""
+def sensor_stage(m, d, veh, signals, fx, sm_params, sm_state, out):
+    """The sensor channels as the car's sensors report them: the physical values (true_sensors, and
+    what model effects change in the sensing) through the sensor model (rtsim.vehicle.kit.sensor_model;
+    with every channel neutral, exactly the physical values). A drop-in for true_sensors in compiled loops."""
     physical_sensors(m, d, veh, signals, fx, out)
-    slots = int(fx[FX_HIST])
-    head = int(fs[FS_HEAD])
-    for c in range(NSENSOR):
-        k = FX_SENS + 3 * c
-        x = out[c]
-        lag = fx[k + FXS_DELAY]
-        if lag > 0.0 and slots > 0:
-            n = int(lag)
-            frac = lag - n
-            a = fs[FS_HIST + ((head - n) % slots) * NSENSOR + c]
-            b = fs[FS_HIST + ((head - n - 1) % slots) * NSENSOR + c]
-            x = a + frac * (b - a)
-        out[c] = fx[k + FXS_SCALE] * x + fx[k + FXS_BIAS]
-
-
-@kernel
-def sensor_stage(m, d, veh, signals, fx, fs, out):
-    """The sensor channels as the car's sensors show them: true_sensors when no effect concerns the
-    sensors (bit-identical), effect_sensors otherwise. A drop-in for true_sensors in compiled loops."""
-    if fx[FX_SENS_ON] > 0.5:
-        effect_sensors(m, d, veh, signals, fx, fs, out)
-    else:
-        true_sensors(m, d, veh, signals, out)
+    sensor_apply(sm_params, sm_state, out, out)

@@ -50,8 +50,7 @@ from rtsim.errors import ConfigError
 from .effect_kernels import (
     BRAKE_STICTION_PRESSURE, DRIVELINE_DAMPING_RATIO, DRIVELINE_INERTIA, FX_B_BREAK, FX_B_LAG, FX_B_SCALE,
     FX_BEARING, FX_BRAKE, FX_CDA, FX_COS, FX_DL, FX_DL_C, FX_DL_J, FX_DL_K, FX_G_1MCOS, FX_G_SIN, FX_GRADE,
-    FX_HIST, FX_M_CHASSIS, FX_M_CORNER, FX_MASS, FX_ON, FX_RELAX, FX_RR, FX_SENS, FX_SENS_ON, FX_SIN, FX_SLIP,
-    FXS_BIAS, FXS_DELAY, FXS_SCALE, neutral_params,
+    FX_M_CHASSIS, FX_M_CORNER, FX_MASS, FX_ON, FX_RELAX, FX_RR, FX_SIN, FX_SLIP, neutral_params,
 )
 from .layout import G
 
@@ -303,12 +302,6 @@ def effects_toml(effects) -> str:
 
 
 # ------------------------------------------------------------------------------------------- packing
-def history_slots(effects: dict, dt: float) -> int:
-    """Slots of the per-step sensor history the active delays need (0: none)."""
-    delays = [row["delay"] for row in effects.get("sensor_delay", ()) if row["delay"] > 0.0]
-    return int(math.floor(max(delays) / dt)) + 2 if delays else 0
-
-
 def pack_effects(effects: dict, dt: float, chassis_mass: float, unsprung_masses) -> np.ndarray:
     """The kernels' parameter array (rtsim.vehicle.car.effect_kernels FX_*) of a validated effects mapping,
     for integrator step dt (s), sprung mass (kg) and the four unsprung masses (kg)."""
@@ -361,20 +354,8 @@ def pack_effects(effects: dict, dt: float, chassis_mass: float, unsprung_masses)
         fx[FX_BEARING] = t
         model_on = True
     fx[FX_ON] = 1.0 if model_on else 0.0
-    sensor_on = False
-    for name, slot in (("sensor_delay", FXS_DELAY), ("sensor_scale", FXS_SCALE), ("sensor_bias", FXS_BIAS)):
-        for row in effects.get(name, ()):
-            c = SENSOR_NAMES.index(row["channel"])
-            v = row[EFFECTS[name].params[0].name]
-            if slot == FXS_DELAY:
-                v = v / dt
-                v = float(round(v)) if abs(v - round(v)) < 1e-9 else v     # whole steps exactly
-            fx[FX_SENS + 3 * c + slot] = v
-            sensor_on = True
-    fx[FX_HIST] = history_slots(effects, dt)
-    fx[FX_SENS_ON] = 1.0 if (sensor_on or fx[FX_GRADE] > 0.5) else 0.0
     return fx
 
 
 __all__ = ["ParamSpec", "EffectSpec", "EFFECTS", "SENSOR_EFFECTS", "MODEL_EFFECTS", "validate_effects",
-           "pack_effects", "history_slots", "effects_toml"]
+           "pack_effects", "effects_toml"]

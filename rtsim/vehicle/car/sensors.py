@@ -1,6 +1,6 @@
-"""The prototype's sensors (the seed's Table 1) as channels in SI units (rtsim.channels.SENSORS), computed
-from the multibody state, and an optional sensor model per channel: bias, white noise, quantisation
-and a transport delay (all off by default).
+"""The car's sensors (the seed's Table 1) as channels in SI units (rtsim.channels.SENSORS): their
+physical values computed from the multibody state. What the sensors report of them (bias, scale,
+noise, quantisation, delay) is the kit's sensor model (rtsim.vehicle.kit.sensor_model).
 
 Inertial channels at the IMU mounting point rho (body frame, from the centre of mass):
   a = r'' + alpha x rho + omega x (omega x rho),  accel = R^T (a - g)   (specific force, body axes)
@@ -11,9 +11,7 @@ Steer angles: the heading of each front wheel's spin axis in the body frame, del
 """
 from __future__ import annotations
 
-from math import asin, atan2, floor
-
-import numpy as np
+from math import asin, atan2
 
 from rtsim.channels import SENSOR_NAMES
 from rtsim.jit import kernel
@@ -32,9 +30,6 @@ assert len(SENSOR_NAMES) == NSENSOR and SENSOR_NAMES[S_WHEEL_TORQUE_RR] == "whee
 SG_BRAKE_PRESSURE, SG_SW_ANGLE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_THROTTLE, SG_TORQUE_LEFT, SG_TORQUE_RIGHT = range(7)
 NSIGNAL = 7
 
-# sensor model parameters per channel
-SM_BIAS, SM_NOISE, SM_QUANTUM, SM_DELAY_STEPS = range(4)
-NSM = 4
 G_WORLD_Z = -9.81
 
 
@@ -92,41 +87,3 @@ def true_sensors(m, d, veh, signals, out):
     out[S_THROTTLE] = signals[SG_THROTTLE]
     out[S_WHEEL_TORQUE_RL] = signals[SG_TORQUE_LEFT]
     out[S_WHEEL_TORQUE_RR] = signals[SG_TORQUE_RIGHT]
-
-
-@kernel
-def sensor_model(params, buf, head, true_values, out):
-    """Apply bias, noise, quantisation and delay per channel. buf (NSENSOR, nbuf) is a ring buffer of
-    past true values, head the slot to write; returns the next head."""
-    nbuf = buf.shape[1]
-    for c in range(NSENSOR):
-        buf[c, head] = true_values[c]
-        lag = int(params[c, SM_DELAY_STEPS])
-        x = buf[c, (head - lag) % nbuf]
-        x += params[c, SM_BIAS]
-        if params[c, SM_NOISE] > 0.0:
-            x += params[c, SM_NOISE] * np.random.standard_normal()
-        qn = params[c, SM_QUANTUM]
-        if qn > 0.0:
-            x = qn * floor(x / qn + 0.5)
-        out[c] = x
-    return (head + 1) % nbuf
-
-
-@kernel
-def seed_sensor_noise(seed):
-    """Seed the noise generator of the compiled sensor model (reproducible runs)."""
-    np.random.seed(seed)
-
-
-def sensor_params(channels: dict, dt: float) -> np.ndarray:
-    """Sensor model parameters from the vehicle config's [sensors.channels] (name -> SensorNoise), for
-    samples dt seconds apart (delays are whole samples)."""
-    p = np.zeros((NSENSOR, NSM))
-    for name, spec in channels.items():
-        c = SENSOR_NAMES.index(name) if name in SENSOR_NAMES else -1
-        if c < 0:
-            from rtsim.errors import ConfigError
-            raise ConfigError(f"sensors.channels: unknown channel {name!r}; channels are {', '.join(SENSOR_NAMES)}")
-        p[c] = (spec.bias, spec.noise_std, spec.quantum, round(spec.delay_s / dt))
-    return p

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rtsim.channels import SENSOR_NAMES
 from rtsim.errors import ConfigError
 from rtsim.mbs import Simulation
 from rtsim.mbs.integrator import NEED_FACTOR
@@ -16,18 +17,21 @@ from rtsim.road.model import Road
 from rtsim.road.query import NQUERY, Q_NX, Q_NZ, Q_Z, road_query
 
 from ..kit.brake import BP_GAIN, BS_P_FRONT, BS_P_REAR, brake_config, brake_params, brake_state
-from .step import CMD_BRAKE, EX_SELECTOR, Parts, States, make_io, make_vehicle_data, vehicle_advance
-from .effect_kernels import (FS_DL, FS_HIST, FS_LAG, FX_B_LAG, FX_DL, FX_DL_K, FX_HIST, FX_MASS, FX_ON, fill_history,
-                             neutral_params, sensor_stage, state_size)
-from .effects import pack_effects, validate_effects
-from .build import VehicleModel
-from .layout import CI_PHI, WHEELS
-from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT, PP_MEASURED,
-                         powertrain_config, powertrain_params, powertrain_state_rolling, powertrain_step)
-from .sensors import NSENSOR
+from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT,
+                              PP_MEASURED, powertrain_config, powertrain_params, powertrain_state_rolling,
+                              powertrain_step)
+from ..kit.sensor_model import ST_ON as SM_ST_ON, ST_SLOTS as SM_ST_SLOTS
+from ..kit.sensor_model import neutral_params as sm_neutral, sensor_params, sensor_state
 from ..kit.steering import steering_config, steering_params, steering_state
 from ..kit.tyre.magic_formula import effective_rolling_radius
 from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
+from .build import VehicleModel
+from .effect_kernels import (FS_DL, FS_LAG, FS_SIZE, FX_B_LAG, FX_DL, FX_DL_K, FX_MASS, FX_ON, fill_history,
+                             neutral_params, sensor_stage)
+from .effects import pack_effects, validate_effects
+from .layout import CI_PHI, WHEELS
+from .sensors import NSENSOR
+from .step import CMD_BRAKE, EX_SELECTOR, Parts, States, make_io, make_vehicle_data, vehicle_advance
 
 
 def _align_z(n: np.ndarray) -> np.ndarray:
@@ -71,8 +75,8 @@ class VehicleSim:
         self.stcfg = steering_config(cfg.steering or None, "steering")
         sp = steering_params(self.stcfg)
         self.vd = make_vehicle_data()
-        self.parts = Parts(self.tp, bp, pp, sp, neutral_params())
-        self.states = States(bs, ps, steering_state(sp, self.dt), np.zeros(state_size(0)))
+        self.parts = Parts(self.tp, bp, pp, sp, neutral_params(), sm_neutral(NSENSOR))
+        self.states = States(bs, ps, steering_state(sp, self.dt), np.zeros(FS_SIZE), sensor_state(self.parts.sensors))
         self._effects: dict = {}
         self.sim = Simulation(mech, self.dt, q0=q0, qd0=qd0)
         self.data = self.sim.data
@@ -83,6 +87,8 @@ class VehicleSim:
         start = cfg.effects if effects is None else effects
         if start:
             self.set_effects(start)
+        else:
+            self._set_sensor_model({})
 
     def _placed(self, q: np.ndarray, position, yaw: float, speed: float) -> tuple[np.ndarray, np.ndarray]:
         """Design coordinates moved onto the road: yawed by `yaw`, the design ground point under the
@@ -152,14 +158,9 @@ class VehicleSim:
         old = self.parts.effects
         lag_on = old[FX_ON] > 0.5 and old[FX_B_LAG] > 0.0 and fx[FX_B_LAG] > 0.0
         dl_on = old[FX_ON] > 0.5 and old[FX_DL] > 0.5
-        slots, old_slots = int(fx[FX_HIST]), int(old[FX_HIST])
         if fx[FX_MASS] != old[FX_MASS] or fx[FX_DL] != old[FX_DL] or fx[FX_DL_K] != old[FX_DL_K]:
             self.data.flags[NEED_FACTOR] = 1
         fs = self.states.effects
-        if fs.shape[0] != state_size(slots):
-            new_fs = np.zeros(state_size(slots))
-            new_fs[:FS_HIST] = fs[:FS_HIST]
-            fs = new_fs
         bp, bs = self.parts.brake, self.states.brake
         if not lag_on:
             for i in range(4):
@@ -171,11 +172,23 @@ class VehicleSim:
                 kp = self.vm.vehicle.corner_idx[i, CI_PHI]
                 t, w = (fs[o + 2], fs[o + 1]) if dl_on else (float(self.vd.drive[i]), self.data.qd[kp])
                 fs[o:o + 3] = (self.data.q[kp] + t / fx[FX_DL_K], w, t)
-        if slots and slots != old_slots:
-            fill_history(self.m, self.data, self.vm.vehicle, self.io.signals, fx, fs)
         old[:] = fx                                      # in place: holders of self.parts stay valid
-        self.states = self.states._replace(effects=fs)
+        self._set_sensor_model(eff)
         self._effects = eff
+
+    def _set_sensor_model(self, effects: dict) -> None:
+        """The sensor model's parameters from the config's [sensors.channels] and the sensor effects, in
+        place; its history ring kept when its length stays, else a new one holding the present values."""
+        sp = sensor_params(SENSOR_NAMES, self.dt, self.vm.config.sensors.channels, effects)
+        ss = sensor_state(sp)
+        old = self.states.sensors
+        self.parts.sensors[:] = sp
+        if old.shape == ss.shape and old[SM_ST_SLOTS] == ss[SM_ST_SLOTS]:
+            old[SM_ST_ON] = ss[SM_ST_ON]
+            return
+        if ss[SM_ST_SLOTS] > 0:
+            fill_history(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, ss, np.zeros(NSENSOR))
+        self.states = self.states._replace(sensors=ss)
 
     def set_torque_mode(self, measured: bool) -> None:
         """Drive with the measured wheel torques (io.extra) instead of the engine model."""
@@ -189,11 +202,11 @@ class VehicleSim:
             self.sim._raise(status, int(self.data.stats[0]) + 1)
 
     def sensors(self, out: np.ndarray | None = None) -> np.ndarray:
-        """Noise-free sensor channels of the current state, rtsim.channels.SENSOR_NAMES order, with the
-        active sensor effects (scale x(t - delay) + bias) and what model effects change in the sensing
-        (the grade's tilted gravity); the config's noise model ([sensors.channels]) comes on top of
-        these (rtsim.vehicle.offline)."""
+        """The sensor channels as the car's sensors report them, rtsim.channels.SENSOR_NAMES order: the
+        physical values (with what model effects change in the sensing: the grade's tilted gravity)
+        through the sensor model (the config's [sensors.channels] and the sensor effects). Noise, if
+        any, is drawn at each call (seed it with rtsim.vehicle.kit.sensor_model.seed_noise)."""
         out = np.zeros(NSENSOR) if out is None else out
-        sensor_stage(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, self.states.effects,
-                     out)
+        sensor_stage(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, self.parts.sensors,
+                     self.states.sensors, out)
         return out

@@ -34,7 +34,7 @@ from rtsim.mbs.model import OK
 from rtsim.road.query import CT_D, CT_EX, CT_GAMMA, CT_MU, CT_NX, CT_PX, CT_RR, NCONTACT, wheel_contact
 
 from .effect_kernels import (BEARING_OMEGA_EPS, FS_DL, FX_BEARING, FX_BRAKE, FX_CDA, FX_DL,
-                             FX_G_1MCOS, FX_G_SIN, FX_GRADE, FX_HIST, FX_M_CHASSIS, FX_M_CORNER, FX_MASS, FX_ON,
+                             FX_G_1MCOS, FX_G_SIN, FX_GRADE, FX_M_CHASSIS, FX_M_CORNER, FX_MASS, FX_ON,
                              FX_RELAX, FX_RR, FX_SLIP, RR_SPEED_EPS, driveline_commit, driveline_torque,
                              effects_brake, record_sensors, smooth_sign)
 from ..kit.brake import BI_SIZE, BO_LINE, BO_SIZE, BP_EPS, BS_TAU_SLIDE, brake_commit, brake_step, brake_wheel_torque
@@ -42,6 +42,7 @@ from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZ
                          PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT, powertrain_step)
 from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_SW_ANGLE, SG_THROTTLE,
                       SG_TORQUE_LEFT, SG_TORQUE_RIGHT)
+from ..kit.sensor_model import ST_SLOTS as SM_ST_SLOTS
 from ..kit.steering import SO_SIZE, SO_SW_ANGLE, SO_TORQUE, steering_control, steering_forces, steering_outputs, \
     steering_tangent
 from .layout import (
@@ -365,10 +366,11 @@ def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, h):
     return step_with(m, d, h, _car_forces, (veh, vd, road, tp, bp, bs, stp, sts, fx, fs))
 
 
-# parameter arrays; effects: rtsim.vehicle.car.effect_kernels FX_* (neutral_params() for the nominal model)
-Parts = namedtuple("Parts", ["tyre", "brake", "powertrain", "steering", "effects"])
-# subsystem state arrays; effects: FS_* (brake lag, driveline nodes, sensor history)
-States = namedtuple("States", ["brake", "powertrain", "steering", "effects"])
+# parameter arrays; effects: rtsim.vehicle.car.effect_kernels FX_* (neutral_params() for the nominal model);
+# sensors: the sensor model's (rtsim.vehicle.kit.sensor_model, (NSENSOR, NSM))
+Parts = namedtuple("Parts", ["tyre", "brake", "powertrain", "steering", "effects", "sensors"])
+# subsystem state arrays; effects: FS_* (brake lag, driveline nodes); sensors: the sensor model's history
+States = namedtuple("States", ["brake", "powertrain", "steering", "effects", "sensors"])
 IO = namedtuple("IO", [
     "commands",     # (3,) throttle_angle_cmd rad, brake_pressure_cmd kPa, steering_wheel_angle_cmd rad
     "extra",        # (4,) measured drive torque on the driven axle's left, right wheel (N m), selector
@@ -447,8 +449,8 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     io.signals[SG_THROTTLE] = io.pt_out[PO_THROTTLE]
     io.signals[SG_TORQUE_LEFT] = io.pt_out[PO_TORQUE_LEFT]
     io.signals[SG_TORQUE_RIGHT] = io.pt_out[PO_TORQUE_RIGHT]
-    if fx[FX_HIST] > 0.5:
-        record_sensors(m, d, veh, io.signals, fx, fs)
+    if states.sensors[SM_ST_SLOTS] > 0.0:
+        record_sensors(m, d, veh, io.signals, fx, states.sensors)
     return OK
 
 

@@ -1,0 +1,190 @@
+"""The sensor model: what a sensor reports of the physical value it senses, per channel, in sensor-chain
+order:
+
+    y = quantise(scale * x(t - delay) + bias + noise)
+
+- delay (s): the physical value `delay` earlier, linear between the samples of a history ring that the
+  owner records at its own cadence (every vehicle step; for a time series, every sample); before the
+  first recorded sample the first value is held;
+- scale (1) and bias (channel unit): a gain and an offset error;
+- noise: white, Gaussian, of standard deviation `noise` (channel unit), from numba's generator (seed it
+  with `seed_noise` for reproducible runs);
+- quantise: rounding to the nearest multiple of `quantum` (0: none).
+
+One implementation for every user: the vehicle's sensor stage (offline runs and the service's compiled
+loop call the same kernel) and the validation workflow (`apply_to_series` on a model's sampled outputs).
+Its parameters come from two sources, combined in `sensor_params`: the vehicle config's
+``[sensors.channels.<name>]`` (bias, scale, noise_std, quantum, delay_s) and the switchable sensor
+effects of the validation workflow (sensor_bias, sensor_scale, sensor_delay): biases and delays add,
+scales multiply.
+
+Arrays: parameters (nch, NSM) float64; state `HEADER + slots * nch` float64: the header (head slot,
+number of slots, a flag that any parameter is not neutral), then the ring of the last `slots` recorded
+rows. A model with every channel neutral (scale 1, all else 0) reports x exactly (bit for bit).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from math import floor
+
+import numpy as np
+
+from rtsim.jit import kernel
+
+from .layout import offsets
+
+(SM_SCALE,       # 1
+ SM_BIAS,        # channel unit
+ SM_NOISE,       # channel unit, standard deviation
+ SM_QUANTUM,     # channel unit, 0: no rounding
+ SM_DELAY,       # recorded rows (float: linear between rows)
+ NSM) = offsets(1, 1, 1, 1, 1)
+
+(ST_HEAD,        # ring slot of the latest recorded row
+ ST_SLOTS,       # rows in the ring (0: no delay anywhere, nothing recorded)
+ ST_ON,          # 1.0: some channel is not neutral
+ HEADER) = offsets(1, 1, 1)
+
+
+def neutral_params(nch: int) -> np.ndarray:
+    """Every channel reports its physical value exactly."""
+    p = np.zeros((nch, NSM))
+    p[:, SM_SCALE] = 1.0
+    return p
+
+
+def sensor_params(names, step: float, channels: Mapping | None = None, effects: Mapping | None = None) -> np.ndarray:
+    """Parameters for the channels `names`, recorded every `step` seconds, from the config's per-channel
+    specs (`channels`: name -> an object or mapping with bias, scale, noise_std, quantum, delay_s) and the
+    canonical sensor effects (`effects`: {"sensor_bias": [{"channel", "bias"}], "sensor_scale":
+    [{"channel", "scale"}], "sensor_delay": [{"channel", "delay"}]}). Unknown channel: ValueError."""
+    names = list(names)
+    p = neutral_params(len(names))
+
+    def index(name):
+        if name not in names:
+            raise ValueError(f"unknown sensor channel {name!r}; channels are {', '.join(names)}")
+        return names.index(name)
+
+    for name, spec in (channels or {}).items():
+        get = spec.get if isinstance(spec, Mapping) else (lambda k, d=None, s=spec: getattr(s, k, d))
+        c = index(name)
+        p[c, SM_SCALE] *= float(get("scale", 1.0))
+        p[c, SM_BIAS] += float(get("bias", 0.0))
+        p[c, SM_NOISE] = float(get("noise_std", 0.0))
+        p[c, SM_QUANTUM] = float(get("quantum", 0.0))
+        p[c, SM_DELAY] += float(get("delay_s", 0.0)) / step
+    for row in (effects or {}).get("sensor_bias", ()):
+        p[index(row["channel"]), SM_BIAS] += float(row["bias"])
+    for row in (effects or {}).get("sensor_scale", ()):
+        p[index(row["channel"]), SM_SCALE] *= float(row["scale"])
+    for row in (effects or {}).get("sensor_delay", ()):
+        p[index(row["channel"]), SM_DELAY] += float(row["delay"]) / step
+    whole = np.round(p[:, SM_DELAY])
+    near = np.abs(p[:, SM_DELAY] - whole) < 1e-9
+    p[near, SM_DELAY] = whole[near]          # a delay of whole steps is exactly that many rows
+    return p
+
+
+def ring_slots(params: np.ndarray) -> int:
+    """Rows the ring needs for the longest delay (0 when there is none)."""
+    longest = float(params[:, SM_DELAY].max()) if params.size else 0.0
+    return int(floor(longest)) + 2 if longest > 0.0 else 0
+
+
+def sensor_state(params: np.ndarray) -> np.ndarray:
+    nch = params.shape[0]
+    slots = ring_slots(params)
+    s = np.zeros(HEADER + slots * nch)
+    s[ST_SLOTS] = slots
+    s[ST_ON] = 0.0 if np.array_equal(params, neutral_params(nch)) else 1.0
+    return s
+
+
+@kernel
+def seed_noise(seed):
+    """Seed the noise generator of the compiled sensor model (reproducible runs)."""
+    np.random.seed(seed)
+
+
+@kernel
+def sensor_record(state, x):
+    """Append the physical values x (one per channel) to the ring (no-op without delays)."""
+    slots = int(state[ST_SLOTS])
+    if slots == 0:
+        return
+    nch = x.shape[0]
+    head = (int(state[ST_HEAD]) + 1) % slots
+    state[ST_HEAD] = head
+    o = HEADER + head * nch
+    for c in range(nch):
+        state[o + c] = x[c]
+
+
+@kernel
+def sensor_next_row(state, nch):
+    """Advance the ring's head and return the offset in `state` of its row (nch floats), for the caller
+    to write the latest physical values into (there must be a ring: ST_SLOTS > 0)."""
+    slots = int(state[ST_SLOTS])
+    head = (int(state[ST_HEAD]) + 1) % slots
+    state[ST_HEAD] = head
+    return HEADER + head * nch
+
+
+@kernel
+def sensor_fill(state, x):
+    """Fill the whole ring with x (nothing older is known: the value is held)."""
+    slots = int(state[ST_SLOTS])
+    nch = x.shape[0]
+    for k in range(slots):
+        for c in range(nch):
+            state[HEADER + k * nch + c] = x[c]
+    state[ST_HEAD] = 0.0
+
+
+@kernel
+def sensor_apply(params, state, x, out):
+    """out = what the sensors report of the physical values x, whose latest row the ring holds already
+    when there are delays (x and out may be the same array)."""
+    nch = x.shape[0]
+    if state[ST_ON] < 0.5:
+        for c in range(nch):
+            out[c] = x[c]
+        return
+    slots = int(state[ST_SLOTS])
+    head = int(state[ST_HEAD])
+    for c in range(nch):
+        v = x[c]
+        lag = params[c, SM_DELAY]
+        if lag > 0.0 and slots > 0:
+            n = int(lag)
+            frac = lag - n
+            a = state[HEADER + ((head - n) % slots) * nch + c]
+            b = state[HEADER + ((head - n - 1) % slots) * nch + c]
+            v = a + frac * (b - a)
+        v = params[c, SM_SCALE] * v + params[c, SM_BIAS]
+        if params[c, SM_NOISE] > 0.0:
+            v += params[c, SM_NOISE] * np.random.standard_normal()
+        qn = params[c, SM_QUANTUM]
+        if qn > 0.0:
+            v = qn * floor(v / qn + 0.5)
+        out[c] = v
+
+
+@kernel
+def _apply_rows(params, state, x, out):
+    for k in range(x.shape[0]):
+        if k == 0:
+            sensor_fill(state, x[0])
+        else:
+            sensor_record(state, x[k])
+        sensor_apply(params, state, x[k], out[k])
+
+
+def apply_to_series(params: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The model on a sampled series x (n samples, nch channels; delays in samples); returns a new array."""
+    x = np.ascontiguousarray(x, dtype=float)
+    out = np.empty_like(x)
+    if x.shape[0]:
+        _apply_rows(params, sensor_state(params), x, out)
+    return out
