@@ -71,16 +71,14 @@ state array the closed-loop drivers read; `sc.road_path` / `sc.vehicle_path` are
 """
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal, Optional, Union
 
 import numpy as np
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, StrictBool, ValidationError
-from pydantic import create_model, model_validator
-from pydantic_core import PydanticCustomError
+from pydantic import Field, StrictBool, create_model, model_validator
 
+from rtsim.configfile import Range, Strict, bad, load, problem
 from rtsim.errors import ConfigError
 
 from .base import INPUT_NAMES, INPUT_UNITS, LIMITS, NSTATE, S_SPEED, S_X, S_Y
@@ -96,25 +94,6 @@ SCENARIO_DIR = Path(__file__).resolve().parents[1] / "configs" / "scenarios"
 
 # ---------------------------------------------------------------------------------------------------
 # Value types with ranges that report the whole allowed range
-
-
-def _number(x: Any) -> Any:
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
-        raise PydanticCustomError("not_number", "must be a number")
-    return float(x)
-
-
-def Range(lo: float, hi: float, unit: str = "", lo_open: bool = False, hi_open: bool = False):
-    """A float within [lo, hi] (or open at either end); NaN is rejected."""
-    def check(x: float) -> float:
-        if not math.isfinite(x):
-            raise PydanticCustomError("not_finite", "must be a finite number")
-        ok = (x > lo if lo_open else x >= lo) and (x < hi if hi_open else x <= hi)
-        if not ok:
-            raise PydanticCustomError("out_of_range", "out of range",
-                                      {"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open, "unit": unit})
-        return x
-    return Annotated[float, BeforeValidator(_number), AfterValidator(check)]
 
 
 Num = Range(-1e9, 1e9)               # any finite value (channel ranges are checked after)
@@ -170,24 +149,8 @@ def _param_fields(ranges: dict, defaults) -> dict:
             for n, (lo, hi, unit, lo_open) in ranges.items()}
 
 
-class _Model(BaseModel):
-    """Unknown keys are errors that list the allowed keys."""
-    model_config = ConfigDict(extra="forbid")
-
-    @model_validator(mode="before")
-    @classmethod
-    def _known_keys(cls, data: Any) -> Any:
-        if isinstance(data, dict):
-            for k, v in data.items():
-                if k not in cls.model_fields:
-                    raise PydanticCustomError("unknown_key", "unknown key",
-                                              {"key": k, "value": v, "allowed": ", ".join(cls.model_fields)})
-        return data
-
-
-def _bad(key: str, value: Any, msg: str) -> PydanticCustomError:
-    """An error about `key` (relative to the model that raises it)."""
-    return PydanticCustomError("bad_key", msg, {"key": key, "value": value})
+_Model = Strict          # the one config base (rtsim.configfile): unknown keys listed, immutable
+_bad = bad
 
 
 def _increasing(name: str, xs: list[float]) -> None:
@@ -414,71 +377,8 @@ class ScenarioSpec(_Model):
 # Error messages
 
 
-def _fmt_value(v: Any) -> str:
-    s = repr(v)
-    return s if len(s) <= 60 else s[:57] + "..."
-
-
-def _key(loc: tuple) -> str:
-    out = ""
-    prev: Any = None
-    for part in loc:
-        if isinstance(part, int):
-            out += f"[{part}]"
-        elif part in PROFILE_TYPES and (isinstance(prev, int) or prev in INPUT_NAMES):
-            pass  # the union tag pydantic inserts after a profile field
-        else:
-            out += ("." if out else "") + str(part)
-        prev = part
-    return out
-
-
-def _message(file: Path, err: dict) -> str:
-    loc = tuple(err["loc"])
-    ctx = err.get("ctx") or {}
-    kind = err["type"]
-    value = err.get("input")
-    if kind == "unknown_key":
-        loc = loc + (ctx["key"],)
-        value = ctx["value"]
-        reason = f"unknown key (allowed: {ctx['allowed']})"
-    elif kind == "bad_key":
-        loc = loc + tuple(ctx["key"].split("."))
-        value = ctx["value"]
-        reason = err["msg"]
-    elif kind == "out_of_range":
-        leaf = _key(loc).rsplit(".", 1)[-1]
-        lo, hi = ctx["lo"], ctx["hi"]
-        unit = f" {ctx['unit']}" if ctx["unit"] else ""
-        reason = (f"out of range (allowed {lo:g} {'<' if ctx['lo_open'] else '<='} {leaf} "
-                  f"{'<' if ctx['hi_open'] else '<='} {hi:g}{unit})")
-    elif kind == "missing":
-        return f"{file}: {_key(loc)}: missing (required)"
-    elif kind == "union_tag_invalid":
-        reason = f"unknown profile type (allowed: {', '.join(PROFILE_TYPES)})"
-        loc = loc + ("type",)
-        value = ctx.get("tag", value)
-    elif kind == "union_tag_not_found":
-        return f"{file}: {_key(loc)}.type: missing (required; one of {', '.join(PROFILE_TYPES)})"
-    elif kind in ("model_type", "model_attributes_type", "dict_type"):
-        reason = "must be a table (a [section] or {key = value, ...})"
-    elif kind == "list_type":
-        reason = "must be a list [...]"
-    elif kind == "too_short":
-        reason = f"must have at least {ctx.get('min_length', 1)} entries"
-    elif kind == "literal_error":
-        reason = f"must be one of {ctx.get('expected')}"
-    elif kind == "string_pattern_mismatch":
-        reason = "must contain only letters, digits, '_' and '-'"
-    else:
-        reason = err["msg"]
-        if reason.startswith("Value error, "):
-            reason = reason[len("Value error, "):]
-    return f"{file}: {_key(loc)} = {_fmt_value(value)}: {reason}"
-
-
 def _fail(file: Path, key: str, value: Any, reason: str) -> ConfigError:
-    return ConfigError(f"{file}: {key} = {_fmt_value(value)}: {reason}")
+    return problem(file, key, value, reason)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -539,16 +439,7 @@ def load_scenario(path: str | Path, check_files: bool = False) -> Scenario:
     """Load and validate a scenario file; ConfigError on any problem (see the module docstring).
     check_files: also require the road and vehicle files to exist."""
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read scenario ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: TOML syntax error: {exc}") from None
-    try:
-        spec = ScenarioSpec.model_validate(raw)
-    except ValidationError as exc:
-        raise ConfigError(_message(path, exc.errors()[0])) from None
+    spec = load(ScenarioSpec, path)
 
     base = path.parent
     road = (base / spec.road).resolve()

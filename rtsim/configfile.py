@@ -1,56 +1,237 @@
-"""Loading TOML configuration files into validated pydantic models, with one-line errors that name
-the file, the key, the offending value and what is allowed."""
+"""The one configuration mechanism of rtsim: TOML files read by `load_toml`, validated by pydantic models
+derived from `Strict`, every error reported by one formatter as one line naming the file, the key (dotted,
+list items as [i]), the offending value and what is allowed:
+
+    configs/scenarios/x.toml: duration = -1.0: out of range (allowed 0 < duration <= 3600 s)
+    configs/vehicles/x.toml: steering.kp = -1.0: out of range (allowed 0 <= kp <= 1e+06 N m/rad)
+    configs/roads/x.toml: heigth = 1.0: unknown key (allowed: type, height, mu, rolling_resistance)
+
+Ranges are declared with `Range(lo, hi, unit)` (an annotated float: finite, within the bounds, the unit
+in the message); checks across keys raise `bad(key, value, reason)` inside a model validator; checks
+after validation (files that must exist, sampled profiles) raise `problem(source, key, value, reason)`.
+Vehicles, roads, scenarios, drivers and the service's settings all load through here.
+"""
 from __future__ import annotations
 
+import math
 import tomllib
+import types
+import typing
 from pathlib import Path
-from typing import TypeVar
+from typing import Annotated, Any, TypeVar, Union
 
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, TypeAdapter, ValidationError, \
+    model_validator
+from pydantic_core import PydanticCustomError
 
 from rtsim.errors import ConfigError
 
-M = TypeVar("M", bound=BaseModel)
+M = TypeVar("M")
+
+
+# ---- declarations ----------------------------------------------------------------------------------
+def _number(x: Any) -> Any:
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise PydanticCustomError("not_number", "must be a number")
+    return float(x)
+
+
+def Range(lo: float, hi: float, unit: str = "", lo_open: bool = False, hi_open: bool = False):
+    """A float within [lo, hi] (open at either end if asked), finite; its errors show the whole range
+    and the unit."""
+    def check(x: float) -> float:
+        if not math.isfinite(x):
+            raise PydanticCustomError("not_finite", "must be a finite number")
+        ok = (x > lo if lo_open else x >= lo) and (x < hi if hi_open else x <= hi)
+        if not ok:
+            raise PydanticCustomError("out_of_range", "out of range",
+                                      {"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open, "unit": unit})
+        return x
+    return Annotated[float, BeforeValidator(_number), AfterValidator(check)]
+
+
+def bad(key: str, value: Any, reason: str) -> PydanticCustomError:
+    """An error about `key` (dotted, relative to the model whose validator raises it)."""
+    return PydanticCustomError("bad_key", reason, {"key": key, "value": value})
 
 
 class Strict(BaseModel):
-    """Base of every config section: unknown keys are errors (a typo must not pass silently)."""
+    """Base of every config section: unknown keys are errors that list the allowed keys (a typo must not
+    pass silently); sections are immutable once loaded."""
     model_config = ConfigDict(extra="forbid", frozen=True)
 
+    @model_validator(mode="before")
+    @classmethod
+    def _known_keys(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            for k, v in data.items():
+                if k not in cls.model_fields:
+                    raise PydanticCustomError("unknown_key", "unknown key",
+                                              {"key": k, "value": v, "allowed": ", ".join(cls.model_fields)})
+        return data
 
-def _describe(err: dict) -> str:
-    loc = ".".join(str(p) for p in err["loc"]) or "(top level)"
-    msg = err["msg"]
+
+# ---- the error formatter ----------------------------------------------------------------------------
+def _fmt_value(v: Any) -> str:
+    s = repr(v)
+    return s if len(s) <= 60 else s[:57] + "..."
+
+
+def _key(loc: tuple, data: Any) -> str:
+    """Dotted key of an error location, list items as [i]. Parts pydantic inserts that are not keys of
+    the data (a union's tag or member name) are left out, found by walking the data along the path."""
+    out = ""
+    here = data
+    for n, part in enumerate(loc):
+        last = n == len(loc) - 1
+        if isinstance(here, dict) and not last and (part not in here or (
+                part in here.values() and loc[n + 1] in here)):
+            continue
+        if isinstance(part, int):
+            out += f"[{part}]"
+            here = here[part] if isinstance(here, (list, tuple)) and -len(here) <= part < len(here) else None
+        else:
+            out += ("." if out else "") + str(part)
+            here = here.get(part) if isinstance(here, dict) else None
+    return out
+
+
+def _members(tp) -> list:
+    """The alternatives of a type: Annotated unwrapped, unions spread."""
+    origin = typing.get_origin(tp)
+    if origin is Annotated:
+        return _members(typing.get_args(tp)[0])
+    if origin in (Union, types.UnionType):
+        return [m for a in typing.get_args(tp) for m in _members(a)]
+    return [tp]
+
+
+def _field_at(root, loc: tuple):
+    """The FieldInfo a location ends on, walking the models (through unions, lists, dicts), or None."""
+    cands, info = _members(root), None
+    for part in loc:
+        nxt, found = [], None
+        for tp in cands:
+            if isinstance(tp, type) and issubclass(tp, BaseModel):
+                f = tp.model_fields.get(part) if isinstance(part, str) else None
+                if f is not None:
+                    found = f
+                    nxt += _members(f.annotation)
+                nxt.append(tp)                   # the part may be a union's tag: the model goes on too
+            elif typing.get_origin(tp) in (list, tuple):
+                nxt += [m for a in typing.get_args(tp) if a is not Ellipsis for m in _members(a)]
+            elif typing.get_origin(tp) is dict:
+                nxt += _members(typing.get_args(tp)[1])
+        cands = nxt
+        if isinstance(part, str):
+            info = found
+    return info
+
+
+def _allowed(root, loc: tuple, leaf: str, ctx: dict) -> str:
+    """'lo <= leaf <= hi; description' from the field's declared bounds (else the violated one)."""
+    info = _field_at(root, loc) if root is not None else None
+    meta = {}
+    for m in (info.metadata if info is not None else ()):
+        for k in ("gt", "ge", "lt", "le"):
+            if getattr(m, k, None) is not None:
+                meta[k] = getattr(m, k)
+    meta = meta or {k: ctx[k] for k in ("gt", "ge", "lt", "le") if k in ctx}
+    lo = f"{meta['gt']:g} < " if "gt" in meta else f"{meta['ge']:g} <= " if "ge" in meta else ""
+    hi = f" < {meta['lt']:g}" if "lt" in meta else f" <= {meta['le']:g}" if "le" in meta else ""
+    desc = f"; {info.description}" if info is not None and info.description else ""
+    return f"{lo}{leaf}{hi}{desc}"
+
+
+def message(source: str, err: dict, data: Any = None, root=None) -> str:
+    """One line for one pydantic error of `data` read from `source` (validated against the type
+    `root`, whose fields give the allowed ranges)."""
+    loc = tuple(err["loc"])
     ctx = err.get("ctx") or {}
-    if err["type"] == "missing":
-        return f"missing key '{loc}'"
-    if err["type"] == "extra_forbidden":
-        return f"unknown key '{loc}'"
+    kind = err["type"]
     value = err.get("input")
-    bounds = ", ".join(f"{k} {v}" for k, v in ctx.items() if k in ("gt", "ge", "lt", "le"))
-    allowed = f" (allowed: {bounds})" if bounds else ""
-    return f"'{loc}' = {value!r}: {msg}{allowed}"
+    if kind == "unknown_key":
+        loc = loc + (ctx["key"],)
+        value = ctx["value"]
+        reason = f"unknown key (allowed: {ctx['allowed']})"
+    elif kind == "extra_forbidden":
+        reason = "unknown key"
+    elif kind == "bad_key":
+        loc = loc + tuple(ctx["key"].split("."))
+        value = ctx["value"]
+        reason = err["msg"]
+    elif kind == "out_of_range":
+        leaf = _key(loc, data).rsplit(".", 1)[-1]
+        unit = f" {ctx['unit']}" if ctx["unit"] else ""
+        reason = (f"out of range (allowed {ctx['lo']:g} {'<' if ctx['lo_open'] else '<='} {leaf} "
+                  f"{'<' if ctx['hi_open'] else '<='} {ctx['hi']:g}{unit})")
+    elif kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+        reason = f"out of range (allowed {_allowed(root, loc, _key(loc, data).rsplit('.', 1)[-1], ctx)})"
+    elif kind == "missing":
+        info = _field_at(root, loc) if root is not None else None
+        desc = f"; {info.description}" if info is not None and info.description else ""
+        return f"{source}: {_key(loc, data)}: missing (required{desc})"
+    elif kind == "union_tag_invalid":
+        reason = f"not one of {ctx.get('expected_tags')}"
+        loc = loc + (ctx.get("discriminator", "'type'").strip("'"),)
+        value = ctx.get("tag", value)
+    elif kind == "union_tag_not_found":
+        key = _key(loc + (ctx.get("discriminator", "'type'").strip("'"),), data)
+        return f"{source}: {key}: missing (required)"
+    elif kind in ("model_type", "model_attributes_type", "dict_type"):
+        reason = "must be a table (a [section] or {key = value, ...})"
+    elif kind == "list_type":
+        reason = "must be a list [...]"
+    elif kind == "too_short":
+        reason = f"must have at least {ctx.get('min_length', 1)} entries"
+    elif kind == "literal_error":
+        reason = f"must be one of {ctx.get('expected')}"
+    elif kind == "string_pattern_mismatch":
+        reason = f"must match {ctx.get('pattern')}"
+    else:
+        reason = err["msg"]
+        if reason.startswith("Value error, "):
+            reason = reason[len("Value error, "):]
+        reason = reason[:1].lower() + reason[1:]
+    return f"{source}: {_key(loc, data)} = {_fmt_value(value)}: {reason}"
 
 
-def validate(model: type[M], data: dict, source: str) -> M:
-    """Validate `data` against `model`; ConfigError naming `source` and every bad key otherwise."""
-    try:
-        return model.model_validate(data)
-    except ValidationError as exc:
-        problems = "; ".join(_describe(e) for e in exc.errors())
-        raise ConfigError(f"{source}: {problems}") from None
+def problem(source: str | Path, key: str, value: Any, reason: str) -> ConfigError:
+    """The error for a check made after validation (a file that must exist, a sampled profile)."""
+    return ConfigError(f"{source}: {key} = {_fmt_value(value)}: {reason}")
 
 
+# ---- loading and validation --------------------------------------------------------------------------
 def load_toml(path: str | Path) -> dict:
     path = Path(path)
     try:
         with path.open("rb") as fh:
             return tomllib.load(fh)
     except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
+        raise ConfigError(f"{path}: cannot read: no such file") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read: {exc}") from None
 
 
-def load(model: type[M], path: str | Path) -> M:
-    return validate(model, load_toml(path), str(path))
+def validate(schema: type[M] | TypeAdapter, data: Any, source: str | Path) -> M:
+    """`data` validated against a model class or a TypeAdapter; a ConfigError naming `source` and the
+    first problem (and how many more there are) otherwise. An instance of the model passes as is."""
+    if isinstance(schema, type) and isinstance(data, schema):
+        return data
+    try:
+        if isinstance(schema, TypeAdapter):
+            return schema.validate_python(data)
+        return schema.model_validate(data)
+    except ValidationError as exc:
+        errors = exc.errors(include_url=False)
+        more = len(errors) - 1
+        tail = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
+        root = schema._type if isinstance(schema, TypeAdapter) else schema
+        raise ConfigError(message(str(source), errors[0], data, root) + tail) from None
+
+
+def load(schema: type[M] | TypeAdapter, path: str | Path) -> M:
+    """A TOML file validated against `schema`."""
+    return validate(schema, load_toml(path), str(path))

@@ -146,7 +146,7 @@ def test_bad_vehicle_file_names_the_key(tmp_path):
     with pytest.raises(ConfigError, match=r"chassis\.mass_kg.*-5"):
         validate(VehicleConfig, data, "bad.toml")
     del data["front"]
-    with pytest.raises(ConfigError, match="missing key 'front'"):
+    with pytest.raises(ConfigError, match="front: missing"):
         validate(VehicleConfig, data, "bad.toml")
 
 

@@ -25,14 +25,12 @@ Every error is a ConfigError naming the file, the key, the value and what is all
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
-import annotated_types as at
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+from pydantic import Field, TypeAdapter
 
-from rtsim.errors import ConfigError
+from rtsim.configfile import Strict, load, problem
 from rtsim.road.model import MU_RANGE, RR_RANGE, Road, make_grade, make_mesh, make_plane
 from rtsim.road.survey import read_survey, survey_to_mesh
 
@@ -42,8 +40,8 @@ _RR = Field(0.010, ge=RR_RANGE[0], le=RR_RANGE[1], allow_inf_nan=False, strict=T
             description="rolling-resistance coefficient")
 
 
-class _Road(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+class _Road(Strict):
+    """A road section: the one config base (unknown keys are errors listing the allowed ones)."""
 
 
 class FlatRoadConfig(_Road):
@@ -83,73 +81,11 @@ class MeshRoadConfig(_Road):
 RoadConfig = Annotated[Union[FlatRoadConfig, GradeRoadConfig, MeshRoadConfig],
                        Field(discriminator="type")]
 _ADAPTER = TypeAdapter(RoadConfig)
-_KINDS = {"flat": FlatRoadConfig, "grade": GradeRoadConfig, "mesh": MeshRoadConfig}
-
-
-def _allowed(model, name: str) -> str:
-    """'allowed: lo <= value <= hi; description' for a field of a config model."""
-    field = model.model_fields.get(name)
-    if field is None:
-        return ""
-    bounds = []
-    for m in field.metadata:
-        if isinstance(m, at.Gt):
-            bounds.append(f"> {m.gt:g}")
-        elif isinstance(m, at.Ge):
-            bounds.append(f">= {m.ge:g}")
-        elif isinstance(m, at.Lt):
-            bounds.append(f"< {m.lt:g}")
-        elif isinstance(m, at.Le):
-            bounds.append(f"<= {m.le:g}")
-    parts = []
-    if bounds:
-        parts.append("allowed: " + " and ".join(bounds))
-    if field.description:
-        parts.append(field.description)
-    return f" ({'; '.join(parts)})" if parts else ""
-
-
-def _message(src: str, raw: dict, exc: ValidationError) -> str:
-    errors = exc.errors(include_url=False)
-    e = errors[0]
-    kind = raw.get("type") if isinstance(raw, dict) else None
-    model = _KINDS.get(kind) if isinstance(kind, str) else None
-    loc = list(e["loc"])
-    if model is not None and loc and loc[0] == kind:
-        loc = loc[1:]
-    key = ".".join(str(p) for p in loc)
-    more = f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})" if len(errors) > 1 else ""
-    etype = e["type"]
-    if etype == "union_tag_not_found":
-        return f"{src}: key 'type' is missing (allowed: 'flat', 'grade', 'mesh'){more}"
-    if etype == "union_tag_invalid":
-        return f"{src}: key 'type' = {kind!r} is not a road type (allowed: 'flat', 'grade', 'mesh'){more}"
-    if etype == "extra_forbidden":
-        allowed = ", ".join(model.model_fields) if model else ""
-        return f"{src}: unknown key '{key}' (allowed keys for type = {kind!r}: {allowed}){more}"
-    name = str(loc[0]) if loc else ""
-    hint = _allowed(model, name) if model else ""
-    if etype == "missing":
-        return f"{src}: key '{key}' is missing{hint}{more}"
-    return f"{src}: key '{key}' = {e.get('input')!r}: {e['msg'].lower()}{hint}{more}"
 
 
 def read_road_config(path) -> FlatRoadConfig | GradeRoadConfig | MeshRoadConfig:
-    """Parse and validate a road TOML file."""
-    path = Path(path)
-    src = str(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{src}: road file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{src}: not valid TOML: {exc}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{src}: cannot read the road file: {exc}") from None
-    try:
-        return _ADAPTER.validate_python(raw)
-    except ValidationError as exc:
-        raise ConfigError(_message(src, raw, exc)) from None
+    """Parse and validate a road TOML file (rtsim.configfile: errors name the file, key, value, range)."""
+    return load(_ADAPTER, Path(path))
 
 
 def load_road(path) -> Road:
@@ -163,7 +99,7 @@ def load_road(path) -> Road:
                           cfg.rolling_resistance)
     survey_path = path.parent / cfg.survey
     if not survey_path.is_file():
-        raise ConfigError(f"{path}: key 'survey' = {cfg.survey!r}: file not found ({survey_path})")
+        raise problem(path, "survey", cfg.survey, f"file not found ({survey_path})")
     survey = read_survey(survey_path)
     mesh = survey_to_mesh(survey, cfg.grid_spacing, cfg.alpha_radius, cfg.mu, cfg.rolling_resistance)
     return make_mesh(mesh.vertices, mesh.triangles, mesh.tri_mu, mesh.tri_rr,
