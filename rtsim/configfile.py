@@ -27,6 +27,7 @@ from pydantic_core import PydanticCustomError
 from rtsim.errors import ConfigError
 
 M = TypeVar("M")
+MAX_PROBLEMS = 5        # problems listed in one error (all on one line, the first first)
 
 
 # ---- declarations ----------------------------------------------------------------------------------
@@ -143,9 +144,17 @@ def _allowed(root, loc: tuple, leaf: str, ctx: dict) -> str:
     return f"{lo}{leaf}{hi}{desc}"
 
 
-def message(source: str, err: dict, data: Any = None, root=None) -> str:
+def message(source: str, err: dict, data: Any = None, root=None, prefix: str = "") -> str:
     """One line for one pydantic error of `data` read from `source` (validated against the type
-    `root`, whose fields give the allowed ranges)."""
+    `root`, whose fields give the allowed ranges); keys start with `prefix` (a section validated on its
+    own: its key in the file); an empty source leaves the file out."""
+    line = _message(err, data, root)
+    if prefix:
+        line = prefix + ("." + line if not line.startswith((" ", ":")) else line)
+    return f"{source}: {line}" if source else line
+
+
+def _message(err: dict, data: Any, root) -> str:
     loc = tuple(err["loc"])
     ctx = err.get("ctx") or {}
     kind = err["type"]
@@ -154,7 +163,7 @@ def message(source: str, err: dict, data: Any = None, root=None) -> str:
         loc = loc + (ctx["key"],)
         value = ctx["value"]
         reason = f"unknown key (allowed: {ctx['allowed']})"
-    elif kind == "extra_forbidden":
+    elif kind in ("extra_forbidden", "unexpected_keyword_argument"):
         reason = "unknown key"
     elif kind == "bad_key":
         loc = loc + tuple(ctx["key"].split("."))
@@ -170,14 +179,14 @@ def message(source: str, err: dict, data: Any = None, root=None) -> str:
     elif kind == "missing":
         info = _field_at(root, loc) if root is not None else None
         desc = f"; {info.description}" if info is not None and info.description else ""
-        return f"{source}: {_key(loc, data)}: missing (required{desc})"
+        return f"{_key(loc, data)}: missing (required{desc})"
     elif kind == "union_tag_invalid":
         reason = f"not one of {ctx.get('expected_tags')}"
         loc = loc + (ctx.get("discriminator", "'type'").strip("'"),)
         value = ctx.get("tag", value)
     elif kind == "union_tag_not_found":
         key = _key(loc + (ctx.get("discriminator", "'type'").strip("'"),), data)
-        return f"{source}: {key}: missing (required)"
+        return f"{key}: missing (required)"
     elif kind in ("model_type", "model_attributes_type", "dict_type"):
         reason = "must be a table (a [section] or {key = value, ...})"
     elif kind == "list_type":
@@ -193,7 +202,7 @@ def message(source: str, err: dict, data: Any = None, root=None) -> str:
         if reason.startswith("Value error, "):
             reason = reason[len("Value error, "):]
         reason = reason[:1].lower() + reason[1:]
-    return f"{source}: {_key(loc, data)} = {_fmt_value(value)}: {reason}"
+    return f"{_key(loc, data)} = {_fmt_value(value)}: {reason}"
 
 
 def problem(source: str | Path, key: str, value: Any, reason: str) -> ConfigError:
@@ -215,9 +224,10 @@ def load_toml(path: str | Path) -> dict:
         raise ConfigError(f"{path}: cannot read: {exc}") from None
 
 
-def validate(schema: type[M] | TypeAdapter, data: Any, source: str | Path) -> M:
-    """`data` validated against a model class or a TypeAdapter; a ConfigError naming `source` and the
-    first problem (and how many more there are) otherwise. An instance of the model passes as is."""
+def validate(schema: type[M] | TypeAdapter, data: Any, source: str | Path, prefix: str = "") -> M:
+    """`data` validated against a model class or a TypeAdapter; a ConfigError naming `source` and every
+    problem (up to MAX_PROBLEMS, then how many more) otherwise, keys after `prefix`. An instance of the
+    model passes as is."""
     if isinstance(schema, type) and isinstance(data, schema):
         return data
     try:
@@ -226,10 +236,12 @@ def validate(schema: type[M] | TypeAdapter, data: Any, source: str | Path) -> M:
         return schema.model_validate(data)
     except ValidationError as exc:
         errors = exc.errors(include_url=False)
-        more = len(errors) - 1
-        tail = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
         root = schema._type if isinstance(schema, TypeAdapter) else schema
-        raise ConfigError(message(str(source), errors[0], data, root) + tail) from None
+        lines = [message("", e, data, root, prefix) for e in errors[:MAX_PROBLEMS]]
+        more = len(errors) - len(lines)
+        tail = f"; and {more} more problem{'s' if more > 1 else ''}" if more > 0 else ""
+        text = "; ".join(lines) + tail
+        raise ConfigError(f"{source}: {text}" if source else text) from None
 
 
 def load(schema: type[M] | TypeAdapter, path: str | Path) -> M:

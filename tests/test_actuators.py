@@ -73,24 +73,29 @@ def test_saturation_of_command_and_output():
     assert A.rate_limit(0.0, 1.0, 10.0, 0.01) == pytest.approx(0.1)
 
 
+def _act():
+    return A.LagConfig(time_constant=0.05, min=0.0, max=2.0)
+
+
+@A.pydantic_config
 @dataclass(frozen=True)
 class _Section:
     gain: float = 1.0
-    act: A.LagConfig = field(default_factory=lambda: A.LagConfig(time_constant=0.05, min=0.0, max=2.0))
+    act: A.LagConfig = field(default_factory=_act)
 
-    def validate(self, where):
-        A.check(self.gain > 0, where, "gain", self.gain, "expected > 0")
+    def __post_init__(self):
+        A.check(self.gain > 0, "gain", self.gain, "expected > 0")
 
 
 def test_config_plumbing():
-    s = A.from_mapping(_Section, {"act": {"rate_limit": 3.0}}, "sec")
+    s = A.part_config(_Section, {"act": {"rate_limit": 3.0}}, "sec")
     assert s.act == A.LagConfig(time_constant=0.05, rate_limit=3.0, min=0.0, max=2.0)   # merged over the default
     with pytest.raises(ConfigError, match=r"sec\.gain = -1\.0"):
-        A.from_mapping(_Section, {"gain": -1.0}, "sec")
+        A.part_config(_Section, {"gain": -1.0}, "sec")
     with pytest.raises(ConfigError, match=r"sec\.act\.max"):
-        A.from_mapping(_Section, {"act": {"min": 3.0}}, "sec")
+        A.part_config(_Section, {"act": {"min": 3.0}}, "sec")
     with pytest.raises(ConfigError, match=r"sec\.act\.delay = 'x'"):
-        A.from_mapping(_Section, {"act": {"delay": "x"}}, "sec")
+        A.part_config(_Section, {"act": {"delay": "x"}}, "sec")
     with pytest.raises(ConfigError, match=r"unknown key"):
-        A.from_mapping(_Section, {"gian": 2.0}, "sec")
-    assert A.from_mapping(_Section, None, "sec") == _Section()
+        A.part_config(_Section, {"gian": 2.0}, "sec")
+    assert A.part_config(_Section, None, "sec") == _Section()

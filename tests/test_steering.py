@@ -8,6 +8,7 @@ inertia (the linkage) and a known spring or constant load on the rack, stepped b
 as the vehicles (rtsim.mbs.integrator.step_with) with the part's forces inside the Newton iteration."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -206,7 +207,7 @@ def test_a_steering_step_reaches_the_wheels_with_the_actuators_bandwidth():
     for corner in vm.corners[:2]:
         j = [tuple(e) for e in corner.exponents].index((0, 1))
         m_link += cfg.front.unsprung_mass_kg * float(np.sum(corner.vec_coef[OUT_CENTRE][:, j] ** 2))
-    rack = Rig(linkage_mass=m_link, **(cfg.steering or {})).run(np.full(steer.shape[0], 0.5))[:, S.SO_RACK_POS]
+    rack = Rig(linkage_mass=m_link, **dataclasses.asdict(cfg.steering)).run(np.full(steer.shape[0], 0.5))[:, S.SO_RACK_POS]
 
     def rise(y):
         return DT * np.argmax(y > 0.1 * y[-1]), DT * np.argmax(y > 0.9 * y[-1])

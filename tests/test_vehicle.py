@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pathlib import Path
+
 from rtsim.errors import ConfigError
 from rtsim.road.model import make_grade, make_plane
 from rtsim.vehicle.car.config import load_vehicle, validate, VehicleConfig, load_toml
@@ -16,6 +18,8 @@ from rtsim.vehicle.kit.linkages import (
 )
 from rtsim.vehicle.car.build import _geometry, build_vehicle
 from rtsim.vehicle.car.sim import VehicleSim
+
+ROOT = Path(__file__).resolve().parents[1]
 from rtsim.mbs.model import ST_MAX_PHI, ST_MAX_PHID
 
 G = 9.81
@@ -160,14 +164,15 @@ def test_unreachable_travel_range_is_a_clear_error():
         solve_corner(geom, z_range=(-0.6, 0.6), nz=5, ns=3)
 
 
-def test_bad_subsystem_value_names_the_key(model):
-    """A bad brake value in the vehicle file is reported with its dotted key when the car is built."""
-    import dataclasses
-    cfg = model.config
-    bad = cfg.model_copy(update={"brakes": {**cfg.brakes, "front": {**cfg.brakes["front"], "mu": -1.0}}})
-    bad_model = dataclasses.replace(model, config=bad)
-    with pytest.raises(ConfigError, match=r"brakes\.front\.mu"):
-        VehicleSim(bad_model, make_plane(), 1e-3)
+def test_bad_subsystem_value_names_the_key(tmp_path):
+    """A bad brake value in the vehicle file is reported with the file and its dotted key on load."""
+    from rtsim.vehicle.car.config import load_vehicle
+    src = ROOT / "configs" / "vehicles" / "xbw.toml"
+    text = src.read_text().replace('property_file = "../tyres/', f'property_file = "{(ROOT / "configs/tyres").as_posix()}/')
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace("mu = 0.38 ", "mu = -1.0 "))
+    with pytest.raises(ConfigError, match=r"bad.toml: brakes\.front\.mu = -1\.0"):
+        load_vehicle(bad)
 
 
 def test_linear_tyre_model_is_used_when_configured():

@@ -10,6 +10,7 @@ channel) switch on effects of the catalogue rtsim.vehicle.car.effects; absent: n
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Literal
 
@@ -18,6 +19,11 @@ from pydantic import Field, field_validator, model_validator
 from rtsim.channels import SENSOR_NAMES
 from rtsim.configfile import Strict, load_toml, validate
 from rtsim.errors import ConfigError
+
+from ..kit.actuators import over_defaults
+from ..kit.brake import BrakeConfig
+from ..kit.powertrain import PowertrainConfig
+from ..kit.steering import SteeringConfig
 
 from .effects import validate_effects
 
@@ -172,11 +178,19 @@ class VehicleConfig(Strict):
     tyres: Tyres
     aero: Aero = Aero()
     sensors: Sensors
-    brakes: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.kit.brake")
-    powertrain: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.kit.powertrain")
-    steering: dict = Field(default_factory=dict, description="validated by rtsim.vehicle.kit.steering")
+    brakes: BrakeConfig = Field(default_factory=BrakeConfig, description="rtsim.vehicle.kit.brake")
+    powertrain: PowertrainConfig = Field(default_factory=PowertrainConfig,
+                                         description="rtsim.vehicle.kit.powertrain")
+    steering: SteeringConfig = Field(default_factory=SteeringConfig, description="rtsim.vehicle.kit.steering")
     effects: dict = Field(default_factory=dict, description="switchable effects, validated by "
                           "rtsim.vehicle.car.effects (canonical form after loading)")
+
+    @field_validator("brakes", "powertrain", "steering", mode="before")
+    @classmethod
+    def _part_tables(cls, v, info):
+        """A partial table of a part overrides its defaults key by key (nested sections too)."""
+        part = {"brakes": BrakeConfig, "powertrain": PowertrainConfig, "steering": SteeringConfig}[info.field_name]
+        return over_defaults(part, v) if isinstance(v, Mapping) else v
 
     @field_validator("effects", mode="before")
     @classmethod

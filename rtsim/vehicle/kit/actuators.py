@@ -20,13 +20,15 @@ exactly at t = tau whatever dt is. A zero time constant makes the lag a pass-thr
 """
 from __future__ import annotations
 
+import functools
 import math
-import typing
 from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, fields, is_dataclass
 
 import numpy as np
+from pydantic import ConfigDict, TypeAdapter
 
+from rtsim.configfile import bad, validate
 from rtsim.errors import ConfigError
 from rtsim.jit import inline_kernel, kernel
 
@@ -148,91 +150,49 @@ def lag_state(p: np.ndarray, dt: float, y0: float = 0.0) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------ config
-def check(ok: bool, where: str, key: str, value, allowed: str) -> None:
-    """Raise ConfigError naming the key, the offending value and what is allowed, unless ok."""
+def check(ok: bool, key: str, value, allowed: str) -> None:
+    """In a config dataclass's __post_init__: unless ok, the error about `key` (rtsim.configfile formats
+    it with the file and the section's full key)."""
     if not ok:
-        raise ConfigError(f"{where}.{key} = {value!r}: {allowed}")
+        raise bad(key, value, allowed)
 
 
-def _coerce(tp, value, where: str, base=None):
-    origin = typing.get_origin(tp)
-    if is_dataclass(tp):
-        if base is not None and isinstance(value, Mapping):
-            # a partial table overrides the owner's default for this section, key by key
-            merged = {f.name: getattr(base, f.name) for f in fields(base)}
-            merged.update(value)
-            value = merged
-        return from_mapping(tp, value, where)
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where} = {value!r}: expected true or false")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise ConfigError(f"{where} = {value!r}: expected an integer")
-        return int(value)
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-            raise ConfigError(f"{where} = {value!r}: expected a number")
-        v = float(value)
-        if math.isnan(v):
-            raise ConfigError(f"{where} = nan: expected a number")
-        return v
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{where} = {value!r}: expected a string")
-        return value
-    if origin is typing.Literal:
-        allowed = typing.get_args(tp)
-        if value not in allowed:
-            raise ConfigError(f"{where} = {value!r}: expected one of {list(allowed)}")
-        return value
-    if origin is tuple:
-        args = typing.get_args(tp)
-        if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
-            raise ConfigError(f"{where} = {value!r}: expected a list")
-        items = list(value)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_coerce(args[0], v, f"{where}[{i}]") for i, v in enumerate(items))
-        if len(items) != len(args):
-            raise ConfigError(f"{where} = {value!r}: expected a list of {len(args)} items")
-        return tuple(_coerce(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, items)))
-    raise TypeError(f"{where}: unsupported config field type {tp!r}")
+@functools.cache
+def _adapter(cls) -> TypeAdapter:
+    return TypeAdapter(cls)
 
 
-def _default_of(f):
-    if f.default is not MISSING:
-        return f.default
-    if f.default_factory is not MISSING:
-        return f.default_factory()
-    return None
+def over_defaults(cls, data: Mapping) -> dict:
+    """A partial table of a section overrides that section's default (the owner's, which may differ
+    from the section class's own), key by key, at every depth."""
+    out = dict(data)
+    for f in fields(cls):
+        if f.default_factory is not MISSING and is_dataclass(default := f.default_factory()) \
+                and isinstance(out.get(f.name), Mapping):
+            merged = {g.name: getattr(default, g.name) for g in fields(default)}
+            merged.update(over_defaults(type(default), out[f.name]))
+            out[f.name] = merged
+    return out
 
 
-def from_mapping(cls, data, where: str):
-    """Build the config dataclass `cls` from a mapping (a TOML table), checking key names, types and,
-    through the class's ``validate(where)`` method, values. An instance of `cls` is validated and
-    returned as is; None gives the defaults. Errors are ConfigError naming ``where.key``."""
+def part_config(cls, data, where: str):
+    """The config dataclass `cls` of a part from a mapping (a TOML table), an instance (as is), or None
+    (the defaults), validated by pydantic (rtsim.configfile: one mechanism, one error format naming
+    ``where.key``, the value and what is allowed)."""
     if isinstance(data, cls):
-        obj = data
-    else:
-        if data is None:
-            data = {}
-        if not isinstance(data, Mapping):
-            raise ConfigError(f"{where}: expected a table, got {type(data).__name__}")
-        hints = typing.get_type_hints(cls, include_extras=False)
-        flds = {f.name: f for f in fields(cls)}
-        names = list(flds)
-        unknown = sorted(set(data) - set(names))
-        if unknown:
-            raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: {names}")
-        kw = {k: _coerce(hints[k], v, f"{where}.{k}", _default_of(flds[k])) for k, v in data.items()}
-        obj = cls(**kw)
-    validate = getattr(obj, "validate", None)
-    if validate is not None:
-        validate(where)
-    return obj
+        return data
+    if data is not None and not isinstance(data, Mapping):
+        raise ConfigError(f"{where} = {data!r}: must be a table (a [section] or {{key = value, ...}})")
+    return validate(_adapter(cls), over_defaults(cls, data or {}), "", prefix=where)
 
 
+def pydantic_config(cls):
+    """Make a config dataclass strict for pydantic: unknown keys are errors."""
+    cls.__pydantic_config__ = ConfigDict(extra="forbid")
+    return cls
+
+
+@pydantic_config
 @dataclass(frozen=True)
 class LagConfig:
     """A by-wire actuator as a lag block. Units are those of the actuated quantity (kPa for brake
@@ -243,12 +203,12 @@ class LagConfig:
     min: float = -math.inf          # units, lower bound of command and output
     max: float = math.inf           # units, upper bound of command and output
 
-    def validate(self, where: str) -> None:
-        check(self.time_constant >= 0.0 and math.isfinite(self.time_constant), where,
+    def __post_init__(self) -> None:
+        check(self.time_constant >= 0.0 and math.isfinite(self.time_constant),
               "time_constant", self.time_constant, "expected a finite time >= 0 s")
-        check(self.rate_limit > 0.0, where, "rate_limit", self.rate_limit, "expected a rate > 0 (inf: none)")
-        check(0.0 <= self.delay <= 1.0, where, "delay", self.delay, "expected 0 <= delay <= 1 s")
-        check(self.min < self.max, where, "max", self.max, f"expected max > min ({self.min})")
+        check(self.rate_limit > 0.0, "rate_limit", self.rate_limit, "expected a rate > 0 (inf: none)")
+        check(0.0 <= self.delay <= 1.0, "delay", self.delay, "expected 0 <= delay <= 1 s")
+        check(self.min < self.max, "max", self.max, f"expected max > min ({self.min})")
 
     def params(self) -> np.ndarray:
         return lag_params(self.time_constant, self.rate_limit, self.min, self.max, self.delay)

@@ -48,7 +48,7 @@ import numpy as np
 from rtsim.jit import kernel
 
 from .layout import offsets
-from .actuators import (LAG_NPAR, LAG_Y, LagConfig, check, from_mapping, lag_init, lag_state_size,
+from .actuators import (LAG_NPAR, LAG_Y, LagConfig, check, part_config, pydantic_config, lag_init, lag_state_size,
                         lag_step)
 
 NWHEEL = 4          # fl, fr, rl, rr (rtsim.channels.WHEELS)
@@ -98,6 +98,7 @@ SLIDE = 0.0
 
 
 # ------------------------------------------------------------------------------------------ config
+@pydantic_config
 @dataclass(frozen=True)
 class BrakeAxleConfig:
     """One axle's calipers (seed eq. 5)."""
@@ -107,14 +108,14 @@ class BrakeAxleConfig:
     piston_area: float = 1.81e-3      # A, m^2 (48 mm piston)
     effective_radius: float = 0.095   # R, m, disc centre to pad centre of pressure
 
-    def validate(self, where: str) -> None:
-        check(1 <= self.pads <= 16, where, "pads", self.pads, "expected 1..16 pads")
-        check(0.0 < self.mu <= 2.0, where, "mu", self.mu, "expected 0 < mu <= 2")
-        check(self.mu <= self.mu_static <= 3.0, where, "mu_static", self.mu_static,
+    def __post_init__(self) -> None:
+        check(1 <= self.pads <= 16, "pads", self.pads, "expected 1..16 pads")
+        check(0.0 < self.mu <= 2.0, "mu", self.mu, "expected 0 < mu <= 2")
+        check(self.mu <= self.mu_static <= 3.0, "mu_static", self.mu_static,
               f"expected mu ({self.mu}) <= mu_static <= 3")
-        check(0.0 < self.piston_area < 0.1, where, "piston_area", self.piston_area,
+        check(0.0 < self.piston_area < 0.1, "piston_area", self.piston_area,
               "expected an area in m^2, 0 < A < 0.1")
-        check(0.0 < self.effective_radius < 1.0, where, "effective_radius", self.effective_radius,
+        check(0.0 < self.effective_radius < 1.0, "effective_radius", self.effective_radius,
               "expected a radius in m, 0 < R < 1")
 
     def gain(self) -> float:
@@ -130,6 +131,7 @@ def _default_actuator() -> LagConfig:
     return LagConfig(time_constant=0.045, rate_limit=40000.0, delay=0.0, min=0.0, max=12000.0)
 
 
+@pydantic_config
 @dataclass(frozen=True)
 class BrakeConfig:
     front: BrakeAxleConfig = field(default_factory=BrakeAxleConfig)
@@ -146,31 +148,28 @@ class BrakeConfig:
     omega_eps: float = 0.05               # rad/s, sliding-law regularisation band
     omega_stick: float = 0.05             # rad/s, a slowing wheel sticks below this speed
 
-    def validate(self, where: str) -> None:
-        from_mapping(BrakeAxleConfig, self.front, f"{where}.front")
-        from_mapping(BrakeAxleConfig, self.rear, f"{where}.rear")
-        from_mapping(LagConfig, self.actuator, f"{where}.actuator")
-        check(self.actuator.min >= 0.0, f"{where}.actuator", "min", self.actuator.min,
+    def __post_init__(self) -> None:
+        check(self.actuator.min >= 0.0, "actuator.min", self.actuator.min,
               "expected a pressure >= 0 kPa")
-        check(math.isfinite(self.actuator.max), f"{where}.actuator", "max", self.actuator.max,
+        check(math.isfinite(self.actuator.max), "actuator.max", self.actuator.max,
               "expected a finite maximum pressure in kPa")
-        check(self.proportioning_knee >= 0.0, where, "proportioning_knee", self.proportioning_knee,
+        check(self.proportioning_knee >= 0.0, "proportioning_knee", self.proportioning_knee,
               "expected a pressure >= 0 kPa")
-        check(0.0 <= self.proportioning_ratio <= 1.0, where, "proportioning_ratio",
+        check(0.0 <= self.proportioning_ratio <= 1.0, "proportioning_ratio",
               self.proportioning_ratio, "expected 0 <= ratio <= 1")
-        check(0.0 < self.anchor_stiffness < 1e9, where, "anchor_stiffness", self.anchor_stiffness,
+        check(0.0 < self.anchor_stiffness < 1e9, "anchor_stiffness", self.anchor_stiffness,
               "expected 0 < k < 1e9 N*m/rad")
-        check(0.0 <= self.anchor_damping < 1e7, where, "anchor_damping", self.anchor_damping,
+        check(0.0 <= self.anchor_damping < 1e7, "anchor_damping", self.anchor_damping,
               "expected 0 <= c < 1e7 N*m*s/rad")
-        check(0.0 < self.omega_eps <= 10.0, where, "omega_eps", self.omega_eps,
+        check(0.0 < self.omega_eps <= 10.0, "omega_eps", self.omega_eps,
               "expected 0 < omega_eps <= 10 rad/s")
-        check(0.0 < self.omega_stick <= 10.0, where, "omega_stick", self.omega_stick,
+        check(0.0 < self.omega_stick <= 10.0, "omega_stick", self.omega_stick,
               "expected 0 < omega_stick <= 10 rad/s")
 
 
 def brake_config(data=None, where: str = "brake") -> BrakeConfig:
     """Validated BrakeConfig from a mapping (a TOML table), an instance, or None (defaults)."""
-    return from_mapping(BrakeConfig, data, where)
+    return part_config(BrakeConfig, data, where)
 
 
 def rear_pressure(cfg: BrakeConfig, p_line: float) -> float:

@@ -57,7 +57,7 @@ import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
 from .layout import offsets
-from .actuators import (LAG_NPAR, LAG_Y, LagConfig, check, from_mapping, lag_init,
+from .actuators import (LAG_NPAR, LAG_Y, LagConfig, check, part_config, pydantic_config, lag_init,
                         lag_state_size, lag_step, saturate)
 
 RPM = 2.0 * math.pi / 60.0   # rad/s per rpm
@@ -174,6 +174,7 @@ def _strictly_increasing(xs) -> bool:
     return all(b > a for a, b in zip(xs, xs[1:]))
 
 
+@pydantic_config
 @dataclass(frozen=True)
 class EngineConfig:
     throttle_nodes: tuple[float, ...] = _MAP[0]             # rad
@@ -187,26 +188,27 @@ class EngineConfig:
     rev_limit: float = 6500.0 * RPM     # rad/s, fuel cut
     rev_limit_band: float = 100.0 * RPM  # rad/s
 
-    def validate(self, where: str) -> None:
+    def __post_init__(self) -> None:
         th, w, tab = self.throttle_nodes, self.speed_nodes, self.torque_table
-        check(len(th) >= 2 and _strictly_increasing(th) and th[0] >= 0.0, where, "throttle_nodes", th,
+        check(len(th) >= 2 and _strictly_increasing(th) and th[0] >= 0.0, "throttle_nodes", th,
               "expected >= 2 strictly increasing angles >= 0 rad")
-        check(len(w) >= 2 and _strictly_increasing(w) and w[0] >= 0.0, where, "speed_nodes", w,
+        check(len(w) >= 2 and _strictly_increasing(w) and w[0] >= 0.0, "speed_nodes", w,
               "expected >= 2 strictly increasing speeds >= 0 rad/s")
-        check(len(tab) == len(th) and all(len(r) == len(w) for r in tab), where, "torque_table",
+        check(len(tab) == len(th) and all(len(r) == len(w) for r in tab), "torque_table",
               f"{len(tab)} rows", f"expected {len(th)} rows (throttle) of {len(w)} values (speed)")
-        check(all(math.isfinite(v) for r in tab for v in r), where, "torque_table", "non-finite",
+        check(all(math.isfinite(v) for r in tab for v in r), "torque_table", "non-finite",
               "expected finite torques in N*m")
-        check(0.0 < self.inertia < 10.0, where, "inertia", self.inertia, "expected 0 < J < 10 kg*m^2")
-        check(0.0 < self.idle_speed < self.rev_limit, where, "idle_speed", self.idle_speed,
+        check(0.0 < self.inertia < 10.0, "inertia", self.inertia, "expected 0 < J < 10 kg*m^2")
+        check(0.0 < self.idle_speed < self.rev_limit, "idle_speed", self.idle_speed,
               "expected 0 < idle speed < rev limit (rad/s)")
-        check(self.idle_kp >= 0.0, where, "idle_kp", self.idle_kp, "expected >= 0")
-        check(self.idle_ki >= 0.0, where, "idle_ki", self.idle_ki, "expected >= 0")
-        check(0.0 <= self.idle_max_opening <= th[-1], where, "idle_max_opening", self.idle_max_opening,
+        check(self.idle_kp >= 0.0, "idle_kp", self.idle_kp, "expected >= 0")
+        check(self.idle_ki >= 0.0, "idle_ki", self.idle_ki, "expected >= 0")
+        check(0.0 <= self.idle_max_opening <= th[-1], "idle_max_opening", self.idle_max_opening,
               f"expected 0..{th[-1]} rad")
-        check(self.rev_limit_band > 0.0, where, "rev_limit_band", self.rev_limit_band, "expected > 0 rad/s")
+        check(self.rev_limit_band > 0.0, "rev_limit_band", self.rev_limit_band, "expected > 0 rad/s")
 
 
+@pydantic_config
 @dataclass(frozen=True)
 class ConverterConfig:
     speed_ratio_nodes: tuple[float, ...] = (0.0, 0.2, 0.4, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95)
@@ -220,23 +222,21 @@ class ConverterConfig:
     lockup_capacity: float = 250.0        # N*m
     lockup_damping: float = 30.0          # N*m*s/rad, slip damping of the engaged clutch
 
-    def validate(self, where: str) -> None:
+    def __post_init__(self) -> None:
         sr, k = self.speed_ratio_nodes, self.k_factor
-        check(len(sr) >= 2 and sr[0] == 0.0 and _strictly_increasing(sr) and sr[-1] < 1.0, where,
-              "speed_ratio_nodes", sr, "expected >= 2 strictly increasing ratios from 0 to below 1")
-        check(len(k) == len(sr) and all(0.0 < v < 1e4 for v in k), where, "k_factor", k,
+        check(len(sr) >= 2 and sr[0] == 0.0 and _strictly_increasing(sr) and sr[-1] < 1.0, "speed_ratio_nodes", sr, "expected >= 2 strictly increasing ratios from 0 to below 1")
+        check(len(k) == len(sr) and all(0.0 < v < 1e4 for v in k), "k_factor", k,
               f"expected {len(sr)} finite K factors > 0 in (rad/s)/sqrt(N*m)")
         tn, tr = self.torque_ratio_nodes, self.torque_ratio
-        check(len(tn) >= 2 and tn[0] == 0.0 and _strictly_increasing(tn) and tn[-1] <= 1.0, where,
-              "torque_ratio_nodes", tn, "expected >= 2 strictly increasing ratios from 0 up to 1")
-        check(len(tr) == len(tn) and all(1.0 <= v <= 5.0 for v in tr), where, "torque_ratio", tr,
+        check(len(tn) >= 2 and tn[0] == 0.0 and _strictly_increasing(tn) and tn[-1] <= 1.0, "torque_ratio_nodes", tn, "expected >= 2 strictly increasing ratios from 0 up to 1")
+        check(len(tr) == len(tn) and all(1.0 <= v <= 5.0 for v in tr), "torque_ratio", tr,
               f"expected {len(tn)} torque ratios in 1..5")
-        check(tr[-1] == 1.0, where, "torque_ratio", tr, "expected the last torque ratio (coupling) = 1")
-        check(0.0 < self.overrun_capacity_scale <= 10.0, where, "overrun_capacity_scale",
+        check(tr[-1] == 1.0, "torque_ratio", tr, "expected the last torque ratio (coupling) = 1")
+        check(0.0 < self.overrun_capacity_scale <= 10.0, "overrun_capacity_scale",
               self.overrun_capacity_scale, "expected 0 < scale <= 10")
-        check(self.lockup_speed >= 0.0, where, "lockup_speed", self.lockup_speed, "expected >= 0 m/s")
-        check(self.lockup_capacity > 0.0, where, "lockup_capacity", self.lockup_capacity, "expected > 0 N*m")
-        check(self.lockup_damping > 0.0, where, "lockup_damping", self.lockup_damping,
+        check(self.lockup_speed >= 0.0, "lockup_speed", self.lockup_speed, "expected >= 0 m/s")
+        check(self.lockup_capacity > 0.0, "lockup_capacity", self.lockup_capacity, "expected > 0 N*m")
+        check(self.lockup_damping > 0.0, "lockup_damping", self.lockup_damping,
               "expected > 0 N*m*s/rad")
 
     def coupling_point(self) -> float:
@@ -247,6 +247,7 @@ class ConverterConfig:
         return 1.0
 
 
+@pydantic_config
 @dataclass(frozen=True)
 class GearboxConfig:
     ratios: tuple[float, ...] = (2.45, 1.45, 1.00)   # forward gears, a small 3-speed automatic
@@ -260,31 +261,32 @@ class GearboxConfig:
     shift_delay: float = 0.2              # s a shift request must persist
     shift_time: float = 0.25              # s for the ratio change
 
-    def validate(self, where: str) -> None:
+    def __post_init__(self) -> None:
         r = self.ratios
         check(2 <= len(r) <= 6 and all(v > 0.0 for v in r) and all(b < a for a, b in zip(r, r[1:])),
-              where, "ratios", r, "expected 2..6 positive, decreasing ratios")
-        check(self.reverse_ratio > 0.0, where, "reverse_ratio", self.reverse_ratio, "expected > 0")
-        check(self.final_drive > 0.0, where, "final_drive", self.final_drive, "expected > 0")
-        check(0.5 <= self.efficiency <= 1.0, where, "efficiency", self.efficiency, "expected 0.5..1")
-        check(0.05 < self.wheel_radius < 2.0, where, "wheel_radius", self.wheel_radius, "expected m")
+              "ratios", r, "expected 2..6 positive, decreasing ratios")
+        check(self.reverse_ratio > 0.0, "reverse_ratio", self.reverse_ratio, "expected > 0")
+        check(self.final_drive > 0.0, "final_drive", self.final_drive, "expected > 0")
+        check(0.5 <= self.efficiency <= 1.0, "efficiency", self.efficiency, "expected 0.5..1")
+        check(0.05 < self.wheel_radius < 2.0, "wheel_radius", self.wheel_radius, "expected m")
         st = self.schedule_throttle
-        check(len(st) >= 1 and _strictly_increasing(st), where, "schedule_throttle", st,
+        check(len(st) >= 1 and _strictly_increasing(st), "schedule_throttle", st,
               "expected strictly increasing throttle angles (rad)")
         for key, rows in (("upshift_speeds", self.upshift_speeds), ("downshift_speeds", self.downshift_speeds)):
-            check(len(rows) == len(r) - 1 and all(len(row) == len(st) for row in rows), where, key,
+            check(len(rows) == len(r) - 1 and all(len(row) == len(st) for row in rows), key,
                   rows, f"expected {len(r) - 1} rows (one per shift) of {len(st)} speeds (m/s)")
         for k, (up, dn) in enumerate(zip(self.upshift_speeds, self.downshift_speeds)):
-            check(all(0.0 <= d < u for u, d in zip(up, dn)), where, f"downshift_speeds[{k}]", dn,
+            check(all(0.0 <= d < u for u, d in zip(up, dn)), f"downshift_speeds[{k}]", dn,
                   f"expected 0 <= downshift < upshift speed {up} at each throttle (hysteresis)")
-        check(0.0 <= self.shift_delay <= 5.0, where, "shift_delay", self.shift_delay, "expected 0..5 s")
-        check(0.0 <= self.shift_time <= 5.0, where, "shift_time", self.shift_time, "expected 0..5 s")
+        check(0.0 <= self.shift_delay <= 5.0, "shift_delay", self.shift_delay, "expected 0..5 s")
+        check(0.0 <= self.shift_time <= 5.0, "shift_time", self.shift_time, "expected 0..5 s")
 
 
 def _default_throttle() -> LagConfig:
     return LagConfig(time_constant=0.05, rate_limit=5.0, delay=0.0, min=0.0, max=1.4)
 
 
+@pydantic_config
 @dataclass(frozen=True)
 class PowertrainConfig:
     engine: EngineConfig = field(default_factory=EngineConfig)
@@ -293,22 +295,18 @@ class PowertrainConfig:
     throttle: LagConfig = field(default_factory=_default_throttle)   # rad, rad/s
     wheel_torque_source: Literal["model", "measured"] = "model"
 
-    def validate(self, where: str) -> None:
-        from_mapping(EngineConfig, self.engine, f"{where}.engine")
-        from_mapping(ConverterConfig, self.converter, f"{where}.converter")
-        from_mapping(GearboxConfig, self.gearbox, f"{where}.gearbox")
-        from_mapping(LagConfig, self.throttle, f"{where}.throttle")
-        check(self.throttle.min >= 0.0, f"{where}.throttle", "min", self.throttle.min, "expected >= 0 rad")
-        check(self.throttle.max <= 1.6, f"{where}.throttle", "max", self.throttle.max, "expected <= 1.6 rad")
-        check(self.wheel_torque_source in ("model", "measured"), where, "wheel_torque_source",
+    def __post_init__(self) -> None:
+        check(self.throttle.min >= 0.0, "throttle.min", self.throttle.min, "expected >= 0 rad")
+        check(self.throttle.max <= 1.6, "throttle.max", self.throttle.max, "expected <= 1.6 rad")
+        check(self.wheel_torque_source in ("model", "measured"), "wheel_torque_source",
               self.wheel_torque_source, "expected 'model' or 'measured'")
-        check(1 <= self.converter.lockup_gear <= len(self.gearbox.ratios), f"{where}.converter",
-              "lockup_gear", self.converter.lockup_gear, f"expected 1..{len(self.gearbox.ratios)}")
+        check(1 <= self.converter.lockup_gear <= len(self.gearbox.ratios), "converter.lockup_gear",
+              self.converter.lockup_gear, f"expected 1..{len(self.gearbox.ratios)}")
 
 
 def powertrain_config(data=None, where: str = "powertrain") -> PowertrainConfig:
     """Validated PowertrainConfig from a mapping (a TOML table), an instance, or None (defaults)."""
-    return from_mapping(PowertrainConfig, data, where)
+    return part_config(PowertrainConfig, data, where)
 
 
 def powertrain_params(cfg: PowertrainConfig | None = None) -> np.ndarray:

@@ -36,7 +36,7 @@ import numpy as np
 from rtsim.jit import inline_kernel, kernel
 from rtsim.mbs.envelope import add_entry
 
-from .actuators import LAG_NPAR, LagConfig, check, from_mapping, lag_init, lag_state_size, lag_step
+from .actuators import LAG_NPAR, LagConfig, check, part_config, pydantic_config, lag_init, lag_state_size, lag_step
 from .layout import offsets
 
 # Parameter layout.
@@ -81,6 +81,7 @@ def _default_command() -> LagConfig:
     return LagConfig(time_constant=0.0, rate_limit=math.inf, delay=0.0, min=-11.0, max=11.0)
 
 
+@pydantic_config
 @dataclass(frozen=True)
 class SteeringConfig:
     steering_wheel_inertia: float = 0.03       # kg m^2
@@ -104,26 +105,25 @@ class SteeringConfig:
     integral_limit: float = 40.0               # N m
     command: LagConfig = field(default_factory=_default_command)   # rad, rad/s
 
-    def validate(self, where: str) -> None:
+    def __post_init__(self) -> None:
         for key in ("steering_wheel_inertia", "column_inertia", "pinion_inertia", "rack_mass",
                     "torsion_bar_stiffness", "rack_travel_per_rad", "reduction_ratio",
                     "motor_torque_limit", "motor_torque_rate"):
             v = getattr(self, key)
-            check(v > 0.0, where, key, v, "expected a value > 0")
+            check(v > 0.0, key, v, "expected a value > 0")
         for key in ("column_damping", "torsion_bar_damping", "rack_damping",
                     "motor_inertia", "motor_time_constant", "kp", "ki", "kd", "integral_limit"):
             v = getattr(self, key)
-            check(v >= 0.0 and math.isfinite(v), where, key, v, "expected a finite value >= 0")
-        check(0.0 < self.reduction_efficiency <= 1.0, where, "reduction_efficiency",
+            check(v >= 0.0 and math.isfinite(v), key, v, "expected a finite value >= 0")
+        check(0.0 < self.reduction_efficiency <= 1.0, "reduction_efficiency",
               self.reduction_efficiency, "expected 0 < eta <= 1")
-        check(self.rack_travel_per_rad < 0.1, where, "rack_travel_per_rad", self.rack_travel_per_rad,
+        check(self.rack_travel_per_rad < 0.1, "rack_travel_per_rad", self.rack_travel_per_rad,
               "expected metres of rack per pinion radian (< 0.1)")
-        from_mapping(LagConfig, self.command, f"{where}.command")
 
 
 def steering_config(data=None, where: str = "steering") -> SteeringConfig:
     """Validated SteeringConfig from a mapping (a TOML table), an instance, or None (defaults)."""
-    return from_mapping(SteeringConfig, data, where)
+    return part_config(SteeringConfig, data, where)
 
 
 def steering_params(cfg: SteeringConfig | None = None) -> np.ndarray:
