@@ -45,7 +45,7 @@ from typing import Iterable, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
-from rtsim.channels import COMMAND_NAMES, SENSOR_NAMES
+from rtsim.channels import CAR, SENSOR_NAMES, ChannelDictionary
 from rtsim.errors import ConfigError
 
 from . import can_e2e as e2e
@@ -179,10 +179,14 @@ def _encode_raw(sig: _Sig, value: float) -> int:
 class Codec:
     """Everything derived from the DBC, plus the encoders of the SIM frames and of command frames."""
 
-    def __init__(self, dbc_path: str | Path = DEFAULT_DBC):
+    def __init__(self, dbc_path: str | Path = DEFAULT_DBC, channels: ChannelDictionary = CAR):
+        """The codec of a vehicle's DBC, checked against the vehicle's channel dictionary: every sensor
+        channel is a signal of one sensor frame, in the dictionary's unit; every command has its frame."""
         import cantools  # imported here: rtsim itself never needs it
 
         where = str(dbc_path)
+        self.channels = channels
+        sensor_names, command_names = channels.sensor_names, channels.command_names
         try:
             self.db = cantools.database.load_file(str(dbc_path), strict=True)
         except Exception as exc:  # noqa: BLE001  (cantools raises many types)
@@ -193,7 +197,8 @@ class Codec:
         # sensor frames: SIM frames carrying the time stamp
         self.sensor_frames = tuple(f for f in self.frames.values()
                                    if f.sender == "SIM" and any(s.name == TIME_SIGNAL for s in f.signals))
-        index = {n: i for i, n in enumerate(SENSOR_NAMES)}
+        index = {n: i for i, n in enumerate(sensor_names)}
+        units = {c.name: c.unit for c in channels.sensors}
         seen: dict[str, str] = {}
         plans = []
         for f in self.sensor_frames:
@@ -203,13 +208,17 @@ class Codec:
                 if s.name == TIME_SIGNAL:
                     continue
                 if s.name not in index:
-                    raise ConfigError(f"{where}: {f.name}.{s.name} is not a sensor channel of rtsim.channels")
+                    raise ConfigError(f"{where}: {f.name}.{s.name} is not a sensor channel of the vehicle "
+                                      f"(its channels: {', '.join(sensor_names)})")
+                if (s.unit or "") != units[s.name]:
+                    raise ConfigError(f"{where}: {f.name}.{s.name} is in {s.unit!r}, the vehicle's channel in "
+                                      f"{units[s.name]!r}")
                 if s.name in seen:
                     raise ConfigError(f"{where}: sensor {s.name} is in both {seen[s.name]} and {f.name}")
                 seen[s.name] = f.name
                 items.append((index[s.name], s))
             plans.append((f.frame_id, tsig.start, tsig.mask, tuple(items)))
-        missing = [n for n in SENSOR_NAMES if n not in seen]
+        missing = [n for n in sensor_names if n not in seen]
         if missing:
             raise ConfigError(f"{where}: sensor channels missing from the sensor frames: {', '.join(missing)}")
         self._sensor_plans = tuple(plans)
@@ -230,7 +239,7 @@ class Codec:
                 continue
             f = self.frames[msg.name]
             data_id = _attr(msg, "E2EDataID", None)
-            vals = [s for s in f.signals if s.name in COMMAND_NAMES]
+            vals = [s for s in f.signals if s.name in command_names]
             ctr = [s for s in f.signals if s.name.endswith("_counter")]
             crc = [s for s in f.signals if s.name.endswith("_crc")]
             if data_id is None or len(vals) != 1 or len(ctr) != 1 or len(crc) != 1:
@@ -241,9 +250,9 @@ class Codec:
             prefix = ctr[0].name[: -len("_counter")]
             self.command_frames[vals[0].name] = f
             self._cmd_plans[vals[0].name] = (f, vals[0], ctr[0], crc[0], int(data_id), prefix)
-        if set(self.command_frames) != set(COMMAND_NAMES):
+        if set(self.command_frames) != set(command_names):
             raise ConfigError(f"{where}: command frames carry {sorted(self.command_frames)}, "
-                              f"expected {list(COMMAND_NAMES)}")
+                              f"expected {list(command_names)}")
         self._cmd_by_frame_name = {p[0].name: n for n, p in self._cmd_plans.items()}
 
         # lockstep request/acknowledgement
@@ -266,7 +275,7 @@ class Codec:
         """All sensor frames for one sample. ``values``: a mapping by channel name or a sequence in
         ``SENSOR_NAMES`` order; ``sim_time`` in s (sent as ms modulo 65536)."""
         if isinstance(values, Mapping):
-            values = [values[n] for n in SENSOR_NAMES]
+            values = [values[n] for n in self.channels.sensor_names]
         t_raw = int(round(sim_time * 1000.0))
         out = []
         for frame_id, tstart, tmask, items in self._sensor_plans:
@@ -416,12 +425,12 @@ class CommandReceiver:
             codec = Codec(codec if codec is not None else DEFAULT_DBC)
         self.codec = codec
         self.clamp = frozenset(clamp)
-        bad = self.clamp - set(COMMAND_NAMES)
+        bad = self.clamp - set(codec.channels.command_names)
         if bad:
             raise ValueError(f"clamp: unknown command signals {sorted(bad)}")
         self.hold_pressure = float(hold_pressure)
         self.max_counter_step = int(max_counter_step)
-        self.names = tuple(COMMAND_NAMES)
+        self.names = codec.channels.command_names
         timeouts = dict(timeouts or {})
         n = len(self.names)
         ip = np.zeros((n, e2e.NRP), dtype=np.int64)

@@ -1,6 +1,6 @@
 """Compiled packing of the sensor frames, and their decoding on the ECU side.
 
-``SensorPacker`` turns one sensor sample (``rtsim.channels.SENSOR_NAMES`` order, SI units) and its
+``SensorPacker`` turns one sensor sample (the codec's sensor channels in order, SI units) and its
 simulation time into the payloads of every sensor frame with one numba call over layout arrays taken
 from the DBC (``Codec.sensor_layout``): no Python-level work per signal and no allocation per sample.
 The payloads land in a preallocated ``(nframes, 8)`` byte array (the service's step packs them the same
@@ -18,7 +18,6 @@ import math
 
 import numpy as np
 
-from rtsim.channels import SENSOR_NAMES
 
 from .can_codec import TIME_SIGNAL, Codec
 from .can_e2e import pack_frames
@@ -45,7 +44,7 @@ class SensorPacker:
 
 
 class SensorDecoder:
-    """Decodes SIM sensor frames into ``values`` (SENSOR_NAMES order, SI units).
+    """Decodes SIM sensor frames into ``values`` (the codec's sensor channels in order, SI units).
 
     ``receive(can_id, data)`` returns True when the frame completed a sample (every sensor frame seen
     with the same ``sim_time_ms``); ``time`` is then the sample's simulation time in s, unwrapped
@@ -54,7 +53,8 @@ class SensorDecoder:
 
     def __init__(self, codec: Codec):
         self.codec = codec
-        index = {n: i for i, n in enumerate(SENSOR_NAMES)}
+        names = codec.channels.sensor_names
+        index = {n: i for i, n in enumerate(names)}
         self._plans = {}
         for f in codec.sensor_frames:
             items = []
@@ -67,7 +67,7 @@ class SensorDecoder:
                               s.wrap))
             self._plans[f.frame_id] = (tsig.start, tsig.mask, tuple(items))
         self.nframes = len(self._plans)
-        self.values = np.full(len(SENSOR_NAMES), np.nan)
+        self.values = np.full(len(names), np.nan)
         self.time = math.nan
         self.samples = 0
         self._pending_ms = -1

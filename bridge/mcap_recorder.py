@@ -45,7 +45,8 @@ from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
-from bridge.payloads import SCHEMAS, TOPIC_KEYS, encode_json
+from bridge.payloads import TOPIC_KEYS, encode_json, schemas_for
+from rtsim.channels import CAR, ChannelDictionary
 from rtsim.errors import ConfigError
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -76,7 +77,7 @@ class Recorder:
     def __init__(self, path: str | Path, vehicle_id: str, chunk_size: int = 256 * 1024,
                  flush_interval: float = 1.0, queue_size: int = 100_000,
                  on_chunk: Callable[[int, int], Any] | None = None, poll_interval: float = 0.002,
-                 metadata: dict[str, dict[str, str]] | None = None):
+                 metadata: dict[str, dict[str, str]] | None = None, channels: ChannelDictionary = CAR):
         if chunk_size <= 0 or flush_interval <= 0 or queue_size <= 0:
             raise ValueError("chunk_size, flush_interval and queue_size must be positive")
         self.path = Path(path)
@@ -105,7 +106,7 @@ class Recorder:
         for name, values in (metadata or {}).items():     # session facts (config, versions): before
             self._writer.add_metadata(name, {str(k): str(v) for k, v in values.items()})   # any chunk
         self._fh.flush()         # header and metadata are on disk even if the process dies before a chunk
-        self._schema_defs = SCHEMAS
+        self._schema_defs = schemas_for(channels)       # the recorded vehicle's channels
         self._schema_ids: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._seq: dict[str, int] = {}

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rtsim.channels import COMMANDS, SENSOR_NAMES, SENSORS, STATE, STATE_NAMES
+from rtsim.channels import CAR, SENSOR_NAMES, STATE_NAMES, ChannelDictionary
 from rtsim.errors import RtsimError
 
 TOPIC_KEYS = ("sensors", "state", "status", "commands", "can/rx", "can/tx")
@@ -98,10 +98,11 @@ def _status_props() -> dict:
     }
 
 
-def _build_schemas() -> dict[str, tuple[str, dict]]:
-    sensors = {"time": _TIME, **{c.name: _signal(c.unit, c.description) for c in SENSORS}}
-    state = {"time": _TIME, **{c.name: _signal(c.unit, c.description) for c in STATE}}
-    commands = {"time": _TIME, **{c.name: _signal(c.unit, c.description) for c in COMMANDS},
+def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]]:
+    """topic key -> (schema name, JSON schema) of a vehicle's channel dictionary."""
+    sensors = {"time": _TIME, **{c.name: _signal(c.unit, c.description) for c in channels.sensors}}
+    state = {"time": _TIME, **{c.name: _signal(c.unit, c.description) for c in channels.state}}
+    commands = {"time": _TIME, **{c.name: _signal(c.unit, c.description) for c in channels.commands},
                 "source": {"type": "string", "enum": list(COMMAND_SOURCES),
                            "description": "where the applied values came from: can (the ECU), "
                                           "zenoh (a control request) or safe (watchdog fallback)"}}
@@ -125,7 +126,7 @@ def _build_schemas() -> dict[str, tuple[str, dict]]:
 
 
 #: topic key -> (schema name, JSON schema). Treat as read-only.
-SCHEMAS: dict[str, tuple[str, dict]] = _build_schemas()
+SCHEMAS: dict[str, tuple[str, dict]] = schemas_for(CAR)
 
 
 # ----------------------------------------------------------------------------------------- encoders
@@ -169,11 +170,12 @@ def _encode_row(names: tuple[str, ...], t: float, values, digits: int | None) ->
     return (template_s % tuple(parts)).encode()
 
 
-def encode_sensors(t: float, values, digits: int | None = None) -> bytes:
-    """One ``sensors`` message: ``t`` (s) and the sensor values in rtsim.channels.SENSOR_NAMES
-    order (SI units; NaN/inf become null). ``digits=None`` writes each value's shortest exact
-    (round-trip) decimal; ``digits=N`` rounds to N significant digits, about 3x cheaper."""
-    return _encode_row(SENSOR_NAMES, t, values, digits)
+def encode_sensors(t: float, values, digits: int | None = None, names: tuple[str, ...] = SENSOR_NAMES) -> bytes:
+    """One ``sensors`` message: ``t`` (s) and the sensor values in the order of `names` (the vehicle's
+    sensor channels; default the rear-drive car's) (SI units; NaN/inf become null). ``digits=None``
+    writes each value's shortest exact (round-trip) decimal; ``digits=N`` rounds to N significant
+    digits, about 3x cheaper."""
+    return _encode_row(names, t, values, digits)
 
 
 def encode_state(t: float, values, digits: int | None = None) -> bytes:

@@ -22,28 +22,32 @@ def _ch(name, unit, description):
 
 WHEELS = ("fl", "fr", "rl", "rr")
 
-#: Sensor channels (the seed's Table 1), sampled at 500 Hz.
-SENSORS: tuple[Channel, ...] = (
-    _ch("accel_x", "m/s^2", "specific force at the sensor mounting point, body x"),
-    _ch("accel_y", "m/s^2", "specific force at the sensor mounting point, body y"),
-    _ch("accel_z", "m/s^2", "specific force at the sensor mounting point, body z"),
-    _ch("gyro_x", "rad/s", "body angular rate about x (roll rate)"),
-    _ch("gyro_y", "rad/s", "body angular rate about y (pitch rate)"),
-    _ch("gyro_z", "rad/s", "body angular rate about z (yaw rate, positive turning left)"),
-    _ch("roll", "rad", "inclinometer roll angle, positive right side down"),
-    _ch("pitch", "rad", "inclinometer pitch angle, positive nose down"),
-    *(_ch(f"wheel_angle_{w}", "rad", f"cumulative rotation angle of wheel {w}, positive rolling forward")
-      for w in WHEELS),
-    _ch("brake_pressure", "kPa", "brake line pressure"),
-    _ch("steering_wheel_angle", "rad", "steering-wheel angle, positive steering left"),
-    _ch("steer_angle_fl", "rad", "road-wheel steer angle front left, positive left"),
-    _ch("steer_angle_fr", "rad", "road-wheel steer angle front right, positive left"),
-    _ch("engine_speed", "rad/s", "engine crankshaft speed"),
-    _ch("steering_torque", "N*m", "inline torque sensor on the steering column (torsion bar)"),
-    _ch("throttle_angle", "rad", "throttle plate angle"),
-    _ch("wheel_torque_rl", "N*m", "drive/brake torque measured at the rear-left wheel"),
-    _ch("wheel_torque_rr", "N*m", "drive/brake torque measured at the rear-right wheel"),
-)
+def car_sensors(driven=("rl", "rr")) -> tuple[Channel, ...]:
+    """The four-wheel car's sensor channels (the seed's Table 1), sampled at 500 Hz; the two drive-torque
+    sensors sit on the driven wheels (`driven`: left, right wheel names)."""
+    left, right = driven
+    return (
+        _ch("accel_x", "m/s^2", "specific force at the sensor mounting point, body x"),
+        _ch("accel_y", "m/s^2", "specific force at the sensor mounting point, body y"),
+        _ch("accel_z", "m/s^2", "specific force at the sensor mounting point, body z"),
+        _ch("gyro_x", "rad/s", "body angular rate about x (roll rate)"),
+        _ch("gyro_y", "rad/s", "body angular rate about y (pitch rate)"),
+        _ch("gyro_z", "rad/s", "body angular rate about z (yaw rate, positive turning left)"),
+        _ch("roll", "rad", "inclinometer roll angle, positive right side down"),
+        _ch("pitch", "rad", "inclinometer pitch angle, positive nose down"),
+        *(_ch(f"wheel_angle_{w}", "rad", f"cumulative rotation angle of wheel {w}, positive rolling forward")
+          for w in WHEELS),
+        _ch("brake_pressure", "kPa", "brake line pressure"),
+        _ch("steering_wheel_angle", "rad", "steering-wheel angle, positive steering left"),
+        _ch("steer_angle_fl", "rad", "road-wheel steer angle front left, positive left"),
+        _ch("steer_angle_fr", "rad", "road-wheel steer angle front right, positive left"),
+        _ch("engine_speed", "rad/s", "engine crankshaft speed"),
+        _ch("steering_torque", "N*m", "inline torque sensor on the steering column (torsion bar)"),
+        _ch("throttle_angle", "rad", "throttle plate angle"),
+        _ch(f"wheel_torque_{left}", "N*m", f"drive/brake torque measured at the driven wheel {left}"),
+        _ch(f"wheel_torque_{right}", "N*m", f"drive/brake torque measured at the driven wheel {right}"),
+    )
+
 
 #: Actuator commands from the ECU.
 COMMANDS: tuple[Channel, ...] = (
@@ -82,7 +86,48 @@ STATE: tuple[Channel, ...] = (
     _ch("constraint_violation", "1", "max |Phi| of the multibody constraints (coordinate units)"),
 )
 
-SENSOR_NAMES = tuple(c.name for c in SENSORS)
-STATE_NAMES = tuple(c.name for c in STATE)
-COMMAND_NAMES = tuple(c.name for c in COMMANDS)
-BY_NAME = {c.name: c for c in SENSORS + COMMANDS}
+@dataclass(frozen=True)
+class ChannelDictionary:
+    """A vehicle's interface: its sensor, command and state channels (names, SI units, meanings). The
+    DBC, the MCAP and JSON schemas, the Zenoh payloads, the CSV exports and the validation workflow of
+    that vehicle are derived from it."""
+    sensors: tuple[Channel, ...]
+    commands: tuple[Channel, ...]
+    state: tuple[Channel, ...]
+
+    def __post_init__(self):
+        names = [c.name for c in self.sensors] + [c.name for c in self.commands]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"channel names must be unique; repeated: {dup}")
+
+    @property
+    def sensor_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.sensors)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.state)
+
+    @property
+    def command_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.commands)
+
+    @property
+    def by_name(self) -> dict[str, Channel]:
+        return {c.name: c for c in self.sensors + self.commands}
+
+
+def car_channels(driven=("rl", "rr")) -> ChannelDictionary:
+    """The four-wheel car's channel dictionary, its drive-torque sensors on the `driven` wheels."""
+    return ChannelDictionary(car_sensors(driven), COMMANDS, STATE)
+
+
+#: The rear-wheel-drive car's dictionary: the default where no vehicle is at hand (a vehicle in use
+#: carries its own: VehicleModel.channels).
+CAR = car_channels()
+SENSORS = CAR.sensors
+SENSOR_NAMES = CAR.sensor_names
+STATE_NAMES = CAR.state_names
+COMMAND_NAMES = CAR.command_names
+BY_NAME = {c.name: c for c in car_sensors(("fl", "fr")) + SENSORS + COMMANDS}

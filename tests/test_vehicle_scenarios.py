@@ -56,7 +56,7 @@ def test_mcap_output_round_trips(straight_line, tmp_path):
     res, sim = straight_line
     out = tmp_path / "run.mcap"
     rows = res.data[:200]
-    write_run(out, res.columns, rows, sim.vm.config.id)
+    write_run(out, res.columns, rows, sim.vm.config.id, sim.vm.channels)
     msgs = list(read_messages(out, f"rtsim/{sim.vm.config.id}/sensors"))
     assert len(msgs) == len(rows)
     for (t, m), r in zip(msgs, rows):

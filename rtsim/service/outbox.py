@@ -13,10 +13,11 @@ messages. Log times in the recording are simulation times (ns).
 """
 from __future__ import annotations
 
+import functools
 import threading
 
 from bridge import payloads
-from rtsim.channels import COMMAND_NAMES
+from rtsim.channels import CAR, ChannelDictionary
 
 from .rings import CMD_ACCEPTED, H_CMD, H_LOG, H_SENSOR, H_STATE, LOG_RX, RingReader, Rings
 
@@ -27,8 +28,11 @@ class RingDrain:
     ``raw`` (optional) receives each sensor and state sample as (key, t, values array) without JSON:
     re-simulation compares numbers."""
 
-    def __init__(self, rings: Rings, frame_ids, emit=None, raw=None, frames: bool = True):
+    def __init__(self, rings: Rings, frame_ids, emit=None, raw=None, frames: bool = True,
+                 channels: ChannelDictionary = CAR):
         self.r = rings
+        self.channels = channels
+        self._encode_sensors = functools.partial(payloads.encode_sensors, names=channels.sensor_names)
         self.emit = emit
         self.raw = raw
         self.frames = frames
@@ -71,16 +75,16 @@ class RingDrain:
             kind, arg = (int(x) for x in r.cmd_meta[j])
             t = float(r.cmd_t[j])
             if kind == CMD_ACCEPTED:
-                body = {COMMAND_NAMES[arg]: float(r.cmd_v[j, arg]), "source": "can"}
+                body = {self.channels.command_names[arg]: float(r.cmd_v[j, arg]), "source": "can"}
             else:
-                body = {**{nm: float(r.cmd_v[j, i]) for i, nm in enumerate(COMMAND_NAMES)},
+                body = {**{nm: float(r.cmd_v[j, i]) for i, nm in enumerate(self.channels.command_names)},
                         "source": "safe" if arg else "can"}
             emit("commands", t, payloads.encode_json({"time": t, **body}))
         return len(todo)
 
     def _sensor_samples(self) -> int:
         r = self.r
-        return self._samples(self._sensors, "sensors", r.sensor_t, r.sensor_v, payloads.encode_sensors,
+        return self._samples(self._sensors, "sensors", r.sensor_t, r.sensor_v, self._encode_sensors,
                              r.sensor_words if self.frames else None)
 
     def _state_samples(self) -> int:
@@ -112,14 +116,14 @@ class Outbox:
     publishes the status (``status_fn()``) every ``status_period`` s."""
 
     def __init__(self, rings: Rings, frame_ids, zenoh=None, recorder=None, status_fn=None,
-                 status_period: float = 0.1, poll: float = 0.005):
+                 status_period: float = 0.1, poll: float = 0.005, channels: ChannelDictionary = CAR):
         self.zenoh = zenoh
         self.recorder = recorder
         self.status_fn = status_fn
         self.status_period = float(status_period)
         self.poll = float(poll)
         self.published = 0
-        self._rings = RingDrain(rings, frame_ids, emit=self._emit, frames=recorder is not None)
+        self._rings = RingDrain(rings, frame_ids, emit=self._emit, frames=recorder is not None, channels=channels)
         self._stop = threading.Event()
         self._status_due = 0.0
         self._thread = threading.Thread(target=self._run, name="rtsim-publisher", daemon=True)

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from bridge.can_codec import Codec
-from rtsim.channels import SENSOR_NAMES, STATE_NAMES
+from rtsim.channels import STATE_NAMES
 from rtsim.errors import ConfigError
 
 from .loop import HilLoop
@@ -88,7 +88,7 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
             for p in temps:
                 p.unlink(missing_ok=True)
     mode = session["mode"]
-    loop = HilLoop(sim, Codec(), mode=mode, state_rate=float(session.get("state_rate", 100.0)),
+    loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode=mode, state_rate=float(session.get("state_rate", 100.0)),
                    hold_pressure=float(session["hold_pressure"]))
     col = Collector(loop)
     rx = messages.get(f"rtsim/{vid}/can/rx", [])
@@ -106,8 +106,8 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         loop.advance(int(round(rec_sensors[-1].data["time"] / dt)) - loop.k)
     report = {"recording": str(path), "mode": mode, "dt": dt, "files": notes, "frames_replayed": len(rx),
               "sim_time": loop.sim_time, "run_state": loop.run_state, "message": loop.message,
-              "sensors": _compare(rec_sensors, col.sensors, SENSOR_NAMES),
-              "state": _compare(rec_state, col.state, STATE_NAMES)}
+              "sensors": _compare(rec_sensors, col.sensors, sim.vm.channels.sensor_names),
+              "state": _compare(rec_state, col.state, sim.vm.channels.state_names)}
     report["identical"] = bool(report["sensors"]["identical"] and report["state"]["identical"])
     return report
 
@@ -124,7 +124,7 @@ def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | N
 
     frames = read_frames(path)
     sim, sc = build_sim(scenario or DEFAULT_SCENARIO, vehicle, dt, models)
-    loop = HilLoop(sim, Codec(), mode="fast")
+    loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode="fast")
     col = Collector(loop)
     t_first = frames[0].time if frames else 0.0
     for f in frames:

@@ -24,7 +24,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from bridge.can_bus import HUB_HOST, LoopbackHub, default_hub_port, socketcan_available
-from bridge.can_codec import DEFAULT_DBC, Codec
+from bridge.can_codec import Codec
 from rtsim.errors import ConfigError
 from rtsim.realtime.health import LoopHealth
 from rtsim.realtime.pacer import MODES, Pacer
@@ -59,7 +59,7 @@ class ServeOptions:
     spin: float = 0.0002                        # s of busy-wait before each step (the rest is slept);
                                                 # >= dt: never sleep (a dedicated core on a bench)
     duration: float | None = None               # s of wall time (None: until stopped)
-    dbc: Path = DEFAULT_DBC
+    dbc: Path | None = None                     # default: the vehicle's ([interface] dbc)
 
     def check(self) -> None:
         if self.mode not in MODES:
@@ -144,18 +144,17 @@ class Service:
         self.sim, self.sc = build_sim(self.scenario_path, o.vehicle, o.dt, self.models)
         self.model = self.sim.vm
         self.vehicle_id = o.vehicle_id or self.model.config.id
-        self.codec = Codec(o.dbc)
+        ch = self.model.channels
+        self.codec = Codec(o.dbc or self.model.dbc, ch)        # the served vehicle's interface
         self.inbox = queue.SimpleQueue()
-        from rtsim.channels import COMMAND_NAMES, SENSOR_NAMES, STATE_NAMES
 
         from .rings import make_rings
-        self.rings = make_rings(len(SENSOR_NAMES), len(self.codec.sensor_frames), len(STATE_NAMES),
-                                len(COMMAND_NAMES))
+        self.rings = make_rings(len(ch.sensors), len(self.codec.sensor_frames), len(ch.state), len(ch.commands))
         self._open_can()
         if o.record is not None:
             from bridge.mcap_recorder import Recorder
             self.recorder = Recorder(o.record, self.vehicle_id, metadata=self.session_metadata(),
-                                     poll_interval=0.005)
+                                     poll_interval=0.005, channels=ch)
         if o.zenoh:
             from bridge.zenoh_link import ZenohLink
             self.zenoh = ZenohLink(self.vehicle_id, listen=tuple(o.zenoh_listen),
@@ -167,7 +166,7 @@ class Service:
         self.loop.port = self.port
         from .outbox import Outbox
         self.outbox = Outbox(self.rings, self.loop.lp.sensor_ids, zenoh=self.zenoh, recorder=self.recorder,
-                             status_fn=self.loop.status, status_period=1.0 / o.status_rate)
+                             status_fn=self.loop.status, status_period=1.0 / o.status_rate, channels=ch)
         self.loop.outbox = self.outbox
         self.pacer = Pacer(self.loop.run_steps, self.sim.dt, "fast" if o.mode == "fast" else (
             "lockstep" if o.mode == "lockstep" else "realtime"), max_catch_up=o.max_catch_up,
@@ -220,7 +219,7 @@ class Service:
                               "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
             "rtsim.scenario": {"path": str(self.scenario_path.resolve()), "toml": self.scenario_path.read_text()},
             "rtsim.vehicle": {"path": str(vpath.resolve()), "toml": vpath.read_text()},
-            "rtsim.dbc": {"path": str(Path(self.opts.dbc).resolve()), "text": Path(self.opts.dbc).read_text()},
+            "rtsim.dbc": {"path": str(self.codec.path.resolve()), "text": self.codec.path.read_text()},
         }
 
     def loop_hold_pressure(self) -> float:
@@ -259,14 +258,14 @@ class Service:
             "dt": self.sim.dt,
             "can": self.port.stats() if self.port is not None else None,
             "zenoh": {"endpoints": list(self.zenoh.endpoints)} if self.zenoh is not None else None,
-            "dbc": str(self.opts.dbc),
+            "dbc": str(self.codec.path),
         }
 
     # -- running ---------------------------------------------------------------------------------------
     def describe(self) -> list[str]:
         lines = [f"rtsim serve: vehicle {self.vehicle_id} ({self.model.config.name}), scenario "
                  f"{self.sc.name}, mode {self.opts.mode}, step {self.sim.dt * 1e3:g} ms",
-                 f"  CAN:    {self.port.description} (DBC {self.opts.dbc.name}: sensors every "
+                 f"  CAN:    {self.port.description} (DBC {self.codec.path.name}: sensors every "
                  f"{self.loop.sensor_every * self.sim.dt * 1e3:g} ms, status every "
                  f"{self.loop.status_every * self.sim.dt * 1e3:g} ms)"]
         if self.zenoh is not None:

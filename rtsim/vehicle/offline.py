@@ -1,5 +1,6 @@
 """Offline runs: a vehicle, a road and a scenario's driver, as fast as the machine allows, logged at
-the scenario's output rate to CSV (column `time`, then the sensor channels, then the state columns)."""
+the scenario's output rate (column `time`, then the vehicle's sensor channels as reported, then its
+state channels: the names of its channel dictionary) to CSV or, through bridge.mcap_log, to MCAP."""
 from __future__ import annotations
 
 import csv
@@ -13,20 +14,26 @@ import numpy as np
 
 from drivers.base import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, NSTATE, S_SPEED, S_X, S_Y, S_YAW
 from drivers.scenario import Scenario, load_scenario
-from rtsim.channels import SENSOR_NAMES, WHEELS
+from rtsim.channels import CAR, ChannelDictionary
 from rtsim.errors import ConfigError
 from rtsim.road.config import load_road
 
-from .car.config import load_vehicle
-from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT, TO_FX, TO_FY, TO_FZ
 from .car.build import build_vehicle
+from .car.config import load_vehicle
+from .car.observer import vehicle_state_values
 from .car.sensors import NSENSOR
-from .kit.sensor_model import seed_noise
 from .car.sim import VehicleSim
+from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT
+from .kit.sensor_model import seed_noise
 
-STATE_COLUMNS = ("pos_x", "pos_y", "pos_z", "yaw", "speed",
-                 *(f"tyre_{c}_{w}" for c in ("fx", "fy", "fz") for w in WHEELS), "constraint_violation")
-COLUMNS = ("time", *SENSOR_NAMES, *STATE_COLUMNS)
+
+
+def columns_of(channels: ChannelDictionary) -> tuple[str, ...]:
+    """CSV/MCAP columns of a run: time, the sensor channels, the state channels (the vehicle's names)."""
+    return ("time", *channels.sensor_names, *channels.state_names)
+
+
+COLUMNS = columns_of(CAR)      # the rear-drive car's
 
 
 @dataclass
@@ -78,7 +85,8 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
     dt = sc.dt
     nsteps = int(round(sc.duration / dt))
     every = max(1, int(round(1.0 / (sc.spec.output_rate * dt))))
-    rows = np.zeros((nsteps // every + 1, len(COLUMNS)))
+    columns = columns_of(sim.vm.channels)
+    rows = np.zeros((nsteps // every + 1, len(columns)))
     driver = sc.driver()
     state = np.zeros(NSTATE)
     sens = np.zeros(NSENSOR)
@@ -103,24 +111,15 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
         io.extra[EX_TORQUE_RIGHT] = cmd[I_TORQUE_RR]
         sim.step(1)
     wall = time.perf_counter() - t0
-    return RunResult(COLUMNS, rows[:nrow], wall, nsteps)
+    return RunResult(columns, rows[:nrow], wall, nsteps)
 
 
 def _log(sim: VehicleSim, sens: np.ndarray, row: np.ndarray) -> None:
+    """time, the sensors as reported, the observer state (the service's state channels)."""
     sim.sensors(sens)
-    q, qd = sim.data.q, sim.data.qd
-    ci = sim.vm.vehicle.chassis_idx
     row[0] = sim.data.t[0]
     row[1:1 + NSENSOR] = sens
-    k = 1 + NSENSOR
-    row[k:k + 3] = q[ci[0]:ci[0] + 3]
-    row[k + 3] = math.atan2(q[ci[4]], q[ci[3]])
-    row[k + 4] = float(np.linalg.norm(qd[ci[0]:ci[0] + 3]))
-    tyre = sim.vd.tyre
-    row[k + 5:k + 9] = tyre[:, TO_FX]
-    row[k + 9:k + 13] = tyre[:, TO_FY]
-    row[k + 13:k + 17] = tyre[:, TO_FZ]
-    row[k + 17] = float(np.max(np.abs(sim.data.phi), initial=0.0))   # max |Phi| at the end of the last step
+    vehicle_state_values(sim.data, sim.vm.vehicle, sim.vd, sim.io.signals, row[1 + NSENSOR:])
 
 
 def write_csv(result: RunResult, path: str | Path) -> None:

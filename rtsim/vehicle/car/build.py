@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rtsim.channels import ChannelDictionary, car_channels
 from rtsim.mbs import Mechanism, MechanismBuilder, Settings
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
@@ -45,6 +46,8 @@ class VehicleModel:
     corners: list[CornerKinematics]
     static_loads: np.ndarray       # N, per wheel, from the weight split
     design_wheel_centre: np.ndarray
+    channels: ChannelDictionary    # its interface: sensor, command and state channels
+    dbc: Path                      # its DBC (the channels' CAN frames)
 
 
 def _geometry(cfg_axle, right: bool):
@@ -150,7 +153,9 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         drive_slot=np.array([driven.index(i) if i in driven else -1 for i in range(len(WHEELS))], dtype=np.int64),
         side=np.array([1.0 if i in (FRONT_AXLE[0], REAR_AXLE[0]) else -1.0 for i in range(len(WHEELS))]),
     )
-    return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w)
+    channels = car_channels(tuple(WHEELS[i] for i in driven))
+    return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w, channels,
+                        (Path(base) / cfg.interface.dbc).resolve())
 
 
 def _basis(exps: np.ndarray, z: float, s: float) -> np.ndarray:

@@ -167,6 +167,12 @@ class Sensors(Strict):
         return v
 
 
+class Interface(Strict):
+    """The vehicle's CAN interface: its DBC, whose signals carry the channels of the vehicle's channel
+    dictionary (rtsim.channels.car_channels) by the same names and units."""
+    dbc: str = Field(default="../can/xbw.dbc", description="DBC file, relative to the vehicle file")
+
+
 class VehicleConfig(Strict):
     name: str
     id: str = Field(pattern=r"^[a-z0-9_]+$", description="used in topic names: rtsim/<id>/...")
@@ -176,6 +182,7 @@ class VehicleConfig(Strict):
     driven_axle: Literal["front", "rear"] = Field(
         default="rear", description="the axle the powertrain drives through its open differential")
     tyres: Tyres
+    interface: Interface = Interface()
     aero: Aero = Aero()
     sensors: Sensors
     brakes: BrakeConfig = Field(default_factory=BrakeConfig, description="rtsim.vehicle.kit.brake")
