@@ -48,3 +48,21 @@ def test_bad_values_name_file_key_and_range(tmp_path, text, key):
     with pytest.raises(ConfigError) as e:
         _opts("--config", str(cfg))
     assert str(cfg) in str(e.value) and key in str(e.value)
+
+
+def test_every_setting_is_declared_once_and_documented():
+    """The file's keys and the flags come from the one declaration (rtsim.service.config); the shipped
+    file documents each key (set, or commented out with its default)."""
+    import argparse
+
+    from rtsim.service.config import ServeOptions, add_arguments
+    text = (ROOT / "configs" / "service.toml").read_text()
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    dests = {a.dest for a in parser._actions}
+    for name, f in ServeOptions.model_fields.items():
+        key = (f.json_schema_extra or {}).get("key")
+        if key:
+            sec, k = key.split(".")
+            assert f"[{sec}]" in text and (f"\n{k} = " in text or f"\n# {k} = " in text), key
+        assert f"opt_{name}" in dests, name

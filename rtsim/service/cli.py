@@ -1,67 +1,13 @@
-"""`rtsim serve` command line: flags map one to one onto ServeOptions."""
+"""`rtsim serve` command line: the flags are derived from the settings' declarations (rtsim.service.config)."""
 from __future__ import annotations
 
-import argparse
 import json
 import sys
-from pathlib import Path
 
-from .server import DEFAULT_ZENOH_LISTEN, ServeOptions, Service
+from .config import add_arguments, options
+from .server import Service
 
-
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", help="service settings TOML (see configs/service.toml); flags override it")
-    p.add_argument("--scenario", help="scenario TOML or name in configs/scenarios (road, start, step; "
-                                      "default hil_flat)")
-    p.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")
-    p.add_argument("--dt", type=float, help="fixed step, s (default: the scenario's, 0.001)")
-    p.add_argument("--mode", choices=["realtime", "lockstep", "fast"],
-                   help="realtime (default): paced by the wall clock; lockstep: steps only on request (CAN "
-                        "SIM_STEP_REQ or Zenoh control op=step); fast: as fast as possible")
-    p.add_argument("--can-interface", help="python-can interface (socketcan, remote, virtual, pcan, ...); "
-                                           "default: socketcan vcan0 if present, else the loopback hub")
-    p.add_argument("--can-channel", help="python-can channel (vcan0, can0, 127.0.0.1:54701, ...)")
-    p.add_argument("--no-hub", action="store_true", help="do not start the embedded loopback CAN hub")
-    p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT",
-                   help=f"Zenoh listen endpoint (repeatable; default {DEFAULT_ZENOH_LISTEN})")
-    p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT",
-                   help="Zenoh endpoint to connect to (a router on a bench; repeatable)")
-    p.add_argument("--zenoh-allow-remote", action="store_true",
-                   help="allow Zenoh endpoints off 127.0.0.1 (a real bench network)")
-    p.add_argument("--no-zenoh", action="store_true", help="do not publish over Zenoh")
-    p.add_argument("--record", metavar="FILE.mcap", help="record the session to MCAP")
-    p.add_argument("--vehicle-id", help="key segment of the Zenoh keys and MCAP topics (default: the vehicle's id)")
-    p.add_argument("--state-rate", type=float, help="state publication rate, Hz (default 100)")
-    p.add_argument("--status-rate", type=float, help="status publication rate, Hz (1-10, default 10)")
-    p.add_argument("--hold-pressure", type=float, help="brake pressure applied when the brake command "
-                                                       "times out, kPa (default 3000)")
-    p.add_argument("--max-catch-up", type=int,
-                   help="after a stall, steps run back to back before the rest are skipped (default 20)")
-    p.add_argument("--spin", type=float, help="busy-wait before each step, s (default 0.0002; a value >= the "
-                                              "step never sleeps: for a dedicated core)")
-    p.add_argument("--duration", type=float, help="stop after this many seconds of wall time")
-    p.add_argument("--json", action="store_true", help="print the closing summary as JSON")
-
-
-def options(args) -> ServeOptions:
-    """ServeOptions from the defaults, then the --config file, then the flags given."""
-    kw: dict = {}
-    if args.config:
-        from .config import load_service_config
-        kw.update(load_service_config(args.config))
-    flags = {"scenario": args.scenario and Path(args.scenario), "vehicle": args.vehicle and Path(args.vehicle),
-             "dt": args.dt, "mode": args.mode, "can_interface": args.can_interface,
-             "can_channel": args.can_channel, "zenoh_listen": args.zenoh_listen,
-             "zenoh_connect": args.zenoh_connect, "record": args.record and Path(args.record),
-             "vehicle_id": args.vehicle_id, "state_rate": args.state_rate, "status_rate": args.status_rate,
-             "hold_pressure": args.hold_pressure, "max_catch_up": args.max_catch_up, "duration": args.duration,
-             "spin": args.spin}
-    kw.update({k: v for k, v in flags.items() if v is not None})
-    for flag, key, value in (("no_hub", "start_hub", False), ("no_zenoh", "zenoh", False),
-                             ("zenoh_allow_remote", "zenoh_allow_remote", True)):
-        if getattr(args, flag):
-            kw[key] = value
-    return ServeOptions(**kw)
+__all__ = ["add_arguments", "options", "main"]
 
 
 def main(args) -> int:

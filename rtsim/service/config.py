@@ -1,66 +1,161 @@
-"""`rtsim serve --config FILE`: the service's settings as a validated TOML file (configs/service.toml
-documents every key and the embedded defaults). Errors name the file, the key, the value and what is
-allowed; command-line flags override the file."""
+"""`rtsim serve`'s settings, declared once: each is a field of `ServeOptions` with its type, default, range,
+help text, its key in the settings file (configs/service.toml documents every key and the embedded
+defaults) and its command-line flag. The file's sections, the flags and the validation are derived from
+these declarations; flags override the file; errors name the file (or the flag), the key, the value and
+what is allowed (rtsim.configfile).
+"""
 from __future__ import annotations
 
+import argparse
+import typing
 from pathlib import Path
-from typing import Literal, Optional
+from typing import Annotated, Any, Literal, Optional
 
-from pydantic import Field
+from pydantic import BaseModel, ConfigDict, Field, create_model
 
-from rtsim.configfile import Strict, load
+from rtsim.configfile import Range, Strict, load_toml, validate
 
-
-class SimulationSection(Strict):
-    scenario: Optional[str] = None
-    vehicle: Optional[str] = None
-    mode: Literal["realtime", "lockstep", "fast"] = "realtime"
-    dt: Optional[float] = Field(None, ge=1e-5, le=0.01)
-    max_catch_up: int = Field(20, ge=0, le=10000)
-    hold_pressure: Optional[float] = Field(None, ge=0.0, le=12000.0)
-
-
-class CanSection(Strict):
-    interface: Optional[str] = None
-    channel: Optional[str] = None
-    start_hub: bool = True
+ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_SCENARIO = ROOT / "configs" / "scenarios" / "hil_flat.toml"
+DEFAULT_ZENOH_LISTEN = "tcp/127.0.0.1:7447"
+Step = Range(1e-5, 0.01, "s")
+Pressure = Range(0.0, 12000.0, "kPa")
+StateRate = Range(1.0, 1000.0, "Hz")
+StatusRate = Range(1.0, 10.0, "Hz")
+Spin = Range(0.0, 0.01, "s")
+WallTime = Range(0.0, 1e9, "s", lo_open=True)
 
 
-class ZenohSection(Strict):
-    enabled: bool = True
-    listen: list[str] = ["tcp/127.0.0.1:7447"]
-    connect: list[str] = []
-    allow_remote: bool = False
-    vehicle_id: Optional[str] = Field(None, pattern=r"^[A-Za-z0-9_-]+$")
-    state_rate: float = Field(100.0, ge=1.0, le=1000.0)
-    status_rate: float = Field(10.0, ge=1.0, le=10.0)
+def setting(default: Any, help: str, key: str | None, flag: str | None = None, **kw):
+    """A setting's declaration: `key` is "section.name" in the settings file (None: flag only), `flag`
+    the command-line option (default --<name> with dashes; "" for none); a bool flag given as "--no-x"
+    sets False."""
+    return Field(default, description=help, json_schema_extra={"key": key, "flag": flag}, **kw)
 
 
-class RecordSection(Strict):
-    path: Optional[str] = None
+class ServeOptions(BaseModel):
+    """Everything `rtsim serve` can be told."""
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+    scenario: Path = setting(DEFAULT_SCENARIO, "scenario TOML or name in configs/scenarios (road, start, step; "
+                             "default hil_flat)", "simulation.scenario")
+    vehicle: Optional[Path] = setting(None, "vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)",
+                                      "simulation.vehicle")
+    dt: Optional[Step] = setting(None, "fixed step, s (default: the scenario's, 0.001)",
+                                                   "simulation.dt")
+    mode: Literal["realtime", "lockstep", "fast"] = setting(
+        "realtime", "realtime (default): paced by the wall clock; lockstep: steps only on request (CAN "
+        "SIM_STEP_REQ or Zenoh control op=step); fast: as fast as possible", "simulation.mode")
+    max_catch_up: int = setting(20, "after a stall, steps run back to back before the rest are skipped "
+                                "(default 20)", "simulation.max_catch_up", ge=0, le=10000)
+    hold_pressure: Optional[Pressure] = setting(
+        None, "brake pressure applied when the brake command times out, kPa (default 3000)",
+        "simulation.hold_pressure")
+    can_interface: Optional[str] = setting(None, "python-can interface (socketcan, remote, virtual, pcan, ...); "
+                                           "default: socketcan vcan0 if present, else the loopback hub",
+                                           "can.interface")
+    can_channel: Optional[str] = setting(None, "python-can channel (vcan0, can0, 127.0.0.1:54701, ...)",
+                                         "can.channel")
+    start_hub: bool = setting(True, "do not start the embedded loopback CAN hub", "can.start_hub", "--no-hub")
+    zenoh: bool = setting(True, "do not publish over Zenoh", "zenoh.enabled", "--no-zenoh")
+    zenoh_listen: list[str] = setting([DEFAULT_ZENOH_LISTEN], f"Zenoh listen endpoint (repeatable; default "
+                                      f"{DEFAULT_ZENOH_LISTEN})", "zenoh.listen")
+    zenoh_connect: list[str] = setting([], "Zenoh endpoint to connect to (a router on a bench; repeatable)",
+                                       "zenoh.connect")
+    zenoh_allow_remote: bool = setting(False, "allow Zenoh endpoints off 127.0.0.1 (a real bench network)",
+                                       "zenoh.allow_remote")
+    vehicle_id: Optional[str] = setting(None, "key segment of the Zenoh keys and MCAP topics (default: the "
+                                        "vehicle's id)", "zenoh.vehicle_id", pattern=r"^[A-Za-z0-9_-]+$")
+    state_rate: StateRate = setting(100.0, "state publication rate, Hz (default 100)",
+                                                   "zenoh.state_rate")
+    status_rate: StatusRate = setting(10.0, "status publication rate, Hz (1-10, default 10)",
+                                                  "zenoh.status_rate")
+    record: Optional[Path] = setting(None, "record the session to MCAP (FILE.mcap)", "record.path")
+    spin: Spin = setting(0.0002, "busy-wait before each step, s (default 0.0002; a value >= "
+                                          "the step never sleeps: for a dedicated core)", None)
+    duration: Optional[WallTime] = setting(
+        None, "stop after this many seconds of wall time", None)
+    dbc: Optional[Path] = setting(None, "DBC of the CAN interface (default: the vehicle's [interface] dbc)", None)
+
+    def check(self) -> None:
+        """Checks across settings (each value was checked on assignment)."""
+        from rtsim.errors import ConfigError
+        if self.record is not None and Path(self.record).suffix.lower() != ".mcap":
+            raise ConfigError(f"--record {self.record}: the recording must be an .mcap file")
 
 
-class ServiceConfig(Strict):
-    simulation: SimulationSection = SimulationSection()
-    can: CanSection = CanSection()
-    zenoh: ZenohSection = ZenohSection()
-    record: RecordSection = RecordSection()
+def _declared():
+    for name, f in ServeOptions.model_fields.items():
+        extra = f.json_schema_extra or {}
+        yield name, f, extra.get("key"), extra.get("flag")
+
+
+def _file_schema() -> type[BaseModel]:
+    """The settings file's model, derived from the declarations: one Strict section per file section."""
+    sections: dict[str, dict] = {}
+    for name, f, key, _flag in _declared():
+        if key:
+            sec, k = key.split(".")
+            tp = Annotated[(f.annotation, *f.metadata)] if f.metadata else f.annotation
+            sections.setdefault(sec, {})[k] = (tp, Field(f.default, description=f.description))
+    models = {sec: create_model(f"Service_{sec}", __base__=Strict, **fields) for sec, fields in sections.items()}
+    return create_model("ServiceFile", __base__=Strict, **{sec: (m, m()) for sec, m in models.items()})
 
 
 def load_service_config(path: str | Path) -> dict:
-    """ServeOptions keyword arguments from a service TOML (paths resolved against its folder)."""
+    """ServeOptions keyword arguments from a settings file (only the keys it sets; relative paths
+    against its folder); errors name the file and the section.key."""
     path = Path(path)
-    cfg = load(ServiceConfig, path)
-    base = path.parent
-
-    def rel(p):
-        return None if p is None else (Path(p) if Path(p).is_absolute() else base / p)
-    s, c, z, r = cfg.simulation, cfg.can, cfg.zenoh, cfg.record
-    out = {"mode": s.mode, "dt": s.dt, "max_catch_up": s.max_catch_up, "hold_pressure": s.hold_pressure,
-           "vehicle": rel(s.vehicle), "can_interface": c.interface, "can_channel": c.channel,
-           "start_hub": c.start_hub, "zenoh": z.enabled, "zenoh_listen": list(z.listen),
-           "zenoh_connect": list(z.connect), "zenoh_allow_remote": z.allow_remote, "vehicle_id": z.vehicle_id,
-           "state_rate": z.state_rate, "status_rate": z.status_rate, "record": rel(r.path)}
-    if s.scenario is not None:
-        out["scenario"] = rel(s.scenario)
+    raw = load_toml(path)
+    validate(_file_schema(), raw, str(path))
+    out = {}
+    for name, f, key, _flag in _declared():
+        if not key:
+            continue
+        sec, k = key.split(".")
+        if k in raw.get(sec, {}):
+            v = raw[sec][k]
+            if f.annotation in (Path, Optional[Path]) and v is not None and not Path(v).is_absolute():
+                v = path.parent / v
+            out[name] = v
     return out
+
+
+def _arg_type(annotation):
+    """The command-line conversion of a setting's type (its range is checked by the model)."""
+    for tp in (t for t in (typing.get_args(annotation) or (annotation,)) if t is not type(None)):
+        base = typing.get_args(tp)[0] if typing.get_origin(tp) is typing.Annotated else tp
+        if base in (float, int, Path):
+            return base
+    return str
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """One flag per declared setting (plus --config and --json)."""
+    p.add_argument("--config", help="service settings TOML (see configs/service.toml); flags override it")
+    for name, f, _key, flag in _declared():
+        if flag == "":
+            continue
+        dest = f"opt_{name}"
+        if f.annotation is bool:
+            neg = flag is not None and flag.startswith("--no-")
+            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="store_const",
+                           const=not neg, default=None, help=f.description)
+        elif f.annotation == list[str]:
+            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append", metavar="ENDPOINT",
+                           help=f.description)
+        else:
+            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, type=_arg_type(f.annotation),
+                           help=f.description)
+    p.add_argument("--json", action="store_true", help="print the closing summary as JSON")
+
+
+def options(args) -> ServeOptions:
+    """ServeOptions from the defaults, then the --config file, then the flags given (flag errors name
+    `rtsim serve` and the setting)."""
+    kw: dict = {}
+    if getattr(args, "config", None):
+        kw.update(load_service_config(args.config))
+    flags = {name: getattr(args, f"opt_{name}") for name, *_ in _declared()
+             if getattr(args, f"opt_{name}", None) is not None}
+    return validate(ServeOptions, {**kw, **flags}, "rtsim serve")

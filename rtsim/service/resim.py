@@ -120,7 +120,7 @@ def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | N
     ``models``: a cache of built vehicle models (see ``build_sim``)."""
     from bridge.can_logs import read_frames
 
-    from .server import DEFAULT_SCENARIO
+    from .config import DEFAULT_SCENARIO
 
     frames = read_frames(path)
     sim, sc = build_sim(scenario or DEFAULT_SCENARIO, vehicle, dt, models)

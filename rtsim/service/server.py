@@ -20,64 +20,18 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from bridge.can_bus import HUB_HOST, LoopbackHub, default_hub_port, socketcan_available
 from bridge.can_codec import Codec
 from rtsim.errors import ConfigError
 from rtsim.realtime.health import LoopHealth
-from rtsim.realtime.pacer import MODES, Pacer
+from rtsim.realtime.pacer import Pacer
 
+from .config import ServeOptions
 from .loop import HilLoop, Request
 
 ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_SCENARIO = ROOT / "configs" / "scenarios" / "hil_flat.toml"
-DEFAULT_ZENOH_LISTEN = "tcp/127.0.0.1:7447"
-
-
-@dataclass
-class ServeOptions:
-    """Everything `rtsim serve` can be told (CLI flags map one to one)."""
-    scenario: Path = DEFAULT_SCENARIO
-    vehicle: Path | None = None                 # default: the scenario's vehicle, else configs/vehicles/xbw.toml
-    dt: float | None = None                     # s; default: the scenario's step
-    mode: str = "realtime"
-    can_interface: str | None = None
-    can_channel: str | None = None
-    start_hub: bool = True                      # embedded default: start the loopback hub if none runs
-    zenoh: bool = True
-    zenoh_listen: list[str] = field(default_factory=lambda: [DEFAULT_ZENOH_LISTEN])
-    zenoh_connect: list[str] = field(default_factory=list)
-    zenoh_allow_remote: bool = False            # a router on another machine (a real bench)
-    record: Path | None = None
-    vehicle_id: str | None = None
-    state_rate: float = 100.0                   # Hz
-    status_rate: float = 10.0                   # Hz (Zenoh/MCAP status; the CAN status frame follows the DBC)
-    hold_pressure: float | None = None          # kPa applied when the brake command times out
-    max_catch_up: int = 20                      # steps run back to back after a stall before skipping
-    spin: float = 0.0002                        # s of busy-wait before each step (the rest is slept);
-                                                # >= dt: never sleep (a dedicated core on a bench)
-    duration: float | None = None               # s of wall time (None: until stopped)
-    dbc: Path | None = None                     # default: the vehicle's ([interface] dbc)
-
-    def check(self) -> None:
-        if self.mode not in MODES:
-            raise ConfigError(f"--mode {self.mode!r}: expected one of {', '.join(MODES)}")
-        if self.dt is not None and not 1e-5 <= self.dt <= 0.01:
-            raise ConfigError(f"--dt {self.dt}: allowed 1e-05 <= dt <= 0.01 s")
-        if not 1.0 <= self.state_rate <= 1000.0:
-            raise ConfigError(f"--state-rate {self.state_rate}: allowed 1 <= rate <= 1000 Hz")
-        if not 1.0 <= self.status_rate <= 10.0:
-            raise ConfigError(f"--status-rate {self.status_rate}: allowed 1 <= rate <= 10 Hz")
-        if not 0.0 <= self.spin <= 0.01:
-            raise ConfigError(f"--spin {self.spin}: allowed 0 <= spin <= 0.01 s")
-        if not 0 <= self.max_catch_up <= 10000:
-            raise ConfigError(f"--max-catch-up {self.max_catch_up}: allowed 0..10000 steps")
-        if self.duration is not None and not self.duration > 0:
-            raise ConfigError(f"--duration {self.duration}: must be > 0 s")
-        if self.record is not None and Path(self.record).suffix.lower() != ".mcap":
-            raise ConfigError(f"--record {self.record}: the recording must be an .mcap file")
 
 
 def resolve_scenario(name: str | Path) -> Path:
@@ -248,8 +202,7 @@ class Service:
 
     def config(self) -> dict:
         """The running configuration (Zenoh ``config`` query)."""
-        o = asdict(self.opts)
-        o = {k: (str(v) if isinstance(v, Path) else v) for k, v in o.items()}
+        o = self.opts.model_dump(mode="json")
         return {
             "vehicle_id": self.vehicle_id,
             "options": o,
