@@ -14,6 +14,7 @@ Vehicles, roads, scenarios, drivers and the service's settings all load through 
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 import types
 import typing
@@ -41,9 +42,7 @@ def Range(lo: float, hi: float, unit: str = "", lo_open: bool = False, hi_open: 
     """A float within [lo, hi] (open at either end if asked), finite; its errors show the whole range
     and the unit."""
     def check(x: float) -> float:
-        if not math.isfinite(x):
-            raise PydanticCustomError("not_finite", "must be a finite number")
-        ok = (x > lo if lo_open else x >= lo) and (x < hi if hi_open else x <= hi)
+        ok = math.isfinite(x) and (x > lo if lo_open else x >= lo) and (x < hi if hi_open else x <= hi)
         if not ok:
             raise PydanticCustomError("out_of_range", "out of range",
                                       {"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open, "unit": unit})
@@ -166,7 +165,7 @@ def _message(err: dict, data: Any, root) -> str:
     elif kind in ("extra_forbidden", "unexpected_keyword_argument"):
         reason = "unknown key"
     elif kind == "bad_key":
-        loc = loc + tuple(ctx["key"].split("."))
+        loc = loc + tuple(int(k[1:-1]) if k.startswith("[") else k for k in re.findall(r"[^.\[\]]+|\[\d+\]", ctx["key"]))
         value = ctx["value"]
         reason = err["msg"]
     elif kind == "out_of_range":

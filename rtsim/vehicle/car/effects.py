@@ -40,11 +40,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Optional
 
 import numpy as np
 
-from rtsim.channels import BY_NAME, SENSOR_NAMES
+from pydantic import Field, create_model, model_validator
+from pydantic_core import PydanticCustomError
+
+from rtsim.channels import BY_NAME, COMMAND_NAMES, SENSOR_NAMES
+from rtsim.configfile import Range, Strict, bad, validate
 from rtsim.errors import ConfigError
 
 from .effect_kernels import (
@@ -213,75 +217,84 @@ MODEL_EFFECTS = tuple(n for n, e in EFFECTS.items() if e.kind == "model")
 
 
 # ---------------------------------------------------------------------------------------- validation
-def _number(where: str, key: str, value, lo: float, hi: float, unit: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise ConfigError(f"{where}.{key} = {value!r}: expected a number in {lo:g} .. {hi:g} {unit}")
-    x = float(value)
-    if not math.isfinite(x) or x < lo or x > hi:
-        raise ConfigError(f"{where}.{key} = {value!r}: outside the plausible range {lo:g} .. {hi:g} {unit}")
-    return x
+def _param_field(spec: EffectSpec, p: ParamSpec):
+    lo, hi = (-1e9, 1e9) if (spec.name == "sensor_bias" and p.name == "bias") else (p.lo, p.hi)
+    unit = "" if p.unit == "1" or p.unit.startswith("unit") else p.unit
+    return (Range(lo, hi, unit), Field(description=p.description))
 
 
-def _table(where: str, spec: EffectSpec, table) -> dict:
-    if hasattr(table, "items"):
-        table = dict(table.items())
-    if not isinstance(table, dict):
-        raise ConfigError(f"{where} = {table!r}: expected a table of {', '.join(spec.param_names)}")
-    allowed = (("channel",) if spec.kind == "sensor" else ()) + spec.param_names
-    for key in table:
-        if key not in allowed:
-            raise ConfigError(f"{where}: unknown key {key!r}; {spec.name} takes {', '.join(allowed)}")
-    out: dict = {}
-    channel = None
+def _effect_model(spec: EffectSpec) -> type[Strict]:
+    """The pydantic model of one effect's table, from the catalogue: every parameter required, within
+    its plausible range (sensor_bias.bias within the channel's, which depends on the channel)."""
+    fields = {p.name: _param_field(spec, p) for p in spec.params}
     if spec.kind == "sensor":
-        channel = table.get("channel")
-        if channel not in SENSOR_NAMES:
-            raise ConfigError(f"{where}.channel = {channel!r}: not a sensor channel; channels are "
-                              f"{', '.join(SENSOR_NAMES)}")
-        out["channel"] = channel
-    for p in spec.params:
-        if p.name not in table:
-            lo, hi = spec.bounds(p.name, channel)
-            raise ConfigError(f"{where}: missing key {p.name!r} ({p.description}; {lo:g} .. {hi:g} {p.unit})")
-        lo, hi = spec.bounds(p.name, channel)
-        unit = BY_NAME[channel].unit if (spec.kind == "sensor" and p.unit.startswith("unit")) else p.unit
-        out[p.name] = _number(where, p.name, table[p.name], lo, hi, unit)
-    return out
+        fields = {"channel": (str, Field(description="sensor channel")), **fields}
+    model = create_model(f"Effect_{spec.name}", __base__=Strict, **fields)
+    if spec.kind == "sensor":
+        def _check(self, spec=spec):
+            if self.channel not in BY_NAME or BY_NAME[self.channel] not in SENSOR_CHANNELS:
+                raise bad("channel", self.channel, f"not a sensor channel; channels are {', '.join(SENSOR_NAMES)}")
+            if spec.name == "sensor_bias":
+                lo, hi = spec.bounds("bias", self.channel)
+                if not lo <= self.bias <= hi:
+                    raise bad("bias", self.bias, f"out of range (allowed {lo:g} <= bias <= {hi:g} "
+                                                 f"{BY_NAME[self.channel].unit})")
+            return self
+        model = create_model(f"Effect_{spec.name}", __base__=model,
+                             __validators__={"_channel": model_validator(mode="after")(_check)})
+    return model
+
+
+def _effects_model() -> type[Strict]:
+    """The pydantic model of an [effects] table: a model effect is one table, a sensor effect an array
+    of tables (one table alone is one channel), each channel at most once."""
+    fields = {}
+    for name, spec in EFFECTS.items():
+        m = _effect_model(spec)
+        fields[name] = (Optional[m] if spec.kind == "model" else Optional[list[m]], None)
+
+    def _shapes(cls, data):
+        if isinstance(data, dict):
+            for name, val in data.items():
+                spec = EFFECTS.get(name)
+                if spec is None:
+                    raise PydanticCustomError("unknown_key", "unknown effect", {
+                        "key": name, "value": val, "allowed": ", ".join(EFFECTS)})
+                if spec.kind == "model" and isinstance(val, (list, tuple)):
+                    raise bad(name, "[...]", f"a model effect is one table ([effects.{name}]), not an array")
+            return {k: ([v] if EFFECTS[k].kind == "sensor" and isinstance(v, dict) else v) for k, v in data.items()}
+        return data
+
+    def _channels_once(self):
+        for name in SENSOR_EFFECTS:
+            seen = set()
+            for k, row in enumerate(getattr(self, name) or ()):
+                if row.channel in seen:
+                    raise bad(f"{name}[{k}].channel", row.channel, f"channel given twice for {name}")
+                seen.add(row.channel)
+        return self
+
+    return create_model("Effects", __base__=Strict, **fields, __validators__={
+        "_shapes": model_validator(mode="before")(classmethod(_shapes)),
+        "_channels_once": model_validator(mode="after")(_channels_once)})
+
+
+SENSOR_CHANNELS = tuple(c for c in BY_NAME.values() if c.name not in COMMAND_NAMES)
+_EFFECTS_MODEL = _effects_model()
 
 
 def validate_effects(mapping, where: str = "effects") -> dict:
     """The canonical effects mapping of `mapping` (None or {} for none): model effects as
     {name: {param: float}}, sensor effects as {name: [{"channel": str, param: float}, ...]}.
-    ConfigError (one line, naming `where`, the key, the value and the allowed range) otherwise."""
+    ConfigError (rtsim.configfile: one line naming `where`, the key, the value and the allowed range)
+    otherwise."""
     if mapping is None:
         return {}
-    if hasattr(mapping, "items"):
+    if hasattr(mapping, "items") and not isinstance(mapping, dict):
         mapping = dict(mapping.items())
-    if not isinstance(mapping, dict):
-        raise ConfigError(f"{where} = {mapping!r}: expected a table of effects ({', '.join(EFFECTS)})")
-    out: dict = {}
-    for name, val in mapping.items():
-        spec = EFFECTS.get(name)
-        if spec is None:
-            raise ConfigError(f"{where}: unknown effect {name!r}; effects are {', '.join(EFFECTS)}")
-        if spec.kind == "model":
-            if isinstance(val, (list, tuple)):
-                raise ConfigError(f"{where}.{name}: a model effect is one table ([effects.{name}]), not an array")
-            out[name] = _table(f"{where}.{name}", spec, val)
-            continue
-        tables = list(val) if isinstance(val, (list, tuple)) else [val]
-        seen: set = set()
-        rows = []
-        for k, t in enumerate(tables):
-            row = _table(f"{where}.{name}[{k}]", spec, t)
-            if row["channel"] in seen:
-                raise ConfigError(f"{where}.{name}[{k}].channel = {row['channel']!r}: channel given twice "
-                                  f"for {name}")
-            seen.add(row["channel"])
-            rows.append(row)
-        if rows:
-            out[name] = rows
-    return out
+    source, _, prefix = where.rpartition(": ")
+    eff = validate(_EFFECTS_MODEL, mapping, source, prefix=prefix)
+    return {k: v for k, v in eff.model_dump(exclude_none=True).items() if v != []}
 
 
 def effects_toml(effects) -> str:
