@@ -34,10 +34,12 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 
 import numpy as np
+from pydantic import create_model
 
+from rtsim.configfile import Strict, check_ranges, range_fields
 from rtsim.jit import inline_kernel, kernel
 
 from .base import I_STEER, S_SPEED, S_X, S_Y, S_YAW
@@ -93,18 +95,26 @@ class PathFollowerParams:
     rear_offset: float = 0.0
 
     def __post_init__(self):
-        for f in fields(self):
-            x = getattr(self, f.name)
-            if not math.isfinite(x):
-                raise ValueError(f"path follower {f.name} = {x} must be finite")
-        for n in ("wheelbase", "steering_ratio", "la_min", "la_max", "max_wheel_angle", "max_rate", "v_soft"):
-            if not getattr(self, n) > 0.0:
-                raise ValueError(f"path follower {n} = {getattr(self, n)} must be > 0")
-        for n in ("la_gain", "k_stanley"):
-            if getattr(self, n) < 0.0:
-                raise ValueError(f"path follower {n} = {getattr(self, n)} must be >= 0")
+        check_ranges(_PARAMS_MODEL, asdict(self), "path follower")
         if self.la_max < self.la_min:
-            raise ValueError(f"path follower la_max = {self.la_max} m is below la_min = {self.la_min} m")
+            raise ValueError(f"path follower: la_max = {self.la_max!r}: must be >= la_min = {self.la_min!r} m")
+
+
+#: Allowed ranges of the parameters: name -> (lo, hi, unit, lo_open); the scenario files use them too.
+PATH_FOLLOWER_RANGES = {
+    "wheelbase": (0.0, 10.0, "m", True),
+    "steering_ratio": (0.0, 100.0, "", True),
+    "la_min": (0.0, 200.0, "m", True),
+    "la_gain": (0.0, 10.0, "s", False),
+    "la_max": (0.0, 500.0, "m", True),
+    "k_stanley": (0.0, 50.0, "1/s", False),
+    "v_soft": (0.0, 50.0, "m/s", True),
+    "max_wheel_angle": (0.0, 1.5, "rad", True),
+    "max_rate": (0.0, 100.0, "rad/s", True),
+    "rear_offset": (-10.0, 10.0, "m", False),
+}
+_PARAMS_MODEL = create_model("PathFollowerParamsModel", __base__=Strict,
+                             **range_fields(PATH_FOLLOWER_RANGES, {n: 0.0 for n in PATH_FOLLOWER_RANGES}))
 
 
 def path_follower(x, y, method: str = "pure_pursuit", closed: bool = False,

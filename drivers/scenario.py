@@ -78,17 +78,17 @@ from typing import Annotated, Any, Literal, Optional, Union
 import numpy as np
 from pydantic import Field, StrictBool, create_model, model_validator
 
-from rtsim.configfile import Range, Strict, bad, load, problem
+from rtsim.configfile import Range, Strict, bad, load, problem, range_fields
 from rtsim.errors import ConfigError
 
 from .base import INPUT_NAMES, INPUT_UNITS, LIMITS, NSTATE, S_SPEED, S_X, S_Y
 from .base import S_YAW, SENSOR_ALIASES, input_name
 from .driver import Driver
-from .path_follower import PathFollowerParams, path_follower
+from .path_follower import PATH_FOLLOWER_RANGES, PathFollowerParams, path_follower
 from .profiles import Profile, pack, sample
 from . import profiles as P
 from .replay import Recording, parse_column, read_csv_table, read_recording, replay_profiles
-from .speed_follower import SpeedFollowerParams, speed_follower
+from .speed_follower import SPEED_FOLLOWER_RANGES, SpeedFollowerParams, speed_follower
 
 SCENARIO_DIR = Path(__file__).resolve().parents[1] / "configs" / "scenarios"
 
@@ -109,44 +109,8 @@ Duration = Range(0.0, 3600.0, "s", lo_open=True)
 Step = Range(1e-5, 0.01, "s")
 Rate = Range(0.0, 1e4, "Hz", lo_open=True)
 
-#: Allowed ranges of the closed-loop drivers' parameters: name -> (lo, hi, unit, lo_open).
-#: Defaults are those of SpeedFollowerParams / PathFollowerParams.
-SPEED_FOLLOWER_RANGES = {
-    "kp": (0.0, 50.0, "1/s", False),
-    "ki": (0.0, 50.0, "1/s^2", False),
-    "kd": (0.0, 10.0, "", False),
-    "tau_d": (0.0, 10.0, "s", False),
-    "throttle_gain": (0.0, 10.0, "rad/(m/s^2)", True),
-    "throttle_max": (0.0, LIMITS["throttle_angle_cmd"][1], "rad", True),
-    "brake_gain": (0.0, 1e4, "kPa/(m/s^2)", True),
-    "brake_max": (0.0, LIMITS["brake_pressure_cmd"][1], "kPa", True),
-    "band": (0.0, 5.0, "m/s^2", False),
-    "hold_pressure": (0.0, LIMITS["brake_pressure_cmd"][1], "kPa", False),
-    "hold_rate": (0.0, 1e6, "kPa/s", True),
-    "v_stop": (0.0, 2.0, "m/s", False),
-    "v_eps": (0.0, 1.0, "m/s", False),
-    "i_max": (0.0, 20.0, "m/s^2", False),
-    "a_res0": (0.0, 5.0, "m/s^2", False),
-    "a_res2": (0.0, 0.1, "1/m", False),
-    "ff_gain": (0.0, 2.0, "", False),
-}
-PATH_FOLLOWER_RANGES = {
-    "wheelbase": (0.0, 10.0, "m", True),
-    "steering_ratio": (0.0, 100.0, "", True),
-    "la_min": (0.0, 200.0, "m", True),
-    "la_gain": (0.0, 10.0, "s", False),
-    "la_max": (0.0, 500.0, "m", True),
-    "k_stanley": (0.0, 50.0, "1/s", False),
-    "v_soft": (0.0, 50.0, "m/s", True),
-    "max_wheel_angle": (0.0, 1.5, "rad", True),
-    "max_rate": (0.0, 100.0, "rad/s", True),
-    "rear_offset": (-10.0, 10.0, "m", False),
-}
-
-
 def _param_fields(ranges: dict, defaults) -> dict:
-    return {n: (Range(lo, hi, unit, lo_open=lo_open), getattr(defaults, n))
-            for n, (lo, hi, unit, lo_open) in ranges.items()}
+    return range_fields(ranges, {n: getattr(defaults, n) for n in ranges})
 
 
 _Model = Strict          # the one config base (rtsim.configfile): unknown keys listed, immutable
@@ -301,8 +265,10 @@ class _PathFollowerBase(_Model):
                 raise _bad("x", self.x, "a path needs at least 2 points")
         elif self.x is not None or self.y is not None:
             raise _bad("file", self.file, "give the path either as x and y lists or as a file, not both")
-        if self.la_max < self.la_min:
-            raise _bad("la_max", self.la_max, f"must be >= la_min = {self.la_min!r} m")
+        try:
+            self.params()               # the parameters' own checks across keys (PathFollowerParams)
+        except ValueError as exc:
+            raise _bad("la_max", self.la_max, str(exc).rpartition(": ")[2]) from None
         return self
 
     def params(self) -> PathFollowerParams:

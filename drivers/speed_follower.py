@@ -32,15 +32,16 @@ throttle and per kPa of brake pressure).
 """
 from __future__ import annotations
 
-import math
 from collections import namedtuple
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 
 import numpy as np
+from pydantic import create_model
 
+from rtsim.configfile import Strict, check_ranges, range_fields
 from rtsim.jit import inline_kernel, kernel
 
-from .base import I_BRAKE, I_THROTTLE, S_SPEED
+from .base import I_BRAKE, I_THROTTLE, LIMITS, S_SPEED
 
 # Parameter indices (par).
 P_KP = 0          # 1/s, proportional gain (m/s^2 per m/s)
@@ -102,17 +103,31 @@ class SpeedFollowerParams:
     ff_gain: float = 1.0
 
     def __post_init__(self):
-        for f in fields(self):
-            x = getattr(self, f.name)
-            if not math.isfinite(x):
-                raise ValueError(f"speed follower {f.name} = {x} must be finite")
-        for n in ("kp", "ki", "kd", "tau_d", "band", "hold_pressure", "v_stop", "v_eps", "i_max",
-                  "a_res0", "a_res2", "ff_gain"):
-            if getattr(self, n) < 0.0:
-                raise ValueError(f"speed follower {n} = {getattr(self, n)} must be >= 0")
-        for n in ("throttle_gain", "throttle_max", "brake_gain", "brake_max", "hold_rate"):
-            if not getattr(self, n) > 0.0:
-                raise ValueError(f"speed follower {n} = {getattr(self, n)} must be > 0")
+        check_ranges(_PARAMS_MODEL, asdict(self), "speed follower")
+
+
+#: Allowed ranges of the parameters: name -> (lo, hi, unit, lo_open); the scenario files use them too.
+SPEED_FOLLOWER_RANGES = {
+    "kp": (0.0, 50.0, "1/s", False),
+    "ki": (0.0, 50.0, "1/s^2", False),
+    "kd": (0.0, 10.0, "", False),
+    "tau_d": (0.0, 10.0, "s", False),
+    "throttle_gain": (0.0, 10.0, "rad/(m/s^2)", True),
+    "throttle_max": (0.0, LIMITS["throttle_angle_cmd"][1], "rad", True),
+    "brake_gain": (0.0, 1e4, "kPa/(m/s^2)", True),
+    "brake_max": (0.0, LIMITS["brake_pressure_cmd"][1], "kPa", True),
+    "band": (0.0, 5.0, "m/s^2", False),
+    "hold_pressure": (0.0, LIMITS["brake_pressure_cmd"][1], "kPa", False),
+    "hold_rate": (0.0, 1e6, "kPa/s", True),
+    "v_stop": (0.0, 2.0, "m/s", False),
+    "v_eps": (0.0, 1.0, "m/s", False),
+    "i_max": (0.0, 20.0, "m/s^2", False),
+    "a_res0": (0.0, 5.0, "m/s^2", False),
+    "a_res2": (0.0, 0.1, "1/m", False),
+    "ff_gain": (0.0, 2.0, "", False),
+}
+_PARAMS_MODEL = create_model("SpeedFollowerParamsModel", __base__=Strict,
+                             **range_fields(SPEED_FOLLOWER_RANGES, {n: 0.0 for n in SPEED_FOLLOWER_RANGES}))
 
 
 _ORDER = ("kp", "ki", "kd", "tau_d", "throttle_gain", "throttle_max", "brake_gain", "brake_max", "band",

@@ -50,6 +50,21 @@ def Range(lo: float, hi: float, unit: str = "", lo_open: bool = False, hi_open: 
     return Annotated[float, BeforeValidator(_number), AfterValidator(check)]
 
 
+def range_fields(ranges: dict, defaults: dict) -> dict:
+    """Model fields (for pydantic.create_model) of named floats declared as name -> (lo, hi, unit,
+    lo_open), with their defaults."""
+    return {n: (Range(lo, hi, unit, lo_open=lo_open), defaults[n]) for n, (lo, hi, unit, lo_open) in ranges.items()}
+
+
+def check_ranges(model, values: dict, what: str) -> None:
+    """ValueError (the one formatter's text) unless `values` fit the ranged model (a driver's
+    parameters checked where they are built, by the same declaration the config files use)."""
+    try:
+        validate(model, values, what)
+    except ConfigError as exc:
+        raise ValueError(str(exc)) from None
+
+
 def bad(key: str, value: Any, reason: str) -> PydanticCustomError:
     """An error about `key` (dotted, relative to the model whose validator raises it)."""
     return PydanticCustomError("bad_key", reason, {"key": key, "value": value})
