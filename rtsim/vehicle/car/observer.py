@@ -18,13 +18,15 @@ from .layout import CI_PHI, CI_S
 from .sensors import SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_SW_ANGLE, SG_THROTTLE
 
 NSTATE_OUT = len(STATE_NAMES)
-X_POS, X_ATT, X_VEL, X_RATE, X_SPEED = 0, 3, 6, 9, 12
-X_WHEEL = 13                                  # 7 blocks of 4 wheels follow
-X_THROTTLE = X_WHEEL + 7 * 4
-X_BRAKE, X_SW_ANGLE, X_RACK, X_ENGINE, X_PHI = X_THROTTLE + 1, X_THROTTLE + 2, X_THROTTLE + 3, \
-    X_THROTTLE + 4, X_THROTTLE + 5
-assert STATE_NAMES[X_WHEEL] == "wheel_speed_fl" and STATE_NAMES[X_THROTTLE] == "throttle_angle"
-assert STATE_NAMES[X_PHI] == "constraint_violation" and NSTATE_OUT == X_PHI + 1 and len(WHEELS) == 4
+# offsets of the state channels, from the channel dictionary's names (blocks of 4 follow the wheel order)
+X_POS, X_ATT, X_VEL, X_RATE, X_SPEED = (STATE_NAMES.index(n) for n in ("pos_x", "roll_angle", "vel_x", "roll_rate",
+                                                                         "speed"))
+X_WHEEL = STATE_NAMES.index("wheel_speed_fl")          # 7 blocks of 4 wheels follow
+X_THROTTLE, X_BRAKE, X_SW_ANGLE, X_RACK, X_ENGINE, X_PHI = (STATE_NAMES.index(n) for n in (
+    "throttle_angle", "brake_pressure", "steering_wheel_angle", "rack_position", "engine_speed",
+    "constraint_violation"))
+assert STATE_NAMES[X_WHEEL + 6 * 4:X_WHEEL + 7 * 4] == tuple(f"brake_torque_{w}" for w in WHEELS)
+assert NSTATE_OUT == X_PHI + 1 and len(WHEELS) == 4
 
 
 @kernel

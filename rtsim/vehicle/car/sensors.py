@@ -19,12 +19,14 @@ from rtsim.mbs.constraints import poly_eval
 
 from .layout import CI_PHI, CI_S, CI_Z
 
-# channel indices, in rtsim.channels.SENSOR_NAMES order
+# channel indices, from the car's channel dictionary (rtsim.channels.car_sensors; the last two are the
+# drive-torque sensors on the driven axle's left and right wheels, whichever axle that is)
 (S_ACCEL_X, S_ACCEL_Y, S_ACCEL_Z, S_GYRO_X, S_GYRO_Y, S_GYRO_Z, S_ROLL, S_PITCH, S_WHEEL_FL, S_WHEEL_FR,
  S_WHEEL_RL, S_WHEEL_RR, S_BRAKE_PRESSURE, S_SW_ANGLE, S_STEER_FL, S_STEER_FR, S_ENGINE_SPEED,
- S_STEERING_TORQUE, S_THROTTLE, S_WHEEL_TORQUE_RL, S_WHEEL_TORQUE_RR) = range(21)
-NSENSOR = 21
-assert len(SENSOR_NAMES) == NSENSOR and SENSOR_NAMES[S_WHEEL_TORQUE_RR] == "wheel_torque_rr"
+ S_STEERING_TORQUE, S_THROTTLE, S_DRIVE_TORQUE_LEFT, S_DRIVE_TORQUE_RIGHT) = (
+    SENSOR_NAMES.index(n) for n in (*SENSOR_NAMES[:-2], "wheel_torque_rl", "wheel_torque_rr"))
+NSENSOR = len(SENSOR_NAMES)
+assert SENSOR_NAMES[S_WHEEL_FL] == "wheel_angle_fl" and SENSOR_NAMES[S_STEER_FR] == "steer_angle_fr"
 
 # subsystem signals handed to the sensors (Signals array)
 SG_BRAKE_PRESSURE, SG_SW_ANGLE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_THROTTLE, SG_TORQUE_LEFT, SG_TORQUE_RIGHT = range(7)
@@ -85,5 +87,5 @@ def true_sensors(m, d, veh, signals, out):
     out[S_ENGINE_SPEED] = signals[SG_ENGINE_SPEED]
     out[S_STEERING_TORQUE] = signals[SG_STEERING_TORQUE]
     out[S_THROTTLE] = signals[SG_THROTTLE]
-    out[S_WHEEL_TORQUE_RL] = signals[SG_TORQUE_LEFT]
-    out[S_WHEEL_TORQUE_RR] = signals[SG_TORQUE_RIGHT]
+    out[S_DRIVE_TORQUE_LEFT] = signals[SG_TORQUE_LEFT]
+    out[S_DRIVE_TORQUE_RIGHT] = signals[SG_TORQUE_RIGHT]
