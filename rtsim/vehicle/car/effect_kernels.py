@@ -175,15 +175,23 @@ def driveline_commit(fx, fs, d, veh, drive, h):
 
 
 @inline_kernel
-def _grade_sensors(fx, q, veh, out):
-    """Accelerometers and inclinometers under the tilted gravity of the road grade."""
+def heading(veh, q):
+    """The car's heading in the horizontal plane: its x axis projected and normalised (x, y)."""
     ci = veh.chassis_idx
-    ux, uy, uz = q[ci[3]], q[ci[4]], q[ci[5]]
-    hx, hy = ux, uy
+    hx, hy = q[ci[3]], q[ci[4]]
     nh = sqrt(hx * hx + hy * hy)
     if nh > 1e-9:
         hx /= nh
         hy /= nh
+    return hx, hy
+
+
+@inline_kernel
+def _grade_sensors(fx, q, veh, out):
+    """Accelerometers and inclinometers under the tilted gravity of the road grade."""
+    ci = veh.chassis_idx
+    ux, uy, uz = q[ci[3]], q[ci[4]], q[ci[5]]
+    hx, hy = heading(veh, q)
     # specific force f' = f - (g' - g) = f + g sin h - g (1 - cos) e_z, in body axes
     gs = fx[FX_G_SIN]
     gc = fx[FX_G_1MCOS]

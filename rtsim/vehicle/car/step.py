@@ -36,7 +36,7 @@ from rtsim.road.query import CT_D, CT_EX, CT_GAMMA, CT_MU, CT_NX, CT_PX, CT_RR, 
 from .effect_kernels import (BEARING_OMEGA_EPS, FS_DL, FX_BEARING, FX_BRAKE, FX_CDA, FX_DL,
                              FX_G_1MCOS, FX_G_SIN, FX_GRADE, FX_M_CHASSIS, FX_M_CORNER, FX_MASS, FX_ON,
                              FX_RELAX, FX_RR, FX_SLIP, RR_SPEED_EPS, driveline_commit, driveline_torque,
-                             effects_brake, record_sensors, smooth_sign)
+                             effects_brake, heading, record_sensors, smooth_sign)
 from ..kit.brake import BI_SIZE, BO_LINE, BO_SIZE, BP_EPS, BS_TAU_SLIDE, brake_commit, brake_step, brake_wheel_torque
 from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZE, PI_THROTTLE_CMD, PI_TORQUE_LEFT, PI_TORQUE_RIGHT,
                          PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT, powertrain_step)
@@ -335,12 +335,7 @@ def _mass_and_grade(m, d, veh, fx, tangent):
             for a in range(3):
                 add_entry(d.w_env, m.first, m.ptr, m.pinv, ci[a], ci[a], dm)
     if fx[FX_GRADE] > 0.5:
-        hx = d.q[ci[3]]
-        hy = d.q[ci[4]]
-        nh = sqrt(hx * hx + hy * hy)
-        if nh > 1e-9:
-            hx /= nh
-            hy /= nh
+        hx, hy = heading(veh, d.q)
         gs = fx[FX_G_SIN]
         gc = fx[FX_G_1MCOS]
         for k in range(5):
