@@ -59,7 +59,8 @@ def _assert_bit_identical(a, b):
 # -- the vehicle ---------------------------------------------------------------------------------
 
 def test_vehicle_advance_bound_is_bit_identical_to_the_direct_call():
-    from rtsim.service.server import DEFAULT_SCENARIO, build_sim
+    from rtsim.service.config import DEFAULT_SCENARIO
+    from rtsim.service.server import build_sim
     from rtsim.vehicle.car.step import CMD_STEER, CMD_THROTTLE, vehicle_advance
 
     sim, _ = build_sim(DEFAULT_SCENARIO)

@@ -31,7 +31,8 @@ def _count(x, kind) -> int:
 def dispatch_costs(reps: int = 20000, repeats: int = 7) -> dict:
     """Microseconds per call (median and best of ``repeats`` interleaved rounds of ``reps`` calls, the
     vehicle steps ``reps // 4``), with the times to bind and to load (or compile) the wrappers."""
-    from rtsim.service.server import DEFAULT_SCENARIO, build_sim
+    from rtsim.service.config import DEFAULT_SCENARIO
+    from rtsim.service.server import build_sim
     from rtsim.vehicle.car.step import vehicle_advance
 
     sim, _ = build_sim(DEFAULT_SCENARIO)                 # at rest, held by the brake
