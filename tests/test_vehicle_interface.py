@@ -69,3 +69,25 @@ def test_the_service_loop_sends_the_vehicles_own_frames():
     assert done
     assert dec.values[fl] == pytest.approx(last[fl], abs=0.2)      # the DBC's resolution: 0.2 N*m
     assert np.isfinite(dec.values).all()
+
+
+def test_the_validation_workflow_reads_a_vehicles_own_channels(tmp_path, fwd_model):
+    """A front-drive run (CSV and MCAP written by the offline runner) loads with its drive-torque channels
+    when read with the vehicle's dictionary; with the rear-drive one they are not read, and the note
+    says columns were ignored."""
+    from bridge.mcap_log import write_run
+    from rtsim.vehicle.offline import prepare, run, write_csv
+    from rtsim.validate.data import load_run
+
+    sim, sc = prepare(FWD, ROOT / "configs" / "scenarios" / "step_steer_80kph.toml")
+    res = run(sim, sc)
+    csv_path, mcap_path = tmp_path / "run.csv", tmp_path / "run.mcap"
+    write_csv(res, csv_path)
+    write_run(mcap_path, res.columns, res.data, "xbw_fwd", sim.vm.channels)
+    names = fwd_model.channels.sensor_names
+    for path in (csv_path, mcap_path):
+        r = load_run(path, names)
+        assert set(r.channels) == set(names)
+        assert np.allclose(r.channels["wheel_torque_fl"], res.column("wheel_torque_fl"), rtol=1e-8, atol=1e-9)   # CSV: 9 digits
+    rear = load_run(csv_path)
+    assert "wheel_torque_fl" not in rear.channels and any(n.startswith("ignored ") for n in rear.notes)

@@ -158,7 +158,8 @@ def build_benchmark(runs: list[Run], rejected: list[Rejected] | None = None, rat
         raise ConfigError(f"the aligned runs overlap for only {max(a1 - a0, 0.0):.3g} s")
     t = np.arange(int(np.floor((a1 - a0) / dt + 1e-9)) + 1) * dt
     al = Alignment(al.method, [o + a0 for o in al.offsets], al.correlation, al.reference)
-    names = [c for c in SENSOR_NAMES if any(c in r.channels for r in runs)]
+    order = dict.fromkeys([*SENSOR_NAMES, *(c for r in runs for c in r.channels)])   # a vehicle's own channels last
+    names = [c for c in order if any(c in r.channels for r in runs)]
     values: dict[str, np.ndarray] = {}
     members: dict[str, int] = {}
     for c in names:

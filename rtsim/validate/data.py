@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rtsim.channels import BY_NAME, SENSOR_NAMES
+from rtsim.channels import BY_NAME, COMMAND_NAMES, SENSOR_NAMES
 from rtsim.errors import ConfigError
 
 from .signals import WHEEL_ANGLES, unwrap_angle
@@ -97,7 +97,7 @@ def _read_csv(path: Path) -> tuple[list[str], np.ndarray]:
     return header, m
 
 
-def _read_mcap(path: Path) -> tuple[list[str], np.ndarray]:
+def _read_mcap(path: Path, sensor_names) -> tuple[list[str], np.ndarray]:
     """Header and matrix from the `rtsim/<id>/sensors` topic of an MCAP recording."""
     from bridge.mcap_recorder import read_recording     # the bridge reads MCAP; imported only when needed
     messages, info = read_recording(path)
@@ -107,7 +107,7 @@ def _read_mcap(path: Path) -> tuple[list[str], np.ndarray]:
     if len(topics) > 1:
         raise DataError(f"{path}: several sensor topics ({', '.join(topics)}); one vehicle per recording")
     msgs = [m.data for m in messages[topics[0]] if isinstance(m.data, dict)]
-    names = [n for n in SENSOR_NAMES if any(n in d for d in msgs[:50])]
+    names = [n for n in sensor_names if any(n in d for d in msgs[:50])]
     header = ["time", *names]
     m = np.full((len(msgs), len(header)), np.nan)
     for i, d in enumerate(msgs):
@@ -140,8 +140,9 @@ def _fill_gaps(t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray | None, int, fl
     return out, nbad, gap
 
 
-def load_run(path: str | Path) -> Run:
-    """Read and check one run (see the module docstring); DataError if it cannot be used at all."""
+def load_run(path: str | Path, sensor_names=SENSOR_NAMES) -> Run:
+    """Read and check one run (see the module docstring) of a vehicle with the sensor channels
+    `sensor_names` (its channel dictionary's); DataError if it cannot be used at all."""
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: no such file")
@@ -149,7 +150,7 @@ def load_run(path: str | Path) -> Run:
     if suffix == ".csv":
         header, m = _read_csv(path)
     elif suffix == ".mcap":
-        header, m = _read_mcap(path)
+        header, m = _read_mcap(path, sensor_names)
     else:
         raise DataError(f"{path}: unknown run format {path.suffix or '(none)'}; use .csv or .mcap")
     notes: list[str] = []
@@ -171,13 +172,13 @@ def load_run(path: str | Path) -> Run:
         i = int(back[0]) + 1
         raise DataError(f"{path}: column 'time', row {i + 1}: time {t[i]:.10g} s does not increase (row {i}: "
                         f"{t[i - 1]:.10g} s); time must be strictly increasing ({back.size} such row(s))")
-    ignored = [c for c in header if c != "time" and c not in BY_NAME]
+    ignored = [c for c in header if c != "time" and c not in sensor_names and c not in COMMAND_NAMES]
     if ignored:
         notes.append(f"ignored {len(ignored)} non-sensor column(s): {', '.join(ignored[:6])}"
                      + (" ..." if len(ignored) > 6 else ""))
     channels: dict[str, np.ndarray] = {}
     for j, name in enumerate(header):
-        if name not in SENSOR_NAMES:
+        if name not in sensor_names:
             continue
         x, nbad, gap = _fill_gaps(t, m[:, j])
         if x is None:
@@ -191,13 +192,13 @@ def load_run(path: str | Path) -> Run:
             x = unwrap_angle(x)
         channels[name] = x
     if not channels:
-        raise DataError(f"{path}: no usable sensor channel (expected any of {', '.join(SENSOR_NAMES)})")
+        raise DataError(f"{path}: no usable sensor channel (expected any of {', '.join(sensor_names)})")
     return Run(path, t, channels, notes)
 
 
-def load_runs(paths: list[str | Path]) -> tuple[list[Run], list[Rejected]]:
+def load_runs(paths: list[str | Path], sensor_names=SENSOR_NAMES) -> tuple[list[Run], list[Rejected]]:
     """Every run that can be read, and the rejected ones with their reasons. Paths may be folders
-    (their *.csv and *.mcap files, sorted by name)."""
+    (their *.csv and *.mcap files, sorted by name); `sensor_names`: the vehicle's sensor channels."""
     files: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
@@ -212,7 +213,7 @@ def load_runs(paths: list[str | Path]) -> tuple[list[Run], list[Rejected]]:
     runs, rejected = [], []
     for f in files:
         try:
-            runs.append(load_run(f))
+            runs.append(load_run(f, sensor_names))
         except DataError as exc:
             rejected.append(Rejected(f, str(exc)))
     return runs, rejected

@@ -45,7 +45,6 @@ from pathlib import Path
 
 import numpy as np
 
-from rtsim.channels import SENSOR_NAMES
 from rtsim.errors import ConfigError
 from rtsim.road.config import load_road
 from rtsim.vehicle.kit.actuators import LAG_RATE, LAG_TAU
@@ -281,6 +280,6 @@ class Replayer:
             sim.sensors(row)
             out[k + 1] = row
         self.simulations += 1
-        res = {name: out[:, i].copy() for i, name in enumerate(SENSOR_NAMES)}
+        res = {name: out[:, i].copy() for i, name in enumerate(self.model.channels.sensor_names)}
         res.update(derive_wheel_speeds(res, dtg))
         return res

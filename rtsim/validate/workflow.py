@@ -247,13 +247,22 @@ def _replay_runs(ctx: Context, effects: list[Effect], workers: int) -> tuple[dic
     return {c: np.mean([o[c] for o in outs], axis=0) for c in outs[0]}, ""
 
 
+def _sensor_names(opts: Options, replayer: Replayer | None) -> tuple[str, ...]:
+    """The validated vehicle's sensor channels (its channel dictionary), without building its model."""
+    if replayer is not None:
+        return replayer.model.channels.sensor_names
+    from rtsim.vehicle.car.build import vehicle_channels
+    from rtsim.vehicle.car.config import load_vehicle
+    return vehicle_channels(load_vehicle(opts.vehicle)[0]).sensor_names
+
+
 def run(opts: Options, replayer: Replayer | None = None) -> Result:
     """The whole workflow; `replayer`: a model already built from opts.vehicle (and opts.road), reused."""
     prog = opts.progress or _Quiet()
     tm = {}
     t0 = time.perf_counter()
     prog.stage("loading runs", None)
-    runs, rejected = load_runs(opts.runs)
+    runs, rejected = load_runs(opts.runs, _sensor_names(opts, replayer))
     bench = build_benchmark(runs, rejected, opts.rate, opts.align, opts.compare)
     tm["data"] = time.perf_counter() - t0
     t1 = time.perf_counter()

@@ -29,8 +29,14 @@ from .kit.sensor_model import seed_noise
 
 
 def columns_of(channels: ChannelDictionary) -> tuple[str, ...]:
-    """CSV/MCAP columns of a run: time, the sensor channels, the state channels (the vehicle's names)."""
-    return ("time", *channels.sensor_names, *channels.state_names)
+    """CSV/MCAP columns of a run: time, the sensor channels (as reported), then the state channels that
+    are not also sensor channels (the actuator states brake_pressure, throttle_angle, ... are the
+    sensors' physical values) -- each name once, the vehicle's names."""
+    return ("time", *channels.sensor_names, *_state_only(channels))
+
+
+def _state_only(channels: ChannelDictionary) -> list[str]:
+    return [n for n in channels.state_names if n not in channels.sensor_names]
 
 
 COLUMNS = columns_of(CAR)      # the rear-drive car's
@@ -90,13 +96,15 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
     driver = sc.driver()
     state = np.zeros(NSTATE)
     sens = np.zeros(NSENSOR)
+    observed = np.zeros(len(sim.vm.channels.state))
+    keep = np.array([sim.vm.channels.state_names.index(n) for n in _state_only(sim.vm.channels)])
     io = sim.io
     nrow = 0
     seed_noise(seed)                    # the sensor model's noise, reproducible
     t0 = time.perf_counter()
     for n in range(nsteps + 1):
         if n % every == 0:
-            _log(sim, sens, rows[nrow])
+            _log(sim, sens, observed, keep, rows[nrow])
             nrow += 1
             if progress is not None and nrow % 50 == 0:
                 progress(n / nsteps)
@@ -114,12 +122,13 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
     return RunResult(columns, rows[:nrow], wall, nsteps)
 
 
-def _log(sim: VehicleSim, sens: np.ndarray, row: np.ndarray) -> None:
-    """time, the sensors as reported, the observer state (the service's state channels)."""
+def _log(sim: VehicleSim, sens: np.ndarray, observed: np.ndarray, keep: np.ndarray, row: np.ndarray) -> None:
+    """time, the sensors as reported, the observer state's channels `keep` (the service's state)."""
     sim.sensors(sens)
     row[0] = sim.data.t[0]
     row[1:1 + NSENSOR] = sens
-    vehicle_state_values(sim.data, sim.vm.vehicle, sim.vd, sim.io.signals, row[1 + NSENSOR:])
+    vehicle_state_values(sim.data, sim.vm.vehicle, sim.vd, sim.io.signals, observed)
+    row[1 + NSENSOR:] = observed[keep]
 
 
 def write_csv(result: RunResult, path: str | Path) -> None:

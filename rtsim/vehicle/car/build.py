@@ -153,9 +153,13 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         drive_slot=np.array([driven.index(i) if i in driven else -1 for i in range(len(WHEELS))], dtype=np.int64),
         side=np.array([1.0 if i in (FRONT_AXLE[0], REAR_AXLE[0]) else -1.0 for i in range(len(WHEELS))]),
     )
-    channels = car_channels(tuple(WHEELS[i] for i in driven))
-    return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w, channels,
+    return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w, vehicle_channels(cfg),
                         (Path(base) / cfg.interface.dbc).resolve())
+
+
+def vehicle_channels(cfg: VehicleConfig) -> ChannelDictionary:
+    """The car's channel dictionary: its drive-torque sensors on the driven axle's wheels."""
+    return car_channels(tuple(WHEELS[i] for i in (FRONT_AXLE if cfg.driven_axle == "front" else REAR_AXLE)))
 
 
 def _basis(exps: np.ndarray, z: float, s: float) -> np.ndarray:
