@@ -155,9 +155,12 @@ def test_the_service_applies_the_sensor_model_once(biased_vehicle):
     assert np.array_equal(bias[:, others], base[:, others])
 
 
-def _served(vehicle, record: Path, steps: int):
+def _served(vehicle, record: Path, steps: int, in_thread: bool = False):
     """`steps` steps of the assembled service (fast mode, CAN on a loopback hub, no Zenoh, recording to
-    `record`); returns (the recorded messages, the service's codec)."""
+    `record`; `in_thread`: stepped in a thread of its own, as `rtsim demo` does not but a host may);
+    returns (the recorded messages, the service's codec)."""
+    import threading
+
     from bridge.can_bus import LoopbackHub
     from bridge.mcap_recorder import read_recording
     from rtsim.service.server import ServeOptions, Service
@@ -169,7 +172,14 @@ def _served(vehicle, record: Path, steps: int):
         svc = Service(ServeOptions(scenario=ROOT / "configs/scenarios/step_steer_80kph.toml", vehicle=vehicle,
                                    mode="fast", can_interface="remote", can_channel=hub.channel, start_hub=False,
                                    zenoh=False, record=record), out=lambda *a: None)
-        assert svc.pacer.run(steps=steps) == steps
+        done = []
+        if in_thread:
+            th = threading.Thread(target=lambda: done.append(svc.pacer.run(steps=steps)))
+            th.start()
+            th.join()
+        else:
+            done.append(svc.pacer.run(steps=steps))
+        assert done == [steps]
     finally:
         if svc is not None:
             svc.close()
@@ -217,6 +227,32 @@ def test_a_bias_shows_once_in_the_sensor_frames_and_the_recording(biased_vehicle
                 assert abs((v1 - v0) - b) <= scale + 1e-9, (k, v0, v1)
             else:
                 assert v1 == v0, (k, sig)
+
+
+def test_a_noisy_session_resimulates_bit_for_bit(tmp_path):
+    """Noise, quantisation and a delay of a fraction of a step in the vehicle file; the service stepped
+    in another thread than the one that built it: `rtsim resim` of the recording reproduces every
+    sensor sample exactly (the noise comes from the sensor model's own seeded generator), and the
+    recorded gyro_z carries noise of the configured standard deviation."""
+    from rtsim.service.resim import resim
+
+    vehicle = _vehicle_file(tmp_path, """
+[sensors.channels.gyro_z]
+noise_std = 0.01
+
+[sensors.channels.accel_y]
+noise_std = 0.05
+quantum = 0.02
+delay_s = 0.0035
+""")
+    messages, _ = _served(vehicle, tmp_path / "noisy.mcap", 400, in_thread=True)
+    report = resim(tmp_path / "noisy.mcap")
+    assert report["sensors"]["matched"] >= 150 and report["identical"], report
+    gz = np.array([m.data["gyro_z"] for m in messages["rtsim/xbw/sensors"]])
+    # white noise: its second differences have variance 6 sigma^2 (the smooth yaw rate's are tiny)
+    assert np.std(np.diff(gz, 2)) / np.sqrt(6.0) == pytest.approx(0.01, rel=0.2)
+    ay = np.array([m.data["accel_y"] for m in messages["rtsim/xbw/sensors"]])
+    assert np.allclose(ay / 0.02, np.round(ay / 0.02), rtol=0, atol=1e-6)
 
 
 def test_sensor_noise_replays_from_its_seed_in_any_thread(tmp_path):
