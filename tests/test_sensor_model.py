@@ -277,7 +277,7 @@ def test_sensor_noise_replays_from_its_seed_in_any_thread(tmp_path):
         sim.seed_sensor_noise(11)
         for _ in range(1500):
             sim.step(1)
-            np.random.seed(5)                     # other users of numpy's and numba's generators
+            np.random.seed(5)                     # another user of a global generator
             np.random.normal(size=3)
             out.append((sim.sensors()[gz], sim.physical_sensors()[gz]))
 
