@@ -32,7 +32,6 @@ from rtsim.errors import RtsimError, SimulationError
 from rtsim.mbs.model import OK
 from rtsim.realtime.health import LoopHealth
 from rtsim.vehicle.car.sensors import NSENSOR
-from rtsim.vehicle.kit.sensor_model import seed_noise
 from rtsim.vehicle.car.observer import NSTATE_OUT
 
 from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_OVERRUNS, LI_PENDING_COUNTER, LI_PENDING_STEPS,
@@ -96,7 +95,7 @@ class HilLoop:
         self.sensor_every = self._every(min(f.period for f in c.sensor_frames), "sensor period")
         self.status_every = self._every(c.status_frame.period, "status period")
         self.state_every = max(1, int(round(1.0 / (self.state_rate * self.dt))))
-        seed_noise(0)                     # reproducible sensor noise: a session replays bit for bit
+        sim.seed_sensor_noise(0)          # reproducible sensor noise: a session replays bit for bit
         lay = c.sensor_layout()
         status = c.frame_layout(c.status_frame.name, STATUS_SOURCES)
         ack = c.frame_layout(c.step_ack.name, ("lockstep_sim_time", "lockstep_ack_counter"))

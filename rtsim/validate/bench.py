@@ -1,7 +1,8 @@
 """Benchmark of the validation workflow on the seed's manoeuvre: seven repetitions of
 configs/scenarios/straight_line.toml (30 s, campus road) driven by the rtsim model with a hidden
 effect, with run-to-run variation of the pedal commands (time warp and amplitude, 1.5 %), sensor noise
-and logger offsets, written as CSV; then `python -m rtsim.validate.cli` on them, as a user runs it
+(the vehicle's sensor model, rtsim.vehicle.kit.sensor_model, with `NOISE`) and logger offsets, written
+as CSV; then `python -m rtsim.validate.cli` on them, as a user runs it
 (process start to report), timed.
 
     python -m rtsim.validate.bench [--out DIR] [--effect NAME=VALUE]   (default brake_friction=0.85)
@@ -35,6 +36,7 @@ def generate(out: Path, effects: dict, n: int = 7, seed: int = 0) -> list[Path]:
     from rtsim.vehicle.car.build import build_vehicle
     from rtsim.vehicle.offline import default_vehicle_path
     from rtsim.vehicle.car.sim import VehicleSim
+    from rtsim.vehicle.kit.sensor_model import apply_to_series, sensor_params
 
     sc = load_scenario(SCENARIO, check_files=True)
     cfg, base = load_vehicle(sc.vehicle_path or default_vehicle_path())
@@ -44,6 +46,7 @@ def generate(out: Path, effects: dict, n: int = 7, seed: int = 0) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     names = list(NOISE)
     idx = [SENSOR_NAMES.index(c) for c in names]
+    logger = sensor_params(names, 1.0 / 500.0, channels={c: {"noise_std": NOISE[c]} for c in names})
     paths = []
     for k in range(n):
         warp, shift, gain = 1.0 + rng.normal(0.0, 0.015), rng.normal(0.0, 0.02), 1.0 + rng.normal(0.0, 0.015)
@@ -70,7 +73,7 @@ def generate(out: Path, effects: dict, n: int = 7, seed: int = 0) -> list[Path]:
             sim.step(every)
             sim.sensors(row)
             rows[i] = row
-        x = rows[:, idx] + rng.normal(0.0, 1.0, (m, len(idx))) * np.array([NOISE[c] for c in names])
+        x = apply_to_series(logger, rows[:, idx], seed=int(rng.integers(0, 2 ** 63)))
         t = np.arange(m) / 500.0
         k0, k1 = int(rng.integers(0, 125)), m - int(rng.integers(0, 125))
         path = out / f"straight_line_{k + 1}.csv"

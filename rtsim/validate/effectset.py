@@ -2,7 +2,8 @@
 (rtsim.vehicle.car.effects.EFFECTS) with its parameter values, and the conversions to the mapping that
 `VehicleSim.set_effects` and the vehicle config's `[effects]` tables take:
 {"rolling_resistance": {"coefficient": 0.012}, "sensor_bias": [{"channel": "accel_x", "bias": 0.1}]}.
-Model effects go to the model; sensor effects are applied to the model's outputs (sensorfx)."""
+Model effects go to the model; sensor effects are applied to the model's outputs
+(rtsim.validate.replay.Replayer.reported: the vehicle's one sensor model)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -19,7 +19,7 @@ the data ask for a value beyond it (the Gauss-Newton estimate or the slope at th
 the candidate is rejected as implausible with the value asked for. A candidate that removes less than
 `LITTLE` of the cost at the trial and the first step is not refined.
 
-Sensor effects need no simulation (sensorfx): bias and scale are linear least squares on their
+Sensor effects need no simulation (Replayer.reported): bias and scale are linear least squares on their
 channel, the delay is a grid search over its range refined by a parabola.
 
 Uncertainty (95 %) of a candidate: linearised least squares with the residual left at the optimum
@@ -43,8 +43,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from rtsim.errors import RtsimError
+from rtsim.vehicle.kit.sensor_model import delayed
 
-from . import sensorfx
 from .effectset import Effect, catalogue
 from .objective import Objective, _tau
 from .stats import t_critical
@@ -230,14 +230,14 @@ def fit_model_effect(ctx: Context, name: str, budget: int = MAX_SIMS,
         e = Effect(name, {coord.name: coord.value(th), **others})
         raw = ctx.replayer.simulate(ctx.inputs, [*ctx.effects, e], fit=True)
         raws[th] = raw
-        return sensorfx.apply(raw, ctx.inputs.t, ctx.effects)
+        return ctx.replayer.reported(raw, ctx.inputs.t, ctx.effects)
 
     raws: dict[float, dict] = {}
     r0 = obj.residual(ctx.outputs)
     pts: list[tuple[float, np.ndarray, dict]] = [(0.0, r0, ctx.outputs)]
     for th, raw in seed or []:
         raws[th] = raw
-        out = sensorfx.apply(raw, ctx.inputs.t, ctx.effects)
+        out = ctx.replayer.reported(raw, ctx.inputs.t, ctx.effects)
         pts.append((th, obj.residual(out), out))
     note = ""
     requested = None
@@ -347,7 +347,7 @@ def _sensor_channels(ctx: Context) -> list[tuple[str, str]]:
 
 
 def fit_sensor_effects(ctx: Context) -> list[Candidate]:
-    """Every sensor effect on every compared channel (no simulation: sensorfx on the current outputs)."""
+    """Every sensor effect on every compared channel (no simulation: the sensor model on the current outputs)."""
     cat = catalogue()
     obj = ctx.objective
     t = ctx.inputs.t
@@ -375,7 +375,7 @@ def fit_sensor_effects(ctx: Context) -> list[Candidate]:
 
             def with_value(v: float) -> dict:
                 e = Effect(name, {"channel": sensor, coord.name: v})
-                return sensorfx.apply(ctx.raw, t, [*ctx.effects, e])
+                return ctx.replayer.reported(ctx.raw, t, [*ctx.effects, e])
 
             J = np.zeros_like(r0)
             if name == "sensor_bias":
@@ -391,7 +391,7 @@ def fit_sensor_effects(ctx: Context) -> list[Candidate]:
                 grid = np.linspace(coord.tlo, coord.thi, 81)
                 costs = []
                 for d in grid:
-                    yd = sensorfx.delayed(t, y, d)
+                    yd = delayed(y, float(t[1] - t[0]), d)
                     costs.append(float(np.sum(((yd - obj.mean[comp]) / s) ** 2)))
                 k = int(np.argmin(costs))
                 free = float(grid[k])
@@ -400,7 +400,7 @@ def fit_sensor_effects(ctx: Context) -> list[Candidate]:
                     den = c0 - 2 * c1 + c2
                     if den > 0:
                         free += 0.5 * (c0 - c2) / den * (grid[1] - grid[0])
-                yd = sensorfx.delayed(t, y, free)
+                yd = delayed(y, float(t[1] - t[0]), free)
                 J[seg] = -np.gradient(yd, t) / s
             th = coord.clip(free)
             span = coord.thi - coord.tlo
@@ -424,7 +424,7 @@ def run_estimate(ctx: Context, cand: Candidate, i: int) -> float:
     effects = [*ctx.effects, cand.effect]
     inp = ctx.replayer.inputs(ctx.bench, run=i)
     raw = ctx.replayer.simulate(inp, effects)        # at the model's own step: no discretisation bias
-    out = sensorfx.apply(raw, inp.t, effects)
+    out = ctx.replayer.reported(raw, inp.t, effects)
     r = ctx.objective.residual_to_run(out, i)
     return cand.theta - float(cand.J @ r) / float(cand.J @ cand.J)
 

@@ -53,14 +53,14 @@ from rtsim.vehicle.car.config import load_vehicle
 from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT
 from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.kit.powertrain import PP_THR
+from rtsim.vehicle.kit.sensor_model import apply_to_series, neutral_params, sensor_params
 from rtsim.vehicle.car.sensors import NSENSOR
 from rtsim.vehicle.car.sim import VehicleSim
 from rtsim.vehicle.kit.tyre.magic_formula import effective_rolling_radius
 
-from . import sensorfx
 from .benchmark import Benchmark
 from .effectset import Effect, from_mapping, model_mapping
-from .signals import derive_wheel_speeds
+from .signals import DERIVED, derive_wheel_speeds
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_ROAD = ROOT / "configs" / "roads" / "flat.toml"
@@ -204,7 +204,7 @@ class Replayer:
         best, best_err = u, math.inf
         for _ in range(STEER_PASSES):
             raw = self._run(inp, inp.steer_effects, dt, u)
-            y = sensorfx.apply(raw, inp.t, inp.steer_effects)["steering_wheel_angle"]
+            y = self.reported(raw, inp.t, inp.steer_effects)["steering_wheel_angle"]
             e = target - y
             err = float(np.sqrt(np.mean(e * e)))
             stalled = err > best_err / 1.5
@@ -219,6 +219,33 @@ class Replayer:
         inp.steer_cmd[dt], inp.steer_error[dt] = best, best_err
         return best
 
+    def reported(self, raw: dict[str, np.ndarray], t: np.ndarray, effects: list[Effect]) -> dict[str, np.ndarray]:
+        """What the sensors report of the physical values `raw` (channel -> samples on the uniform grid t,
+        as `simulate` gives them): the vehicle's one sensor model (rtsim.vehicle.kit.sensor_model) with
+        the config's [sensors.channels] and the sensor effects of `effects` (model effects ignored),
+        applied once, on the grid (delays interpolated between grid samples, noise from seed 0). Sensor
+        effects need no re-simulation: they change what the sensors report, not the car's motion. A
+        wheel angle's scale and delay carry over to the wheel speed derived from it (a constant angle
+        bias does not show in a speed). A copy of `raw` when some channel is not neutral, else `raw`."""
+        dtg = float(t[1] - t[0])
+        mapping: dict[str, list] = {}
+        for e in effects:
+            if e.kind == "sensor" and e.channel in raw:
+                mapping.setdefault(e.name, []).append(dict(e.params))
+        p = sensor_params(SENSOR_NAMES, dtg, self.config.sensors.channels, mapping)
+        active = [i for i in range(len(SENSOR_NAMES)) if not np.array_equal(p[i], neutral_params(1)[0])
+                  and SENSOR_NAMES[i] in raw]
+        if not active:
+            return raw
+        names = [SENSOR_NAMES[i] for i in active]
+        y = apply_to_series(p[active], np.column_stack([raw[n] for n in names]))
+        out = dict(raw)
+        out.update({n: y[:, k] for k, n in enumerate(names)})
+        angles = {a: out[a] for s, a in DERIVED.items() if a in names and s not in names}
+        if angles:
+            out.update(derive_wheel_speeds(angles, dtg))
+        return out
+
     def new_sim(self, inp: ReplayInputs, effects: list[Effect], dt: float) -> VehicleSim:
         p0 = float(inp.brake[0]) if inp.brake is not None else 0.0
         sim = VehicleSim(self.model, self.road, dt, brake_pressure=p0, speed=inp.speed0,
@@ -232,8 +259,9 @@ class Replayer:
         return sim
 
     def simulate(self, inp: ReplayInputs, effects: list[Effect], fit: bool = False) -> dict[str, np.ndarray]:
-        """Sensor channels (and wheel speeds) of the model on the grid, with the model effects of
-        `effects` switched on (sensor effects are not applied here: see sensorfx); `fit`: at fit_dt."""
+        """The physical values of the sensor channels (and wheel speeds) of the model on the grid, with
+        the model effects of `effects` switched on; what the sensors report of them is `reported`.
+        `fit`: at fit_dt."""
         dt = self.fit_dt if fit else self.dt
         return self._run(inp, effects, dt, self.steering_command(inp, dt))
 
@@ -264,7 +292,7 @@ class Replayer:
             cmd[CMD_STEER] = float(steer[0])
         if inp.speed0 == 0.0:
             sim.step(int(round(SETTLE / dt)))
-        sim.sensors(row)
+        sim.physical_sensors(row)
         out[0] = row
         for k in range(n - 1):
             if inp.brake is not None:
@@ -277,7 +305,7 @@ class Replayer:
             if steer is not None:
                 cmd[CMD_STEER] = mid(steer, k)
             sim.step(sub)
-            sim.sensors(row)
+            sim.physical_sensors(row)
             out[k + 1] = row
         self.simulations += 1
         res = {name: out[:, i].copy() for i, name in enumerate(self.model.channels.sensor_names)}

@@ -41,7 +41,6 @@ import numpy as np
 
 from rtsim.errors import RtsimError
 
-from . import sensorfx
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import load_runs
 from .effectset import Effect, catalogue, from_mapping
@@ -158,7 +157,7 @@ def _task(task: tuple):
         if task[0] == "replay":
             effects, i = task[1], task[2]
             inp = _CTX.replayer.inputs(_CTX.bench, run=i)
-            return sensorfx.apply(_CTX.replayer.simulate(inp, effects), inp.t, effects)
+            return _CTX.replayer.reported(_CTX.replayer.simulate(inp, effects), inp.t, effects)
         return run_estimate(_CTX, task[1], task[2])
     except RtsimError as exc:
         return _Failed(f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
@@ -274,9 +273,9 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
     tm["model_build"] = time.perf_counter() - t1
     t2 = time.perf_counter()
     prog.stage("replaying mean inputs", None)
-    before = sensorfx.apply(rp.simulate(inp, base), bench.t, base)
+    before = rp.reported(rp.simulate(inp, base), bench.t, base)
     raw = rp.simulate(inp, base, fit=True)           # the fits' starting point, at the fitting step
-    out = sensorfx.apply(raw, bench.t, base)
+    out = rp.reported(raw, bench.t, base)
     tm["first_simulation"] = (time.perf_counter() - t2) / 2
     obj = Objective.from_benchmark(bench)
     reg = regimes(bench, rp.wheel_radius)
@@ -349,9 +348,9 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
             eff = win.effect
             if win.kind == "model":
                 win.raw = rp.simulate(inp, [*current, eff], fit=True)
-                win.outputs = sensorfx.apply(win.raw, bench.t, [*current, eff])
+                win.outputs = rp.reported(win.raw, bench.t, [*current, eff])
             else:
-                win.outputs = sensorfx.apply(raw, bench.t, [*current, eff])
+                win.outputs = rp.reported(raw, bench.t, [*current, eff])
         ties = equivalents(obj, win, ranked)
         runner = next((c for c in ranked if c is not win and c.plausible), None)
         gap = (runner.ic - win.ic) if runner else float("inf")
@@ -375,7 +374,7 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
     else:
         verdict = f"stopped after {opts.max_iterations} iterations: " + iterations[-1].verdict
     t3 = time.perf_counter()
-    after = sensorfx.apply(rp.simulate(inp, [*base, *effects]), bench.t, [*base, *effects]) if effects else before
+    after = rp.reported(rp.simulate(inp, [*base, *effects]), bench.t, [*base, *effects]) if effects else before
     replayed = {"before": before, "after": after}
     if bench.n >= 2:
         prog.stage("replaying every run before and after", None)

@@ -24,7 +24,6 @@ from .car.observer import vehicle_state_values
 from .car.sensors import NSENSOR
 from .car.sim import VehicleSim
 from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT
-from .kit.sensor_model import seed_noise
 
 
 
@@ -100,7 +99,7 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
     keep = np.array([sim.vm.channels.state_names.index(n) for n in _state_only(sim.vm.channels)])
     io = sim.io
     nrow = 0
-    seed_noise(seed)                    # the sensor model's noise, reproducible
+    sim.seed_sensor_noise(seed)         # the sensor model's noise, reproducible
     t0 = time.perf_counter()
     for n in range(nsteps + 1):
         if n % every == 0:

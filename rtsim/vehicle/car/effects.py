@@ -20,6 +20,9 @@ A single table is accepted for a sensor effect too (one channel). Every paramete
 plausible range (ParamSpec.lo..hi, for sensor_bias the channel's own range, ``EffectSpec.bounds``) is
 enforced on load and by ``set_effects``. Sensor effects act on the channels of
 rtsim.channels.SENSOR_NAMES in the sensor stage (``VehicleSim.sensors``): y = scale x(t - delay) + bias.
+They are parameters of the one sensor model (rtsim.vehicle.kit.sensor_model.sensor_params), packed there
+with the config's ``[sensors.channels]`` into one array: their biases and delays add to the config's,
+their scales multiply the config's.
 Wheel speeds are not sensor channels (the workflow derives them from ``wheel_angle_*``): a scale or
 delay of a wheel angle carries over to its speed, and a bias of a speed has no meaning for an angle
 counter, so there are no ``wheel_speed_*`` sensor effects. The formulations are in

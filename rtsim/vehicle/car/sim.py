@@ -21,13 +21,13 @@ from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZ
                               PP_MEASURED, powertrain_config, powertrain_params, powertrain_state_rolling,
                               powertrain_step)
 from ..kit.sensor_model import ST_ON as SM_ST_ON, ST_SLOTS as SM_ST_SLOTS
-from ..kit.sensor_model import neutral_params as sm_neutral, sensor_params, sensor_state
+from ..kit.sensor_model import copy_noise_state, neutral_params as sm_neutral, seed_noise, sensor_params, sensor_state
 from ..kit.steering import steering_config, steering_params, steering_state
 from ..kit.tyre.magic_formula import effective_rolling_radius
 from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
 from .build import VehicleModel
 from .effect_kernels import (FS_DL, FS_LAG, FS_SIZE, FX_B_LAG, FX_DL, FX_DL_K, FX_MASS, FX_ON, fill_history,
-                             neutral_params, sensor_stage)
+                             neutral_params, physical_sensors, sensor_stage)
 from .effects import pack_effects, validate_effects
 from .layout import CI_PHI, WHEELS
 from .sensors import NSENSOR
@@ -186,9 +186,22 @@ class VehicleSim:
         if old.shape == ss.shape and old[SM_ST_SLOTS] == ss[SM_ST_SLOTS]:
             old[SM_ST_ON] = ss[SM_ST_ON]
             return
+        copy_noise_state(old, ss)                        # the noise stream carries on
         if ss[SM_ST_SLOTS] > 0:
             fill_history(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, ss, np.zeros(NSENSOR))
         self.states = self.states._replace(sensors=ss)
+
+    def seed_sensor_noise(self, seed: int) -> None:
+        """Restart the sensor model's noise generator at `seed` (reproducible noise)."""
+        seed_noise(self.states.sensors, seed)
+
+    def physical_sensors(self, out: np.ndarray | None = None) -> np.ndarray:
+        """The physical values the sensors sense, rtsim.channels.SENSOR_NAMES order (with what model
+        effects change in the sensing), before the sensor model: for applying the sensor model to a
+        sampled series instead (rtsim.vehicle.kit.sensor_model.apply_to_series)."""
+        out = np.zeros(NSENSOR) if out is None else out
+        physical_sensors(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, out)
+        return out
 
     def set_torque_mode(self, measured: bool) -> None:
         """Drive with the measured wheel torques (io.extra) instead of the engine model."""
@@ -205,7 +218,7 @@ class VehicleSim:
         """The sensor channels as the car's sensors report them, rtsim.channels.SENSOR_NAMES order: the
         physical values (with what model effects change in the sensing: the grade's tilted gravity)
         through the sensor model (the config's [sensors.channels] and the sensor effects). Noise, if
-        any, is drawn at each call (seed it with rtsim.vehicle.kit.sensor_model.seed_noise)."""
+        any, is drawn at each call, from the model's own generator (`seed_sensor_noise`; seed 0 at start)."""
         out = np.zeros(NSENSOR) if out is None else out
         sensor_stage(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, self.parts.sensors,
                      self.states.sensors, out)

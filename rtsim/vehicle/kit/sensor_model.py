@@ -7,25 +7,30 @@ order:
   owner records at its own cadence (every vehicle step; for a time series, every sample); before the
   first recorded sample the first value is held;
 - scale (1) and bias (channel unit): a gain and an offset error;
-- noise: white, Gaussian, of standard deviation `noise` (channel unit), from numba's generator (seed it
-  with `seed_noise` for reproducible runs);
+- noise: white, Gaussian, of standard deviation `noise` (channel unit), drawn in channel order from the
+  model's own generator, whose state is part of the model's state array (SplitMix64, Box-Muller): the
+  same seed (`seed_noise`, `sensor_state(seed=)`) gives the same noise, whichever thread runs the
+  model and whatever else draws random numbers;
 - quantise: rounding to the nearest multiple of `quantum` (0: none).
 
 One implementation for every user: the vehicle's sensor stage (offline runs and the service's compiled
 loop call the same kernel) and the validation workflow (`apply_to_series` on a model's sampled outputs).
-Its parameters come from two sources, combined in `sensor_params`: the vehicle config's
+Its parameters come from two sources, combined in `sensor_params` into one array: the vehicle config's
 ``[sensors.channels.<name>]`` (bias, scale, noise_std, quantum, delay_s) and the switchable sensor
-effects of the validation workflow (sensor_bias, sensor_scale, sensor_delay): biases and delays add,
-scales multiply.
+effects of the catalogue (sensor_bias, sensor_scale, sensor_delay): the effects' biases and delays add
+to the config's, their scales multiply the config's (noise and quantum come from the config only).
+Generic in the number of channels: the arrays are sized by the channel names given, and a name is
+resolved to its index when the parameters are built.
 
 Arrays: parameters (nch, NSM) float64; state `HEADER + slots * nch` float64: the header (head slot,
-number of slots, a flag that any parameter is not neutral), then the ring of the last `slots` recorded
-rows. A model with every channel neutral (scale 1, all else 0) reports x exactly (bit for bit).
+number of slots, a flag that any parameter is not neutral, the noise generator's 64-bit state as two
+32-bit halves), then the ring of the last `slots` recorded rows. A model with every channel neutral
+(scale 1, all else 0) reports x exactly (bit for bit).
 """
 from __future__ import annotations
 
 from collections.abc import Mapping
-from math import floor
+from math import cos, floor, log, sqrt
 
 import numpy as np
 
@@ -43,7 +48,14 @@ from .layout import offsets
 (ST_HEAD,        # ring slot of the latest recorded row
  ST_SLOTS,       # rows in the ring (0: no delay anywhere, nothing recorded)
  ST_ON,          # 1.0: some channel is not neutral
- HEADER) = offsets(1, 1, 1)
+ ST_RNG,         # [2] noise generator state: high and low 32 bits of a uint64 (exact in float64)
+ HEADER) = offsets(1, 1, 1, 2)
+
+_LOW32 = np.uint64(0xFFFFFFFF)
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)      # SplitMix64 increment and mixing constants
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+_TWO_PI = 6.283185307179586
 
 
 def neutral_params(nch: int) -> np.ndarray:
@@ -92,19 +104,50 @@ def ring_slots(params: np.ndarray) -> int:
     return int(floor(longest)) + 2 if longest > 0.0 else 0
 
 
-def sensor_state(params: np.ndarray) -> np.ndarray:
+def sensor_state(params: np.ndarray, seed: int = 0) -> np.ndarray:
+    """A state for `params`: an empty ring of the length its delays need, the noise generator at `seed`."""
     nch = params.shape[0]
     slots = ring_slots(params)
     s = np.zeros(HEADER + slots * nch)
     s[ST_SLOTS] = slots
     s[ST_ON] = 0.0 if np.array_equal(params, neutral_params(nch)) else 1.0
+    seed_noise(s, seed)
     return s
 
 
+def seed_noise(state: np.ndarray, seed: int) -> None:
+    """Put the model's noise generator (in `state`) at `seed` (an integer, 0 <= seed < 2**64)."""
+    seed = int(seed)
+    if not 0 <= seed < 1 << 64:
+        raise ValueError(f"noise seed must be in 0 .. 2**64 - 1, got {seed}")
+    state[ST_RNG] = float(seed >> 32)
+    state[ST_RNG + 1] = float(seed & 0xFFFFFFFF)
+
+
+def copy_noise_state(src: np.ndarray, dst: np.ndarray) -> None:
+    """Carry the noise generator's state over to another state array (e.g. a longer ring)."""
+    dst[ST_RNG:ST_RNG + 2] = src[ST_RNG:ST_RNG + 2]
+
+
 @kernel
-def seed_noise(seed):
-    """Seed the noise generator of the compiled sensor model (reproducible runs)."""
-    np.random.seed(seed)
+def _uniform(state):
+    """The next uniform number in [0, 1) of the generator in `state` (SplitMix64, 53 bits)."""
+    s = (np.uint64(state[ST_RNG]) << np.uint64(32)) | np.uint64(state[ST_RNG + 1])
+    s = s + _GOLDEN
+    state[ST_RNG] = float(s >> np.uint64(32))
+    state[ST_RNG + 1] = float(s & _LOW32)
+    z = (s ^ (s >> np.uint64(30))) * _MIX1
+    z = (z ^ (z >> np.uint64(27))) * _MIX2
+    z = z ^ (z >> np.uint64(31))
+    return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@kernel
+def standard_normal(state):
+    """A standard normal draw from the generator in `state` (Box-Muller on two uniforms)."""
+    u1 = 1.0 - _uniform(state)          # (0, 1]: the logarithm is finite
+    u2 = _uniform(state)
+    return sqrt(-2.0 * log(u1)) * cos(_TWO_PI * u2)
 
 
 @kernel
@@ -164,7 +207,7 @@ def sensor_apply(params, state, x, out):
             v = a + frac * (b - a)
         v = params[c, SM_SCALE] * v + params[c, SM_BIAS]
         if params[c, SM_NOISE] > 0.0:
-            v += params[c, SM_NOISE] * np.random.standard_normal()
+            v += params[c, SM_NOISE] * standard_normal(state)
         qn = params[c, SM_QUANTUM]
         if qn > 0.0:
             v = qn * floor(v / qn + 0.5)
@@ -181,10 +224,21 @@ def _apply_rows(params, state, x, out):
         sensor_apply(params, state, x[k], out[k])
 
 
-def apply_to_series(params: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The model on a sampled series x (n samples, nch channels; delays in samples); returns a new array."""
+def apply_to_series(params: np.ndarray, x: np.ndarray, seed: int = 0) -> np.ndarray:
+    """The model on a sampled series x (n samples, nch channels; the parameters' delays in samples, i.e.
+    built with the series' sample interval as `step`), its noise from `seed`; returns a new array."""
     x = np.ascontiguousarray(x, dtype=float)
     out = np.empty_like(x)
     if x.shape[0]:
-        _apply_rows(params, sensor_state(params), x, out)
+        _apply_rows(params, sensor_state(params, seed), x, out)
     return out
+
+
+def delayed(x: np.ndarray, step: float, delay: float) -> np.ndarray:
+    """x(t - delay) of a series x sampled every `step` s (the model with that delay alone; the first
+    value held before the start)."""
+    x = np.asarray(x, dtype=float)
+    if not delay:
+        return x
+    p = sensor_params(["x"], step, effects={"sensor_delay": [{"channel": "x", "delay": delay}]})
+    return apply_to_series(p, x[:, None])[:, 0]
