@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 
 from bridge.can_codec import Codec
-from rtsim.channels import STATE_NAMES
 from rtsim.errors import ConfigError
 
 from .loop import HilLoop
@@ -87,6 +86,8 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         finally:
             for p in temps:
                 p.unlink(missing_ok=True)
+    if info.channels is not None and info.channels != sim.vm.channels:
+        notes.append(f"the recorded channels differ from the vehicle's: {_channel_difference(info.channels, sim.vm.channels)}")
     mode = session["mode"]
     loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode=mode, state_rate=float(session.get("state_rate", 100.0)),
                    hold_pressure=float(session["hold_pressure"]))
@@ -112,6 +113,20 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
     return report
 
 
+def _channel_difference(recorded, vehicle) -> str:
+    """What differs between two channel dictionaries, per kind: names only in one, changed units."""
+    out = []
+    for kind in ("sensors", "commands", "state"):
+        rec = {c.name: c.unit for c in getattr(recorded, kind)}
+        now = {c.name: c.unit for c in getattr(vehicle, kind)}
+        parts = [f"recorded only {', '.join(n for n in rec if n not in now)}" if set(rec) - set(now) else "",
+                 f"vehicle only {', '.join(n for n in now if n not in rec)}" if set(now) - set(rec) else "",
+                 ", ".join(f"{n} {rec[n]} -> {now[n]}" for n in rec if n in now and rec[n] != now[n])]
+        if any(parts):
+            out.append(f"{kind}: " + "; ".join(p for p in parts if p))
+    return "; ".join(out) or "descriptions or order"
+
+
 def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | None = None,
                dt: float | None = None, models: dict | None = None) -> dict:
     """Drive the model with the ECU command frames of a python-can log (.asc, .blf, candump .log),
@@ -134,8 +149,9 @@ def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | N
         if loop.run_state == "stopped":
             break
     loop.advance(int(round(0.5 / sim.dt)))       # half a second after the last frame
-    xs = np.array([v for _, v in col.state]) if col.state else np.zeros((0, len(STATE_NAMES)))
-    ix, iy, isp = STATE_NAMES.index("pos_x"), STATE_NAMES.index("pos_y"), STATE_NAMES.index("speed")
+    ch = sim.vm.channels
+    xs = np.array([v for _, v in col.state]) if col.state else np.zeros((0, len(ch.state)))
+    ix, iy, isp = (ch.index("state", n) for n in ("pos_x", "pos_y", "speed"))
     dist = float(np.sum(np.hypot(np.diff(xs[:, ix]), np.diff(xs[:, iy])))) if len(xs) > 1 else 0.0
     return {"log": str(path), "scenario": sc.name, "frames": len(frames), "accepted": loop.rx.accepted,
             "rejected": dict(loop.rx.counters), "sim_time": loop.sim_time, "run_state": loop.run_state,
