@@ -155,3 +155,25 @@ def test_the_service_loop_refuses_a_dictionary_its_kernel_does_not_produce(tmp_p
     with pytest.raises(RtsimError, match=rf"small.dbc: the vehicle declares 20 sensor and {len(CAR.state)} state "
                                          rf"channels; the car's loop produces 21 and {len(CAR.state)}"):
         HilLoop(None, Codec(small_dbc(tmp_path / "small.dbc"), SMALL), mode="fast")
+
+
+def test_the_front_drive_cars_own_sensor_channels_take_sensor_parameters(tmp_path):
+    """[sensors.channels] of the front-drive car configures its wheel_torque_fl (a channel the rear-drive
+    car does not have): the bias shows in that channel only."""
+    from rtsim.service.server import build_sim
+    from rtsim.vehicle.car.step import CMD_THROTTLE
+
+    text = (ROOT / "configs/vehicles/xbw_fwd.toml").read_text().replace('"../', f'"{ROOT.as_posix()}/configs/')
+    biased = tmp_path / "fwd_biased.toml"
+    biased.write_text(text + "\n[sensors.channels.wheel_torque_fl]\nbias = 3.0\n")
+    out = []
+    for vehicle in (ROOT / "configs/vehicles/xbw_fwd.toml", biased):
+        sim, _ = build_sim(ROOT / "configs/scenarios/hil_flat.toml", vehicle)
+        sim.io.commands[CMD_THROTTLE] = 0.3
+        sim.step(200)
+        out.append(sim.sensors(np.zeros(len(sim.vm.channels.sensors))))
+    base, bias = out
+    fl = sim.vm.channels.index("sensors", "wheel_torque_fl")
+    assert bias[fl] - base[fl] == pytest.approx(3.0, abs=1e-12)
+    others = [i for i in range(len(base)) if i != fl]
+    assert np.array_equal(bias[others], base[others])
