@@ -30,6 +30,8 @@ from .loop import HilLoop
 from .outbox import RingDrain
 from .server import build_sim, resolve_scenario
 
+ROOT = Path(__file__).resolve().parents[2]
+
 
 class Collector:
     """Reads a re-run loop's rings after every compiled call: every sensor and state sample."""
@@ -45,8 +47,8 @@ class Collector:
 
 
 def _file_for(meta: dict, key: str, override: Path | None, tmp: Path) -> tuple[Path, str]:
-    """The config file to use and a note: the override, the recorded path if its text is unchanged,
-    else the recorded text written next to nothing (a temporary file in the recorded folder when
+    """The config file to use and a note: the override, the recorded path (recorded in another checkout:
+    this one's file at the same place under configs/) if its text is unchanged, else the recorded text written next to nothing (a temporary file in the recorded folder when
     possible, so relative paths still resolve)."""
     if override is not None:
         return override, f"{key} {override} (given)"
@@ -54,6 +56,10 @@ def _file_for(meta: dict, key: str, override: Path | None, tmp: Path) -> tuple[P
     if rec is None:
         raise ConfigError(f"the recording has no rtsim.{key} metadata (not written by rtsim serve?)")
     path = Path(rec["path"])
+    if not path.exists() and "configs" in path.parts:     # recorded in another checkout: this one's file
+        local = ROOT.joinpath(*path.parts[len(path.parts) - 1 - path.parts[::-1].index("configs"):])
+        if local.parent.is_dir():
+            path = local
     if path.exists() and path.read_text() == rec["toml"]:
         return path, f"{key} {path} (unchanged)"
     folder = path.parent if path.parent.exists() else tmp
