@@ -278,7 +278,8 @@ class Codec:
     def encode_sensors(self, values: Mapping[str, float] | Sequence[float], sim_time: float
                        ) -> list[tuple[int, bytes]]:
         """All sensor frames for one sample. ``values``: a mapping by channel name or a sequence in
-        the order of the dictionary's sensor channels (``channels.sensor_names``); ``sim_time`` in s (sent as ms modulo 65536)."""
+        the order of the dictionary's sensor channels (``channels.sensor_names``); ``sim_time`` in s
+        (sent as ms modulo 65536)."""
         if isinstance(values, Mapping):
             values = [values[n] for n in self.channels.sensor_names]
         t_raw = int(round(sim_time * 1000.0))

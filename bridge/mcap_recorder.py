@@ -47,13 +47,12 @@ from mcap.writer import CompressionType, Writer
 
 from bridge.payloads import TOPIC_KEYS, encode_json, schemas_for
 from rtsim.channels import CAR, ChannelDictionary
-
-#: The MCAP metadata record holding the recorded vehicle's channel dictionary (``{"json": ...}``,
-#: rtsim.channels.ChannelDictionary.to_json), so a replay knows the channels it holds.
-CHANNELS_METADATA = "rtsim.channels"
 from rtsim.errors import ConfigError
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+#: The MCAP metadata record holding the recorded vehicle's channel dictionary (``{"json": ...}``,
+#: rtsim.channels.ChannelDictionary.to_json), so a replay knows the channels it holds.
+CHANNELS_METADATA = "rtsim.channels"
 _FOOTER_OPCODE = 0x02
 
 CAN_KEYS = frozenset(("can/rx", "can/tx"))

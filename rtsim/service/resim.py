@@ -48,8 +48,9 @@ class Collector:
 
 def _file_for(meta: dict, key: str, override: Path | None, tmp: Path) -> tuple[Path, str]:
     """The config file to use and a note: the override, the recorded path (recorded in another checkout:
-    this one's file at the same place under configs/) if its text is unchanged, else the recorded text written next to nothing (a temporary file in the recorded folder when
-    possible, so relative paths still resolve)."""
+    this one's file at the same place under configs/) if its text is unchanged, else the recorded text
+    written next to nothing (a temporary file in the recorded folder when possible, so relative paths
+    still resolve)."""
     if override is not None:
         return override, f"{key} {override} (given)"
     rec = meta.get(f"rtsim.{key}")
@@ -93,7 +94,8 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
             for p in temps:
                 p.unlink(missing_ok=True)
     if info.channels is not None and info.channels != sim.vm.channels:
-        notes.append(f"the recorded channels differ from the vehicle's: {_channel_difference(info.channels, sim.vm.channels)}")
+        diff = _channel_difference(info.channels, sim.vm.channels)
+        notes.append(f"the recorded channels differ from the vehicle's: {diff}")
     mode = session["mode"]
     loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode=mode, state_rate=float(session.get("state_rate", 100.0)),
                    hold_pressure=float(session["hold_pressure"]))

@@ -16,7 +16,7 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from rtsim.channels import car_sensors
+from rtsim.channels import SENSOR_NAMES
 from rtsim.configfile import Strict, load_toml, validate
 from rtsim.errors import ConfigError
 
@@ -161,7 +161,8 @@ class Sensors(Strict):
     @field_validator("channels")
     @classmethod
     def _known_channels(cls, v):
-        known = list(dict.fromkeys(c.name for d in (("rl", "rr"), ("fl", "fr")) for c in car_sensors(d)))
+        from rtsim.channels import car_sensors
+        known = list(dict.fromkeys([*SENSOR_NAMES, *(c.name for c in car_sensors(("fl", "fr")))]))
         unknown = [k for k in v if k not in known]         # the car's, either driven axle
         if unknown:
             raise ValueError(f"unknown sensor channel {unknown[0]!r}; channels are {', '.join(known)}")
