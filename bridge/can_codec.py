@@ -1,4 +1,4 @@
-"""CAN codec of the simulated X-by-wire car, derived from ``configs/can/xbw.dbc``.
+"""CAN codec of a simulated vehicle, derived from its DBC (the X-by-wire car's: ``configs/can/xbw.dbc``).
 
 The DBC is the single source of truth: it is loaded with cantools once, and everything the codec
 needs (frame ids, DLCs, cycle times, signal positions, scales, ranges, which raw values wrap, the
@@ -6,7 +6,8 @@ E2E data IDs, the status enum) is read from it and precomputed into small tuples
 per-frame hot path is plain integer arithmetic on one 64-bit little-endian word (all signals are
 Intel byte order, whose start bit is the LSB position in that word).
 
-Sensor frames (``Codec.encode_sensors``): every channel of ``rtsim.channels.SENSORS`` in exactly one
+Sensor frames (``Codec.encode_sensors``): every sensor channel of the vehicle's channel dictionary
+(``Codec(dbc_path, channels)``; default the rear-drive car's, rtsim.channels.CAR) in exactly one
 SIM frame, each frame with a ``sim_time_ms`` stamp (ms, modulo 65536). Values outside a signal's
 [minimum, maximum] are sent saturated at the limit (as a real sensor saturates; NaN is replaced by
 0.0 and then clamped into the range, infinities saturate); signals
@@ -45,7 +46,7 @@ from typing import Iterable, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
-from rtsim.channels import CAR, SENSOR_NAMES, ChannelDictionary
+from rtsim.channels import CAR, ChannelDictionary
 from rtsim.errors import ConfigError
 
 from . import can_e2e as e2e
@@ -247,6 +248,10 @@ class Codec:
                                   f"one *_counter and one *_crc signal")
             if crc[0].start != 8 * (f.length - 1) or crc[0].length != 8:
                 raise ConfigError(f"{where}: {f.name}: the CRC must be the last byte")
+            cmd_unit = next(c.unit for c in channels.commands if c.name == vals[0].name)
+            if (vals[0].unit or "") != cmd_unit:
+                raise ConfigError(f"{where}: {f.name}.{vals[0].name} is in {vals[0].unit!r}, the vehicle's "
+                                  f"command in {cmd_unit!r}")
             prefix = ctr[0].name[: -len("_counter")]
             self.command_frames[vals[0].name] = f
             self._cmd_plans[vals[0].name] = (f, vals[0], ctr[0], crc[0], int(data_id), prefix)
@@ -273,7 +278,8 @@ class Codec:
     def encode_sensors(self, values: Mapping[str, float] | Sequence[float], sim_time: float
                        ) -> list[tuple[int, bytes]]:
         """All sensor frames for one sample. ``values``: a mapping by channel name or a sequence in
-        ``SENSOR_NAMES`` order; ``sim_time`` in s (sent as ms modulo 65536)."""
+        the order of the dictionary's sensor channels (``channels.sensor_names``); ``sim_time`` in s
+        (sent as ms modulo 65536)."""
         if isinstance(values, Mapping):
             values = [values[n] for n in self.channels.sensor_names]
         t_raw = int(round(sim_time * 1000.0))
@@ -539,7 +545,7 @@ def _benchmark(n: int = 20000) -> None:  # pragma: no cover - manual measurement
     codec = Codec()
     rx = CommandReceiver(codec)
     rng = random.Random(1)
-    vals = [0.1 * rng.uniform(-1, 1) for _ in SENSOR_NAMES]
+    vals = [0.1 * rng.uniform(-1, 1) for _ in codec.channels.sensors]
     nf = len(codec.sensor_frames)
     t = min(timeit.repeat(lambda: codec.encode_sensors(vals, 1.234), number=n, repeat=5)) / n
     print(f"encode_sensors, all {nf} frames: {t * 1e6:.2f} us ({t * 1e6 / nf:.2f} us per frame)")

@@ -50,6 +50,9 @@ from rtsim.channels import CAR, ChannelDictionary
 from rtsim.errors import ConfigError
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+#: The MCAP metadata record holding the recorded vehicle's channel dictionary (``{"json": ...}``,
+#: rtsim.channels.ChannelDictionary.to_json), so a replay knows the channels it holds.
+CHANNELS_METADATA = "rtsim.channels"
 _FOOTER_OPCODE = 0x02
 
 CAN_KEYS = frozenset(("can/rx", "can/tx"))
@@ -103,7 +106,8 @@ class Recorder:
         self._writer = Writer(self._fh, chunk_size=self.chunk_size * 4 + (1 << 20),
                               compression=CompressionType.ZSTD)
         self._writer.start(profile="", library="rtsim")
-        for name, values in (metadata or {}).items():     # session facts (config, versions): before
+        metadata = {CHANNELS_METADATA: {"json": channels.to_json()}, **(metadata or {})}
+        for name, values in metadata.items():             # the vehicle's channels, session facts: before
             self._writer.add_metadata(name, {str(k): str(v) for k, v in values.items()})   # any chunk
         self._fh.flush()         # header and metadata are on disk even if the process dies before a chunk
         self._schema_defs = schemas_for(channels)       # the recorded vehicle's channels
@@ -270,6 +274,16 @@ class RecordingInfo:
     truncated_bytes: int = 0       # trailing bytes of an incomplete record that were discarded
     note: str = ""                 # what stopped the recovery of a damaged file
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)   # MCAP metadata records by name
+    channels: ChannelDictionary | None = None   # the recorded vehicle's channels (None: not recorded)
+
+    def __post_init__(self):
+        """The channel dictionary's record becomes ``channels``; ``metadata`` keeps the session's."""
+        record = self.metadata.pop(CHANNELS_METADATA, None)
+        if record is not None and self.channels is None:
+            try:
+                self.channels = ChannelDictionary.from_json(record.get("json", ""))
+            except ValueError as exc:
+                self.note = "; ".join(filter(None, (self.note, f"unreadable {CHANNELS_METADATA}: {exc}")))
 
 
 class _Bounded:

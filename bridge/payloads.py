@@ -178,10 +178,10 @@ def encode_sensors(t: float, values, digits: int | None = None, names: tuple[str
     return _encode_row(names, t, values, digits)
 
 
-def encode_state(t: float, values, digits: int | None = None) -> bytes:
-    """One ``state`` message: ``t`` (s) and the values in rtsim.channels.STATE_NAMES order
-    (``digits`` as for :func:`encode_sensors`)."""
-    return _encode_row(STATE_NAMES, t, values, digits)
+def encode_state(t: float, values, digits: int | None = None, names: tuple[str, ...] = STATE_NAMES) -> bytes:
+    """One ``state`` message: ``t`` (s) and the values in the order of `names` (the vehicle's state
+    channels; default the car's) (``digits`` as for :func:`encode_sensors`)."""
+    return _encode_row(names, t, values, digits)
 
 
 def _finite(x):
@@ -293,15 +293,17 @@ def validate(key: str, obj) -> None:
 
 # ----------------------------------------------------------------------------------------- files
 
-def schema_files() -> dict[str, str]:
-    """Relative file name (``<key>.json``) -> file text for every topic's schema."""
-    return {f"{key}.json": json.dumps(SCHEMAS[key][1], indent=2) + "\n" for key in TOPIC_KEYS}
+def schema_files(channels: ChannelDictionary = CAR) -> dict[str, str]:
+    """Relative file name (``<key>.json``) -> file text for every topic's schema of a vehicle with the
+    channel dictionary `channels` (default the rear-drive car's: the committed schemas/ files)."""
+    schemas = schemas_for(channels)
+    return {f"{key}.json": json.dumps(schemas[key][1], indent=2) + "\n" for key in TOPIC_KEYS}
 
 
-def write_schemas(directory: str | Path) -> list[Path]:
-    """Write :func:`schema_files` into ``directory`` (created if needed); returns the paths."""
+def write_schemas(directory: str | Path, channels: ChannelDictionary = CAR) -> list[Path]:
+    """Write :func:`schema_files` of `channels` into ``directory`` (created if needed); returns the paths."""
     out = []
-    for rel, text in schema_files().items():
+    for rel, text in schema_files(channels).items():
         p = Path(directory) / rel
         p.parent.mkdir(parents=True, exist_ok=True)
         p.write_text(text)
@@ -343,10 +345,17 @@ def _bench() -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m bridge.payloads", description=__doc__.split("\n")[0])
     ap.add_argument("--write-schemas", metavar="DIR", help="write one <key>.json schema per topic")
+    ap.add_argument("--vehicle", metavar="FILE", help="vehicle config whose channels the schemas describe "
+                                                     "(default: the rear-drive car's, as in schemas/)")
     ap.add_argument("--bench", action="store_true", help="time the encoders (best of 5)")
     args = ap.parse_args(argv)
     if args.write_schemas:
-        for p in write_schemas(args.write_schemas):
+        channels = CAR
+        if args.vehicle:
+            from rtsim.vehicle.car.build import build_vehicle     # the vehicle layer, only when asked
+            from rtsim.vehicle.car.config import load_vehicle
+            channels = build_vehicle(*load_vehicle(args.vehicle)).channels
+        for p in write_schemas(args.write_schemas, channels):
             print(p)
     if args.bench:
         _bench()

@@ -39,7 +39,6 @@ import numpy as np
 from bridge.bus_wait import Waiting, bus_name, wait_for_bus
 from bridge.can_codec import Codec
 from bridge.can_pack import SensorDecoder
-from rtsim.channels import COMMAND_NAMES, SENSOR_NAMES
 from rtsim.errors import RtsimError
 
 from .base import I_BRAKE, I_STEER, I_THROTTLE, NSTATE, S_SPEED, S_X, S_Y, S_YAW
@@ -81,8 +80,9 @@ class DemoEcu:
         self.t = 0.0
         self._prev_t: float | None = None
         self._prev_wheels: tuple[float, float] | None = None
-        self._iw = (SENSOR_NAMES.index("wheel_angle_fl"), SENSOR_NAMES.index("wheel_angle_fr"))
-        self._igz = SENSOR_NAMES.index("gyro_z")
+        sensors = codec.channels.sensor_names             # the channels the DBC carries
+        self._iw = (sensors.index("wheel_angle_fl"), sensors.index("wheel_angle_fr"))
+        self._igz = sensors.index("gyro_z")
         self.done = False
         self.peak_speed = 0.0
         self.distance = 0.0
@@ -166,7 +166,7 @@ class DemoEcu:
 
     def command_frames(self) -> list[tuple[int, bytes]]:
         frames = []
-        for i, name in enumerate(COMMAND_NAMES):
+        for i, name in enumerate(self.codec.channels.command_names):
             self.counters[i] = (self.counters[i] + 1) & 0xF
             frames.append(self.codec.encode_command(name, float(self.cmd[i]), self.counters[i]))
         return frames

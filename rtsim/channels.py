@@ -6,6 +6,7 @@ positive steer angle steers left; wheel order fl, fr, rl, rr.
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 
 
@@ -86,20 +87,35 @@ STATE: tuple[Channel, ...] = (
     _ch("constraint_violation", "1", "max |Phi| of the multibody constraints (coordinate units)"),
 )
 
+#: The units a channel may have: SI units and the SI-derived ones the interface uses (``1``: dimensionless).
+SI_UNITS = frozenset(("1", "s", "ms", "m", "m/s", "m/s^2", "rad", "rad/s", "rad/s^2", "N", "N*m", "Pa",
+                      "kPa", "kg", "K", "A", "V", "W"))
+KINDS = ("sensors", "commands", "state")
+
+
 @dataclass(frozen=True)
 class ChannelDictionary:
     """A vehicle's interface: its sensor, command and state channels (names, SI units, meanings). The
     DBC, the MCAP and JSON schemas, the Zenoh payloads, the CSV exports and the validation workflow of
-    that vehicle are derived from it."""
+    that vehicle are derived from it. Names are unique within each kind and across sensors and
+    commands (they share the DBC); every unit is one of ``SI_UNITS``."""
     sensors: tuple[Channel, ...]
     commands: tuple[Channel, ...]
     state: tuple[Channel, ...]
 
     def __post_init__(self):
-        names = [c.name for c in self.sensors] + [c.name for c in self.commands]
-        dup = sorted({n for n in names if names.count(n) > 1})
-        if dup:
-            raise ValueError(f"channel names must be unique; repeated: {dup}")
+        for kind, names in (("sensor and command", [c.name for c in self.sensors + self.commands]),
+                            ("state", [c.name for c in self.state])):
+            dup = sorted({n for n in names if names.count(n) > 1})
+            if dup:
+                raise ValueError(f"{kind} channel names must be unique; repeated: {', '.join(dup)}")
+        for kind in KINDS:
+            for c in getattr(self, kind):
+                if not c.name.isidentifier():
+                    raise ValueError(f"{kind} channel {c.name!r}: a name must be an identifier")
+                if c.unit not in SI_UNITS:
+                    raise ValueError(f"{kind} channel {c.name}: unit {c.unit!r} is not one of "
+                                     f"{', '.join(sorted(SI_UNITS))}")
 
     @property
     def sensor_names(self) -> tuple[str, ...]:
@@ -115,7 +131,30 @@ class ChannelDictionary:
 
     @property
     def by_name(self) -> dict[str, Channel]:
+        """Sensor and command channels by name (state channels: ``index("state", name)``)."""
         return {c.name: c for c in self.sensors + self.commands}
+
+    def index(self, kind: str, name: str) -> int:
+        """Position of channel `name` among the `kind` channels ("sensors", "commands", "state")."""
+        if kind not in KINDS:
+            raise ValueError(f"channel kind {kind!r} is not one of {', '.join(KINDS)}")
+        names = [c.name for c in getattr(self, kind)]
+        if name not in names:
+            raise KeyError(f"{name!r} is not a {kind} channel of the vehicle (its {kind}: {', '.join(names)})")
+        return names.index(name)
+
+    def to_json(self) -> str:
+        """The dictionary as JSON (recorded with a session, so a replay knows its channels)."""
+        return json.dumps({k: [[c.name, c.unit, c.description] for c in getattr(self, k)] for k in KINDS})
+
+    @classmethod
+    def from_json(cls, text: str) -> "ChannelDictionary":
+        """The dictionary ``to_json`` wrote (ValueError if it is not one)."""
+        try:
+            d = json.loads(text)
+            return cls(*(tuple(Channel(str(n), str(u), str(t)) for n, u, t in d[k]) for k in KINDS))
+        except (TypeError, KeyError, json.JSONDecodeError) as exc:
+            raise ValueError(f"not a channel dictionary: {exc}") from None
 
 
 def car_channels(driven=("rl", "rr")) -> ChannelDictionary:

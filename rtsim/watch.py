@@ -17,13 +17,13 @@ import collections
 import threading
 import time
 
-from rtsim.channels import SENSORS, STATE
+from rtsim.channels import BY_NAME, STATE
 
 TOPICS = ("sensors", "state", "status", "commands")
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 RATE_WINDOW = 2.0          # s of arrivals a topic's rate is averaged over
 
-_UNITS = {c.name: c.unit for c in SENSORS + STATE}
+_UNITS = {c.name: c.unit for c in (*BY_NAME.values(), *STATE)}   # the known channels' units
 STATE_SHOWN = ("speed", "pos_x", "pos_y", "pos_z", "roll_angle", "pitch_angle", "yaw_angle",
                "vel_x", "vel_y", "yaw_rate",
                *(f"wheel_speed_{w}" for w in ("fl", "fr", "rl", "rr")),
@@ -140,8 +140,9 @@ def render(snap: dict, vehicle_id: str, endpoint: str):
     else:
         head.append("no status yet", style="yellow")
 
-    sensors = _channels("Sensors", snap["sensors"]["msg"], [c.name for c in SENSORS])
-    vehicle = _channels("Vehicle state", state, STATE_SHOWN)
+    sensor_msg = snap["sensors"]["msg"]               # the served vehicle's own sensor channels
+    sensors = _channels("Sensors", sensor_msg, [n for n in (sensor_msg or {}) if n != "time"])
+    vehicle = _channels("Vehicle state", state, [n for n in STATE_SHOWN if state is None or n in state])
 
     act = _channels("Actuators", state, ACTUATORS)
     for n in COMMANDS_SHOWN:

@@ -27,7 +27,6 @@ import numpy as np
 from bridge.can_codec import FAULTS, STATUS_SOURCES, Codec, CommandReceiver
 from bridge.can_e2e import C_STEP_IGNORED, C_STEP_REJECTED
 from rtsim.boundcall import bind
-from rtsim.channels import COMMAND_NAMES
 from rtsim.errors import RtsimError, SimulationError
 from rtsim.mbs.model import OK
 from rtsim.realtime.health import LoopHealth
@@ -71,8 +70,12 @@ class HilLoop:
         self.health = health if health is not None else LoopHealth()
         self.scenario_name = scenario_name
         self.on_chunk = on_chunk
+        ch = codec.channels               # the served vehicle's interface: ring widths, payload names
+        if (len(ch.sensors), len(ch.state)) != (NSENSOR, NSTATE_OUT):
+            raise RtsimError(f"{codec.path}: the vehicle declares {len(ch.sensors)} sensor and {len(ch.state)} "
+                             f"state channels; the car's loop produces {NSENSOR} and {NSTATE_OUT}")
         self.rings = rings if rings is not None else make_rings(
-            NSENSOR, len(codec.sensor_frames), NSTATE_OUT, len(COMMAND_NAMES))
+            len(ch.sensors), len(codec.sensor_frames), len(ch.state), len(ch.commands))
         kw = {} if hold_pressure is None else {"hold_pressure": hold_pressure}
         self.rx = CommandReceiver(codec, **kw)           # its arrays are the step's E2E state
         self.rx_writer = RxWriter(self.rings)            # for feeding frames by hand (re-simulation)
@@ -140,7 +143,7 @@ class HilLoop:
 
     @property
     def state(self) -> np.ndarray:
-        """The last observer state sample (STATE_NAMES order)."""
+        """The last observer state sample (the vehicle's state channels' order)."""
         return self.ls.state
 
     def compiled_seconds(self, cycles_per_second: float) -> np.ndarray:

@@ -33,6 +33,7 @@ class RingDrain:
         self.r = rings
         self.channels = channels
         self._encode_sensors = functools.partial(payloads.encode_sensors, names=channels.sensor_names)
+        self._encode_state = functools.partial(payloads.encode_state, names=channels.state_names)
         self.emit = emit
         self.raw = raw
         self.frames = frames
@@ -89,7 +90,7 @@ class RingDrain:
 
     def _state_samples(self) -> int:
         r = self.r
-        return self._samples(self._state, "state", r.state_t, r.state_v, payloads.encode_state)
+        return self._samples(self._state, "state", r.state_t, r.state_v, self._encode_state)
 
     def _samples(self, reader, key, times, values, encode, words=None) -> int:
         """One sample ring: (t, values) to ``raw`` and as JSON to ``emit``; with ``words``, each

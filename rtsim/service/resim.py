@@ -24,12 +24,13 @@ from pathlib import Path
 import numpy as np
 
 from bridge.can_codec import Codec
-from rtsim.channels import STATE_NAMES
 from rtsim.errors import ConfigError
 
 from .loop import HilLoop
 from .outbox import RingDrain
 from .server import build_sim, resolve_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 class Collector:
@@ -46,15 +47,20 @@ class Collector:
 
 
 def _file_for(meta: dict, key: str, override: Path | None, tmp: Path) -> tuple[Path, str]:
-    """The config file to use and a note: the override, the recorded path if its text is unchanged,
-    else the recorded text written next to nothing (a temporary file in the recorded folder when
-    possible, so relative paths still resolve)."""
+    """The config file to use and a note: the override, the recorded path (recorded in another checkout:
+    this one's file at the same place under configs/) if its text is unchanged, else the recorded text
+    written next to nothing (a temporary file in the recorded folder when possible, so relative paths
+    still resolve)."""
     if override is not None:
         return override, f"{key} {override} (given)"
     rec = meta.get(f"rtsim.{key}")
     if rec is None:
         raise ConfigError(f"the recording has no rtsim.{key} metadata (not written by rtsim serve?)")
     path = Path(rec["path"])
+    if not path.exists() and "configs" in path.parts:     # recorded in another checkout: this one's file
+        local = ROOT.joinpath(*path.parts[len(path.parts) - 1 - path.parts[::-1].index("configs"):])
+        if local.parent.is_dir():
+            path = local
     if path.exists() and path.read_text() == rec["toml"]:
         return path, f"{key} {path} (unchanged)"
     folder = path.parent if path.parent.exists() else tmp
@@ -87,6 +93,9 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         finally:
             for p in temps:
                 p.unlink(missing_ok=True)
+    if info.channels is not None and info.channels != sim.vm.channels:
+        diff = _channel_difference(info.channels, sim.vm.channels)
+        notes.append(f"the recorded channels differ from the vehicle's: {diff}")
     mode = session["mode"]
     loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode=mode, state_rate=float(session.get("state_rate", 100.0)),
                    hold_pressure=float(session["hold_pressure"]))
@@ -112,6 +121,20 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
     return report
 
 
+def _channel_difference(recorded, vehicle) -> str:
+    """What differs between two channel dictionaries, per kind: names only in one, changed units."""
+    out = []
+    for kind in ("sensors", "commands", "state"):
+        rec = {c.name: c.unit for c in getattr(recorded, kind)}
+        now = {c.name: c.unit for c in getattr(vehicle, kind)}
+        parts = [f"recorded only {', '.join(n for n in rec if n not in now)}" if set(rec) - set(now) else "",
+                 f"vehicle only {', '.join(n for n in now if n not in rec)}" if set(now) - set(rec) else "",
+                 ", ".join(f"{n} {rec[n]} -> {now[n]}" for n in rec if n in now and rec[n] != now[n])]
+        if any(parts):
+            out.append(f"{kind}: " + "; ".join(p for p in parts if p))
+    return "; ".join(out) or "descriptions or order"
+
+
 def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | None = None,
                dt: float | None = None, models: dict | None = None) -> dict:
     """Drive the model with the ECU command frames of a python-can log (.asc, .blf, candump .log),
@@ -134,8 +157,9 @@ def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | N
         if loop.run_state == "stopped":
             break
     loop.advance(int(round(0.5 / sim.dt)))       # half a second after the last frame
-    xs = np.array([v for _, v in col.state]) if col.state else np.zeros((0, len(STATE_NAMES)))
-    ix, iy, isp = STATE_NAMES.index("pos_x"), STATE_NAMES.index("pos_y"), STATE_NAMES.index("speed")
+    ch = sim.vm.channels
+    xs = np.array([v for _, v in col.state]) if col.state else np.zeros((0, len(ch.state)))
+    ix, iy, isp = (ch.index("state", n) for n in ("pos_x", "pos_y", "speed"))
     dist = float(np.sum(np.hypot(np.diff(xs[:, ix]), np.diff(xs[:, iy])))) if len(xs) > 1 else 0.0
     return {"log": str(path), "scenario": sc.name, "frames": len(frames), "accepted": loop.rx.accepted,
             "rejected": dict(loop.rx.counters), "sim_time": loop.sim_time, "run_state": loop.run_state,

@@ -13,7 +13,7 @@ Writers and readers:
   step reads (``H_RX_TAIL``). A full ring drops new frames (counted in ``H_RX_DROPPED``).
 * ``tx_*``: frames to send (id, 8-byte payload as a little-endian word, time stamp s); the step writes,
   the CAN writer thread reads.
-* ``sensor_*``: sensor samples (time s, values in ``SENSOR_NAMES`` order, the packed sensor frames);
+* ``sensor_*``: sensor samples (time s, values in the vehicle's sensor channels' order, the packed sensor frames);
   ``state_*``: observer state samples; the step writes, the publisher (Zenoh, MCAP) reads.
 * ``log_*``: every frame the step took (direction RX) or sent besides the sensor frames (status, lockstep
   acknowledgement; direction TX), for the MCAP ``can/rx`` / ``can/tx`` topics.

@@ -15,6 +15,7 @@ loop through the inbox, so the loop only swaps a finished object in between two 
 from __future__ import annotations
 
 import gc
+import json
 import queue
 import signal
 import sys
@@ -212,6 +213,7 @@ class Service:
             "can": self.port.stats() if self.port is not None else None,
             "zenoh": {"endpoints": list(self.zenoh.endpoints)} if self.zenoh is not None else None,
             "dbc": str(self.codec.path),
+            "channels": json.loads(self.codec.channels.to_json()),   # the served vehicle's interface
         }
 
     # -- running ---------------------------------------------------------------------------------------

@@ -161,9 +161,11 @@ class Sensors(Strict):
     @field_validator("channels")
     @classmethod
     def _known_channels(cls, v):
-        unknown = [k for k in v if k not in SENSOR_NAMES]
+        from rtsim.channels import car_sensors
+        known = list(dict.fromkeys([*SENSOR_NAMES, *(c.name for c in car_sensors(("fl", "fr")))]))
+        unknown = [k for k in v if k not in known]         # the car's, either driven axle
         if unknown:
-            raise ValueError(f"unknown sensor channel {unknown[0]!r}; channels are {', '.join(SENSOR_NAMES)}")
+            raise ValueError(f"unknown sensor channel {unknown[0]!r}; channels are {', '.join(known)}")
         return v
 
 

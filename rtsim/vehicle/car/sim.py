@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 
-from rtsim.channels import SENSOR_NAMES
 from rtsim.errors import ConfigError
 from rtsim.mbs import Simulation
 from rtsim.mbs.integrator import NEED_FACTOR
@@ -179,7 +178,7 @@ class VehicleSim:
     def _set_sensor_model(self, effects: dict) -> None:
         """The sensor model's parameters from the config's [sensors.channels] and the sensor effects, in
         place; its history ring kept when its length stays, else a new one holding the present values."""
-        sp = sensor_params(SENSOR_NAMES, self.dt, self.vm.config.sensors.channels, effects)
+        sp = sensor_params(self.vm.channels.sensor_names, self.dt, self.vm.config.sensors.channels, effects)
         ss = sensor_state(sp)
         old = self.states.sensors
         self.parts.sensors[:] = sp
