@@ -232,12 +232,13 @@ class Replayer:
         for e in effects:
             if e.kind == "sensor" and e.channel in raw:
                 mapping.setdefault(e.name, []).append(dict(e.params))
-        p = sensor_params(SENSOR_NAMES, dtg, self.config.sensors.channels, mapping)
-        active = [i for i in range(len(SENSOR_NAMES)) if not np.array_equal(p[i], neutral_params(1)[0])
-                  and SENSOR_NAMES[i] in raw]
+        sensor_names = self.model.channels.sensor_names
+        p = sensor_params(sensor_names, dtg, self.config.sensors.channels, mapping)
+        active = [i for i in range(len(sensor_names)) if not np.array_equal(p[i], neutral_params(1)[0])
+                  and sensor_names[i] in raw]
         if not active:
             return raw
-        names = [SENSOR_NAMES[i] for i in active]
+        names = [sensor_names[i] for i in active]
         y = apply_to_series(p[active], np.column_stack([raw[n] for n in names]))
         out = dict(raw)
         out.update({n: y[:, k] for k, n in enumerate(names)})
