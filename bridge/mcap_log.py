@@ -12,23 +12,28 @@ from mcap.reader import make_reader
 
 from bridge.mcap_recorder import Recorder
 from bridge.payloads import encode_json
-from rtsim.channels import CAR, ChannelDictionary
+from rtsim.channels import CAR, ENERGY, ChannelDictionary
+
+ENERGY_NAMES = frozenset(c.name for c in ENERGY)
 
 
 def write_run(path: str | Path, columns: tuple[str, ...], rows, vehicle_id: str,
               channels: ChannelDictionary = CAR) -> None:
     """Write the rows of a run (columns: `time`, then channels of `channels`, as
-    rtsim.vehicle.offline.columns_of) to an MCAP file: each row as one sensors and one state message
-    with the columns of that kind it has."""
+    rtsim.vehicle.offline.columns_of, and the power audit's rtsim.channels.ENERGY) to an MCAP file: each
+    row as one sensors, one state and one energy message with the columns of that kind it has."""
     sensors = [c for c in columns if c in channels.sensor_names]
     state = [c for c in columns if c in channels.state_names]
+    energy = [c for c in columns if c in ENERGY_NAMES and c not in state]
     idx = {c: i for i, c in enumerate(columns)}
-    rec = Recorder(path, vehicle_id, queue_size=2 * len(rows) + 16, channels=channels)
+    rec = Recorder(path, vehicle_id, queue_size=3 * len(rows) + 16, channels=channels)
     try:
         for r in rows:
             t = float(r[idx["time"]])
             t_ns = int(round(t * 1e9))
-            for key, fields in (("sensors", sensors), ("state", state)):
+            for key, fields in (("sensors", sensors), ("state", state), ("energy", energy)):
+                if not fields:
+                    continue
                 rec.record(key, t_ns, encode_json({"time": t, **{f: float(r[idx[f]]) for f in fields}}))
     finally:
         rec.close()

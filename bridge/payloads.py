@@ -20,10 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rtsim.channels import CAR, SENSOR_NAMES, STATE_NAMES, ChannelDictionary
+from rtsim.channels import CAR, ENERGY, SENSOR_NAMES, STATE_NAMES, ChannelDictionary
 from rtsim.errors import RtsimError
 
 TOPIC_KEYS = ("sensors", "state", "status", "commands", "can/rx", "can/tx")
+OFFLINE_TOPIC_KEYS = ("energy",)    # recorded by offline runs only (rtsim.vehicle.car.energy)
 MODES = ("realtime", "lockstep", "fast")
 RUN_STATES = ("running", "paused", "stopped")
 COMMAND_SOURCES = ("can", "zenoh", "safe")
@@ -113,6 +114,7 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
         "data": {"type": "string", "description": "frame payload, hexadecimal, 2 digits per byte"},
         "time": _TIME,
     }
+    energy = {"time": _TIME, **{c.name: _signal(c.unit, c.description) for c in ENERGY}}
     return {
         "sensors": ("rtsim.sensors", _obj("rtsim sensors", sensors, sensors)),
         "state": ("rtsim.state", _obj("rtsim state", state, state)),
@@ -122,6 +124,7 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
         # one schema (one name) for both directions: MCAP registers a schema name once
         "can/rx": ("rtsim.can_frame", _obj("rtsim CAN frame", can, ["id", "dlc", "data", "time"])),
         "can/tx": ("rtsim.can_frame", _obj("rtsim CAN frame", can, ["id", "dlc", "data", "time"])),
+        "energy": ("rtsim.energy", _obj("rtsim power audit (offline runs)", energy, ["time"])),
     }
 
 

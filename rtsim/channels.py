@@ -87,9 +87,33 @@ STATE: tuple[Channel, ...] = (
     _ch("constraint_violation", "1", "max |Phi| of the multibody constraints (coordinate units)"),
 )
 
+#: The power audit of a run (rtsim.vehicle.car.energy), recorded beside the sensors and state of offline
+#: runs (MCAP topic ``energy``, CSV columns): cumulative work of every port on the vehicle (J, positive:
+#: energy into the vehicle), the stored energies' change since the audit started (J), the balance's
+#: residual, and the electric power steering's electrical and actuator values (zero without EPS).
+ENERGY_FLOWS = ("tyres", "dampers", "axle_reactions", "brakes", "drive", "aero", "effects", "steer_by_wire",
+                "driver_torque", "column_friction", "motor_friction", "gear_loss", "pinion_friction",
+                "rack_loss", "rack_friction", "driver_angle", "joints", "motor_supply", "motor_winding",
+                "motor_conversion")
+ENERGY_STORED = ("kinetic", "gravity", "suspension_springs", "anti_roll_bars", "torsion_bar", "inductance")
+ENERGY: tuple[Channel, ...] = (
+    *(_ch(f"work_{n}", "J", f"work done on the vehicle through the {n.replace('_', ' ')} port") for n in ENERGY_FLOWS),
+    *(_ch(f"stored_{n}", "J", f"change of the {n.replace('_', ' ')} energy since the audit started")
+      for n in ENERGY_STORED),
+    _ch("energy_residual", "J", "stored change - (inputs - dissipation): the integrator's energy error"),
+    _ch("motor_current", "A", "EPS motor current"),
+    _ch("motor_voltage", "V", "EPS motor drive voltage"),
+    _ch("motor_power", "W", "EPS motor electrical input power"),
+    _ch("motor_speed", "rad/s", "EPS motor speed"),
+    _ch("motor_angle", "rad", "EPS motor angle"),
+    _ch("torsion_bar_torque", "N*m", "EPS torsion-bar torque (the torque sensor)"),
+    _ch("driver_torque", "N*m", "the driver's torque on the steering wheel"),
+    _ch("assist_torque", "N*m", "EPS assistance torque at the pinion"),
+)
+
 #: The units a channel may have: SI units and the SI-derived ones the interface uses (``1``: dimensionless).
 SI_UNITS = frozenset(("1", "s", "ms", "m", "m/s", "m/s^2", "rad", "rad/s", "rad/s^2", "N", "N*m", "Pa",
-                      "kPa", "kg", "K", "A", "V", "W"))
+                      "kPa", "kg", "K", "A", "V", "W", "J"))
 KINDS = ("sensors", "commands", "state")
 
 

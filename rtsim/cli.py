@@ -115,6 +115,17 @@ def _run(args) -> int:
     return 0
 
 
+def _energy(args) -> int:
+    from rtsim.vehicle.car.energy import read_energy, summarise
+
+    try:
+        t, series = read_energy(args.run)
+    except (OSError, ValueError) as exc:
+        raise RtsimError(str(exc)) from None
+    print(summarise(t, series))
+    return 0
+
+
 def _describe(args) -> int:
     from rtsim.road.model import make_plane
     from rtsim.vehicle.car.config import load_vehicle
@@ -160,6 +171,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--scenario", required=True, help="scenario TOML (configs/scenarios/)")
     r.add_argument("--out", required=True, help="output file: .csv or .mcap")
     r.set_defaults(func=_run)
+    en = sub.add_parser("energy", help="the power audit of a recorded run: every port's energy and the balance")
+    en.add_argument("run", help="a run's MCAP or CSV (rtsim run --out)")
+    en.set_defaults(func=_energy)
     d = sub.add_parser("describe", help="print the vehicle model's size and key parameters")
     d.add_argument("--vehicle", help="vehicle TOML (default configs/vehicles/xbw.toml)")
     d.add_argument("--json", action="store_true")

@@ -51,7 +51,7 @@ def status_example(**over):
 # ----------------------------------------------------------------------------------------- schemas
 
 def test_schema_fields_come_from_the_channel_dictionary():
-    assert tuple(P.SCHEMAS) == P.TOPIC_KEYS
+    assert tuple(P.SCHEMAS) == P.TOPIC_KEYS + P.OFFLINE_TOPIC_KEYS
     for key, channels in (("sensors", SENSORS), ("state", STATE)):
         name, schema = P.SCHEMAS[key]
         assert name == f"rtsim.{key}" and schema["type"] == "object"

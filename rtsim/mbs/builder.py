@@ -25,7 +25,7 @@ from rtsim.errors import ModelError
 
 from . import envelope
 from .model import (
-    CON_ANGLE2D, CON_ANGLE3D, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
+    CON_ANGLE2D, CON_ANGLE3D, CON_CRANK_ROD, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
     FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
     FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
 )
@@ -142,6 +142,11 @@ class MechanismBuilder:
         self._forces: list[dict] = []
         self._gravity = np.zeros(3)
         self._conservative = True
+
+    @property
+    def constraint_count(self) -> int:
+        """Constraint rows declared so far (a row's index in the compiled model is its order)."""
+        return len(self._cons)
 
     # ---- coordinates ---------------------------------------------------------------------------
     def _coord(self, name: str, value: float, velocity: float | None) -> int:
@@ -368,6 +373,18 @@ class MechanismBuilder:
         for c in range(3):   # consecutive rows, component 0 first: the kernels share p(z, s) among them
             self._add_con(CON_POLY_POINT, (p, origin, frame[0], frame[1], frame[2]), (z, s),
                           (float(k), float(c), 0.0, 0.0), f"{name}.{'xyz'[c]}")
+
+    def crank_rod(self, theta: Scalar, x: Scalar, pivot, arm, rod_end, direction: float, length: float,
+                  name: str = "crank_rod") -> None:
+        """Planar crank and rod (a steering arm and its tie rod): the crank turns by the angle
+        coordinate `theta` (rad) about `pivot`, its end at pivot + R(theta) `arm`; the rod of `length` (m)
+        joins it to `rod_end`, which slides by `direction` * x along the plane's second axis with the
+        travel coordinate `x` (m). Points are 2-vectors in the plane of motion (a body's x, y). One row."""
+        c = np.asarray(pivot, dtype=float)[:2] - np.asarray(rod_end, dtype=float)[:2]
+        a = np.asarray(arm, dtype=float)[:2]
+        ra = Ref(f"{name}.c", (-1, -1, -1), (float(c[0]), float(c[1]), float(a[0])))
+        rb = Ref(f"{name}.l", (-1, -1, -1), (float(a[1]), float(direction), float(length)))
+        self._add_con(CON_CRANK_ROD, (ra, rb), (theta, x), (0.0,) * 4, name)
 
     def _poly_coef(self) -> np.ndarray:
         if not self._polys:

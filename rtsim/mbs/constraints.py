@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
-from .model import CON_ANGLE2D, CON_DOT, CON_LINEAR, CON_POLY_POINT, DRV_POLY, DRV_SINE, NSLOT, SCALAR, SCALAR2
+from .model import CON_ANGLE2D, CON_CRANK_ROD, CON_DOT, CON_LINEAR, CON_POLY_POINT, DRV_POLY, DRV_SINE, NSLOT, SCALAR, SCALAR2
 
 
 @inline_kernel
@@ -185,6 +185,15 @@ def eval_constraints(m, d, q):
             jac[3] = -sn
             jac[4] = cs
             jac[SCALAR] = dx * cs + dy * sn
+        elif kind == CON_CRANK_ROD:
+            th = q[idx[i, SCALAR]]
+            x = q[idx[i, SCALAR2]]
+            dx, dy, rx, ry, dirx, rod = _crank_rod(cst, i, th, x)
+            for s_ in range(NSLOT):
+                jac[s_] = 0.0
+            jac[SCALAR] = (dy * rx - dx * ry) / rod
+            jac[SCALAR2] = -dirx * dy / rod
+            d.phi[i] = (dx * dx + dy * dy - rod * rod) / (2.0 * rod) - f
         elif kind == CON_POLY_POINT:
             k = int(par[0])
             comp = int(par[1])
@@ -250,6 +259,20 @@ def _triple(a0, a1, a2, b0, b1, b2, c0, c1, c2):
     return (a1 * b2 - a2 * b1) * c0 + (a2 * b0 - a0 * b2) * c1 + (a0 * b1 - a1 * b0) * c2
 
 
+@inline_kernel
+def _crank_rod(cst, i, th, x):
+    """Planar crank and rod: d = c + R(th) a - (0, dir x), the crank arm r = R(th) a; returns
+    (dx, dy, rx, ry, dir, L) from the row's constants (c0, c1, a0 | a1, dir, L)."""
+    sn = np.sin(th)
+    cs = np.cos(th)
+    a0 = cst[i, 2]
+    a1 = cst[i, 3]
+    rx = cs * a0 - sn * a1
+    ry = sn * a0 + cs * a1
+    dirx = cst[i, 4]
+    return cst[i, 0] + rx, cst[i, 1] + ry - dirx * x, rx, ry, dirx, cst[i, 5]
+
+
 @kernel
 def eval_hqd(m, d, q, qd):
     """d.hqd = (d/dt Phi_q) qd, the velocity-quadratic part of Phi'' = Phi_q qdd + hqd + Phi_tt."""
@@ -281,6 +304,17 @@ def eval_hqd(m, d, q, qd):
             dxd = refd(idx, qd, i, 0, 0) - refd(idx, qd, i, 1, 0)
             dyd = refd(idx, qd, i, 0, 1) - refd(idx, qd, i, 1, 1)
             d.hqd[i] = 2.0 * (dxd * cs + dyd * sn) * thd + (-dx * sn + dy * cs) * thd * thd
+        elif kind == CON_CRANK_ROD:
+            kt = idx[i, SCALAR]
+            kx = idx[i, SCALAR2]
+            dx, dy, rx, ry, dirx, rod = _crank_rod(cst, i, q[kt], q[kx])
+            a2 = cst[i, 2] * cst[i, 2] + cst[i, 3] * cst[i, 3]
+            ptt = (a2 - dx * rx - dy * ry) / rod
+            ptx = -dirx * rx / rod
+            pxx = dirx * dirx / rod
+            td = qd[kt]
+            xd = qd[kx]
+            d.hqd[i] = ptt * td * td + 2.0 * ptx * td * xd + pxx * xd * xd
         elif kind == CON_POLY_POINT:
             kp = int(m.con_par[i, 0])
             comp = int(m.con_par[i, 1])

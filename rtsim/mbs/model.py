@@ -31,7 +31,10 @@ CON_ANGLE2D = 2  # (A - B) x e(theta) = dx sin(theta) - dy cos(theta) = 0, theta
 CON_ANGLE3D = 3  # ((A x B).C) cos(theta) - (A.B) sin(theta) = 0: angle from A to B about axis C
 CON_POLY_POINT = 4  # A_c - B_c - sum_k p_k(z, s) E_k,c = 0 with frame vectors E_0..2 = C, D, E,
 #                     z = q[idx[SCALAR]], s = q[idx[SCALAR2]] (or 0), p = polynomial par[0], c = par[1]
-CON_KIND_NAMES = ("linear", "dot", "angle2d", "angle3d", "poly_point")
+CON_CRANK_ROD = 5   # (|d|^2 - L^2) / (2 L) = 0, planar crank and rod: a crank of angle theta = q[idx[SCALAR]]
+#                     about its pivot, a rod of length L to a slider at travel x = q[idx[SCALAR2]];
+#                     d = c + R(theta) a - (0, dir x), constants (c0, c1, a0) in slot A, (a1, dir, L) in B
+CON_KIND_NAMES = ("linear", "dot", "angle2d", "angle3d", "poly_point", "crank_rod")
 
 # Force kinds.
 FRC_SPRING = 0      # point-to-point spring-damper-actuator between A and B: par = k, c, L0, F0

@@ -1,6 +1,7 @@
 """Offline runs: a vehicle, a road and a scenario's driver, as fast as the machine allows, logged at
 the scenario's output rate (column `time`, then the vehicle's sensor channels as reported, then its
-state channels: the names of its channel dictionary) to CSV or, through bridge.mcap_log, to MCAP."""
+state channels: the names of its channel dictionary, then the power audit's rtsim.channels.ENERGY) to
+CSV or, through bridge.mcap_log, to MCAP."""
 from __future__ import annotations
 
 import csv
@@ -19,6 +20,7 @@ from rtsim.errors import ConfigError
 from rtsim.road.config import load_road
 
 from .car.build import build_vehicle
+from .car.energy import ENERGY_NAMES, energy_row
 from .car.config import load_vehicle
 from .car.observer import vehicle_state_values
 from .car.sensors import NSENSOR
@@ -90,8 +92,9 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
     dt = sc.dt
     nsteps = int(round(sc.duration / dt))
     every = max(1, int(round(1.0 / (sc.spec.output_rate * dt))))
-    columns = columns_of(sim.vm.channels)
+    columns = columns_of(sim.vm.channels) + ENERGY_NAMES
     rows = np.zeros((nsteps // every + 1, len(columns)))
+    sim.start_energy_audit()            # the power audit's cumulative flows (rtsim.vehicle.car.energy)
     driver = sc.driver()
     state = np.zeros(NSTATE)
     sens = np.zeros(NSENSOR)
@@ -127,7 +130,9 @@ def _log(sim: VehicleSim, sens: np.ndarray, observed: np.ndarray, keep: np.ndarr
     row[0] = sim.data.t[0]
     row[1:1 + NSENSOR] = sens
     vehicle_state_values(sim.data, sim.vm.vehicle, sim.vd, sim.io.signals, observed)
-    row[1 + NSENSOR:] = observed[keep]
+    n_state = len(keep)
+    row[1 + NSENSOR:1 + NSENSOR + n_state] = observed[keep]
+    energy_row(sim, row[1 + NSENSOR + n_state:])
 
 
 def write_csv(result: RunResult, path: str | Path) -> None:

@@ -25,15 +25,21 @@ from rtsim.mbs import Mechanism, MechanismBuilder, Settings
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import VehicleConfig
-from .layout import (NSP, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE,
-                     SP_K, SP_PARTNER, TYRE_LINEAR, TYRE_MAGIC_FORMULA, G, Vehicle, FRONT_AXLE,
-                     REAR_AXLE, WHEELS)
+from .layout import (NSP, SP_ARB, SP_BX, SP_BY, SP_CFY, SP_CMZ, SP_L0, SP_PARTNER, STEER_BY_WIRE, STEER_EPS,
+                     TYRE_LINEAR, TYRE_MAGIC_FORMULA, G, Vehicle, FRONT_AXLE, REAR_AXLE, WHEELS)
+from ..kit.eps import add_eps, eps_params
 from ..kit.steering import add_steering, steering_config, steering_params
+from ..kit.tables import table_1d
 from ..kit.linkage_cache import cached_corner_kinematics
 from ..kit.linkages import (
-    OUT_AXIS, OUT_CENTRE, OUT_ROT_S, OUT_ROT_Z, CornerKinematics, DoubleWishbone, MacPherson, VerticalSlider, mirror,
-    solve_corner,
+    OUT_AXIS, OUT_CENTRE, OUT_ROT_S, OUT_ROT_Z, CornerKinematics, DoubleWishbone, MacPherson, VerticalSlider,
+    crank_rod_constants, mirror, solve_corner,
 )
+
+# A car with EPS: the front knuckles' steer angle range of the fits (rad) and the polynomial degrees
+# (the slider's travel is linear; sin and cos of the steer angle to 1e-9 over the range).
+PIVOT_RANGE = (-0.75, 0.75)
+PIVOT_DEGREES = dict(deg_z=1, deg_s=11, nz=5, ns=41)
 
 
 
@@ -63,9 +69,16 @@ def _geometry(cfg_axle, right: bool):
 
 
 def corner_kinematics(cfg: VehicleConfig) -> list[CornerKinematics]:
+    """The corners' fitted kinematics. With [eps] the front ones are functions of travel and the
+    knuckle's own steer angle (the tie rods are constraints of the model), all of degree 1 in travel."""
     out = []
     for axle, right in ((cfg.front, False), (cfg.front, True), (cfg.rear, False), (cfg.rear, True)):
-        out.append(solve_corner(_geometry(axle, right), z_range=axle.travel_m))
+        if cfg.eps is None:
+            out.append(solve_corner(_geometry(axle, right), z_range=axle.travel_m))
+        else:
+            steered = axle is cfg.front
+            out.append(solve_corner(_geometry(axle, right), z_range=axle.travel_m, s_range=PIVOT_RANGE,
+                                    steer_angle=steered, **PIVOT_DEGREES))
     return out
 
 
@@ -84,7 +97,13 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     ixz = cfg.chassis.ixz_kgm2
     b.body("chassis", r, [u, v, w], cfg.chassis.mass_kg, cg, np.array([[ixx, 0, -ixz], [0, iyy, 0], [-ixz, 0, izz]]))
     rack = b.length("rack", 0.0, velocity=0.0)
-    column = add_steering(b, steering_params(steering_config(cfg.steering or None, "steering")), rack)
+    driver_row = -1
+    if cfg.eps is None:
+        column = add_steering(b, steering_params(steering_config(cfg.steering or None, "steering")), rack)
+    else:
+        column, drv = add_eps(b, eps_params(cfg.eps), rack)
+        if drv >= 0:
+            driver_row = b.constraint_count - 1     # the driver's constraint row, just added
     full_exps = _common_exponents(corners)
     corner_idx = np.zeros((4, 6), dtype=np.int64)
     axis_coef = np.zeros((4, 3, full_exps.shape[0]))
@@ -104,12 +123,17 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         b.point_mass(wc, axle.unsprung_mass_kg)
         path = vec[OUT_CENTRE].copy()
         path[:, 0] -= cg      # relative to the chassis origin r (constant term of the polynomial)
-        b.poly_point(wc, r, (u, v, w), path, full_exps, z, rack if kin.steered else None, name=f"suspension {name}")
+        steer = rack if kin.steered else None
+        if kin.steered and cfg.eps is not None:       # the knuckle's steer angle, tied to the rack
+            steer = b.angle(f"steer_{name}", 0.0, velocity=0.0)
+            b.scalar_inertia(steer, axle.pivot_inertia_kgm2)
+            b.crank_rod(steer, rack, name=f"tie rod {name}", **crank_rod_constants(_geometry(axle, i % 2 == 1)))
+        b.poly_point(wc, r, (u, v, w), path, full_exps, z, steer, name=f"suspension {name}")
         phi = b.angle(f"spin_{name}", 0.0, velocity=0.0)
         b.scalar_inertia(phi, axle.wheel_spin_inertia_kgm2)
         zs.append(z)
         b.couple(wc)           # the tyre's 3x3 stiffness/damping block on the wheel centre
-        corner_idx[i] = [*wc.idx, z.index, phi.index, rack.index if kin.steered else -1]
+        corner_idx[i] = [*wc.idx, z.index, phi.index, steer.index if kin.steered else -1]
         axis_coef[i], rotz_coef[i], rots_coef[i] = vec[OUT_AXIS], vec[OUT_ROT_Z], vec[OUT_ROT_S]
         spring_coef[i] = _pad_scalar(kin, full_exps)
     # the tangent entries rtsim.vehicle.car.step adds: each wheel centre's 3x3 block (tyre stiffness
@@ -126,26 +150,30 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     front_share = (cg[0] - xr) / (xf - xr)
     sprung = np.array([front_share, front_share, 1 - front_share, 1 - front_share]) * 0.5 * m_s * G
     unsprung = np.array([cfg.front.unsprung_mass_kg] * 2 + [cfg.rear.unsprung_mass_kg] * 2) * G
+    spring_tab = np.zeros((4, table_1d([0.0, 1.0], [0.0, 0.0]).size))
+    damper_tab = np.zeros_like(spring_tab)
+    r_wheel = float(np.mean(design_w[:, 2]))       # wheel radius for the axle reactions (design height)
     for i in range(4):
         axle = cfg.front if i < 2 else cfg.rear
-        sp = axle.spring
         dl = _spring_slope(spring_coef[i], full_exps)
         length0 = spring_coef[i] @ _basis(full_exps, 0.0, 0.0)
         f_static = sprung[i] / max(-dl, 1e-6)          # spring compression force at design height
-        free = sp.free_length_m if sp.free_length_m is not None else length0 + f_static / sp.stiffness_n_per_m
-        susp[i, SP_K] = sp.stiffness_n_per_m
-        susp[i, SP_FREE] = free
-        susp[i, SP_BS_LEN] = length0 - sp.bump_stop_clearance_m
-        susp[i, SP_BS_K] = sp.bump_stop_stiffness_n_per_m
-        susp[i, SP_C_BUMP] = sp.damping_bump_ns_per_m
-        susp[i, SP_C_REB] = sp.damping_rebound_ns_per_m
+        spring_tab[i], damper_tab[i] = _spring_damper_tables(axle.spring, length0, f_static)
+        susp[i, SP_L0] = length0
         susp[i, SP_ARB] = axle.anti_roll_bar_n_per_m
         susp[i, SP_PARTNER] = i ^ 1
+        susp[i, SP_BX] = r_wheel / axle.anti_pitch_arm_m if axle.anti_pitch_arm_m else 0.0
+        susp[i, SP_BY] = r_wheel / axle.anti_roll_arm_m if axle.anti_roll_arm_m else 0.0
+        susp[i, SP_CFY] = axle.compliance_steer_rad_per_n
+        susp[i, SP_CMZ] = axle.compliance_steer_rad_per_nm
     driven = list(FRONT_AXLE if cfg.driven_axle == "front" else REAR_AXLE)
     veh = Vehicle(
         chassis_idx=np.array([*r.idx, *u.idx, *v.idx, *w.idx], dtype=np.int64),
         corner_idx=corner_idx, axis_coef=axis_coef, rotz_coef=rotz_coef, rots_coef=rots_coef,
-        spring_coef=spring_coef, susp=susp, steer_idx=np.array([column.index, rack.index], dtype=np.int64),
+        spring_coef=spring_coef, susp=susp, spring_tab=spring_tab, damper_tab=damper_tab,
+        steer_idx=np.array([column.index, rack.index], dtype=np.int64),
+        steer_kind=np.array([STEER_BY_WIRE if cfg.eps is None else STEER_EPS], dtype=np.int64),
+        driver_row=np.array([driver_row], dtype=np.int64),
         imu_local=np.array(cfg.sensors.imu_position_m, dtype=float) - cg,
         aero=np.array([cfg.aero.drag_area_m2, cfg.aero.air_density_kg_m3]),
         tyre_model=np.array([TYRE_LINEAR if cfg.tyres.model == "linear" else TYRE_MAGIC_FORMULA], dtype=np.int64),
@@ -155,6 +183,23 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     )
     return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w, vehicle_channels(cfg),
                         (Path(base) / cfg.interface.dbc).resolve())
+
+
+def _spring_damper_tables(sp, length0: float, f_static: float) -> tuple[np.ndarray, np.ndarray]:
+    """The spring's force (N, compression positive) against compression from the design length (m),
+    and the damper's force against compression speed (m/s), as tables. A linear spring with its bump
+    stop and a two-rate damper are tables of three points each, exactly (the ends continue linearly)."""
+    if sp.spring_table is not None:
+        spring = table_1d(sp.spring_table.x, np.asarray(sp.spring_table.force_n) + f_static)
+    else:
+        k, kb, gap = sp.stiffness_n_per_m, sp.bump_stop_stiffness_n_per_m, sp.bump_stop_clearance_m
+        pre = f_static if sp.free_length_m is None else k * (sp.free_length_m - length0)
+        spring = table_1d([-1.0, gap, gap + 1.0], [pre - k, pre + k * gap, pre + k * (gap + 1.0) + kb])
+    if sp.damper_table is not None:
+        damper = table_1d(sp.damper_table.x, sp.damper_table.force_n)
+    else:
+        damper = table_1d([-1.0, 0.0, 1.0], [-sp.damping_rebound_ns_per_m, 0.0, sp.damping_bump_ns_per_m])
+    return spring, damper
 
 
 def vehicle_channels(cfg: VehicleConfig) -> ChannelDictionary:

@@ -22,6 +22,7 @@ from rtsim.errors import ConfigError
 
 from ..kit.actuators import over_defaults
 from ..kit.brake import BrakeConfig
+from ..kit.eps import EpsConfig
 from ..kit.powertrain import PowertrainConfig
 from ..kit.steering import SteeringConfig
 
@@ -97,15 +98,46 @@ SUSPENSIONS = {"double_wishbone": DoubleWishboneHardpoints, "macpherson": MacPhe
                "vertical_slider": VerticalSliderHardpoints}
 
 
+class Characteristic(Strict):
+    """A nonlinear law as a table (piecewise linear, continued with the end slopes): x increasing."""
+    x: list[float] = Field(min_length=2, max_length=16)
+    force_n: list[float] = Field(min_length=2, max_length=16)
+
+    @model_validator(mode="after")
+    def _points(self):
+        if len(self.x) != len(self.force_n):
+            raise ValueError(f"x and force_n must have the same length ({len(self.x)} != {len(self.force_n)})")
+        if any(b <= a for a, b in zip(self.x, self.x[1:])):
+            raise ValueError("x must increase")
+        return self
+
+
 class SpringDamper(Strict):
-    """Along the spring/damper element. Force in compression positive."""
-    stiffness_n_per_m: float = Field(gt=0, le=1e6)
+    """Along the spring/damper element. Force in compression positive. Linear spring with a bump stop
+    and a two-rate damper, or tables: `spring_table` (x: compression from the design ride height, m;
+    force_n: the force above the static preload, so the car sits at design height) and `damper_table`
+    (x: compression speed, m/s; force_n: damping force, 0 at 0)."""
+    stiffness_n_per_m: float | None = Field(default=None, gt=0, le=1e6)
     free_length_m: float | None = Field(default=None, gt=0, le=2.0,
                                         description="unset: chosen so the car sits at design ride height")
     bump_stop_clearance_m: float = Field(default=0.05, gt=0, le=0.3)
     bump_stop_stiffness_n_per_m: float = Field(default=2e5, ge=0, le=1e7)
-    damping_bump_ns_per_m: float = Field(gt=0, le=1e5)
-    damping_rebound_ns_per_m: float = Field(gt=0, le=1e5)
+    damping_bump_ns_per_m: float | None = Field(default=None, gt=0, le=1e5)
+    damping_rebound_ns_per_m: float | None = Field(default=None, gt=0, le=1e5)
+    spring_table: Characteristic | None = None
+    damper_table: Characteristic | None = None
+
+    @model_validator(mode="after")
+    def _one_law_each(self):
+        if (self.spring_table is None) == (self.stiffness_n_per_m is None):
+            raise ValueError("give stiffness_n_per_m or spring_table (one of them)")
+        linear = self.damping_bump_ns_per_m is not None and self.damping_rebound_ns_per_m is not None
+        if (self.damper_table is None) != linear:
+            raise ValueError("give damping_bump_ns_per_m and damping_rebound_ns_per_m, or damper_table")
+        if self.spring_table is not None and self.spring_table.x[0] > 0.0 or \
+                self.spring_table is not None and self.spring_table.x[-1] < 0.0:
+            raise ValueError("spring_table must span compression 0 (the design ride height)")
+        return self
 
 
 class Axle(Strict):
@@ -119,6 +151,18 @@ class Axle(Strict):
     anti_roll_bar_n_per_m: float = Field(default=0.0, ge=0, le=1e6,
                                          description="force per metre of left-right travel difference")
     travel_m: tuple[float, float] = Field(default=(-0.08, 0.08), description="rebound, bump limits of the fit")
+    pivot_inertia_kgm2: float = Field(default=0.0, ge=0, le=20, description=(
+        "wheel, hub and knuckle about the kingpin (a car with [eps]: each front wheel steers freely "
+        "about its kingpin, tied to the rack by its tie rod)"))
+    compliance_steer_rad_per_n: float = Field(default=0.0, ge=-1e-4, le=1e-4, description=(
+        "elastokinematic steer induced by the lateral tyre force (positive: towards the force)"))
+    compliance_steer_rad_per_nm: float = Field(default=0.0, ge=-1e-3, le=1e-3, description=(
+        "steer induced by the aligning moment"))
+    anti_pitch_arm_m: float | None = Field(default=None, gt=0.05, le=20, description=(
+        "axle reaction ('Brouilhet effect'): the longitudinal tyre force's moment about the wheel "
+        "centre, Fx r, taken by an arm of this length between wheel and body (side-view swing arm)"))
+    anti_roll_arm_m: float | None = Field(default=None, gt=0.05, le=20, description=(
+        "axle reaction of the lateral tyre force, Fy r over this arm (front-view swing arm)"))
 
     @model_validator(mode="after")
     def _hardpoints_match(self):
@@ -191,6 +235,9 @@ class VehicleConfig(Strict):
     powertrain: PowertrainConfig = Field(default_factory=PowertrainConfig,
                                          description="rtsim.vehicle.kit.powertrain")
     steering: SteeringConfig = Field(default_factory=SteeringConfig, description="rtsim.vehicle.kit.steering")
+    eps: EpsConfig | None = Field(default=None, description=(
+        "electric power steering (rtsim.vehicle.kit.eps) instead of the steer-by-wire [steering]: the "
+        "driver steers, the motor assists; the front pivots are coordinates tied to the rack"))
     effects: dict = Field(default_factory=dict, description="switchable effects, validated by "
                           "rtsim.vehicle.car.effects (canonical form after loading)")
 
@@ -220,6 +267,14 @@ class VehicleConfig(Strict):
             raise ValueError("front wheel centre must be ahead of the rear one (x forward)")
         if wf[1] <= 0 or wr[1] <= 0:
             raise ValueError("hardpoints are given for the left corners (y > 0)")
+        if self.eps is not None:
+            if self.front.suspension != "vertical_slider" or self.front.pivot_inertia_kgm2 <= 0.0:
+                raise ValueError("[eps] steers front vertical sliders about their kingpins: front.suspension "
+                                 "= 'vertical_slider' with tie rods and front.pivot_inertia_kgm2 > 0")
+        elif self.front.compliance_steer_rad_per_n or self.front.compliance_steer_rad_per_nm:
+            raise ValueError("compliance steer needs the front pivots as coordinates ([eps])")
+        if self.rear.compliance_steer_rad_per_n or self.rear.compliance_steer_rad_per_nm:
+            raise ValueError("compliance steer is modelled at the front axle only")
         return self
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from collections import namedtuple
 
+from ..kit.eps import NPORT_EPS
+
 G = 9.81
 WHEELS = ("fl", "fr", "rl", "rr")   # corner order of every per-wheel array: front axle first, left first
 FRONT_AXLE, REAR_AXLE = (0, 1), (2, 3)
@@ -13,9 +15,12 @@ FRONT_AXLE, REAR_AXLE = (0, 1), (2, 3)
 CI_WX, CI_WY, CI_WZ, CI_Z, CI_PHI, CI_S = range(6)
 # Chassis coordinate index table (Vehicle.chassis_idx): r (0..2), u (3..5), v (6..8), w (9..11).
 
-# Per-corner suspension parameters (Vehicle.susp[w, :]).
-SP_K, SP_FREE, SP_BS_LEN, SP_BS_K, SP_C_BUMP, SP_C_REB, SP_ARB, SP_PARTNER = range(8)
-NSP = 8
+# Per-corner suspension parameters (Vehicle.susp[w, :]): the spring/damper element's length at design
+# ride height (m; the tables' compression is measured from it), anti-roll bar (N/m of travel difference)
+# and the other wheel of the axle, the axle reactions (Brouilhet effects: 1/m, force on the travel per
+# N m of Fx r and of Fy r), the compliance steer (rad/N of Fy, rad/(N m) of Mz).
+SP_L0, SP_ARB, SP_PARTNER, SP_BX, SP_BY, SP_CFY, SP_CMZ = range(7)
+NSP = 7
 
 Vehicle = namedtuple("Vehicle", [
     "chassis_idx",     # (12,) int
@@ -23,7 +28,12 @@ Vehicle = namedtuple("Vehicle", [
     "axis_coef", "rotz_coef", "rots_coef",   # (4, 3, nterm) polynomials in (z, s), body frame
     "spring_coef",     # (4, nterm) spring/damper length polynomial, m
     "susp",            # (4, NSP) float
+    "spring_tab",      # (4, TABLE) spring force (N, compression positive, preload included) against
+                       # compression from SP_L0 (m): rtsim.vehicle.kit.tables 1-D table
+    "damper_tab",      # (4, TABLE) damper force (N) against compression speed (m/s)
     "steer_idx",       # (2,) int coordinate indices of the steering column angle and the rack travel
+    "steer_kind",      # (1,) int STEER_BY_WIRE or STEER_EPS (which of rtsim.vehicle.kit.steering / eps)
+    "driver_row",      # (1,) int constraint row of the driver's steering-wheel angle (EPS angle mode) or -1
     "imu_local",       # (3,) IMU position in the body frame relative to the CG, m
     "aero",            # (2,) drag area m^2, air density kg/m^3
     "tyre_model",      # (1,) int: TYRE_MAGIC_FORMULA or TYRE_LINEAR
@@ -33,3 +43,13 @@ Vehicle = namedtuple("Vehicle", [
 ])
 TYRE_MAGIC_FORMULA, TYRE_LINEAR = 0, 1
 STEER_COLUMN, STEER_RACK = 0, 1     # Vehicle.steer_idx
+STEER_BY_WIRE, STEER_EPS = 0, 1     # Vehicle.steer_kind
+
+# Energy-audit ports: rows of the port-force array (VehicleData.pf), each the generalized forces one
+# element puts on the coordinates (rtsim.vehicle.car.energy). The EPS's own ports follow PORT_EPS
+# (rtsim.vehicle.kit.eps PORT_*).
+(PORT_TYRE, PORT_SPRING, PORT_DAMPER, PORT_ARB, PORT_AXLE_REACTION, PORT_BRAKE, PORT_DRIVE, PORT_AERO,
+ PORT_EFFECTS, PORT_STEER_BY_WIRE, PORT_EPS) = range(11)
+NPORT = PORT_EPS + NPORT_EPS
+CAR_PORT_NAMES = ("tyres", "suspension_springs", "dampers", "anti_roll_bars", "axle_reactions", "brakes",
+                  "drive", "aero", "effects", "steer_by_wire")

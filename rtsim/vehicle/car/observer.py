@@ -14,7 +14,7 @@ from rtsim.channels import STATE_NAMES, WHEELS
 from rtsim.jit import kernel
 
 from .step import TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_KAPPA
-from .layout import CI_PHI, CI_S
+from .layout import CI_PHI, STEER_RACK
 from .sensors import SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_SW_ANGLE, SG_THROTTLE
 
 NSTATE_OUT = len(STATE_NAMES)
@@ -68,7 +68,7 @@ def vehicle_state_values(d, veh, vd, signals, out):
     out[X_THROTTLE] = signals[SG_THROTTLE]
     out[X_BRAKE] = signals[SG_BRAKE_PRESSURE]
     out[X_SW_ANGLE] = signals[SG_SW_ANGLE]
-    out[X_RACK] = q[veh.corner_idx[0, CI_S]]
+    out[X_RACK] = q[veh.steer_idx[STEER_RACK]]
     out[X_ENGINE] = signals[SG_ENGINE_SPEED]
     worst = 0.0
     for k in range(d.phi.shape[0]):

@@ -21,6 +21,7 @@ from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZ
                               powertrain_step)
 from ..kit.sensor_model import ST_ON as SM_ST_ON, ST_SLOTS as SM_ST_SLOTS
 from ..kit.sensor_model import copy_noise_state, neutral_params as sm_neutral, seed_noise, sensor_params, sensor_state
+from ..kit.eps import ES_GAIN, eps_state, eps_params, stage_off
 from ..kit.steering import steering_config, steering_params, steering_state
 from ..kit.tyre.magic_formula import effective_rolling_radius
 from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
@@ -71,11 +72,17 @@ class VehicleSim:
         names = mech.coordinate_names
         w_driven = float(np.mean([qd0[names.index(f"spin_{WHEELS[i]}")] for i in model.vehicle.driven]))
         ps = powertrain_state_rolling(pp, self.dt, w_driven, throttle=0.0, selector=1.0)
-        self.stcfg = steering_config(cfg.steering or None, "steering")
-        sp = steering_params(self.stcfg)
-        self.vd = make_vehicle_data()
+        if cfg.eps is None:
+            self.stcfg = steering_config(cfg.steering or None, "steering")
+            sp = steering_params(self.stcfg)
+            sts = steering_state(sp, self.dt)
+        else:
+            self.stcfg = cfg.eps
+            sp = eps_params(cfg.eps)
+            sts = eps_state()
+        self.vd = make_vehicle_data(mech.model.nq)
         self.parts = Parts(self.tp, bp, pp, sp, neutral_params(), sm_neutral(NSENSOR))
-        self.states = States(bs, ps, steering_state(sp, self.dt), np.zeros(FS_SIZE), sensor_state(self.parts.sensors))
+        self.states = States(bs, ps, sts, np.zeros(FS_SIZE), sensor_state(self.parts.sensors))
         self._effects: dict = {}
         self.sim = Simulation(mech, self.dt, q0=q0, qd0=qd0)
         self.data = self.sim.data
@@ -201,6 +208,23 @@ class VehicleSim:
         out = np.zeros(NSENSOR) if out is None else out
         physical_sensors(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, out)
         return out
+
+    @property
+    def has_eps(self) -> bool:
+        return self.vm.config.eps is not None
+
+    def set_assist(self, gain: float) -> None:
+        """EPS: scale the assistance law (1 nominal, 0 no assistance; the motor's drive stays on)."""
+        self.states.steering[ES_GAIN] = float(gain)
+
+    def assist_off(self) -> None:
+        """EPS: the safe state, power stage off (open winding, no assistance)."""
+        stage_off(self.parts.steering, self.states.steering)
+
+    def start_energy_audit(self) -> None:
+        """Start the power audit (rtsim.vehicle.car.energy) at the end of the next step."""
+        self.vd.audit[0] = 1.0
+        self.vd.audit_e[:] = 0.0
 
     def set_torque_mode(self, measured: bool) -> None:
         """Drive with the measured wheel torques (io.extra) instead of the engine model."""

@@ -45,9 +45,14 @@ from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_STEERING_T
 from ..kit.sensor_model import ST_SLOTS as SM_ST_SLOTS
 from ..kit.steering import SO_SIZE, SO_SW_ANGLE, SO_TORQUE, steering_control, steering_forces, steering_outputs, \
     steering_tangent
+from ..kit.eps import (EO_SIZE, EO_SW_ANGLE, EO_TB_TORQUE, EP_DRIVER, EP_K_TB, EP_N, EP_RP, ES_T_DRIVER, DRIVER_TORQUE,
+                       eps_commit, eps_control, eps_forces, eps_outputs, hands_step)
+from ..kit.tables import table_eval
+from .energy_kernels import audit_commit
 from .layout import (
-    G, TYRE_LINEAR,
-    CI_PHI, CI_S, CI_WX, CI_Z, STEER_COLUMN, STEER_RACK, SP_ARB, SP_BS_K, SP_BS_LEN, SP_C_BUMP, SP_C_REB, SP_FREE, SP_K, SP_PARTNER,
+    G, TYRE_LINEAR, CI_PHI, CI_S, CI_WX, CI_Z, STEER_COLUMN, STEER_EPS, STEER_RACK, SP_ARB, SP_BX, SP_BY, SP_CFY,
+    SP_CMZ, SP_L0, SP_PARTNER, PORT_AERO, PORT_ARB, PORT_AXLE_REACTION, PORT_BRAKE, PORT_DAMPER, PORT_DRIVE,
+    PORT_EFFECTS, PORT_EPS, PORT_SPRING, PORT_STEER_BY_WIRE, PORT_TYRE, NPORT,
 )
 from ..kit.tyre.magic_formula import (advance_deflections, advance_deflections_relaxed, effective_rolling_radius,
                                  mf52_forces, transient_slip, transient_slip_relaxed, vertical_force)
@@ -67,13 +72,23 @@ VehicleData = namedtuple("VehicleData", [
     "brake_torque",  # (4,) brake torque of the last evaluation, N m
     "theta", "omega",  # (4,) wheel spin angles and rates handed to the brake commit
     "brake_in", "brake_out",  # brake kernel input (BI_SIZE) and outputs (BO_SIZE)
+    "steer_offset",  # (4,) rad, compliance steer of each knuckle, held over the step (from the tyre forces)
+    "audit",       # (1,) 1: the force evaluations at a refactored tangent also fill pf (energy audit)
+    "pf",          # (NPORT, nq) generalized forces per port of the last tangent evaluation
+    "pf_prev", "q_prev", "qc", "qc_prev",   # the audit's values at the previous step's end (energy.py)
+    "audit_e",     # (A_SIZE,) the audit's cumulative energies (rtsim.vehicle.car.energy)
+    "e_base",      # (3,) the EPS's electrical energies when the audit started
 ])
+AUDIT_SIZE = 64    # >= rtsim.vehicle.car.energy.A_SIZE (checked there)
 
 
-def make_vehicle_data() -> VehicleData:
+def make_vehicle_data(nq: int = 1) -> VehicleData:
     return VehicleData(slip=np.zeros((4, 2)), drive=np.zeros(4), tyre=np.zeros((4, NTO)),
                        contact=np.zeros(NCONTACT), brake_torque=np.zeros(4), theta=np.zeros(4),
-                       omega=np.zeros(4), brake_in=np.zeros(BI_SIZE), brake_out=np.zeros(BO_SIZE))
+                       omega=np.zeros(4), brake_in=np.zeros(BI_SIZE), brake_out=np.zeros(BO_SIZE),
+                       steer_offset=np.zeros(4), audit=np.zeros(1), pf=np.zeros((NPORT, nq)),
+                       pf_prev=np.zeros((NPORT, nq)), q_prev=np.zeros(nq), qc=np.zeros((2, nq)),
+                       qc_prev=np.zeros((2, nq)), audit_e=np.zeros(AUDIT_SIZE), e_base=np.zeros(3))
 
 
 @inline_kernel
@@ -138,6 +153,10 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
     om = chassis_omega(veh, q, qd)
     r0 = tp[P_UNLOADED_RADIUS]
     fx_on = fx[FX_ON] > 0.5
+    pf = vd.pf
+    audit = tangent and vd.audit[0] > 0.5
+    if audit:
+        pf[:, :] = 0.0
     for i in range(4):
         ix = veh.corner_idx[i]
         kz = ix[CI_Z]
@@ -146,25 +165,30 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
         kw = ix[CI_WX]
         z = q[kz]
         zd = qd[kz]
-        s = q[ks] if ks >= 0 else 0.0
+        s = (q[ks] + vd.steer_offset[i]) if ks >= 0 else 0.0
         sd = qd[ks] if ks >= 0 else 0.0
-        # ---- suspension spring, bump stop, damper ------------------------------------------------
+        # ---- suspension spring and damper (tables: force in compression against compression from
+        # the design length, and against compression speed) ----------------------------------------
         sp = veh.susp[i]
         length, lz, ls, _a, _b, _c = poly_eval(veh.spring_coef[i], exps, z, s)
         ldot = lz * zd + ls * sd
-        k_eff = sp[SP_K]
-        fsp = sp[SP_K] * (sp[SP_FREE] - length)
-        if length < sp[SP_BS_LEN]:
-            fsp += sp[SP_BS_K] * (sp[SP_BS_LEN] - length)
-            k_eff += sp[SP_BS_K]
-        c = sp[SP_C_BUMP] if ldot < 0.0 else sp[SP_C_REB]
-        fsp -= c * ldot
+        f_spring, k_eff = table_eval(veh.spring_tab[i], sp[SP_L0] - length)
+        f_damp, c = table_eval(veh.damper_tab[i], -ldot)
+        fsp = f_spring + f_damp
         f[kz] += fsp * lz
         if ks >= 0:
             f[ks] += fsp * ls
         # anti-roll bar on the travel difference with the other wheel of the axle
         partner = veh.corner_idx[int(sp[SP_PARTNER]), CI_Z]
-        f[kz] -= sp[SP_ARB] * (z - q[partner])
+        f_arb = -sp[SP_ARB] * (z - q[partner])
+        f[kz] += f_arb
+        if audit:
+            pf[PORT_SPRING, kz] += f_spring * lz
+            pf[PORT_DAMPER, kz] += f_damp * lz
+            if ks >= 0:
+                pf[PORT_SPRING, ks] += f_spring * ls
+                pf[PORT_DAMPER, ks] += f_damp * ls
+            pf[PORT_ARB, kz] += f_arb
         if tangent:
             add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * (k_eff * lz * lz + sp[SP_ARB]) + hc * c * lz * lz)
             add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, partner, -0.5 * bq * sp[SP_ARB])
@@ -199,8 +223,14 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
                 sb, dsb = smooth_sign(qd[kp], BEARING_OMEGA_EPS)
                 f[kp] -= fx[FX_BEARING] * sb
                 c_fx += fx[FX_BEARING] * dsb
+                if audit:
+                    pf[PORT_EFFECTS, kp] -= fx[FX_BEARING] * sb
         f[kp] += tb + drive
         f[kz] += drive * (ax * tzx + ay * tzy + az * tzz)
+        if audit:
+            pf[PORT_BRAKE, kp] += tb
+            pf[PORT_DRIVE, kp] += drive
+            pf[PORT_DRIVE, kz] += drive * (ax * tzx + ay * tzy + az * tzz)
         if tangent:
             # Near a locked wheel the sliding law's slope is -tau_s/omega_eps inside the band and 0
             # outside: a tangent of 0 lets Newton jump across the band and back forever. Use the band's
@@ -270,6 +300,20 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
         f[kz] += m0 * tzx + m1 * tzy + m2 * tzz
         if ks >= 0:
             f[ks] += m0 * tsx + m1 * tsy + m2 * tsz
+        # axle reactions (Brouilhet effects): the tyre forces' moments about the wheel centre taken by
+        # the axle's swing arms, a force on the travel (positive: pulls the body down onto the wheel)
+        f_ar = -fxt * sp[SP_BX] + side * fy * sp[SP_BY]
+        f[kz] += f_ar
+        if audit:
+            pf[PORT_TYRE, kw] += fvx
+            pf[PORT_TYRE, kw + 1] += fvy
+            pf[PORT_TYRE, kw + 2] += fvz
+            pf[PORT_TYRE, kp] += m0 * ax + m1 * ay + m2 * az
+            _add_chassis_moment(veh, q, pf[PORT_TYRE], m0, m1, m2)
+            pf[PORT_TYRE, kz] += m0 * tzx + m1 * tzy + m2 * tzz
+            if ks >= 0:
+                pf[PORT_TYRE, ks] += m0 * tsx + m1 * tsy + m2 * tsz
+            pf[PORT_AXLE_REACTION, kz] += f_ar
         out[TO_FX] = fxt
         out[TO_FY] = fy
         out[TO_FZ] = fz
@@ -295,9 +339,18 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
     # ---- steering column and rack --------------------------------------------------------------
     ic = veh.steer_idx[STEER_COLUMN]
     ir = veh.steer_idx[STEER_RACK]
-    steering_forces(stp, sts, q, qd, f, ic, ir)
-    if tangent:
-        steering_tangent(m, d.w_env, stp, ic, ir, bq, hc)
+    if veh.steer_kind[0] == STEER_EPS:
+        eps_forces(m, d, stp, sts, ic, ir, 2.0 * hc, tangent, bq, hc, pf[PORT_EPS:], audit)
+    else:
+        if audit:
+            fc0 = f[ic]
+            fr0 = f[ir]
+        steering_forces(stp, sts, q, qd, f, ic, ir)
+        if audit:
+            pf[PORT_STEER_BY_WIRE, ic] += f[ic] - fc0
+            pf[PORT_STEER_BY_WIRE, ir] += f[ir] - fr0
+        if tangent:
+            steering_tangent(m, d.w_env, stp, ic, ir, bq, hc)
     # ---- aerodynamic drag at the centre of mass -------------------------------------------------
     ci = veh.chassis_idx
     vx, vy, vz = qd[ci[0]], qd[ci[1]], qd[ci[2]]
@@ -309,11 +362,21 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
     f[ci[0]] -= cd * vx
     f[ci[1]] -= cd * vy
     f[ci[2]] -= cd * vz
+    if audit:
+        pf[PORT_AERO, ci[0]] -= cd * vx
+        pf[PORT_AERO, ci[1]] -= cd * vy
+        pf[PORT_AERO, ci[2]] -= cd * vz
     if tangent and speed > 0.0:
         for a in range(3):
             add_entry(d.w_env, m.first, m.ptr, m.pinv, ci[a], ci[a], hc * 2.0 * cd)
     if fx_on:
+        if audit:
+            for k in range(m.nq):
+                pf[PORT_EFFECTS, k] -= f[k]
         _mass_and_grade(m, d, veh, fx, tangent)
+        if audit:
+            for k in range(m.nq):
+                pf[PORT_EFFECTS, k] += f[k]
     for i in range(m.nq):
         if not np.isfinite(f[i]):
             return i
@@ -372,15 +435,16 @@ IO = namedtuple("IO", [
                     # (+1 D, 0 N, -1 R), spare
     "pt_in", "pt_out",
     "st_out",       # (SO_SIZE,) steering outputs after the step (rtsim.vehicle.kit.steering SO_*)
+    "eps_out",      # (EO_SIZE,) EPS outputs after the step (rtsim.vehicle.kit.eps EO_*)
     "signals",      # (NSIGNAL,) subsystem values handed to the sensors
 ])
 CMD_THROTTLE, CMD_BRAKE, CMD_STEER = 0, 1, 2
-EX_TORQUE_LEFT, EX_TORQUE_RIGHT, EX_SELECTOR = 0, 1, 2
+EX_TORQUE_LEFT, EX_TORQUE_RIGHT, EX_SELECTOR, EX_SW_TORQUE = 0, 1, 2, 3   # EX_SW_TORQUE: N m, EPS torque mode
 
 
 def make_io() -> IO:
     return IO(commands=np.zeros(3), extra=np.array([0.0, 0.0, 1.0, 0.0]), pt_in=np.zeros(PI_SIZE),
-              pt_out=np.zeros(PO_SIZE), st_out=np.zeros(SO_SIZE),
+              pt_out=np.zeros(PO_SIZE), st_out=np.zeros(SO_SIZE), eps_out=np.zeros(EO_SIZE),
               signals=np.zeros(NSIGNAL))
 
 
@@ -402,7 +466,12 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     if fx_on and fx[FX_BRAKE] > 0.5:
         effects_brake(fx, fs, parts.brake, states.brake, vd.brake_out)
     ic = veh.steer_idx[STEER_COLUMN]
-    steering_control(parts.steering, states.steering, io.commands[CMD_STEER], d.q[ic], d.qd[ic], h)
+    ir = veh.steer_idx[STEER_RACK]
+    eps = veh.steer_kind[0] == STEER_EPS
+    if eps:
+        _eps_before_step(m, d, veh, parts.steering, states.steering, io, h, ic, ir)
+    else:
+        steering_control(parts.steering, states.steering, io.commands[CMD_STEER], d.q[ic], d.qd[ic], h)
     io.pt_in[PI_THROTTLE_CMD] = io.commands[CMD_THROTTLE]
     if fx_on and fx[FX_DL] > 0.5:       # the gearbox turns with the driveline nodes
         io.pt_in[PI_OMEGA_LEFT] = fs[FS_DL + 1]
@@ -436,10 +505,25 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
         else:
             advance_deflections(parts.tyre, vd.slip, i, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY],
                                 t[TO_OMEGA], t[TO_RE], h)
-    steering_outputs(parts.steering, states.steering, d.q, ic, veh.steer_idx[STEER_RACK], io.st_out)
     io.signals[SG_BRAKE_PRESSURE] = vd.brake_out[BO_LINE]
-    io.signals[SG_SW_ANGLE] = io.st_out[SO_SW_ANGLE]
-    io.signals[SG_STEERING_TORQUE] = io.st_out[SO_TORQUE]
+    if eps:
+        stp = parts.steering
+        sts = states.steering
+        eps_commit(stp, sts, h, stp[EP_N] * d.qd[ir] / stp[EP_RP])
+        row = veh.driver_row[0]
+        t_driver = -d.lam[row] if row >= 0 else sts[ES_T_DRIVER]
+        eps_outputs(stp, sts, d.q, d.qd, ic, ir, t_driver, io.eps_out)
+        io.signals[SG_SW_ANGLE] = io.eps_out[EO_SW_ANGLE]
+        io.signals[SG_STEERING_TORQUE] = io.eps_out[EO_TB_TORQUE]
+        for i in range(2):       # compliance steer of the front knuckles over the next step
+            sp = veh.susp[i]
+            vd.steer_offset[i] = sp[SP_CFY] * vd.tyre[i, TO_FY] + sp[SP_CMZ] * vd.tyre[i, TO_MZ]
+    else:
+        steering_outputs(parts.steering, states.steering, d.q, ic, ir, io.st_out)
+        io.signals[SG_SW_ANGLE] = io.st_out[SO_SW_ANGLE]
+        io.signals[SG_STEERING_TORQUE] = io.st_out[SO_TORQUE]
+    if vd.audit[0] > 0.5:
+        audit_commit(m, d, veh, vd, parts.steering, states.steering)
     io.signals[SG_ENGINE_SPEED] = io.pt_out[PO_ENGINE_SPEED]
     io.signals[SG_THROTTLE] = io.pt_out[PO_THROTTLE]
     io.signals[SG_TORQUE_LEFT] = io.pt_out[PO_TORQUE_LEFT]
@@ -447,6 +531,26 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     if states.sensors[SM_ST_SLOTS] > 0.0:
         record_sensors(m, d, veh, io.signals, fx, states.sensors)
     return OK
+
+
+@inline_kernel
+def _eps_before_step(m, d, veh, stp, sts, io, h, ic, ir):
+    """The EPS over the coming step: the drive's voltage from the torsion-bar torque, the vehicle speed
+    and the motor speed at the step's start; the driver's input at its end (the angle the hands impose,
+    with its rate and acceleration, or a torque)."""
+    rp = stp[EP_RP]
+    t_tb = stp[EP_K_TB] * (d.q[ic] - d.q[ir] / rp)
+    ci = veh.chassis_idx
+    speed = sqrt(d.qd[ci[0]] ** 2 + d.qd[ci[1]] ** 2 + d.qd[ci[2]] ** 2)
+    eps_control(stp, sts, t_tb, speed, stp[EP_N] * d.qd[ir] / rp, h)
+    if stp[EP_DRIVER] == DRIVER_TORQUE:
+        sts[ES_T_DRIVER] = io.extra[EX_SW_TORQUE]
+    else:
+        k = m.con_drv[veh.driver_row[0]]
+        th, w, al = hands_step(stp, sts, io.commands[CMD_STEER], h)
+        d.drv_ext[k, 0] = th
+        d.drv_ext[k, 1] = w
+        d.drv_ext[k, 2] = al
 
 
 @kernel

@@ -153,11 +153,15 @@ def _solve_macpherson(g: MacPherson, z: float, x0: np.ndarray) -> np.ndarray:
     return sol.x
 
 
-def _solve_vertical_slider(g: VerticalSlider, z: float, s: float, x0: np.ndarray) -> np.ndarray:
+def _solve_vertical_slider(g: VerticalSlider, z: float, s: float, x0: np.ndarray,
+                           steer_angle: bool = False) -> np.ndarray:
     """Pose (rotation vector, translation) of the knuckle: slide z along the body z axis, and for a
-    steered one the turn delta about the vertical kingpin that keeps the tie rod's length."""
+    steered one the turn delta about the vertical kingpin that keeps the tie rod's length (s: rack
+    travel), or the turn s itself (steer_angle: s is the knuckle's own steer coordinate, rad)."""
     if g.tie_outer is None:
         return np.array([0.0, 0.0, 0.0, 0.0, 0.0, z])
+    if steer_angle:
+        return _kingpin_pose(g, z, s)
     kp = g.kingpin
     arm = (g.tie_outer - kp)[:2]
     d_tie = np.linalg.norm(g.tie_outer - g.tie_inner)
@@ -172,7 +176,12 @@ def _solve_vertical_slider(g: VerticalSlider, z: float, s: float, x0: np.ndarray
     if abs(sol.fun[0]) > 1e-10:
         raise ModelError(f"vertical slider cannot reach rack s = {s:.3f} m (residual {abs(sol.fun[0]):.2e} m): "
                          "check the steering arm and tie rod hardpoints")
-    delta = float(sol.x[0])
+    return _kingpin_pose(g, z, float(sol.x[0]))
+
+
+def _kingpin_pose(g: VerticalSlider, z: float, delta: float) -> np.ndarray:
+    """The knuckle turned by delta (rad, positive left) about the vertical kingpin, slid by z."""
+    kp = g.kingpin
     rot = Rotation.from_rotvec([0.0, 0.0, delta]).as_matrix()
     r = kp - g.wheel_centre
     t = r - rot @ r + np.array([0.0, 0.0, z])
@@ -216,9 +225,15 @@ def _fit(zs: np.ndarray, ss: np.ndarray, values: np.ndarray, exps: np.ndarray) -
 
 
 def solve_corner(geom: DoubleWishbone | MacPherson | VerticalSlider, z_range=(-0.08, 0.08),
-                 s_range=(-0.07, 0.07), nz: int = 33, ns: int = 29, deg_z: int = 5, deg_s: int = 7) -> CornerKinematics:
-    """Solve the linkage over the travel (and rack) grid and fit the polynomials."""
+                 s_range=(-0.07, 0.07), nz: int = 33, ns: int = 29, deg_z: int = 5, deg_s: int = 7,
+                 steer_angle: bool = False) -> CornerKinematics:
+    """Solve the linkage over the travel (and rack) grid and fit the polynomials. steer_angle (a steered
+    vertical slider only): the second variable is the knuckle's steer angle about its kingpin (rad,
+    s_range in rad) instead of the rack travel; the tie rod then joins it to the rack as a constraint of
+    the multibody model (crank_rod_constants)."""
     steered = is_steered(geom)
+    if steer_angle and not (isinstance(geom, VerticalSlider) and steered):
+        raise ModelError("a steer-angle corner needs a steered vertical slider (kingpin, tie rod)")
     zg = np.linspace(*z_range, nz)
     sg = np.linspace(*s_range, ns) if steered else np.zeros(1)
     poses = np.zeros((nz, sg.size, 6))
@@ -235,7 +250,7 @@ def solve_corner(geom: DoubleWishbone | MacPherson | VerticalSlider, z_range=(-0
             else:
                 guess = poses[i - 1 if i > iz0 else i + 1, j]
             if isinstance(geom, VerticalSlider):
-                x = _solve_vertical_slider(geom, zg[i], sg[j], guess)
+                x = _solve_vertical_slider(geom, zg[i], sg[j], guess, steer_angle)
                 spring[i, j] = float(np.linalg.norm(geom.spring_upper - geom.spring_lower - [0.0, 0.0, zg[i]]))
             elif steered:
                 x = _solve_double_wishbone(geom, zg[i], sg[j], guess)
@@ -266,6 +281,16 @@ def solve_corner(geom: DoubleWishbone | MacPherson | VerticalSlider, z_range=(-0
     err = max(err, e)
     return CornerKinematics(exps, vec, spring_coef, tuple(z_range), tuple(s_range) if steered else (0.0, 0.0),
                             err, steered)
+
+
+def crank_rod_constants(g: VerticalSlider) -> dict:
+    """The steering arm and tie rod of a steered vertical slider, in the body's horizontal plane, as
+    rtsim.mbs MechanismBuilder.crank_rod takes them: kingpin (pivot), arm (tie_outer - kingpin), the
+    rack end of the tie rod at zero travel, the rack's direction for positive (leftward) steer, and the
+    tie rod's length in that plane (the arm and the rack end at one height: no bump steer)."""
+    return dict(pivot=g.kingpin[:2], arm=(g.tie_outer - g.kingpin)[:2], rod_end=g.tie_inner[:2],
+                direction=float(rack_direction(g)[1]),
+                length=float(np.linalg.norm((g.tie_outer - g.tie_inner)[:2])))
 
 
 def mirror(geom):

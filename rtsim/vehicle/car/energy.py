@@ -1,0 +1,162 @@
+"""The power audit of a car run: the bond-graph view of the model. Every force element is a port whose
+generalized forces (VehicleData.pf, filled by the force kernel at the converged state of each step)
+do work on the coordinates; the stored energies (kinetic, gravity, suspension springs, anti-roll bars,
+torsion bar, the motor's inductance) are functions of the state. The balance
+
+    stored(t) - stored(t0) = sum of the ports' work + supply - winding losses
+
+closes to rounding when the ports' work is paired with the step exactly as the trapezoidal rule
+integrates it: W += (Q_n + Q_n+1) / 2 . (q_n+1 - q_n) for each port, so what is left (`residual`)
+measures the integrator's own energy error (Newton and projection tolerances), not a quadrature error.
+The constraint forces (-Phi_q^T lambda) are two ports of their own: the driver's imposed steering-wheel
+angle (an input) and the joints (zero work in exact arithmetic).
+
+The audit starts at the end of the first step after it is switched on. Values are cumulative
+energies in J (positive: work done on the vehicle); `power_*` are the ports' powers at the step's end, W.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from rtsim.channels import ENERGY, ENERGY_FLOWS, ENERGY_STORED
+
+from ..kit.eps import PORT_MOTOR_EM, PORT_TORSION_BAR
+from .energy_kernels import A_DRIVER_ANGLE, A_EMF, A_JOINTS, A_SIZE, A_STORED, A_STORED0, A_SUPPLY, A_WINDING, NSTORED
+from .layout import CAR_PORT_NAMES, NPORT, PORT_ARB, PORT_EPS, PORT_SPRING
+from .step import AUDIT_SIZE
+
+EPS_PORT_NAMES = ("driver_torque", "torsion_bar", "column_friction", "motor_em", "motor_friction", "gear_loss",
+                  "pinion_friction", "rack_loss", "rack_friction")
+PORT_NAMES = CAR_PORT_NAMES + EPS_PORT_NAMES
+STORED_NAMES = ENERGY_STORED
+assert len(PORT_NAMES) == NPORT and len(STORED_NAMES) == NSTORED and A_SIZE <= AUDIT_SIZE
+# stored elements: their port work is the negative change of their stored energy (not in the balance)
+STORED_PORTS = (PORT_SPRING, PORT_ARB, PORT_EPS + PORT_TORSION_BAR)
+
+
+class Balance:
+    """The audit's summary from its array (VehicleData.audit_e, or a recorded row of energy columns)."""
+
+    def __init__(self, a: np.ndarray, e_base: np.ndarray):
+        self.ports = {n: float(a[i]) for i, n in enumerate(PORT_NAMES)}
+        self.driver_angle = float(a[A_DRIVER_ANGLE])
+        self.joints = float(a[A_JOINTS])
+        self.supply = float(a[A_SUPPLY] - e_base[0])
+        self.winding = float(a[A_WINDING] - e_base[1])
+        self.emf = float(a[A_EMF] - e_base[2])
+        self.stored = {n: float(a[A_STORED + j] - a[A_STORED0 + j]) for j, n in enumerate(STORED_NAMES)}
+
+    @property
+    def flows(self) -> dict[str, float]:
+        """Work done on the vehicle by every non-storing port (J): inputs positive, losses negative."""
+        out = {n: self.ports[n] for i, n in enumerate(PORT_NAMES) if i not in STORED_PORTS and i != PORT_EPS + PORT_MOTOR_EM}
+        out["driver_angle"] = self.driver_angle
+        out["joints"] = self.joints
+        out["motor_supply"] = self.supply
+        out["motor_winding"] = -self.winding
+        # the motor's conversion: mechanical work of Kt i less the electrical energy converted (0 exactly)
+        out["motor_conversion"] = self.ports["motor_em"] - self.emf
+        return out
+
+    @property
+    def stored_change(self) -> float:
+        return sum(self.stored.values())
+
+    @property
+    def exchanged(self) -> float:
+        """The energy exchanged in the run (J): the sum of the magnitudes of all non-storing flows."""
+        return sum(abs(v) for v in self.flows.values()) + abs(self.emf)
+
+    @property
+    def residual(self) -> float:
+        """stored change - (inputs - dissipation), J."""
+        return self.stored_change - sum(self.flows.values())
+
+
+ENERGY_NAMES = tuple(c.name for c in ENERGY)
+
+
+def energy_row(sim, out: np.ndarray) -> None:
+    """The audit's channels (rtsim.channels.ENERGY order) of a VehicleSim at its present step."""
+    from .step import TO_FZ  # noqa: F401  (keeps the step module's layout the reference)
+    from ..kit.eps import (EO_ASSIST_TORQUE, EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_POWER, EO_SW_TORQUE,
+                           EO_TB_TORQUE, EO_VOLTAGE)
+    b = Balance(sim.vd.audit_e, sim.vd.e_base)
+    flows = b.flows
+    k = 0
+    for n in ENERGY_FLOWS:
+        out[k] = flows[n]
+        k += 1
+    for n in ENERGY_STORED:
+        out[k] = b.stored[n]
+        k += 1
+    out[k] = b.residual
+    k += 1
+    if sim.has_eps:
+        e = sim.io.eps_out
+        for j in (EO_CURRENT, EO_VOLTAGE, EO_POWER, EO_MOTOR_SPEED, EO_MOTOR_ANGLE, EO_TB_TORQUE, EO_SW_TORQUE,
+                  EO_ASSIST_TORQUE):
+            out[k] = e[j]
+            k += 1
+    else:
+        out[k:] = 0.0
+
+
+def read_energy(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The power audit of a recorded run: time (s) and the ENERGY channels, from an MCAP file's
+    ``energy`` topic or a CSV's columns. Raises ValueError when the run has no audit."""
+    from pathlib import Path
+
+    path = Path(path)
+    if path.suffix.lower() == ".csv":
+        import csv
+
+        with path.open(newline="") as fh:
+            rows = list(csv.reader(fh))
+        head, body = rows[0], np.array(rows[1:], dtype=float)
+        if "time" not in head or not set(ENERGY_NAMES) <= set(head):
+            raise ValueError(f"{path}: no power audit columns (work_*, stored_*) in this CSV")
+        return body[:, head.index("time")], {n: body[:, head.index(n)] for n in ENERGY_NAMES}
+    from bridge.mcap_log import read_messages
+
+    msgs = [m for _t, m in read_messages(path, _energy_topic(path))]
+    if not msgs:
+        raise ValueError(f"{path}: no power audit (topic rtsim/<vehicle>/energy) in this recording")
+    return (np.array([m["time"] for m in msgs]),
+            {n: np.array([m.get(n, np.nan) for m in msgs]) for n in ENERGY_NAMES})
+
+
+def _energy_topic(path) -> str:
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    topics = [c.topic for c in (summary.channels.values() if summary else []) if c.topic.endswith("/energy")]
+    return topics[0] if topics else "rtsim/energy"
+
+
+def summarise(t: np.ndarray, series: dict[str, np.ndarray]) -> str:
+    """The audit of a run as text: every port's energy (J) and peak power (W), the stored energies'
+    change, and the balance with its residual relative to the energy exchanged."""
+    def peak(w):
+        p = np.diff(w) / np.maximum(np.diff(t), 1e-12)
+        return float(p[np.argmax(np.abs(p))]) if p.size else 0.0
+    flows = {n: series[f"work_{n}"] for n in ENERGY_FLOWS}
+    stored = {n: series[f"stored_{n}"] for n in ENERGY_STORED}
+    lines = [f"power audit over {t[0]:.3f} .. {t[-1]:.3f} s (J: energy into the vehicle through each port; "
+             "W: largest power)"]
+    lines.append(f"  {'port':<22} {'energy J':>14} {'peak W':>12}")
+    for n, w in flows.items():
+        if np.any(w != 0.0):
+            lines.append(f"  {n:<22} {w[-1] - w[0]:>14.4f} {peak(w):>12.2f}")
+    lines.append(f"  {'stored':<22} {'change J':>14}")
+    for n, e in stored.items():
+        if np.any(e != 0.0):
+            lines.append(f"  {n:<22} {e[-1] - e[0]:>14.4f}")
+    d_stored = sum(e[-1] - e[0] for e in stored.values())
+    inputs = sum(w[-1] - w[0] for w in flows.values())
+    exchanged = sum(abs(w[-1] - w[0]) for w in flows.values())
+    res = d_stored - inputs
+    lines.append(f"  balance: stored change {d_stored:.4f} J = inputs - dissipation {inputs:.4f} J; residual "
+                 f"{res:.3e} J, {res / max(exchanged, 1e-300):.2e} of the {exchanged:.1f} J exchanged")
+    return "\n".join(lines)
