@@ -2,17 +2,19 @@
 set of schemas): one JSON message per logged sample on `rtsim/<vehicle_id>/sensors` and
 `rtsim/<vehicle_id>/state`, log time = the simulation time. Names and units are the vehicle's channel
 dictionary's, so a run and a service session of the same vehicle look alike to Foxglove and to the
-validation workflow."""
+validation workflow; :func:`read_run` reads either back as one table."""
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
+import numpy as np
 from mcap.reader import make_reader
 
-from bridge.mcap_recorder import Recorder
+from bridge.mcap_recorder import Recorder, read_recording
 from bridge.payloads import encode_json
 from rtsim.channels import CAR, ENERGY, ChannelDictionary
+from rtsim.errors import ConfigError
 
 ENERGY_NAMES = frozenset(c.name for c in ENERGY)
 
@@ -44,3 +46,59 @@ def read_messages(path: str | Path, topic: str):
     with open(path, "rb") as fh:
         for _schema_, channel, message in make_reader(fh).iter_messages(topics=[topic], log_time_order=True):
             yield message.log_time * 1e-9, json.loads(message.data)
+
+
+def read_run(path: str | Path) -> tuple[tuple[str, ...], np.ndarray]:
+    """A recording's `rtsim/<vehicle_id>/sensors` and `.../state` topics (an offline run's or a service
+    session's; a damaged file's complete chunks) as one table: columns `time` (s), the sensor channels,
+    then the state channels that are not also sensor channels; rows at the sensor messages' times (the
+    state's values interpolated onto them where its messages have other times; NaN for null values).
+    ConfigError when the file holds neither topic or more than one vehicle."""
+    messages, _info = read_recording(path)
+    topics = {}
+    for key in ("sensors", "state"):
+        found = [t for t in messages if t.startswith("rtsim/") and t.endswith(f"/{key}") and messages[t]]
+        if len(found) > 1:
+            raise ConfigError(f"{path}: several {key} topics ({', '.join(found)}); one vehicle per recording")
+        if found:
+            topics[key] = [m.data for m in messages[found[0]] if isinstance(m.data, dict)]
+    if not any(topics.values()):
+        raise ConfigError(f"{path}: no rtsim/<vehicle_id>/sensors or state messages "
+                          f"(topics: {', '.join(messages) or 'none'})")
+    columns: list[str] = ["time"]
+    tables = []
+    for msgs in topics.values():
+        if not msgs:
+            continue
+        names = [n for n in msgs[0] if n != "time" and n not in columns]
+        tables.append((_table(msgs, ["time", *names]), names))
+        columns += names
+    base = tables[0][0]
+    base = base[np.argsort(base[:, 0], kind="stable")]
+    t = base[:, 0]
+    out = np.full((len(t), len(columns)), np.nan)
+    out[:, :base.shape[1]] = base
+    j = base.shape[1]
+    for m, names in tables[1:]:
+        if m.shape[0] == len(t) and np.array_equal(m[:, 0], t):
+            out[:, j:j + len(names)] = m[:, 1:]
+        else:
+            order = np.argsort(m[:, 0], kind="stable")
+            for k in range(len(names)):
+                x = m[order, 1 + k]
+                ok = np.isfinite(x)
+                if ok.any():
+                    out[:, j + k] = np.interp(t, m[order, 0][ok], x[ok], left=np.nan, right=np.nan)
+        j += len(names)
+    return tuple(columns), out
+
+
+def _table(msgs: list[dict], names: list[str]) -> np.ndarray:
+    """The values of `names` of each message (NaN where missing or not a number)."""
+    m = np.full((len(msgs), len(names)), np.nan)
+    for i, d in enumerate(msgs):
+        for k, n in enumerate(names):
+            v = d.get(n)
+            if isinstance(v, (int, float)):
+                m[i, k] = v
+    return m

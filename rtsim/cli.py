@@ -5,6 +5,7 @@
     rtsim resim    re-run a recording, compare the state   rtsim run      a scenario offline to CSV/MCAP
     rtsim bench    benchmarks                              rtsim describe the vehicle model
     rtsim validate field runs vs the model: find, fit and add the missing effect, report
+    rtsim plot     figures of a run (CSV or MCAP) as PNG
 """
 from __future__ import annotations
 
@@ -112,6 +113,8 @@ def _run(args) -> int:
     print(f"{'' if not sys.stderr.isatty() else chr(13)}{sc.name}: {sc.duration:g} s simulated in {res.wall_s:.2f} s "
           f"({res.wall_s / res.steps * 1e6:.1f} us/step), distance {dist:.1f} m, "
           f"peak speed {res.column('speed').max() * 3.6:.1f} km/h, {len(res.data)} rows -> {out}")
+    if args.plot is not None:
+        _write_figures(res.columns, res.data, args.plot or None, out, sc.name)
     return 0
 
 
@@ -124,6 +127,27 @@ def _energy(args) -> int:
         raise RtsimError(str(exc)) from None
     print(summarise(t, series))
     return 0
+
+
+def _plot(args) -> int:
+    from pathlib import Path
+
+    from rtsim.analyses.figures import read_recorded
+
+    columns, data = read_recorded(args.run)
+    _write_figures(columns, data, args.out, args.run, Path(args.run).stem)
+    return 0
+
+
+def _write_figures(columns, data, out_dir, source, title) -> None:
+    """Figures of a run into `out_dir` (None: beside `source`, <stem>_plots/); prints the files written."""
+    from rtsim.analyses.figures import default_dir, write_run_figures
+
+    written = write_run_figures(columns, data, out_dir or default_dir(source), title)
+    if not written:
+        print(f"{source}: none of the plotted channels present, no figures written")
+    for path in written:
+        print(f"figure -> {path}")
 
 
 def _describe(args) -> int:
@@ -170,10 +194,17 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")
     r.add_argument("--scenario", required=True, help="scenario TOML (configs/scenarios/)")
     r.add_argument("--out", required=True, help="output file: .csv or .mcap")
+    r.add_argument("--plot", nargs="?", const="", metavar="DIR",
+                   help="also write PNG figures (lateral acceleration, tyre loads, steering) into DIR "
+                        "(default: <output stem>_plots/ beside the output)")
     r.set_defaults(func=_run)
     en = sub.add_parser("energy", help="the power audit of a recorded run: every port's energy and the balance")
     en.add_argument("run", help="a run's MCAP or CSV (rtsim run --out)")
     en.set_defaults(func=_energy)
+    pl = sub.add_parser("plot", help="write PNG figures of a recorded run (CSV or MCAP)")
+    pl.add_argument("run", help="the run: .csv (header row) or .mcap recording")
+    pl.add_argument("--out", metavar="DIR", help="folder for the figures (default: <run stem>_plots/ beside it)")
+    pl.set_defaults(func=_plot)
     d = sub.add_parser("describe", help="print the vehicle model's size and key parameters")
     d.add_argument("--vehicle", help="vehicle TOML (default configs/vehicles/xbw.toml)")
     d.add_argument("--json", action="store_true")

@@ -1,0 +1,1 @@
+"""Analyses of finished runs and recordings: figures of the logged channels."""
