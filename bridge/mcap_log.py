@@ -49,14 +49,15 @@ def read_messages(path: str | Path, topic: str):
 
 
 def read_run(path: str | Path) -> tuple[tuple[str, ...], np.ndarray]:
-    """A recording's `rtsim/<vehicle_id>/sensors` and `.../state` topics (an offline run's or a service
-    session's; a damaged file's complete chunks) as one table: columns `time` (s), the sensor channels,
-    then the state channels that are not also sensor channels; rows at the sensor messages' times (the
+    """A recording's `rtsim/<vehicle_id>/sensors`, `.../state` and (offline runs) `.../energy` topics (an
+    offline run's or a service session's; a damaged file's complete chunks) as one table: columns `time`
+    (s), the sensor channels, then the state channels that are not also sensor channels, then the power
+    audit's; rows at the sensor messages' times (the
     state's values interpolated onto them where its messages have other times; NaN for null values).
     ConfigError when the file holds neither topic or more than one vehicle."""
     messages, _info = read_recording(path)
     topics = {}
-    for key in ("sensors", "state"):
+    for key in ("sensors", "state", "energy"):
         found = [t for t in messages if t.startswith("rtsim/") and t.endswith(f"/{key}") and messages[t]]
         if len(found) > 1:
             raise ConfigError(f"{path}: several {key} topics ({', '.join(found)}); one vehicle per recording")
