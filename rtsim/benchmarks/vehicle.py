@@ -32,16 +32,21 @@ def _clock(fn, reps: int) -> float:
     return (time.perf_counter() - t0) / reps
 
 
-def _vehicle(road_path: Path | None):
-    cfg, base = load_vehicle(ROOT / "configs" / "vehicles" / "xbw.toml")
+def _vehicle(road_path: Path | None, vehicle: str = "xbw"):
+    cfg, base = load_vehicle(ROOT / "configs" / "vehicles" / f"{vehicle}.toml")
     model = build_vehicle(cfg, base)
     road = load_road(road_path) if road_path is not None else make_plane()
     return model, road
 
 
-def run_scenario(name: str, road_path: Path | None, speed: float, steer: float, steps: int = 3000) -> dict:
-    model, road = _vehicle(road_path)
+def run_scenario(name: str, road_path: Path | None, speed: float, steer: float, steps: int = 3000,
+                 vehicle: str = "xbw", audit: bool = False) -> dict:
+    """Steps of a car (configs/vehicles/<vehicle>.toml) at 1 ms with the commands held; `audit`: with
+    the power audit on (rtsim.vehicle.car.energy). The parts' shares are timed for the steer-by-wire car."""
+    model, road = _vehicle(road_path, vehicle)
     sim = VehicleSim(model, road, 1e-3, speed=speed, position=(2.0, 0.0))
+    if audit:
+        sim.start_energy_audit()
     sim.io.commands[CMD_THROTTLE] = 0.2
     sim.io.commands[CMD_STEER] = steer
     sim.step(200)                                   # compile/load, settle
@@ -52,12 +57,13 @@ def run_scenario(name: str, road_path: Path | None, speed: float, steer: float, 
     if np.any(sim.vd.tyre[:, TO_FZ] <= 0.0):
         raise RuntimeError(f"{name}: a wheel left the road during the benchmark")
     s1 = sim.data.stats
-    shares = _shares(sim)
+    shares = {} if sim.has_eps else _shares(sim)
     per_step = wall / steps
     # the formulation (constraints, factorizations, Newton, projections) is what remains of the step
-    shares["formulation (ALI3-P: constraints, factorizations, Newton, projections)"] = max(
-        0.0, per_step - sum(shares.values()))
-    total_parts = sum(shares.values())
+    if shares:
+        shares["formulation (ALI3-P: constraints, factorizations, Newton, projections)"] = max(
+            0.0, per_step - sum(shares.values()))
+    total_parts = sum(shares.values()) or 1.0
     return {
         "scenario": name,
         "road": "plane" if road_path is None else road_path.stem,
@@ -137,4 +143,7 @@ def suite() -> list[dict]:
         run_scenario("step steer 80 km/h, flat", None, 22.22, np.radians(35.0)),
         # the surveyed lane is ~6 m wide: a mild steer keeps the car on it for the 1.5 s measured
         run_scenario("steer 80 km/h, campus mesh", campus, 22.22, np.radians(4.0), steps=1500),
+        # the 16-DOF car with electric power steering, the study's first life situation's steer
+        run_scenario("EPS car, 35 deg step steer 80 km/h, flat", None, 22.22, np.radians(35.0), vehicle="eps_car"),
+        run_scenario("EPS car, same, power audit on", None, 22.22, np.radians(35.0), vehicle="eps_car", audit=True),
     ]
