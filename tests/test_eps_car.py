@@ -22,9 +22,8 @@ from rtsim.vehicle.car.layout import CI_S, G
 from rtsim.vehicle.car.sim import VehicleSim
 from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, TO_FZ
 from rtsim.vehicle.kit import eps as E
-from rtsim.vehicle.kit.tables import map_2d
+from rtsim.vehicle.kit.tables import map_2d, map_eval
 from rtsim.vehicle.kit.tyre.magic_formula import mf52_forces
-from rtsim.vehicle.kit.tyre.tir import P_UNLOADED_RADIUS
 from rtsim.vehicle.offline import prepare, run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -168,15 +167,11 @@ def test_life_situation_1_steady_lateral_acceleration_matches_a_single_track_mod
     assert ay_sim == pytest.approx(ay_st, rel=0.05)
 
 
-def _steady_turn(model, gain: float, stage_on: bool = True):
+def _steady_turn(model):
     """80 km/h, a steady steer-in to 40 deg at 20 deg/s (the transmissions' power well above the
     efficiency blend's scale), then held: (sim, per-step log)."""
     sim = _sim(model, speed=22.22)
-    if not stage_on:
-        sim.assist_off()
-    sim.set_assist(gain)
     log = []
-    p = sim.parts.steering
     for n in range(5000):
         t = (n + 1) * 1e-3
         sim.io.commands[CMD_STEER] = math.radians(min(40.0, max(0.0, 20.0 * (t - 0.5))))
@@ -204,13 +199,12 @@ def test_with_assist_the_torsion_bar_torque_sits_at_the_assist_laws_fixed_point(
     """Held in a steady turn: the pinion's static balance T_tb + e N Kt i(T_tb, v) = r_p F (e -> 1 at
     rest, frictions within their bands) solved for T_tb with the shipped law, against the simulated
     torsion-bar torque: within 2 %."""
-    sim, log = _steady_turn(model, 1.0)
+    sim, log = _steady_turn(model)
     p = sim.parts.steering
     law = sim.vm.config.eps.assist
     table = map_2d(law.torque_nm, law.speed_mps, law.current_a)
     t, out, xd, f_load = log[-1]
     v = float(np.linalg.norm(sim.data.qd[sim.vm.vehicle.chassis_idx[:3]]))
-    from rtsim.vehicle.kit.tables import map_eval
     kt, n, rp = p[E.EP_KT], p[E.EP_N], p[E.EP_RP]
 
     def balance(ttb):

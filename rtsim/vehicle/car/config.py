@@ -134,8 +134,8 @@ class SpringDamper(Strict):
         linear = self.damping_bump_ns_per_m is not None and self.damping_rebound_ns_per_m is not None
         if (self.damper_table is None) != linear:
             raise ValueError("give damping_bump_ns_per_m and damping_rebound_ns_per_m, or damper_table")
-        if self.spring_table is not None and self.spring_table.x[0] > 0.0 or \
-                self.spring_table is not None and self.spring_table.x[-1] < 0.0:
+        table = self.spring_table
+        if table is not None and not table.x[0] <= 0.0 <= table.x[-1]:
             raise ValueError("spring_table must span compression 0 (the design ride height)")
         return self
 

@@ -5,14 +5,15 @@ torsion bar, the motor's inductance) are functions of the state. The balance
 
     stored(t) - stored(t0) = sum of the ports' work + supply - winding losses
 
-closes to rounding when the ports' work is paired with the step exactly as the trapezoidal rule
-integrates it: W += (Q_n + Q_n+1) / 2 . (q_n+1 - q_n) for each port, so what is left (`residual`)
-measures the integrator's own energy error (Newton and projection tolerances), not a quadrature error.
+holds without quadrature error when the ports' work is paired with the step exactly as the
+trapezoidal rule integrates it: W += (Q_n + Q_n+1) / 2 . (q_n+1 - q_n) for each port, so what is left
+(`residual`) is the integrator's own energy error (Newton and projection tolerances).
 The constraint forces (-Phi_q^T lambda) are two ports of their own: the driver's imposed steering-wheel
 angle (an input) and the joints (zero work in exact arithmetic).
 
 The audit starts at the end of the first step after it is switched on. Values are cumulative
-energies in J (positive: work done on the vehicle); `power_*` are the ports' powers at the step's end, W.
+energies in J (positive: work done on the vehicle); `summarise` derives the ports' peak powers from the
+recorded cumulative work. The compiled part is rtsim.vehicle.car.energy_kernels.
 """
 from __future__ import annotations
 
@@ -78,7 +79,6 @@ ENERGY_NAMES = tuple(c.name for c in ENERGY)
 
 def energy_row(sim, out: np.ndarray) -> None:
     """The audit's channels (rtsim.channels.ENERGY order) of a VehicleSim at its present step."""
-    from .step import TO_FZ  # noqa: F401  (keeps the step module's layout the reference)
     from ..kit.eps import (EO_ASSIST_TORQUE, EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_POWER, EO_SW_TORQUE,
                            EO_TB_TORQUE, EO_VOLTAGE)
     b = Balance(sim.vd.audit_e, sim.vd.e_base)
