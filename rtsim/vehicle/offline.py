@@ -32,8 +32,9 @@ from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TOR
 def columns_of(channels: ChannelDictionary) -> tuple[str, ...]:
     """CSV/MCAP columns of a run: time, the sensor channels (as reported), then the state channels that
     are not also sensor channels (the actuator states brake_pressure, throttle_angle, ... are the
-    sensors' physical values) -- each name once, the vehicle's names."""
-    return ("time", *channels.sensor_names, *_state_only(channels))
+    sensors' physical values) -- each name once, the vehicle's names -- then the power audit's
+    (rtsim.channels.ENERGY)."""
+    return ("time", *channels.sensor_names, *_state_only(channels), *ENERGY_NAMES)
 
 
 def _state_only(channels: ChannelDictionary) -> list[str]:
@@ -92,7 +93,7 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
     dt = sc.dt
     nsteps = int(round(sc.duration / dt))
     every = max(1, int(round(1.0 / (sc.spec.output_rate * dt))))
-    columns = columns_of(sim.vm.channels) + ENERGY_NAMES
+    columns = columns_of(sim.vm.channels)
     rows = np.zeros((nsteps // every + 1, len(columns)))
     sim.start_energy_audit()            # the power audit's cumulative flows (rtsim.vehicle.car.energy)
     driver = sc.driver()
