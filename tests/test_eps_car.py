@@ -14,17 +14,20 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq, fsolve
 
+from drivers.base import I_BRAKE, I_THROTTLE, NSTATE, S_SPEED
+from drivers.driver import Driver
+from drivers.speed_follower import speed_follower
 from rtsim.road.config import load_road
 from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.car.config import load_vehicle
 from rtsim.vehicle.car.energy import Balance
 from rtsim.vehicle.car.layout import CI_S, G
 from rtsim.vehicle.car.sim import VehicleSim
-from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, TO_FZ
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, TO_FZ
 from rtsim.vehicle.kit import eps as E
 from rtsim.vehicle.kit.tables import map_2d, map_eval
 from rtsim.vehicle.kit.tyre.magic_formula import mf52_forces
-from rtsim.vehicle.offline import prepare, run
+from rtsim.vehicle.offline import prepare, run, vehicle_state
 
 ROOT = Path(__file__).resolve().parents[1]
 VEHICLE = ROOT / "configs" / "vehicles" / "eps_car.toml"
@@ -193,6 +196,100 @@ def _rack_load(sim) -> float:
             if m.con_idx[i, slot] == ir:
                 f += d.jac[i, slot] * d.lam[i]
     return f
+
+
+def _linkage_statics(c, f_load: float, xd: float, w_col: float) -> tuple[float, float]:
+    """Statics of the assist-off linkage with the rack sliding leftwards (xd > 0, m/s) against the
+    tie rods' load f_load (N), from the declared parameters c (the [eps] table): the pinion drives the
+    rack (forward rack efficiency) against the load, the rack's dry and viscous friction; the pinion's
+    dry friction; the pinion back-drives the motor's rotor (the motor stays geared to the rack)
+    through the worm (back-driven efficiency) against its dry and viscous friction. Returns the
+    torsion bar's elastic torque and the driver's torque (N m): the first less the torsion bar's
+    damping, the second plus the column's viscous friction (column turning at w_col, rad/s)."""
+    rp, n = c.rack_travel_per_rad_m, c.gear_ratio
+    w_motor = n * xd / rp
+    t_pinion = ((f_load + c.rack_friction_n + c.rack_damping_ns_per_m * xd) * rp / c.rack_efficiency
+                + c.pinion_friction_nm
+                + n * (c.motor_friction_nm + c.motor_damping_nms_per_rad * w_motor) / c.gear_efficiency_back)
+    return (t_pinion - c.torsion_bar_damping_nms_per_rad * (w_col - xd / rp),
+            t_pinion + c.column_damping_nms_per_rad * w_col)
+
+
+def _linkage_stick_band(c, f_load: float) -> tuple[float, float]:
+    """The torsion-bar torques (N m) between which the assist-off linkage holds the load f_load (N) at
+    rest: every dry friction at its limit, against a leftward (pinion driving the rack, forward
+    efficiency) or a rightward (the rack back-driving the pinion, back efficiency) start; the rotor is
+    back-driven through the worm either way."""
+    rp, n = c.rack_travel_per_rad_m, c.gear_ratio
+    t_motor = n * c.motor_friction_nm / c.gear_efficiency_back
+    lo = (f_load - c.rack_friction_n) * rp * c.rack_efficiency_back - c.pinion_friction_nm - t_motor
+    hi = (f_load + c.rack_friction_n) * rp / c.rack_efficiency + c.pinion_friction_nm + t_motor
+    return lo, hi
+
+
+def test_assist_off_steering_wheel_torque_is_the_linkage_statics(model):
+    """Assist off (the power stage's safe state: open winding, no current), 80 km/h held by the speed
+    follower, a slow steer-in at 5 deg/s to 40 deg, then held.
+
+    Steering in, the linkage is in steady sliding: the column turns at the commanded rate (the hands'
+    lag died out long before) and the rack slides leftwards, its speed above every dry friction's
+    band throughout the windows (asserted), so each friction is at its sliding value against the
+    motion and each transmission in a known regime: the pinion drives the rack, the pinion back-drives
+    the rotor through the worm. The rack still oscillates slightly at the column-rack mode (~11 Hz:
+    the torsion bar against the rack, pinion and rotor, 184 kg at the rack of which 178 kg are the
+    rotor seen through the worm; lightly damped with the winding open), so a single sample carries
+    that mass's inertia force (at 20 deg/s up to ~4 % of the torque, and the rack then dips into the
+    friction bands); over windows of many periods the mean rack acceleration, hence the inertia
+    term, vanishes (asserted: < 0.1 % of the load), and the mean torques are the statics of the mean
+    load, which enters linearly.
+    Reference: the tie rods' load on the rack from the crank-rod constraints' multipliers, through
+    the pinion radius, the forward rack efficiency, the frictions and the back-driven worm as the
+    config declares them (_linkage_statics); the torsion-bar torque and the driver's torque within 2 %.
+
+    Held: the dry frictions stick and their forces are indeterminate within their bands; the rack has
+    come to rest (its speed well inside the bands) and the column is at rest, so the driver's torque
+    is the torsion bar's, and it lies between the statics of a rightward and of a leftward breakaway
+    (_linkage_stick_band) of the load at that moment."""
+    sim = _sim(model, speed=22.22)
+    sim.assist_off()
+    c = sim.vm.config.eps
+    rp, n = c.rack_travel_per_rad_m, c.gear_ratio
+    m_rack = c.rack_mass_kg + (c.pinion_inertia_kgm2 + n * n * c.motor_inertia_kgm2) / rp ** 2
+    driver = Driver(speed=speed_follower([0.0], [22.22]))
+    state = np.zeros(NSTATE)
+    ic, ir = sim.vm.vehicle.steer_idx
+    rate, hold, t0 = 5.0, 40.0, 0.5
+    log = []
+    for k in range(10500):
+        t = (k + 1) * 1e-3
+        vehicle_state(sim, state)
+        cmd = driver.step(t, state)
+        sim.io.commands[CMD_THROTTLE] = cmd[I_THROTTLE]
+        sim.io.commands[CMD_BRAKE] = cmd[I_BRAKE]
+        sim.io.commands[CMD_STEER] = math.radians(min(hold, rate * max(0.0, t - t0)))
+        sim.step()
+        out = sim.io.eps_out
+        log.append((t, out[E.EO_SW_TORQUE], out[E.EO_TB_TORQUE], _rack_load(sim), sim.data.qd[ir],
+                    sim.data.qd[ic], state[S_SPEED], out[E.EO_CURRENT]))
+    t, t_drv, t_tb, f_load, xd, w_col, speed, current = np.array(log).T
+    assert np.all(current == 0.0)
+    band = max(c.rack_friction_band_m_s, c.pinion_friction_band_rad_s * rp,
+               c.motor_friction_band_rad_s * rp / n)      # m/s at the rack
+    for end in (4.5, 6.5, 8.4):                     # steering-wheel angle ~18, 28, 37 deg
+        s = (t > end - 0.8) & (t <= end)
+        assert speed[s].mean() == pytest.approx(22.22, rel=0.03)       # the follower holds 80 km/h
+        assert np.allclose(w_col[s], math.radians(rate), rtol=1e-6)
+        assert xd[s].min() > 1.5 * band                             # sliding: frictions at their limits
+        inertia = m_rack * (xd[s][-1] - xd[s][0]) / (t[s][-1] - t[s][0])
+        assert abs(inertia) < 1e-3 * f_load[s].mean()
+        tb_ref, drv_ref = _linkage_statics(c, f_load[s].mean(), xd[s].mean(), w_col[s].mean())
+        assert t_tb[s].mean() == pytest.approx(tb_ref, rel=0.02)
+        assert t_drv[s].mean() == pytest.approx(drv_ref, rel=0.02)
+    # held: 2 s after the wheel stopped
+    assert abs(xd[-1]) < 0.5 * band and w_col[-1] == pytest.approx(0.0, abs=1e-9)
+    assert t_drv[-1] == pytest.approx(t_tb[-1], rel=1e-3)
+    lo, hi = _linkage_stick_band(c, f_load[-1])
+    assert lo < t_tb[-1] < hi
 
 
 def test_with_assist_the_torsion_bar_torque_sits_at_the_assist_laws_fixed_point(model):
