@@ -58,7 +58,7 @@ STATUS_FRAME = "SIM_STATUS"
 STEP_REQUEST_FRAME = "SIM_STEP_REQ"   # lockstep: ECU asks for n steps (event frame, E2E protected)
 STEP_ACK_FRAME = "SIM_STEP_ACK"       # lockstep: SIM answers with the time reached (event frame)
 EVENT_FRAMES = frozenset((STEP_REQUEST_FRAME, STEP_ACK_FRAME))
-FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error")
+FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error")   # the by-wire cars' (Codec.faults)
 REJECT_KINDS = ("dlc", "crc", "counter", "range")
 #: What the watchdog applies when a command times out.
 SAFE_POLICY = {
@@ -259,6 +259,15 @@ class Codec:
             raise ConfigError(f"{where}: command frames carry {sorted(self.command_frames)}, "
                               f"expected {list(command_names)}")
         self._cmd_by_frame_name = {p[0].name: n for n, p in self._cmd_plans.items()}
+        #: the status frame's fault flags: each command's watchdog (in the commands' order), the bus
+        self.faults = (*(f"{self._cmd_plans[n][5]}_timeout" for n in command_names), "bus_error")
+        #: the SIM_STATUS values in the order the compiled step hands them to ``pack_frames``
+        self.status_sources = ("mode", "sim_time", "loop_overruns", *(f"fault_{f}" for f in self.faults),
+                               *(f"rejected_{k}" for k in REJECT_KINDS))
+        status_names = {s_.name for s_ in self.status_frame.signals}
+        missing = [n for n in self.status_sources if n not in status_names]
+        if missing:
+            raise ConfigError(f"{where}: {STATUS_FRAME} lacks the signals {', '.join(missing)}")
 
         # lockstep request/acknowledgement
         for name in EVENT_FRAMES:
@@ -302,7 +311,7 @@ class Codec:
                       faults: Iterable[str] | Mapping[str, bool] = (),
                       rejected: Mapping[str, int] | None = None) -> tuple[int, bytes]:
         """The SIM_STATUS frame. ``mode``: "realtime", "lockstep", "fast" (or its number);
-        ``faults``: names from ``FAULTS`` that are set (or a mapping name -> bool); ``rejected``:
+        ``faults``: names from ``self.faults`` that are set (or a mapping name -> bool); ``rejected``:
         counts by kind ``dlc, crc, counter, range`` (e.g. ``CommandReceiver.counters``), sent modulo 64."""
         if isinstance(mode, str):
             if mode not in self.modes:
@@ -311,12 +320,12 @@ class Codec:
         if isinstance(faults, Mapping):
             faults = [k for k, v in faults.items() if v]
         faults = set(faults)
-        unknown = faults - set(FAULTS)
+        unknown = faults - set(self.faults)
         if unknown:
-            raise ValueError(f"unknown fault flags {sorted(unknown)}; expected {FAULTS}")
+            raise ValueError(f"unknown fault flags {sorted(unknown)}; expected {self.faults}")
         rejected = rejected or {}
         vals = {"mode": mode, "sim_time": sim_time, "loop_overruns": loop_overruns}
-        for f in FAULTS:
+        for f in self.faults:
             vals[f"fault_{f}"] = 1 if f in faults else 0
         for k in REJECT_KINDS:
             vals[f"rejected_{k}"] = rejected.get(k, 0)
@@ -426,7 +435,11 @@ class CommandReceiver:
 
     def __init__(self, codec: Codec | str | Path | None = None, *, clamp: Iterable[str] = (),
                  hold_pressure: float = DEFAULT_HOLD_PRESSURE, timeouts: Mapping[str, float] | None = None,
-                 max_counter_step: int = 2, t0: float = 0.0):
+                 max_counter_step: int = 2, t0: float = 0.0, slots: Mapping[str, int] | None = None,
+                 invalid_slots: Mapping[str, int] | None = None):
+        """``slots``: where each command's value goes in the array ``apply_timeouts`` fills (default:
+        its position among the commands); ``invalid_slots``: for the commands named, where 1.0 goes
+        while the command has no valid value (the vehicle's own layout, e.g. the EPS's safe state)."""
         if not isinstance(codec, Codec):
             codec = Codec(codec if codec is not None else DEFAULT_DBC)
         self.codec = codec
@@ -450,7 +463,8 @@ class CommandReceiver:
             ip[i] = (f.frame_id, f.length, crcs.start // 8, CRC8_TABLE[0xFF ^ data_id], vs.start, vs.mask,
                      (1 << (vs.length - 1)) if vs.signed else 0, 1 << vs.length, vs.raw_min, vs.raw_max,
                      name in self.clamp, cs.start, cs.mask, e2e.POLICIES[SAFE_POLICY.get(name, "zero")],
-                     self.max_counter_step)
+                     self.max_counter_step, i if slots is None else slots[name],
+                     (invalid_slots or {}).get(name, -1))
             fp[i] = (vs.factor, vs.offset, vs.minimum, vs.maximum, self.timeout[name])
         req, steps, ctr, _, data_id = codec._step_req_plan
         step = np.array((req.frame_id, req.length, CRC8_TABLE[0xFF ^ data_id], steps.start, steps.mask,
@@ -459,7 +473,8 @@ class CommandReceiver:
         self.state = e2e.make_state(n, self.hold_pressure)
         self.state.g[e2e.G_T0] = float(t0)
         self._buf = np.zeros(64, dtype=np.uint8)
-        self._out = np.zeros(n)
+        self._out = np.zeros(max(n, int(ip[:, e2e.RP_SLOT].max(initial=-1)) + 1,
+                                 int(ip[:, e2e.RP_INVALID_SLOT].max(initial=-1)) + 1))
         self.fault_names = tuple(self._fault_name[nm] for nm in self.names)   # per command, its fault flag
 
     def reset(self, t0: float = 0.0) -> None:
@@ -495,12 +510,12 @@ class CommandReceiver:
     def check_timeouts(self, t: float) -> dict[str, float]:
         """Update the timeout flags at time ``t`` and return the command values to apply."""
         self.apply_timeouts(t, self._out)
-        return {name: float(self._out[i]) for i, name in enumerate(self.names)}
+        return {name: float(self._out[self.plan.ip[i, e2e.RP_SLOT]]) for i, name in enumerate(self.names)}
 
     def apply_timeouts(self, t: float, out) -> int:
-        """As ``check_timeouts`` but writes the values into ``out[i]`` (COMMAND_NAMES order, a float
-        array such as the vehicle's command array); returns a bit mask of timed-out commands (bit i =
-        COMMAND_NAMES[i])."""
+        """As ``check_timeouts`` but writes the values into ``out`` at the commands' slots (a float
+        array such as the vehicle's command array); returns a bit mask of timed-out commands (bit i:
+        the i-th command)."""
         return int(e2e.rx_watchdog(self.plan, self.state, float(t), out))
 
     # -- reading --------------------------------------------------------------------------------------

@@ -25,9 +25,11 @@ import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
 # plan, int columns
+# RP_SLOT: where the watchdog writes the command's value in the output array; RP_INVALID_SLOT: where it
+# writes 1.0 while the command has no valid value (none yet, or timed out), else 0.0 (-1: nowhere)
 (RP_ID, RP_DLC, RP_CRC_POS, RP_CRC0, RP_VSTART, RP_VMASK, RP_SIGN_BIT, RP_SPAN, RP_RAW_MIN, RP_RAW_MAX,
- RP_CLAMP, RP_CSTART, RP_CMASK, RP_POLICY, RP_MAX_STEP) = range(15)
-NRP = 15
+ RP_CLAMP, RP_CSTART, RP_CMASK, RP_POLICY, RP_MAX_STEP, RP_SLOT, RP_INVALID_SLOT) = range(17)
+NRP = 17
 # plan, float columns
 RF_FACTOR, RF_OFFSET, RF_LO, RF_HI, RF_TIMEOUT = range(5)
 NRF = 5
@@ -150,26 +152,31 @@ def rx_command(plan, st, i, data, dlc, t):
 
 @kernel
 def rx_watchdog(plan, st, t, out):
-    """Time-out flags at time t (s) and the command values to apply into out[i]: the latest valid
-    value, or the safe value of a timed-out (or never received) command. Returns the bit mask of
-    timed-out commands (bit i: command i)."""
+    """Time-out flags at time t (s) and the command values to apply into out[RP_SLOT]: the latest valid
+    value, or the safe value of a timed-out (or never received) command; 1.0 into out[RP_INVALID_SLOT]
+    for those (where a command has that slot). Returns the bit mask of timed-out commands (bit i:
+    command i)."""
     mask = 0
     ip, fp, iv, fv = plan.ip, plan.fp, st.iv, st.fv
     for i in range(ip.shape[0]):
         ref = fv[i, FV_LAST_T] if iv[i, IV_HAS_T] else st.g[G_T0]
         timed_out = t - ref > fp[i, RF_TIMEOUT]
         iv[i, IV_TIMED_OUT] = 1 if timed_out else 0
-        if iv[i, IV_HAS_VALUE] and not timed_out:
-            out[i] = fv[i, FV_VALUE]
+        slot = ip[i, RP_SLOT]
+        valid = iv[i, IV_HAS_VALUE] and not timed_out
+        if valid:
+            out[slot] = fv[i, FV_VALUE]
         else:
             mask |= 1 << i
             policy = ip[i, RP_POLICY]
             if policy == POLICY_HOLD_PRESSURE:
-                out[i] = st.g[G_HOLD_PRESSURE]
+                out[slot] = st.g[G_HOLD_PRESSURE]
             elif policy == POLICY_HOLD_LAST and iv[i, IV_HAS_VALUE]:
-                out[i] = fv[i, FV_VALUE]
+                out[slot] = fv[i, FV_VALUE]
             else:
-                out[i] = 0.0
+                out[slot] = 0.0
+        if ip[i, RP_INVALID_SLOT] >= 0:
+            out[ip[i, RP_INVALID_SLOT]] = 0.0 if valid else 1.0
     return mask
 
 

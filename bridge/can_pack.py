@@ -49,14 +49,19 @@ class SensorDecoder:
     ``receive(can_id, data)`` returns True when the frame completed a sample (every sensor frame seen
     with the same ``sim_time_ms``); ``time`` is then the sample's simulation time in s, unwrapped
     across the 65.536 s wrap of the 16-bit stamp. Wrapping signals (the cumulative wheel angles) are
-    unwrapped against their previous value. Frames of other ids are ignored (returns False)."""
+    unwrapped against their previous value. Frames of other ids are ignored (returns False).
+    ``frames`` (names): decode only these sensor frames, a sample being complete when all of them
+    arrived (a receiver of the fast frames of a DBC whose frames have different periods)."""
 
-    def __init__(self, codec: Codec):
+    def __init__(self, codec: Codec, frames=None):
         self.codec = codec
         names = codec.channels.sensor_names
         index = {n: i for i, n in enumerate(names)}
         self._plans = {}
-        for f in codec.sensor_frames:
+        chosen = [f for f in codec.sensor_frames if frames is None or f.name in frames]
+        if frames is not None and len(chosen) != len(set(frames)):
+            raise ValueError(f"sensor frames {sorted(set(frames) - {f.name for f in chosen})} are not in the DBC")
+        for f in chosen:
             items = []
             tsig = None
             for s in f.signals:

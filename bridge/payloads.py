@@ -75,8 +75,12 @@ def _status_props() -> dict:
         "cpu_p99": _seconds("99th percentile loop-thread CPU time per step"),
         "cpu_max": _seconds("largest loop-thread CPU time per step"),
         "steal": _seconds("CPU time taken by the hypervisor (steal) over the run, null if unknown"),
-        "faults": _obj("active faults", {f: {"type": "boolean", "description": f"{f} fault active"}
-                                         for f in FAULTS}, FAULTS),
+        "faults": {"title": "active faults", "type": "object",
+                   "description": "one flag per command's watchdog (<command>_timeout; the by-wire cars': "
+                                  f"{', '.join(FAULTS[:-1])}), bus_error, and for a car whose EPS is "
+                                  "commanded over CAN eps_safe_state (assist off, latched until a reset)",
+                   "properties": {"bus_error": {"type": "boolean", "description": "bus_error fault active"}},
+                   "required": ["bus_error"], "additionalProperties": {"type": "boolean"}},
         "rejected": _obj("rejected CAN frames by reason",
                          {r: _count(f"frames rejected: {r}") for r in REJECTIONS}, REJECTIONS),
         "accepted_frames": _count("CAN frames accepted"),

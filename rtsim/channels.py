@@ -57,6 +57,22 @@ COMMANDS: tuple[Channel, ...] = (
     _ch("steering_wheel_angle_cmd", "rad", "commanded steering-wheel angle"),
 )
 
+#: The electric power steering's own sensors (cars with ``[eps]``), after the car's: what its controller
+#: reads beside the torsion-bar torque (``steering_torque``) and the steering-wheel angle.
+EPS_SENSORS: tuple[Channel, ...] = (
+    _ch("eps_motor_angle", "rad", "EPS motor rotor angle (position sensor), positive steering left"),
+    _ch("eps_motor_speed", "rad/s", "EPS motor speed, positive steering left"),
+    _ch("eps_motor_current", "A", "EPS motor current (the drive's current sensor)"),
+    _ch("eps_power_stage", "1", "EPS power stage: 1 on, 0 off (not yet enabled, or the safe state)"),
+    _ch("vehicle_speed", "m/s", "vehicle speed as the chassis bus reports it (centre-of-mass speed)"),
+)
+
+#: The EPS controller's command (cars with ``[eps]`` served in the loop: the controller under test
+#: replaces the built-in assistance law; the driver's inputs come from the scenario).
+EPS_COMMANDS: tuple[Channel, ...] = (
+    _ch("motor_current_cmd", "A", "EPS motor current command (executed by the drive's current loop)"),
+)
+
 #: Vehicle state published for observers (Zenoh ``state``, MCAP ``state``), 100 Hz by default.
 STATE: tuple[Channel, ...] = (
     _ch("pos_x", "m", "centre of mass x, world frame"),
@@ -181,8 +197,12 @@ class ChannelDictionary:
             raise ValueError(f"not a channel dictionary: {exc}") from None
 
 
-def car_channels(driven=("rl", "rr")) -> ChannelDictionary:
-    """The four-wheel car's channel dictionary, its drive-torque sensors on the `driven` wheels."""
+def car_channels(driven=("rl", "rr"), eps: bool = False) -> ChannelDictionary:
+    """The four-wheel car's channel dictionary, its drive-torque sensors on the `driven` wheels; with
+    `eps` (electric power steering), the EPS's sensors after the car's and its controller's command
+    instead of the by-wire commands."""
+    if eps:
+        return ChannelDictionary(car_sensors(driven) + EPS_SENSORS, EPS_COMMANDS, STATE)
     return ChannelDictionary(car_sensors(driven), COMMANDS, STATE)
 
 
@@ -193,4 +213,4 @@ SENSORS = CAR.sensors
 SENSOR_NAMES = CAR.sensor_names
 STATE_NAMES = CAR.state_names
 COMMAND_NAMES = CAR.command_names
-BY_NAME = {c.name: c for c in car_sensors(("fl", "fr")) + SENSORS + COMMANDS}
+BY_NAME = {c.name: c for c in car_sensors(("fl", "fr")) + SENSORS + COMMANDS + EPS_SENSORS + EPS_COMMANDS}

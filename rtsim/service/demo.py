@@ -1,7 +1,11 @@
 """`rtsim demo`: the service on embedded defaults plus the demo ECU in its own process, recorded.
 
 The service runs on this process's main thread; the demo ECU (``drivers.ecu_demo``) is a child process
-that talks to it over CAN only (the same bus the service opened). The ECU starts first and waits,
+that talks to it over CAN only (the same bus the service opened). ``--vehicle eps_car`` (a car with
+electric power steering) runs the EPS in the loop instead: the demo EPS controller (``drivers.eps_demo``)
+commands the motor current every 1 ms from the car's DBC, the driver is the scenario's inside the
+service (default: the bond-graph study's first life situation, a 35 deg step steer at 80 km/h), and the
+summary reports the lateral acceleration and yaw rate reached, the commands accepted and the assist. The ECU starts first and waits,
 bounded and saying so, for the service's bus and first frames (a first run compiles the kernels for a
 minute or more; the service shows that progress). When the ECU finishes its manoeuvre (or
 ``--duration`` of simulated time) the service stops, the recording is finalised and a summary is
@@ -33,12 +37,13 @@ from rtsim.errors import RtsimError
 
 from .cli import format_summary
 from .ecu_process import EcuProcess
-from .server import ServeOptions, Service
+from .server import ServeOptions, Service, resolve_scenario, resolve_vehicle
 
 ROOT = Path(__file__).resolve().parents[2]
 #: tests: the ECU command to run instead of ``python -m drivers.ecu_demo`` (shell words; the bus,
 #: manoeuvre and duration arguments are appended)
 ECU_COMMAND_ENV = "RTSIM_DEMO_ECU"
+EPS_SCENARIO = "step_steer_80kph"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -48,9 +53,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                                   "(default: the whole manoeuvre, about 50 s)")
     p.add_argument("--manoeuvre", choices=["demo", "straight_line", "lane_change"], default="demo",
                    help="demo: the straight-line manoeuvre, then a lane change (default)")
-    p.add_argument("--mode", choices=["realtime", "lockstep"], default="realtime",
-                   help="lockstep: the ECU requests every step (deterministic, not paced)")
+    p.add_argument("--mode", choices=["realtime", "lockstep"],
+                   help="lockstep: the ECU requests every step (deterministic, not paced); default realtime, "
+                        "lockstep for an EPS car (a Python controller answering within the 3 ms watchdog on a "
+                        "host without real-time scheduling is not a given)")
     p.add_argument("--no-zenoh", action="store_true", help="do not publish over Zenoh")
+    p.add_argument("--vehicle", help="vehicle TOML or name in configs/vehicles (default xbw; a car with [eps], "
+                                     "e.g. eps_car, runs the demo EPS controller in the loop)")
+    p.add_argument("--scenario", help="scenario TOML or name (default: hil_flat; with an EPS car "
+                                      f"{EPS_SCENARIO}, the first life situation)")
+    p.add_argument("--silent-after", type=float, help="EPS demo: the controller stops commanding after this "
+                                                      "much simulated time, s (the watchdog's safe state)")
     p.add_argument("--can-interface", help="python-can interface (default: vcan0 if present, else the hub)")
     p.add_argument("--can-channel", help="python-can channel")
 
@@ -114,19 +127,34 @@ def _fail(line: str) -> int:
 def main(args) -> int:
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)     # progress lines show at once in a pipe too
+    vehicle = resolve_vehicle(args.vehicle) if args.vehicle else None
+    eps = vehicle is not None and _has_eps(vehicle)
+    if args.mode is None:
+        args.mode = "lockstep" if eps else "realtime"
+    kw = {"vehicle": vehicle} if vehicle is not None else {}
+    if args.scenario or eps:
+        kw["scenario"] = resolve_scenario(args.scenario or EPS_SCENARIO)
     opts = ServeOptions(mode=args.mode, record=Path(args.record), zenoh=not args.no_zenoh,
-                        can_interface=args.can_interface, can_channel=args.can_channel)
+                        can_interface=args.can_interface, can_channel=args.can_channel, **kw)
     opts.check()                # bad options fail before any process starts
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise RtsimError(f"--duration {args.duration}: must be a positive number of seconds")
+    if args.silent_after is not None and not (eps and args.silent_after > 0):
+        raise RtsimError("--silent-after: only with a car with electric power steering, a positive time in s")
+    if eps and args.duration is None:
+        from drivers.scenario import load_scenario
+        args.duration = load_scenario(opts.scenario).duration
     iface, chan = args.can_interface, args.can_channel
     if iface is None:       # the service's default choice, known before it starts
         iface, chan = ("socketcan", chan or "vcan0") if socketcan_available(chan or "vcan0") else \
             ("remote", chan or f"{HUB_HOST}:{default_hub_port()}")
     # the ECU starts first (its imports and its own kernels take seconds) and waits for the service's
     # bus and first frames (bounded, saying so); the service ends when the ECU does
-    cmd = shlex.split(os.environ.get(ECU_COMMAND_ENV, "")) or [sys.executable, "-m", "drivers.ecu_demo"]
+    ecu_module = "drivers.eps_demo" if eps else "drivers.ecu_demo"
+    cmd = shlex.split(os.environ.get(ECU_COMMAND_ENV, "")) or [sys.executable, "-m", ecu_module]
     cmd = cmd + ["--can-interface", iface, "--can-channel", chan, "--manoeuvre", args.manoeuvre]
+    if args.silent_after is not None:
+        cmd += ["--silent-after", str(args.silent_after)]
     if args.duration is not None:
         cmd += ["--duration", str(args.duration)]
     if args.mode == "lockstep":
@@ -155,7 +183,56 @@ def main(args) -> int:
     ecu.wait(5.0)
     if ecu.returncode != 0:
         return _fail(ecu.describe_end())
+    if eps:
+        return _report_eps(args, svc, summary, ecu.result)
     return _report(args, svc, summary, ecu.result)
+
+
+def _has_eps(vehicle: Path) -> bool:
+    from rtsim.vehicle.car.config import load_vehicle
+
+    cfg, _ = load_vehicle(vehicle)
+    return cfg.eps is not None
+
+
+def recorded_eps(path: Path, vehicle_id: str) -> dict:
+    """From the recording: the lateral acceleration (m/s^2) and yaw rate (rad/s) reached, the motor
+    current's peak (A), and when the EPS power stage was last on and first seen off after (s)."""
+    from bridge.mcap_recorder import read_recording
+
+    messages, _ = read_recording(path)
+    sens = messages.get(f"rtsim/{vehicle_id}/sensors", [])
+    if not sens:
+        return {"samples": 0}
+    d = {k: np.array([m.data[k] for m in sens], dtype=float)
+         for k in ("time", "accel_y", "gyro_z", "eps_motor_current", "eps_power_stage")}
+    on = np.flatnonzero(d["eps_power_stage"] > 0.5)
+    off_after = np.flatnonzero((d["eps_power_stage"] < 0.5) & (np.arange(len(sens)) > (on[0] if len(on) else 0)))
+    return {"samples": len(sens), "peak_accel_y": float(np.max(np.abs(d["accel_y"]))),
+            "peak_yaw_rate": float(np.max(np.abs(d["gyro_z"]))),
+            "peak_motor_current": float(np.max(np.abs(d["eps_motor_current"]))),
+            "stage_first_on": float(d["time"][on[0]]) if len(on) else None,
+            "stage_off_at": float(d["time"][off_after[0]]) if len(on) and len(off_after) else None}
+
+
+def _report_eps(args, svc: Service, summary: dict, result: dict) -> int:
+    """The closing lines of an EPS-in-the-loop demo: what the car and the assist did, from the recording."""
+    rec = recorded_eps(Path(args.record), svc.vehicle_id)
+    accepted = summary.get("accepted_frames", 0) or 0
+    g = 9.80665
+    print(f"rtsim demo: EPS controller sent {result.get('commands_sent', 0)} current commands over "
+          f"{result.get('ecu_time', 0):.2f} s, {accepted} accepted; peak lateral acceleration "
+          f"{rec.get('peak_accel_y', 0) / g:.2f} g, peak yaw rate {math.degrees(rec.get('peak_yaw_rate', 0)):.1f} deg/s, "
+          f"peak motor current {rec.get('peak_motor_current', 0):.1f} A (recorded sensors)")
+    if rec.get("stage_off_at") is not None:
+        print(f"rtsim demo: EPS power stage off at t = {rec['stage_off_at']:.3f} s (the controller's last "
+              f"command at {result.get('last_command_sample_t') or 0:.3f} s): the watchdog's safe state")
+    print(f"rtsim demo: recording written to {args.record}")
+    if rec.get("samples", 0) <= 0 or result.get("samples", 0) <= 0:
+        return _fail("no EPS sensor sample was exchanged")
+    if accepted <= 0 or rec.get("stage_first_on") is None:
+        return _fail("the service accepted no command from the EPS controller (see the rejection counters above)")
+    return 0
 
 
 def _report(args, svc: Service, summary: dict, result: dict) -> int:

@@ -7,11 +7,14 @@
    (``bridge.can_e2e``), accepted values as command events; a SIM_STEP_REQ is checked (CRC, count,
    repeated counter) and, in lockstep mode, stops the intake and is left in ``LI_PENDING_STEPS`` for the
    caller, otherwise counted as ignored;
-2. ``nsteps`` times: the watchdog writes the command values (or the safe values of timed-out commands)
-   into the vehicle's command array (a change of its time-out mask is a command event), one vehicle
-   step, and at the DBC's periods: every sensor channel (with the vehicle's sensor effects and the
-   config's sensor model) packed into the sensor frames, queued for sending and handed to the
-   publisher; the observer state; the SIM_STATUS frame;
+2. ``nsteps`` times: the in-loop driver (a vehicle whose DBC does not carry the driver's commands, such
+   as the EPS car whose controller under test commands only the motor: the scenario's profiles and
+   followers, ``drivers.driver.driver_step``) writes its commands, the watchdog writes the CAN command
+   values (or the safe values of timed-out commands) into their slots of the vehicle's command array (a
+   change of its time-out mask is a command event), one vehicle step, and at the DBC's periods: every
+   sensor channel (with the vehicle's sensor effects and the config's sensor model) packed into the
+   sensor frames and handed to the publisher at the fastest frame's period, each frame queued for
+   sending at its own period; the observer state; the SIM_STATUS frame;
 3. (``ack_counter >= 0``) the SIM_STEP_ACK frame.
 
 One call instead of several matters: each call from Python unboxes the model and state tuples (about
@@ -25,21 +28,25 @@ from typing import NamedTuple
 import numpy as np
 
 from bridge.can_e2e import (C_COUNTER, C_CRC, C_DLC, C_RANGE, C_STEP_IGNORED, C_STEP_REJECTED,
-                            C_UNKNOWN, FV_VALUE, IV_TIMED_OUT, RxPlan, RxState, pack_frames, rx_command,
+                            C_UNKNOWN, FV_VALUE, IV_TIMED_OUT, RP_SLOT, RxPlan, RxState, pack_frames, rx_command,
                             rx_find, rx_watchdog, step_request)
 from rtsim.jit import inline_kernel, kernel, read_cycles
 from rtsim.mbs.model import OK
 from rtsim.vehicle.car.step import vehicle_step
 from rtsim.vehicle.car.effect_kernels import sensor_stage
-from rtsim.vehicle.car.observer import vehicle_state_values
+from rtsim.vehicle.car.observer import driver_view, vehicle_state_values
+from drivers.driver import driver_step
+from drivers.path_follower import PathFollower
+from drivers.profiles import Packed
+from drivers.speed_follower import SpeedFollower
 
 from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SENSOR, H_STATE, H_TX, LOG_RX,
                     LOG_TX, RX_DATA)
 
 # LoopParams.ints
 (PI_SENSOR_EVERY, PI_STATE_EVERY, PI_STATUS_EVERY, PI_LOCKSTEP, PI_MODE_CODE, PI_STEP_REQ_ID, PI_STATUS_ID,
- PI_ACK_ID) = range(8)
-NPI = 8
+ PI_ACK_ID, PI_DRIVER) = range(9)
+NPI = 9
 # LoopState.li
 (LI_K, LI_MASK, LI_PENDING_STEPS, LI_PENDING_COUNTER, LI_STEP_COUNTER, LI_OVERRUNS, LI_BUS_ERROR,
  LI_SENT) = range(8)
@@ -65,6 +72,12 @@ class LoopParams(NamedTuple):
     ack_sig_float: np.ndarray
     no_stamp: np.ndarray         # (1,) int64 zero: the status and ack frames carry no ms stamp
     fault_slot: np.ndarray       # per command: its fault flag's index in the status values
+    frame_every: np.ndarray      # per sensor frame: its period in steps (a multiple of PI_SENSOR_EVERY)
+    drv_packed: Packed           # the in-loop driver (PI_DRIVER): the scenario's profiles,
+    drv_speed: SpeedFollower     # speed follower,
+    drv_path: PathFollower       # path follower,
+    drv_flags: np.ndarray        # which followers drive (drivers.driver.F_*),
+    drv_slot: np.ndarray         # per driver output (drivers.base.INPUT_NAMES): its command slot, -1 none
 
 
 class LoopState(NamedTuple):
@@ -77,6 +90,9 @@ class LoopState(NamedTuple):
     words: np.ndarray            # sensor frame payloads (int64, one per frame)
     frame_word: np.ndarray       # (1,) int64: the status or ack frame
     cycles: np.ndarray           # int64 ring: processor cycles of each call, at [k % size] (k after it)
+    drv_state: np.ndarray        # (drivers.base.NSTATE,) what the in-loop driver reads
+    drv_out: np.ndarray          # (drivers.base.NINPUT,) its outputs
+    drv_live: np.ndarray         # (NINPUT,) live inputs (the ``driver`` control): NaN where the scenario drives
 
 
 @inline_kernel
@@ -115,13 +131,15 @@ def _send_logged(rg, fid, word, t):
 
 
 @inline_kernel
-def _command_event(rg, t, kind, arg, commands):
+def _command_event(rg, plan, t, kind, arg, commands, by_slot):
+    """The command channels' values at an accepted frame or a change of the time-out mask: from their
+    slots in the vehicle's ``commands`` (``by_slot``), or ``commands`` in the channels' order."""
     j = rg.heads[H_CMD] % rg.cmd_t.shape[0]
     rg.cmd_t[j] = t
     rg.cmd_meta[j, 0] = kind
     rg.cmd_meta[j, 1] = arg
     for i in range(rg.cmd_v.shape[1]):
-        rg.cmd_v[j, i] = commands[i]
+        rg.cmd_v[j, i] = commands[plan.ip[i, RP_SLOT]] if by_slot else commands[i]
     rg.heads[H_CMD] += 1
 
 
@@ -156,7 +174,7 @@ def take_frames(lp, ls, rg):
         if i < 0:
             rx.counts[C_UNKNOWN] += 1
         elif rx_command(lp.rx, rx, i, data, dlc, t):
-            _command_event(rg, t, CMD_ACCEPTED, i, rx.fv[:, FV_VALUE])     # (only value i is new)
+            _command_event(rg, lp.rx, t, CMD_ACCEPTED, i, rx.fv[:, FV_VALUE], False)     # (only value i is new)
     rg.heads[H_RX_TAIL] = tail
 
 
@@ -185,10 +203,17 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
     h = lp.dt[0]
     k = li[LI_K]
     t = k * h
+    if lp.ints[PI_DRIVER]:
+        driver_view(d, veh, ls.drv_state)
+        driver_step(lp.drv_packed, lp.drv_speed, lp.drv_path, lp.drv_flags, t + h, ls.drv_state, ls.drv_out)
+        for c in range(ls.drv_out.shape[0]):
+            if lp.drv_slot[c] >= 0:
+                live = ls.drv_live[c]
+                io.commands[lp.drv_slot[c]] = ls.drv_out[c] if live != live else live   # (NaN: none)
     mask = rx_watchdog(lp.rx, ls.rx, t, io.commands)
     if mask != li[LI_MASK]:
         li[LI_MASK] = mask
-        _command_event(rg, t, CMD_MASK, mask, io.commands)
+        _command_event(rg, lp.rx, t, CMD_MASK, mask, io.commands, True)
     status = vehicle_step(m, d, veh, vd, road, parts, states, io, h)
     if status != OK:
         return status
@@ -207,7 +232,8 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
             rg.sensor_v[j, c] = vals[c]
         for f in range(ls.words.shape[0]):
             rg.sensor_words[j, f] = ls.words[f]
-            _send(rg, lp.sensor_ids[f], ls.words[f], t1)
+            if k % lp.frame_every[f] == 0:
+                _send(rg, lp.sensor_ids[f], ls.words[f], t1)
         rg.heads[H_SENSOR] += 1
         li[LI_SENT] += 1
     if k % ints[PI_STATE_EVERY] == 0:

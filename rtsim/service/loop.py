@@ -24,17 +24,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bridge.can_codec import FAULTS, STATUS_SOURCES, Codec, CommandReceiver
+from bridge.can_codec import Codec, CommandReceiver
 from bridge.can_e2e import C_STEP_IGNORED, C_STEP_REJECTED
+from drivers.base import INPUT_NAMES, INPUT_UNITS, LIMITS, NINPUT, NSTATE
+from drivers.driver import Driver
 from rtsim.boundcall import bind
 from rtsim.errors import RtsimError, SimulationError
 from rtsim.mbs.model import OK
 from rtsim.realtime.health import LoopHealth
-from rtsim.vehicle.car.sensors import NSENSOR
 from rtsim.vehicle.car.observer import NSTATE_OUT
+from rtsim.vehicle.car.step import COMMAND_SLOTS, INVALID_SLOTS
 
 from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_OVERRUNS, LI_PENDING_COUNTER, LI_PENDING_STEPS,
-                     LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, PI_ACK_ID, PI_LOCKSTEP,
+                     LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, PI_ACK_ID, PI_DRIVER, PI_LOCKSTEP,
                      PI_MODE_CODE, PI_SENSOR_EVERY, PI_STATE_EVERY, PI_STATUS_EVERY, PI_STATUS_ID,
                      PI_STEP_REQ_ID, ST_FAULT0, LoopParams, LoopState, loop_run)
 from .rings import Rings, RxWriter, make_rings
@@ -57,11 +59,14 @@ class Request:
 class HilLoop:
     """The loop of one service (see the module docstring). ``rings`` are shared with the CAN port and
     the publisher (made here if not given); ``on_chunk`` (optional) is called after every compiled call
-    (re-simulation reads the rings there)."""
+    (re-simulation reads the rings there). ``driver`` (the scenario's, ``Scenario.driver()``) drives, in
+    the loop, the driver's commands the DBC does not carry (the EPS car: its controller under test
+    commands the motor; the steering-wheel angle, throttle and brake come from the scenario)."""
 
     def __init__(self, sim, codec: Codec, rings: Rings | None = None, *, mode: str = "realtime",
                  state_rate: float = 100.0, hold_pressure: float | None = None, inbox=None,
-                 health: LoopHealth | None = None, scenario_name: str | None = None, on_chunk=None):
+                 health: LoopHealth | None = None, scenario_name: str | None = None, on_chunk=None,
+                 driver: Driver | None = None):
         self.codec = codec
         self.port = None                 # set by the service: bus state for the status, writer wake-up
         self.outbox = None               # set by the service: recorder/Zenoh figures for the status
@@ -71,13 +76,13 @@ class HilLoop:
         self.scenario_name = scenario_name
         self.on_chunk = on_chunk
         ch = codec.channels               # the served vehicle's interface: ring widths, payload names
-        if (len(ch.sensors), len(ch.state)) != (NSENSOR, NSTATE_OUT):
-            raise RtsimError(f"{codec.path}: the vehicle declares {len(ch.sensors)} sensor and {len(ch.state)} "
-                             f"state channels; the car's loop produces {NSENSOR} and {NSTATE_OUT}")
+        if (len(ch.sensors), len(ch.state)) != (sim.nsensor, NSTATE_OUT):
+            raise RtsimError(f"{codec.path}: the DBC's vehicle declares {len(ch.sensors)} sensor and "
+                             f"{len(ch.state)} state channels; the car's loop produces {sim.nsensor} and {NSTATE_OUT}")
         self.rings = rings if rings is not None else make_rings(
             len(ch.sensors), len(codec.sensor_frames), len(ch.state), len(ch.commands))
         kw = {} if hold_pressure is None else {"hold_pressure": hold_pressure}
-        self.rx = CommandReceiver(codec, **kw)           # its arrays are the step's E2E state
+        self.rx = CommandReceiver(codec, slots=COMMAND_SLOTS, invalid_slots=INVALID_SLOTS, **kw)   # the step's E2E state
         self.rx_writer = RxWriter(self.rings)            # for feeding frames by hand (re-simulation)
         self.state_rate = state_rate
         self.run_state = "running"
@@ -86,21 +91,37 @@ class HilLoop:
         self.li = np.zeros(NLI, dtype=np.int64)
         self.li[LI_STEP_COUNTER] = NO_STEP_COUNTER
         self.cycles = np.zeros(CYCLE_WINDOW, dtype=np.int64)
-        self._install(sim)
+        self._install(sim, driver)
 
     # -- set-up ------------------------------------------------------------------------------------
-    def _install(self, sim) -> None:
-        """Take a (new) VehicleSim: step counters, sensor model, rates; the E2E counters carry on."""
+    def _install(self, sim, driver: Driver | None = None) -> None:
+        """Take a (new) VehicleSim and its scenario's driver: step counters, sensor model, rates; the E2E
+        counters carry on. A vehicle whose DBC carries the EPS motor command gets its EPS in external
+        mode (the stage on at the controller's first valid command)."""
         self.sim = sim
+        names = self.codec.channels.command_names
+        if "motor_current_cmd" in names:
+            sim.external_eps(True)
+        driven = [i for i, n in enumerate(INPUT_NAMES) if n in COMMAND_SLOTS and n not in names]
+        self.driver = driver if driver is not None and driven else Driver()
+        self.driver.reset()
+        drv_slot = np.full(NINPUT, -1, dtype=np.int64)
+        if driver is not None:
+            for i in driven:
+                drv_slot[i] = COMMAND_SLOTS[INPUT_NAMES[i]]
         self.dt = sim.dt
         self.k = 0
         c = self.codec
         self.sensor_every = self._every(min(f.period for f in c.sensor_frames), "sensor period")
+        self.frame_every = np.array([self._every(f.period, f"{f.name} period") for f in c.sensor_frames],
+                                    dtype=np.int64)
+        if np.any(self.frame_every % self.sensor_every):
+            raise RtsimError(f"{c.path}: every sensor frame's period must be a multiple of the fastest one's")
         self.status_every = self._every(c.status_frame.period, "status period")
         self.state_every = max(1, int(round(1.0 / (self.state_rate * self.dt))))
         sim.seed_sensor_noise(0)          # reproducible sensor noise: a session replays bit for bit
         lay = c.sensor_layout()
-        status = c.frame_layout(c.status_frame.name, STATUS_SOURCES)
+        status = c.frame_layout(c.status_frame.name, c.status_sources)
         ack = c.frame_layout(c.step_ack.name, ("lockstep_sim_time", "lockstep_ack_counter"))
         ints = np.zeros(NPI, dtype=np.int64)
         ints[PI_SENSOR_EVERY], ints[PI_STATE_EVERY], ints[PI_STATUS_EVERY] = \
@@ -109,16 +130,20 @@ class HilLoop:
         ints[PI_MODE_CODE] = c.modes[self.mode]
         ints[PI_STEP_REQ_ID], ints[PI_STATUS_ID], ints[PI_ACK_ID] = \
             c.step_request.frame_id, c.status_frame.frame_id, c.step_ack.frame_id
+        ints[PI_DRIVER] = bool(np.any(drv_slot >= 0))
         faults = self.rx.fault_names
-        assert STATUS_SOURCES[ST_FAULT0 + len(faults)] == "fault_bus_error"
+        sources = c.status_sources
+        assert sources[ST_FAULT0 + len(faults)] == "fault_bus_error"
         self.lp = LoopParams(self.rx.plan, ints, np.array([self.dt]), lay["frame_id"], lay["time_start"],
                              lay["time_mask"], lay["sig_int"], lay["sig_float"], status["sig_int"],
                              status["sig_float"], ack["sig_int"], ack["sig_float"], np.zeros(1, dtype=np.int64),
-                             np.array([STATUS_SOURCES.index(f"fault_{f}") for f in faults], dtype=np.int64))
-        self.ls = LoopState(self.rx.state, self.li, np.zeros(NSENSOR), np.zeros(NSTATE_OUT),
-                            np.zeros(len(STATUS_SOURCES) + 1), np.zeros(3),
+                             np.array([sources.index(f"fault_{f}") for f in faults], dtype=np.int64),
+                             self.frame_every, self.driver.packed, self.driver.speed, self.driver.path,
+                             self.driver.flags, drv_slot)
+        self.ls = LoopState(self.rx.state, self.li, np.zeros(sim.nsensor), np.zeros(NSTATE_OUT),
+                            np.zeros(len(sources) + 1), np.zeros(3),
                             np.zeros(len(lay["frame_id"]), dtype=np.int64), np.zeros(1, dtype=np.int64),
-                            self.cycles)
+                            self.cycles, np.zeros(NSTATE), np.zeros(NINPUT), np.full(NINPUT, np.nan))
         li = self.li
         li[LI_K] = 0
         li[LI_MASK] = -1
@@ -237,9 +262,11 @@ class HilLoop:
         return self.port is not None and ((not self.port.up) or self.port.errors > self._bus_errors_at_status)
 
     def faults(self) -> dict[str, bool]:
-        f = {name: False for name in FAULTS}
+        f = {name: False for name in self.codec.faults}
         f.update(self.rx.faults)
         f["bus_error"] = self._bus_error()
+        if "motor_current_cmd" in self.codec.channels.command_names:
+            f["eps_safe_state"] = self.sim.eps_fault      # latched: assist off until a reset
         return f
 
     # -- inbox ---------------------------------------------------------------------------------------
@@ -288,12 +315,42 @@ class HilLoop:
             return {"ok": True, "sim_time": self.sim_time, "steps": self.k}
         if op in ("reset", "load_scenario", "_install"):
             sim, name = args["_sim"], args.get("_name")
-            self._install(sim)
+            self._install(sim, args.get("_driver"))
             self.scenario_name = name or self.scenario_name
             self.run_state = "running"
             self.message = f"{op}: {self.scenario_name} at t = 0"
             return {"ok": True, "scenario": self.scenario_name, "sim_time": 0.0}
-        return {"ok": False, "error": f"unknown op {op!r}; ops: reset, pause, resume, load_scenario, step"}
+        if op == "driver":
+            return self._live_driver(args)
+        return {"ok": False, "error": f"unknown op {op!r}; ops: reset, pause, resume, load_scenario, step, driver"}
+
+    def _live_driver(self, args: dict) -> dict:
+        """Live driver inputs (a person at a steering wheel, a joystick bridge): ``{channel: value}`` for
+        the channels the in-loop driver drives, in SI units within drivers.base.LIMITS, held until the
+        next request; ``{channel: null}`` hands the channel back to the scenario."""
+        driven = [INPUT_NAMES[i] for i in np.flatnonzero(self.lp.drv_slot >= 0)]
+        if not driven:
+            return {"ok": False, "error": "driver: the CAN commands drive this vehicle; there is no in-loop driver"}
+        live = self.ls.drv_live
+        new = {}
+        for name, value in args.items():
+            if name not in driven:
+                return {"ok": False, "error": f"driver: {name!r} is not driven in the loop (those are: "
+                                              f"{', '.join(driven)})"}
+            if value is not None:
+                lo, hi = LIMITS[name]
+                try:
+                    v = float(value)
+                except (TypeError, ValueError):
+                    return {"ok": False, "error": f"driver: {name} = {value!r} is not a number"}
+                if not lo <= v <= hi:
+                    return {"ok": False, "error": f"driver: {name} = {v}: outside {lo} .. {hi} {INPUT_UNITS[name]}"}
+                value = v
+            new[INPUT_NAMES.index(name)] = np.nan if value is None else value
+        for i, v in new.items():
+            live[i] = v
+        return {"ok": True, "live": {INPUT_NAMES[i]: float(live[i]) for i in range(NINPUT) if not np.isnan(live[i])},
+                "sim_time": self.sim_time}
 
     # -- lockstep ------------------------------------------------------------------------------------
     def run_lockstep(self) -> None:

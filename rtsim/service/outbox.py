@@ -22,6 +22,12 @@ from rtsim.channels import CAR, ChannelDictionary
 from .rings import CMD_ACCEPTED, H_CMD, H_LOG, H_SENSOR, H_STATE, LOG_RX, RingReader, Rings
 
 
+def _multiple(t: float, period: float) -> bool:
+    """Whether simulation time t (s) is a whole number of periods."""
+    n = t / period
+    return abs(n - round(n)) < 1e-6
+
+
 class RingDrain:
     """Reads the publisher's rings in order and calls ``emit(key, t, payload)`` per message: ``key``
     'sensors', 'state' or 'commands' with JSON bytes; 'can/rx' or 'can/tx' with (id, payload bytes).
@@ -29,7 +35,10 @@ class RingDrain:
     re-simulation compares numbers."""
 
     def __init__(self, rings: Rings, frame_ids, emit=None, raw=None, frames: bool = True,
-                 channels: ChannelDictionary = CAR):
+                 channels: ChannelDictionary = CAR, frame_periods=None):
+        """``frame_periods``: per sensor frame, its period in s (default: every sample carries every
+        frame); a frame is recorded as 'can/tx' at the samples it was sent at (simulation times that are
+        multiples of its period)."""
         self.r = rings
         self.channels = channels
         self._encode_sensors = functools.partial(payloads.encode_sensors, names=channels.sensor_names)
@@ -38,6 +47,7 @@ class RingDrain:
         self.raw = raw
         self.frames = frames
         self.frame_ids = [int(f) for f in frame_ids]
+        self.frame_periods = None if frame_periods is None else [float(p) for p in frame_periods]
         h = rings.heads
         self._sensors = RingReader(h, H_SENSOR, rings.sensor_t.shape[0])
         self._state = RingReader(h, H_STATE, rings.state_t.shape[0])
@@ -108,7 +118,8 @@ class RingDrain:
                 if words is not None:
                     row = words[j].tobytes()
                     for k, fid in enumerate(self.frame_ids):
-                        emit("can/tx", t, (fid, row[8 * k:8 * k + 8]))
+                        if self.frame_periods is None or _multiple(t, self.frame_periods[k]):
+                            emit("can/tx", t, (fid, row[8 * k:8 * k + 8]))
         return len(todo)
 
 
@@ -117,14 +128,16 @@ class Outbox:
     publishes the status (``status_fn()``) every ``status_period`` s."""
 
     def __init__(self, rings: Rings, frame_ids, zenoh=None, recorder=None, status_fn=None,
-                 status_period: float = 0.1, poll: float = 0.005, channels: ChannelDictionary = CAR):
+                 status_period: float = 0.1, poll: float = 0.005, channels: ChannelDictionary = CAR,
+                 frame_periods=None):
         self.zenoh = zenoh
         self.recorder = recorder
         self.status_fn = status_fn
         self.status_period = float(status_period)
         self.poll = float(poll)
         self.published = 0
-        self._rings = RingDrain(rings, frame_ids, emit=self._emit, frames=recorder is not None, channels=channels)
+        self._rings = RingDrain(rings, frame_ids, emit=self._emit, frames=recorder is not None, channels=channels,
+                                frame_periods=frame_periods)
         self._stop = threading.Event()
         self._status_due = 0.0
         self._thread = threading.Thread(target=self._run, name="rtsim-publisher", daemon=True)

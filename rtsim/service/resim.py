@@ -89,7 +89,7 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         notes.append(note)
         temps = [p for p in (spath, vpath) if p.name.startswith(".resim-")]
         try:
-            sim, _ = build_sim(spath, vpath, float(session["dt"]))
+            sim, sc = build_sim(spath, vpath, float(session["dt"]))
         finally:
             for p in temps:
                 p.unlink(missing_ok=True)
@@ -98,7 +98,7 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         notes.append(f"the recorded channels differ from the vehicle's: {diff}")
     mode = session["mode"]
     loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode=mode, state_rate=float(session.get("state_rate", 100.0)),
-                   hold_pressure=float(session["hold_pressure"]))
+                   hold_pressure=float(session["hold_pressure"]), driver=sc.driver())
     col = Collector(loop)
     rx = messages.get(f"rtsim/{vid}/can/rx", [])
     rec_sensors = messages.get(f"rtsim/{vid}/sensors", [])
@@ -147,7 +147,7 @@ def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | N
 
     frames = read_frames(path)
     sim, sc = build_sim(scenario or DEFAULT_SCENARIO, vehicle, dt, models)
-    loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode="fast")
+    loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode="fast", driver=sc.driver())
     col = Collector(loop)
     t_first = frames[0].time if frames else 0.0
     for f in frames:

@@ -46,6 +46,17 @@ def resolve_scenario(name: str | Path) -> Path:
     raise ConfigError(f"scenario {str(name)!r}: no such file and no configs/scenarios/{name}.toml")
 
 
+def resolve_vehicle(name: str | Path) -> Path:
+    """A vehicle path, or a bare name of configs/vehicles/<name>.toml."""
+    p = Path(name)
+    if p.is_file():
+        return p
+    cand = ROOT / "configs" / "vehicles" / f"{name}.toml"
+    if cand.is_file():
+        return cand
+    raise ConfigError(f"vehicle {str(name)!r}: no such file and no configs/vehicles/{name}.toml")
+
+
 def build_sim(scenario: Path, vehicle: Path | None = None, dt: float | None = None,
               models: dict | None = None):
     """(VehicleSim, Scenario) at the scenario's start. ``models`` caches built vehicle models by
@@ -117,11 +128,12 @@ class Service:
         self.health = LoopHealth(period=self.sim.dt)
         self.loop = HilLoop(self.sim, self.codec, self.rings, mode=o.mode, state_rate=o.state_rate,
                             hold_pressure=o.hold_pressure, inbox=self.inbox, health=self.health,
-                            scenario_name=self.sc.name)
+                            scenario_name=self.sc.name, driver=self.sc.driver())
         self.loop.port = self.port
         from .outbox import Outbox
         self.outbox = Outbox(self.rings, self.loop.lp.sensor_ids, zenoh=self.zenoh, recorder=self.recorder,
-                             status_fn=self.loop.status, status_period=1.0 / o.status_rate, channels=ch)
+                             status_fn=self.loop.status, status_period=1.0 / o.status_rate, channels=ch,
+                             frame_periods=[f.period for f in self.codec.sensor_frames])
         self.loop.outbox = self.outbox
         self.pacer = Pacer(self.loop.run_steps, self.sim.dt, "fast" if o.mode == "fast" else (
             "lockstep" if o.mode == "lockstep" else "realtime"), max_catch_up=o.max_catch_up,
@@ -133,8 +145,9 @@ class Service:
     def _warm_up(self) -> None:
         """Load every compiled kernel of the loop (numba loads a cached kernel at its first call:
         ~1 s for the vehicle step) on a throwaway copy, so the first paced step is not a stall."""
-        sim, _ = build_sim(self.scenario_path, self.opts.vehicle, self.opts.dt, self.models)
-        scratch = HilLoop(sim, self.codec, mode=self.opts.mode, state_rate=self.opts.state_rate)
+        sim, sc = build_sim(self.scenario_path, self.opts.vehicle, self.opts.dt, self.models)
+        scratch = HilLoop(sim, self.codec, mode=self.opts.mode, state_rate=self.opts.state_rate,
+                          driver=sc.driver())
         if scratch.mode == "lockstep":
             scratch.advance(scratch.status_every)                 # every branch of the step
             scratch.take_frames()
@@ -193,7 +206,7 @@ class Service:
             sim, sc = build_sim(path, self.opts.vehicle, self.opts.dt, self.models)
             if op == "load_scenario":
                 self.scenario_path, self.sc, self.model = path, sc, sim.vm
-            args = {"_sim": sim, "_name": sc.name}
+            args = {"_sim": sim, "_name": sc.name, "_driver": sc.driver()}
         req = Request(op, args)
         self.inbox.put(("ctl", req))
         timeout = 120.0 if op == "step" else 10.0

@@ -5,7 +5,6 @@ CSV or, through bridge.mcap_log, to MCAP."""
 from __future__ import annotations
 
 import csv
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,7 +12,7 @@ from typing import Callable
 
 import numpy as np
 
-from drivers.base import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, NSTATE, S_SPEED, S_X, S_Y, S_YAW
+from drivers.base import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, NSTATE
 from drivers.scenario import Scenario, load_scenario
 from rtsim.channels import CAR, ChannelDictionary
 from rtsim.errors import ConfigError
@@ -22,8 +21,7 @@ from rtsim.road.config import load_road
 from .car.build import build_vehicle
 from .car.energy import ENERGY_NAMES, energy_row
 from .car.config import load_vehicle
-from .car.observer import vehicle_state_values
-from .car.sensors import NSENSOR
+from .car.observer import driver_view, vehicle_state_values
 from .car.sim import VehicleSim
 from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT
 
@@ -77,12 +75,7 @@ def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario) -> tupl
 
 def vehicle_state(sim: VehicleSim, out: np.ndarray) -> None:
     """Speed, x, y, yaw of the centre of mass for the closed-loop drivers (drivers.base.S_*)."""
-    q, qd = sim.data.q, sim.data.qd
-    ci = sim.vm.vehicle.chassis_idx
-    ux, uy = q[ci[3]], q[ci[4]]
-    out[S_X], out[S_Y] = q[ci[0]], q[ci[1]]
-    out[S_YAW] = math.atan2(uy, ux)
-    out[S_SPEED] = (qd[ci[0]] * ux + qd[ci[1]] * uy + qd[ci[2]] * q[ci[5]]) / max(1e-12, math.hypot(ux, uy))
+    driver_view(sim.data, sim.vm.vehicle, out)
 
 
 def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None = None,
@@ -98,7 +91,7 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
     sim.start_energy_audit()            # the power audit's cumulative flows (rtsim.vehicle.car.energy)
     driver = sc.driver()
     state = np.zeros(NSTATE)
-    sens = np.zeros(NSENSOR)
+    sens = np.zeros(sim.nsensor)
     observed = np.zeros(len(sim.vm.channels.state))
     keep = np.array([sim.vm.channels.state_names.index(n) for n in _state_only(sim.vm.channels)])
     io = sim.io
@@ -129,11 +122,12 @@ def _log(sim: VehicleSim, sens: np.ndarray, observed: np.ndarray, keep: np.ndarr
     """time, the sensors as reported, the observer state's channels `keep` (the service's state)."""
     sim.sensors(sens)
     row[0] = sim.data.t[0]
-    row[1:1 + NSENSOR] = sens
+    ns = sens.shape[0]
+    row[1:1 + ns] = sens
     vehicle_state_values(sim.data, sim.vm.vehicle, sim.vd, sim.io.signals, observed)
     n_state = len(keep)
-    row[1 + NSENSOR:1 + NSENSOR + n_state] = observed[keep]
-    energy_row(sim, row[1 + NSENSOR + n_state:])
+    row[1 + ns:1 + ns + n_state] = observed[keep]
+    energy_row(sim, row[1 + ns + n_state:])
 
 
 def write_csv(result: RunResult, path: str | Path) -> None:

@@ -203,8 +203,10 @@ def _spring_damper_tables(sp, length0: float, f_static: float) -> tuple[np.ndarr
 
 
 def vehicle_channels(cfg: VehicleConfig) -> ChannelDictionary:
-    """The car's channel dictionary: its drive-torque sensors on the driven axle's wheels."""
-    return car_channels(tuple(WHEELS[i] for i in (FRONT_AXLE if cfg.driven_axle == "front" else REAR_AXLE)))
+    """The car's channel dictionary: its drive-torque sensors on the driven axle's wheels; a car with
+    electric power steering has the EPS's sensors and its controller's command."""
+    return car_channels(tuple(WHEELS[i] for i in (FRONT_AXLE if cfg.driven_axle == "front" else REAR_AXLE)),
+                        eps=cfg.eps is not None)
 
 
 def _basis(exps: np.ndarray, z: float, s: float) -> np.ndarray:

@@ -47,7 +47,7 @@ from ..kit.brake import BO_TAU_BREAK, BO_TAU_SLIDE, BP_BREAK_RATIO, BP_GAIN, BS_
 from ..kit.layout import offsets
 from ..kit.sensor_model import sensor_apply, sensor_fill, sensor_next_row
 from .layout import CI_PHI
-from .sensors import NSENSOR, S_ACCEL_X, S_PITCH, S_ROLL, true_sensors
+from .sensors import S_ACCEL_X, S_PITCH, S_ROLL, true_sensors
 
 # ---- constants of the formulations ------------------------------------------------------------------
 RR_SPEED_EPS = 0.1            # m/s, rolling resistance fades linearly-smoothly to 0 below this speed
@@ -219,10 +219,11 @@ def physical_sensors(m, d, veh, signals, fx, out):
 
 
 @kernel
-def record_sensors(m, d, veh, signals, fx, sm_state):
+def record_sensors(m, d, veh, signals, fx, sm_params, sm_state):
     """Append this step's physical sensor values to the sensor model's history ring (for its delays)."""
-    o = sensor_next_row(sm_state, NSENSOR)
-    physical_sensors(m, d, veh, signals, fx, sm_state[o:o + NSENSOR])
+    n = sm_params.shape[0]
+    o = sensor_next_row(sm_state, n)
+    physical_sensors(m, d, veh, signals, fx, sm_state[o:o + n])
 
 
 @kernel

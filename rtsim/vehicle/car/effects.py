@@ -50,7 +50,7 @@ import numpy as np
 from pydantic import Field, create_model, model_validator
 from pydantic_core import PydanticCustomError
 
-from rtsim.channels import BY_NAME, COMMAND_NAMES, SENSOR_NAMES
+from rtsim.channels import BY_NAME, COMMANDS, EPS_COMMANDS, SENSOR_NAMES
 from rtsim.configfile import Range, Strict, bad, validate
 from rtsim.errors import ConfigError
 
@@ -106,14 +106,16 @@ class EffectSpec:
 def _bias_range(channel: str) -> tuple[float, float]:
     """Plausible offsets per channel: a few degrees of mounting tilt for the accelerometers (2 m/s^2),
     MEMS gyro offsets (0.1 rad/s), 0.2 rad for angle encoders and inclinometers, one revolution for a
-    wheel angle counter, 500 kPa, 50 N*m (5 N*m on the steering column), 50 rad/s of engine speed."""
+    wheel angle counter, 500 kPa, 50 N*m (5 N*m on the steering column), 50 rad/s of engine speed; for
+    the EPS's sensors 10 A of current offset, 2 m/s of speed and a whole step of the stage flag."""
     special = {"steering_torque": 5.0, "engine_speed": 50.0}
     if channel in special:
         b = special[channel]
     elif channel.startswith("wheel_angle_"):
         b = 2.0 * math.pi
     else:
-        b = {"m/s^2": 2.0, "rad/s": 0.1, "rad": 0.2, "kPa": 500.0, "N*m": 50.0}[BY_NAME[channel].unit]
+        b = {"m/s^2": 2.0, "rad/s": 0.1, "rad": 0.2, "kPa": 500.0, "N*m": 50.0, "A": 10.0, "m/s": 2.0,
+         "1": 1.0}[BY_NAME[channel].unit]
     return -b, b
 
 
@@ -282,7 +284,7 @@ def _effects_model() -> type[Strict]:
         "_channels_once": model_validator(mode="after")(_channels_once)})
 
 
-SENSOR_CHANNELS = tuple(c for c in BY_NAME.values() if c.name not in COMMAND_NAMES)
+SENSOR_CHANNELS = tuple(c for c in BY_NAME.values() if c not in COMMANDS + EPS_COMMANDS)
 _EFFECTS_MODEL = _effects_model()
 
 

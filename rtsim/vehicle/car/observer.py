@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from math import asin, atan2, sqrt
 
+from drivers.base import S_SPEED, S_X, S_Y, S_YAW
 from rtsim.channels import STATE_NAMES, WHEELS
 from rtsim.jit import kernel
 
@@ -27,6 +28,19 @@ X_THROTTLE, X_BRAKE, X_SW_ANGLE, X_RACK, X_ENGINE, X_PHI = (STATE_NAMES.index(n)
     "constraint_violation"))
 assert STATE_NAMES[X_WHEEL + 6 * 4:X_WHEEL + 7 * 4] == tuple(f"brake_torque_{w}" for w in WHEELS)
 assert NSTATE_OUT == X_PHI + 1 and len(WHEELS) == 4
+
+
+@kernel
+def driver_view(d, veh, out):
+    """What the closed-loop drivers read (drivers.base.S_*: speed m/s along the heading, x, y m and yaw
+    rad of the centre of mass) into out[0:4]."""
+    q, qd = d.q, d.qd
+    ci = veh.chassis_idx
+    ux, uy = q[ci[3]], q[ci[4]]
+    out[S_X] = q[ci[0]]
+    out[S_Y] = q[ci[1]]
+    out[S_YAW] = atan2(uy, ux)
+    out[S_SPEED] = (qd[ci[0]] * ux + qd[ci[1]] * uy + qd[ci[2]] * q[ci[5]]) / max(1e-12, sqrt(ux * ux + uy * uy))
 
 
 @kernel

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from math import asin, atan2
 
-from rtsim.channels import SENSOR_NAMES
+from rtsim.channels import EPS_SENSORS, SENSOR_NAMES
 from rtsim.jit import kernel
 from rtsim.mbs.constraints import poly_eval
 
@@ -27,17 +27,22 @@ from .layout import CI_PHI, CI_S, CI_Z
     SENSOR_NAMES.index(n) for n in (*SENSOR_NAMES[:-2], "wheel_torque_rl", "wheel_torque_rr"))
 NSENSOR = len(SENSOR_NAMES)
 assert SENSOR_NAMES[S_WHEEL_FL] == "wheel_angle_fl" and SENSOR_NAMES[S_STEER_FR] == "steer_angle_fr"
+# a car with electric power steering: its EPS's channels follow (rtsim.channels.EPS_SENSORS)
+S_EPS0 = NSENSOR
+NSENSOR_EPS = NSENSOR + len(EPS_SENSORS)
 
-# subsystem signals handed to the sensors (Signals array)
-SG_BRAKE_PRESSURE, SG_SW_ANGLE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_THROTTLE, SG_TORQUE_LEFT, SG_TORQUE_RIGHT = range(7)
-NSIGNAL = 7
+# subsystem signals handed to the sensors (Signals array); the EPS's five in EPS_SENSORS order
+(SG_BRAKE_PRESSURE, SG_SW_ANGLE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_THROTTLE, SG_TORQUE_LEFT, SG_TORQUE_RIGHT,
+ SG_MOTOR_ANGLE, SG_MOTOR_SPEED, SG_MOTOR_CURRENT, SG_POWER_STAGE, SG_VEHICLE_SPEED) = range(12)
+NSIGNAL = 12
 
 G_WORLD_Z = -9.81
 
 
 @kernel
 def true_sensors(m, d, veh, signals, out):
-    """Noise-free channel values of the current state into out[0:NSENSOR]."""
+    """Noise-free channel values of the current state into out (NSENSOR channels, or NSENSOR_EPS for a
+    car with electric power steering)."""
     q, qd, qdd = d.q, d.qd, d.qdd
     ci = veh.chassis_idx
     om0 = om1 = om2 = 0.0
@@ -89,3 +94,5 @@ def true_sensors(m, d, veh, signals, out):
     out[S_THROTTLE] = signals[SG_THROTTLE]
     out[S_DRIVE_TORQUE_LEFT] = signals[SG_TORQUE_LEFT]
     out[S_DRIVE_TORQUE_RIGHT] = signals[SG_TORQUE_RIGHT]
+    for j in range(out.shape[0] - NSENSOR):
+        out[S_EPS0 + j] = signals[SG_MOTOR_ANGLE + j]

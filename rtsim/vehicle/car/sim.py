@@ -21,7 +21,7 @@ from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZ
                               powertrain_step)
 from ..kit.sensor_model import ST_ON as SM_ST_ON, ST_SLOTS as SM_ST_SLOTS
 from ..kit.sensor_model import copy_noise_state, neutral_params as sm_neutral, seed_noise, sensor_params, sensor_state
-from ..kit.eps import ES_GAIN, eps_state, eps_params, stage_off
+from ..kit.eps import ES_FAULT, ES_GAIN, ES_STAGE, eps_state, eps_params, external_mode, stage_off
 from ..kit.steering import steering_config, steering_params, steering_state
 from ..kit.tyre.magic_formula import effective_rolling_radius
 from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
@@ -30,7 +30,6 @@ from .effect_kernels import (FS_DL, FS_LAG, FS_SIZE, FX_B_LAG, FX_DL, FX_DL_K, F
                              neutral_params, physical_sensors, sensor_stage)
 from .effects import pack_effects, validate_effects
 from .layout import CI_PHI, WHEELS
-from .sensors import NSENSOR
 from .step import CMD_BRAKE, EX_SELECTOR, Parts, States, make_io, make_vehicle_data, vehicle_advance
 
 
@@ -59,6 +58,7 @@ class VehicleSim:
         self.vm = model
         self.road = road
         self.dt = float(dt)
+        self.nsensor = len(model.channels.sensors)      # sensor channels (the car's, and its EPS's)
         cfg = model.config
         self.tyre = load_tir(Path(model.base) / cfg.tyres.property_file)
         self.tp = self.tyre.params
@@ -81,7 +81,7 @@ class VehicleSim:
             sp = eps_params(cfg.eps)
             sts = eps_state()
         self.vd = make_vehicle_data(mech.model.nq)
-        self.parts = Parts(self.tp, bp, pp, sp, neutral_params(), sm_neutral(NSENSOR))
+        self.parts = Parts(self.tp, bp, pp, sp, neutral_params(), sm_neutral(self.nsensor))
         self.states = States(bs, ps, sts, np.zeros(FS_SIZE), sensor_state(self.parts.sensors))
         self._effects: dict = {}
         self.sim = Simulation(mech, self.dt, q0=q0, qd0=qd0)
@@ -194,7 +194,7 @@ class VehicleSim:
             return
         copy_noise_state(old, ss)                        # the noise stream carries on
         if ss[SM_ST_SLOTS] > 0:
-            fill_history(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, ss, np.zeros(NSENSOR))
+            fill_history(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, ss, np.zeros(self.nsensor))
         self.states = self.states._replace(sensors=ss)
 
     def seed_sensor_noise(self, seed: int) -> None:
@@ -205,7 +205,7 @@ class VehicleSim:
         """The physical values the sensors sense, rtsim.channels.SENSOR_NAMES order (with what model
         effects change in the sensing), before the sensor model: for applying the sensor model to a
         sampled series instead (rtsim.vehicle.kit.sensor_model.apply_to_series)."""
-        out = np.zeros(NSENSOR) if out is None else out
+        out = np.zeros(self.nsensor) if out is None else out
         physical_sensors(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, out)
         return out
 
@@ -220,6 +220,22 @@ class VehicleSim:
     def assist_off(self) -> None:
         """EPS: the safe state, power stage off (open winding, no assistance)."""
         stage_off(self.parts.steering, self.states.steering)
+
+    def external_eps(self, on: bool = True) -> None:
+        """EPS: an external controller commands the motor current (``io.commands[CMD_MOTOR_CURRENT]``,
+        with ``CMD_MOTOR_INVALID`` 1.0 while it has no valid command) instead of the built-in law; the
+        power stage switches on at its first valid command, off with the fault latched when its commands
+        stop (``eps_fault``)."""
+        external_mode(self.parts.steering, self.states.steering, on)
+
+    @property
+    def eps_fault(self) -> bool:
+        """EPS: the external controller's commands stopped and the power stage is off (latched)."""
+        return self.has_eps and bool(self.states.steering[ES_FAULT] > 0.5)
+
+    @property
+    def eps_stage_on(self) -> bool:
+        return self.has_eps and bool(self.states.steering[ES_STAGE] > 0.5)
 
     def start_energy_audit(self) -> None:
         """Start the power audit (rtsim.vehicle.car.energy) at the end of the next step."""
@@ -242,7 +258,7 @@ class VehicleSim:
         physical values (with what model effects change in the sensing: the grade's tilted gravity)
         through the sensor model (the config's [sensors.channels] and the sensor effects). Noise, if
         any, is drawn at each call, from the model's own generator (`seed_sensor_noise`; seed 0 at start)."""
-        out = np.zeros(NSENSOR) if out is None else out
+        out = np.zeros(self.nsensor) if out is None else out
         sensor_stage(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, self.parts.sensors,
                      self.states.sensors, out)
         return out

@@ -40,13 +40,15 @@ from .effect_kernels import (BEARING_OMEGA_EPS, FS_DL, FX_BEARING, FX_BRAKE, FX_
 from ..kit.brake import BI_SIZE, BO_LINE, BO_SIZE, BP_EPS, BS_TAU_SLIDE, brake_commit, brake_step, brake_wheel_torque
 from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZE, PI_THROTTLE_CMD, PI_TORQUE_LEFT, PI_TORQUE_RIGHT,
                          PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT, powertrain_step)
-from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_SW_ANGLE, SG_THROTTLE,
-                      SG_TORQUE_LEFT, SG_TORQUE_RIGHT)
+from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_MOTOR_ANGLE, SG_MOTOR_CURRENT,
+                      SG_MOTOR_SPEED, SG_POWER_STAGE, SG_STEERING_TORQUE, SG_SW_ANGLE, SG_THROTTLE, SG_TORQUE_LEFT,
+                      SG_TORQUE_RIGHT, SG_VEHICLE_SPEED)
 from ..kit.sensor_model import ST_SLOTS as SM_ST_SLOTS
 from ..kit.steering import SO_SIZE, SO_SW_ANGLE, SO_TORQUE, steering_control, steering_forces, steering_outputs, \
     steering_tangent
-from ..kit.eps import (EO_SIZE, EO_SW_ANGLE, EO_TB_TORQUE, EP_DRIVER, EP_K_TB, EP_N, EP_RP, ES_T_DRIVER, DRIVER_TORQUE,
-                       eps_commit, eps_control, eps_forces, eps_outputs, hands_step)
+from ..kit.eps import (EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_SIZE, EO_SW_ANGLE, EO_TB_TORQUE, EP_DRIVER,
+                       EP_K_TB, EP_N, EP_RP, ES_EXT, ES_STAGE, ES_T_DRIVER, DRIVER_TORQUE, eps_commit, eps_control,
+                       eps_forces, eps_outputs, external_command, hands_step)
 from ..kit.tables import table_eval
 from .energy_kernels import audit_commit
 from .layout import (
@@ -425,12 +427,12 @@ def vehicle_mbs_step(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, h):
 
 
 # parameter arrays; effects: rtsim.vehicle.car.effect_kernels FX_* (neutral_params() for the nominal model);
-# sensors: the sensor model's (rtsim.vehicle.kit.sensor_model, (NSENSOR, NSM))
+# sensors: the sensor model's (rtsim.vehicle.kit.sensor_model, (channels, NSM))
 Parts = namedtuple("Parts", ["tyre", "brake", "powertrain", "steering", "effects", "sensors"])
 # subsystem state arrays; effects: FS_* (brake lag, driveline nodes); sensors: the sensor model's history
 States = namedtuple("States", ["brake", "powertrain", "steering", "effects", "sensors"])
 IO = namedtuple("IO", [
-    "commands",     # (3,) throttle_angle_cmd rad, brake_pressure_cmd kPa, steering_wheel_angle_cmd rad
+    "commands",     # (NCMD,) CMD_*: throttle rad, brake kPa, steering-wheel angle rad, EPS current A, invalid
     "extra",        # (4,) measured drive torque on the driven axle's left, right wheel (N m), selector
                     # (+1 D, 0 N, -1 R), spare
     "pt_in", "pt_out",
@@ -438,12 +440,18 @@ IO = namedtuple("IO", [
     "eps_out",      # (EO_SIZE,) EPS outputs after the step (rtsim.vehicle.kit.eps EO_*)
     "signals",      # (NSIGNAL,) subsystem values handed to the sensors
 ])
-CMD_THROTTLE, CMD_BRAKE, CMD_STEER = 0, 1, 2
+# the vehicle's command slots; the last two: an external EPS controller's current (A) and 1.0 while it
+# has no valid command (none yet, or timed out); COMMAND_SLOTS: where each command channel goes
+CMD_THROTTLE, CMD_BRAKE, CMD_STEER, CMD_MOTOR_CURRENT, CMD_MOTOR_INVALID = range(5)
+NCMD = 5
+COMMAND_SLOTS = {"throttle_angle_cmd": CMD_THROTTLE, "brake_pressure_cmd": CMD_BRAKE,
+                 "steering_wheel_angle_cmd": CMD_STEER, "motor_current_cmd": CMD_MOTOR_CURRENT}
+INVALID_SLOTS = {"motor_current_cmd": CMD_MOTOR_INVALID}
 EX_TORQUE_LEFT, EX_TORQUE_RIGHT, EX_SELECTOR, EX_SW_TORQUE = 0, 1, 2, 3   # EX_SW_TORQUE: N m, EPS torque mode
 
 
 def make_io() -> IO:
-    return IO(commands=np.zeros(3), extra=np.array([0.0, 0.0, 1.0, 0.0]), pt_in=np.zeros(PI_SIZE),
+    return IO(commands=np.zeros(NCMD), extra=np.array([0.0, 0.0, 1.0, 0.0]), pt_in=np.zeros(PI_SIZE),
               pt_out=np.zeros(PO_SIZE), st_out=np.zeros(SO_SIZE), eps_out=np.zeros(EO_SIZE),
               signals=np.zeros(NSIGNAL))
 
@@ -515,6 +523,10 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
         eps_outputs(stp, sts, d.q, d.qd, ic, ir, t_driver, io.eps_out)
         io.signals[SG_SW_ANGLE] = io.eps_out[EO_SW_ANGLE]
         io.signals[SG_STEERING_TORQUE] = io.eps_out[EO_TB_TORQUE]
+        io.signals[SG_MOTOR_ANGLE] = io.eps_out[EO_MOTOR_ANGLE]
+        io.signals[SG_MOTOR_SPEED] = io.eps_out[EO_MOTOR_SPEED]
+        io.signals[SG_MOTOR_CURRENT] = io.eps_out[EO_CURRENT]
+        io.signals[SG_POWER_STAGE] = sts[ES_STAGE]
         for i in range(2):       # compliance steer of the front knuckles over the next step
             sp = veh.susp[i]
             vd.steer_offset[i] = sp[SP_CFY] * vd.tyre[i, TO_FY] + sp[SP_CMZ] * vd.tyre[i, TO_MZ]
@@ -524,12 +536,14 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
         io.signals[SG_STEERING_TORQUE] = io.st_out[SO_TORQUE]
     if vd.audit[0] > 0.5:
         audit_commit(m, d, veh, vd, parts.steering, states.steering)
+    ci = veh.chassis_idx
+    io.signals[SG_VEHICLE_SPEED] = sqrt(d.qd[ci[0]] ** 2 + d.qd[ci[1]] ** 2 + d.qd[ci[2]] ** 2)
     io.signals[SG_ENGINE_SPEED] = io.pt_out[PO_ENGINE_SPEED]
     io.signals[SG_THROTTLE] = io.pt_out[PO_THROTTLE]
     io.signals[SG_TORQUE_LEFT] = io.pt_out[PO_TORQUE_LEFT]
     io.signals[SG_TORQUE_RIGHT] = io.pt_out[PO_TORQUE_RIGHT]
     if states.sensors[SM_ST_SLOTS] > 0.0:
-        record_sensors(m, d, veh, io.signals, fx, states.sensors)
+        record_sensors(m, d, veh, io.signals, fx, parts.sensors, states.sensors)
     return OK
 
 
@@ -542,6 +556,8 @@ def _eps_before_step(m, d, veh, stp, sts, io, h, ic, ir):
     t_tb = stp[EP_K_TB] * (d.q[ic] - d.q[ir] / rp)
     ci = veh.chassis_idx
     speed = sqrt(d.qd[ci[0]] ** 2 + d.qd[ci[1]] ** 2 + d.qd[ci[2]] ** 2)
+    if sts[ES_EXT] > 0.5:
+        external_command(stp, sts, io.commands[CMD_MOTOR_CURRENT], io.commands[CMD_MOTOR_INVALID] > 0.5)
     eps_control(stp, sts, t_tb, speed, stp[EP_N] * d.qd[ir] / rp, h)
     if stp[EP_DRIVER] == DRIVER_TORQUE:
         sts[ES_T_DRIVER] = io.extra[EX_SW_TORQUE]

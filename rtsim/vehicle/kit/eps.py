@@ -430,7 +430,8 @@ def eps_commit(p, s, h, omega1):
     s[ES_I] = s[ES_I1]
 
 
-def stage_off(p: np.ndarray, s: np.ndarray) -> None:
+@kernel
+def stage_off(p, s):
     """Switch the power stage off (safe state): the winding opens, its stored energy goes into the
     freewheeling path's resistance."""
     if s[ES_STAGE] > 0.5:
@@ -442,6 +443,31 @@ def stage_off(p: np.ndarray, s: np.ndarray) -> None:
 
 def inductance_energy(p: np.ndarray, s: np.ndarray) -> float:
     return 0.5 * p[EP_L] * s[ES_I] ** 2
+
+
+@inline_kernel
+def external_command(p, s, i_cmd, invalid):
+    """An external controller's current command i_cmd (A) for the coming step (``ES_EXT`` set).
+    ``invalid``: no valid command (none yet, or the watchdog timed out). The power stage switches on
+    at the first valid command; a command that stops once the stage is on switches it off with the
+    fault latched (ES_FAULT) until the EPS is reset: the safe state, assist off."""
+    if invalid:
+        if s[ES_STAGE] > 0.5:
+            stage_off(p, s)
+            s[ES_FAULT] = 1.0
+    elif s[ES_STAGE] < 0.5 and s[ES_FAULT] < 0.5:
+        s[ES_STAGE] = 1.0
+    s[ES_EXT_I] = i_cmd
+
+
+def external_mode(p: np.ndarray, s: np.ndarray, on: bool) -> None:
+    """Hand the current command to an external controller (``on``; the stage waits, off, for its first
+    valid command) or back to the built-in assistance law (stage on); either way the fault is cleared."""
+    if on:
+        stage_off(p, s)
+    s[ES_EXT] = 1.0 if on else 0.0
+    s[ES_STAGE] = 0.0 if on else 1.0
+    s[ES_FAULT] = 0.0
 
 
 @inline_kernel
