@@ -1,0 +1,224 @@
+"""A demo EPS controller: the electric power steering's ECU on the bench, talking to the simulated car
+over CAN only (``configs/can/eps_car.dbc``), as the controller under test would.
+
+Every 1 ms, when both EPS sensor frames of a sample have arrived (torsion-bar torque, steering-wheel
+angle, motor speed, angle and current, the power stage's state, the vehicle speed), it computes a
+motor current command and sends EPS_MOTOR_CMD with its alive counter and CRC:
+
+    i* = boost(|T_tb|, v) sign(T_tb) - k_d omega_m          (A)
+
+``boost`` is the controller's own calibration (``BOOST_*``: current against torsion-bar torque at a
+few vehicle speeds, interpolated; a dead band of 0.5 N m, a rise to the full 70 A at 8 N m parked and
+at 16 N m and above at speed), ``k_d`` a damping on the motor speed that keeps the hands-off wheel
+from overshooting. It knows nothing of the car's model or of its configuration: the same DBC a real
+EPS ECU would be flashed against.
+
+``--lockstep``: the controller also drives simulated time (one SIM_STEP_REQ of 1 step after each
+command, waiting for SIM_STEP_ACK): deterministic runs for CI. ``--silent-after T``: stop sending
+commands after T s of simulated time (a controller that hangs) but keep requesting steps in lockstep
+for ``--linger`` s more, so the service's watchdog and safe state can be observed; the summary then
+says when the power stage was seen off.
+
+Run as a separate process (``python -m drivers.eps_demo --can-interface remote --can-channel
+127.0.0.1:54701``); it prints a one-line JSON summary last; failures are one ``eps_demo: error: ...``
+line on stderr and a non-zero exit.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bridge.bus_wait import Waiting, bus_name, wait_for_bus
+from bridge.can_codec import Codec
+from bridge.can_pack import SensorDecoder
+from rtsim.channels import car_channels
+from rtsim.errors import RtsimError
+
+ROOT = Path(__file__).resolve().parents[1]
+DBC = ROOT / "configs" / "can" / "eps_car.dbc"
+EPS_FRAMES = ("EPS_SENSORS_A", "EPS_SENSORS_B")
+# the controller's calibration: motor current (A) against torsion-bar torque (N m), per vehicle speed
+BOOST_SPEED = (0.0, 10.0, 30.0)                       # m/s
+BOOST_TORQUE = (0.0, 0.5, 2.0, 4.0, 8.0, 16.0)        # N m
+BOOST_CURRENT = ((0.0, 0.0, 10.0, 30.0, 70.0, 70.0),  # parked
+                 (0.0, 0.0, 6.0, 18.0, 45.0, 70.0),
+                 (0.0, 0.0, 3.0, 9.0, 25.0, 60.0))    # at speed: less assistance, more feel
+DAMPING = 0.02                                        # A per rad/s of motor speed
+CURRENT_LIMIT = 70.0                                  # A
+
+
+def boost(torque: float, speed: float) -> float:
+    """The calibration's current (A) for a torsion-bar torque (N m) at a vehicle speed (m/s)."""
+    mag = abs(torque)
+    rows = [np.interp(mag, BOOST_TORQUE, row) for row in BOOST_CURRENT]
+    return math.copysign(float(np.interp(speed, BOOST_SPEED, rows)), torque)
+
+
+class EpsController:
+    """The controller's logic on decoded samples; bus I/O is done by ``run``."""
+
+    def __init__(self, codec: Codec):
+        self.codec = codec
+        self.decoder = SensorDecoder(codec, frames=EPS_FRAMES)
+        names = codec.channels.sensor_names
+        self._i = {n: names.index(n) for n in ("steering_torque", "eps_motor_speed", "vehicle_speed",
+                                               "eps_power_stage")}
+        self.command = 0.0
+        self.counter = 0
+        self.samples = 0
+        self.t = 0.0
+        self.peak_current = 0.0
+        self.stage_off_at: float | None = None      # simulated time the power stage was seen off, s
+        self.stage_seen_on = False
+
+    def on_sample(self, t: float, values: np.ndarray) -> None:
+        """One complete EPS sample at simulated time t (s): the next current command."""
+        self.t = t
+        self.samples += 1
+        tb = values[self._i["steering_torque"]]
+        i = boost(tb, values[self._i["vehicle_speed"]]) - DAMPING * values[self._i["eps_motor_speed"]]
+        self.command = min(max(i, -CURRENT_LIMIT), CURRENT_LIMIT)
+        self.peak_current = max(self.peak_current, abs(self.command))
+        on = values[self._i["eps_power_stage"]] > 0.5
+        if on:
+            self.stage_seen_on = True
+        elif self.stage_seen_on and self.stage_off_at is None:
+            self.stage_off_at = t
+
+    def command_frame(self) -> tuple[int, bytes]:
+        self.counter = (self.counter + 1) & 0xF
+        return self.codec.encode_command("motor_current_cmd", self.command, self.counter)
+
+    def summary(self) -> dict:
+        return {"ecu_time": self.t, "samples": self.samples, "peak_current_cmd": self.peak_current,
+                "stage_seen_on": self.stage_seen_on, "stage_off_at": self.stage_off_at}
+
+
+def run(bus, ctl: EpsController, duration: float | None = None, lockstep: bool = False,
+        silent_after: float | None = None, linger: float = 0.25, timeout: float = 5.0,
+        first_frame_timeout: float = 60.0, waiting: Waiting | None = None) -> dict:
+    """Command every sample until ``duration`` s of simulated time (or ``silent_after`` + ``linger``),
+    or no frame for ``timeout`` s of wall time once frames flowed. Returns the summary plus counters."""
+    import can
+
+    sent = received = commands = 0
+    step_counter = 0
+    last_command_t = None
+
+    def send(fid, data):
+        nonlocal sent
+        try:
+            bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+        except Exception as exc:  # noqa: BLE001  (backends raise many types)
+            raise RtsimError(f"lost the CAN bus ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+        sent += 1
+
+    def request_step():
+        nonlocal step_counter
+        step_counter = (step_counter + 1) & 0xF
+        send(*ctl.codec.encode_step_request(1, step_counter))
+
+    end = math.inf if duration is None else duration
+    if silent_after is not None:
+        end = min(end, silent_after + linger)
+    if lockstep:
+        request_step()
+    ack_id = ctl.codec.step_ack.frame_id
+    last_rx = time.monotonic()
+    while ctl.t < end - 1e-9:
+        try:
+            msg = bus.recv(0.1)
+        except Exception as exc:  # noqa: BLE001
+            raise RtsimError(f"lost the CAN bus ({type(exc).__name__})") from None
+        if msg is None:
+            if time.monotonic() - last_rx > (timeout if received else first_frame_timeout):
+                break
+            if not received and waiting is not None:
+                waiting.tick("the service's first sensor frames")
+            continue
+        last_rx = time.monotonic()
+        if not received and waiting is not None:
+            waiting.done("first frames from the service")
+        received += 1
+        if lockstep and msg.arbitration_id == ack_id:
+            _, ctr = ctl.codec.decode_step_ack(msg.data)
+            if ctr == step_counter:
+                request_step()
+            continue
+        if ctl.decoder.receive(msg.arbitration_id, msg.data):
+            ctl.on_sample(ctl.decoder.time, ctl.decoder.values)
+            if silent_after is None or ctl.t < silent_after - 1e-9:
+                send(*ctl.command_frame())
+                commands += 1
+                last_command_t = ctl.t
+    out = ctl.summary()
+    out.update({"frames_sent": sent, "frames_received": received, "commands_sent": commands,
+                "last_command_sample_t": last_command_t})
+    return out
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number of seconds")
+    return v
+
+
+def _say(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m drivers.eps_demo", description=__doc__.split("\n\n")[0])
+    p.add_argument("--can-interface")
+    p.add_argument("--can-channel")
+    p.add_argument("--duration", type=_positive, help="stop after this much simulated time, s")
+    p.add_argument("--lockstep", action="store_true", help="request the steps (service in --mode lockstep)")
+    p.add_argument("--silent-after", type=_positive, help="stop commanding after this much simulated time, s")
+    p.add_argument("--linger", type=_positive, default=0.25,
+                   help="with --silent-after: keep stepping (lockstep) or listening this long, s (default 0.25)")
+    p.add_argument("--manoeuvre", help="(accepted for the demo's interface; the scenario drives the driver)")
+    p.add_argument("--timeout", type=_positive, default=5.0,
+                   help="give up after this long without frames once they flowed, s (default 5)")
+    p.add_argument("--connect-timeout", type=_positive, default=600.0,
+                   help="wait at most this long for the service's bus and first frames, s (default 600)")
+    p.add_argument("--report-every", type=_positive, default=10.0,
+                   help="while waiting for the service, say so this often, s (default 10)")
+    args = p.parse_args(argv)
+    try:
+        ctl = EpsController(Codec(DBC, car_channels(("fl", "fr"), eps=True)))
+        waiting = Waiting("eps_demo", _say, args.report_every)
+        bus = wait_for_bus(args.can_interface, args.can_channel, waiting.start + args.connect_timeout, waiting)
+        try:
+            first = max(1.0, waiting.start + args.connect_timeout - time.monotonic())
+            result = run(bus, ctl, args.duration, args.lockstep, args.silent_after, args.linger, args.timeout,
+                         first, waiting)
+        finally:
+            try:
+                bus.shutdown()
+            except Exception:  # noqa: BLE001
+                pass
+    except RtsimError as exc:
+        _say(f"eps_demo: error: {exc}")
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    print(json.dumps(result), flush=True)
+    if result["samples"] == 0:
+        _say(f"eps_demo: error: no EPS sensor sample from the service on "
+             f"{bus_name(args.can_interface, args.can_channel)} after {waiting.elapsed:.0f} s")
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
