@@ -8,6 +8,8 @@ every ``every`` s while a wait lasts, so the user knows what the client is waiti
 """
 from __future__ import annotations
 
+import argparse
+import math
 import time
 from typing import Callable
 
@@ -68,3 +70,29 @@ def wait_for_bus(interface: str | None, channel: str | None, deadline: float, wa
             continue
         waiting.done(f"on the service's CAN bus at {where}")
         return bus
+
+
+def positive_seconds(text: str) -> float:
+    """argparse type: a positive, finite number of seconds."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number of seconds")
+    return v
+
+
+def add_client_arguments(p: argparse.ArgumentParser) -> None:
+    """The bus and waiting options every CAN client of the service takes (the demo ECUs)."""
+    p.add_argument("--can-interface")
+    p.add_argument("--can-channel")
+    p.add_argument("--duration", type=positive_seconds, help="stop after this much simulated time, s")
+    p.add_argument("--lockstep", action="store_true", help="request the steps (service in --mode lockstep)")
+    p.add_argument("--timeout", type=positive_seconds, default=5.0,
+                   help="give up after this long without frames once they flowed, s (default 5)")
+    p.add_argument("--connect-timeout", type=positive_seconds, default=600.0,
+                   help="wait at most this long for the service: its CAN bus, then its first sensor frames "
+                        "(a first run on a fresh machine compiles for a minute or more), s (default 600)")
+    p.add_argument("--report-every", type=positive_seconds, default=10.0,
+                   help="while waiting for the service, say so this often, s (default 10)")

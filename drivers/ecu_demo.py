@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bridge.bus_wait import Waiting, bus_name, wait_for_bus
+from bridge.bus_wait import Waiting, add_client_arguments, bus_name, wait_for_bus
 from bridge.can_codec import Codec
 from bridge.can_pack import SensorDecoder
 from rtsim.errors import RtsimError
@@ -243,34 +243,14 @@ def _lost(exc: Exception) -> RtsimError:
                       f"the service stopped or its hub went away")
 
 
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number of seconds")
-    return v
-
-
 def _say(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m drivers.ecu_demo", description=__doc__.split("\n\n")[0])
-    p.add_argument("--can-interface")
-    p.add_argument("--can-channel")
-    p.add_argument("--duration", type=_positive, help="stop after this much simulated time, s")
+    add_client_arguments(p)
     p.add_argument("--manoeuvre", choices=["demo", "straight_line", "lane_change"], default="demo")
-    p.add_argument("--lockstep", action="store_true", help="request the steps (service in --mode lockstep)")
-    p.add_argument("--timeout", type=_positive, default=5.0,
-                   help="give up after this long without frames once they flowed, s (default 5)")
-    p.add_argument("--connect-timeout", type=_positive, default=600.0,
-                   help="wait at most this long for the service: its CAN bus, then its first sensor frames "
-                        "(a first run on a fresh machine compiles for a minute or more), s (default 600)")
-    p.add_argument("--report-every", type=_positive, default=10.0,
-                   help="while waiting for the service, say so this often, s (default 10)")
     args = p.parse_args(argv)
 
     from rtsim.compile_status import CompileProgress

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bridge.bus_wait import Waiting, bus_name, wait_for_bus
+from bridge.bus_wait import Waiting, add_client_arguments, bus_name, positive_seconds, wait_for_bus
 from bridge.can_codec import Codec
 from bridge.can_pack import SensorDecoder
 from rtsim.channels import car_channels
@@ -163,36 +163,17 @@ def run(bus, ctl: EpsController, duration: float | None = None, lockstep: bool =
     return out
 
 
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive number of seconds")
-    return v
-
-
 def _say(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m drivers.eps_demo", description=__doc__.split("\n\n")[0])
-    p.add_argument("--can-interface")
-    p.add_argument("--can-channel")
-    p.add_argument("--duration", type=_positive, help="stop after this much simulated time, s")
-    p.add_argument("--lockstep", action="store_true", help="request the steps (service in --mode lockstep)")
-    p.add_argument("--silent-after", type=_positive, help="stop commanding after this much simulated time, s")
-    p.add_argument("--linger", type=_positive, default=0.25,
+    add_client_arguments(p)
+    p.add_argument("--silent-after", type=positive_seconds, help="stop commanding after this much simulated time, s")
+    p.add_argument("--linger", type=positive_seconds, default=0.25,
                    help="with --silent-after: keep stepping (lockstep) or listening this long, s (default 0.25)")
     p.add_argument("--manoeuvre", help="(accepted for the demo's interface; the scenario drives the driver)")
-    p.add_argument("--timeout", type=_positive, default=5.0,
-                   help="give up after this long without frames once they flowed, s (default 5)")
-    p.add_argument("--connect-timeout", type=_positive, default=600.0,
-                   help="wait at most this long for the service's bus and first frames, s (default 600)")
-    p.add_argument("--report-every", type=_positive, default=10.0,
-                   help="while waiting for the service, say so this often, s (default 10)")
     args = p.parse_args(argv)
     try:
         ctl = EpsController(Codec(DBC, car_channels(("fl", "fr"), eps=True)))

@@ -35,26 +35,25 @@ from .loop import HilLoop, Request
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def resolve_scenario(name: str | Path) -> Path:
-    """A scenario path, or a bare name of configs/scenarios/<name>.toml."""
+def _resolve(name: str | Path, kind: str, folder: str) -> Path:
+    """A config path, or a bare name of configs/<folder>/<name>.toml."""
     p = Path(name)
     if p.exists():
         return p
-    cand = ROOT / "configs" / "scenarios" / f"{name}.toml"
+    cand = ROOT / "configs" / folder / f"{name}.toml"
     if cand.exists():
         return cand
-    raise ConfigError(f"scenario {str(name)!r}: no such file and no configs/scenarios/{name}.toml")
+    raise ConfigError(f"{kind} {str(name)!r}: no such file and no configs/{folder}/{name}.toml")
+
+
+def resolve_scenario(name: str | Path) -> Path:
+    """A scenario path, or a bare name of configs/scenarios/<name>.toml."""
+    return _resolve(name, "scenario", "scenarios")
 
 
 def resolve_vehicle(name: str | Path) -> Path:
     """A vehicle path, or a bare name of configs/vehicles/<name>.toml."""
-    p = Path(name)
-    if p.is_file():
-        return p
-    cand = ROOT / "configs" / "vehicles" / f"{name}.toml"
-    if cand.is_file():
-        return cand
-    raise ConfigError(f"vehicle {str(name)!r}: no such file and no configs/vehicles/{name}.toml")
+    return _resolve(name, "vehicle", "vehicles")
 
 
 def build_sim(scenario: Path, vehicle: Path | None = None, dt: float | None = None,
