@@ -150,11 +150,14 @@ def test_the_service_loop_refuses_a_dictionary_its_kernel_does_not_produce(tmp_p
     """The car's compiled loop writes the car's sensor channels: a codec for a dictionary of another
     size is refused by name before anything runs."""
     from rtsim.errors import RtsimError
+    from rtsim.service.config import DEFAULT_SCENARIO
     from rtsim.service.loop import HilLoop
+    from rtsim.service.server import build_sim
 
+    sim, _ = build_sim(DEFAULT_SCENARIO)
     with pytest.raises(RtsimError, match=rf"small.dbc: the vehicle declares 20 sensor and {len(CAR.state)} state "
                                          rf"channels; the car's loop produces 21 and {len(CAR.state)}"):
-        HilLoop(None, Codec(small_dbc(tmp_path / "small.dbc"), SMALL), mode="fast")
+        HilLoop(sim, Codec(small_dbc(tmp_path / "small.dbc"), SMALL), mode="fast")
 
 
 def test_the_front_drive_cars_own_sensor_channels_take_sensor_parameters(tmp_path):

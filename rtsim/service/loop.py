@@ -77,7 +77,7 @@ class HilLoop:
         self.on_chunk = on_chunk
         ch = codec.channels               # the served vehicle's interface: ring widths, payload names
         if (len(ch.sensors), len(ch.state)) != (sim.nsensor, NSTATE_OUT):
-            raise RtsimError(f"{codec.path}: the DBC's vehicle declares {len(ch.sensors)} sensor and "
+            raise RtsimError(f"{codec.path}: the vehicle declares {len(ch.sensors)} sensor and "
                              f"{len(ch.state)} state channels; the car's loop produces {sim.nsensor} and {NSTATE_OUT}")
         self.rings = rings if rings is not None else make_rings(
             len(ch.sensors), len(codec.sensor_frames), len(ch.state), len(ch.commands))
