@@ -13,13 +13,18 @@ channel's unit, see `drivers.base`):
     ramp(t0, v0=.., rate=..)            v0 until t0, then v0 + rate (t - t0) without end
     pulse(t0, value, rise, width, fall) trapezoid on a base (default 0): up over `rise` from t0, level
                                         for `width`, down over `fall`
+    sine(amplitude, frequency, phase=0, t0=0, offset=0, fade_cycles=0)
+                                        `offset` until t0, then offset + amplitude w(t) sin(2 pi f (t - t0)
+                                        + phase); w rises from 0 to 1 over the first `fade_cycles`
+                                        periods as a half cosine, 1/2 (1 - cos(pi (t - t0) / T_fade)),
+                                        so that with phase 0 value and rate start smoothly; no fade: w = 1
     a + b, total([a, b, ...])           sum of profiles
     sequence([(d0, a), (d1, b), ...])   a for d0 seconds, then b for d1 seconds, ...; each part runs
                                         in its own time, starting at 0 when its segment starts; the
                                         last duration may be None (for ever). Segments start at t = 0.
 
 Evaluation. `pack({channel: profile})` flattens every profile into *terms*: an elementary function
-(constant, ramp, slope, table, uniform table) with a time window [t_on, t_off) and a time shift; a
+(constant, ramp, slope, table, uniform table, sine) with a time window [t_on, t_off) and a time shift; a
 channel's value is the sum of its active terms evaluated at t - shift. Sums concatenate terms and
 sequences window and shift them, so any nesting flattens to one array of terms per channel. The
 packed arrays (`Packed`) are what the kernels read: `eval_profiles(p, t, out)` writes all channels at
@@ -45,7 +50,9 @@ K_RAMP = 1     # t0, t1, v0, v1: v0 before t0, linear to v1 at t1 (t1 == t0: a s
 K_SLOPE = 2    # t0, rate, v0: v0 before t0, v0 + rate (t - t0) after
 K_TABLE = 3    # hold flag (1: zero-order hold); nodes tab_t/tab_v[start:start + n]
 K_UNIFORM = 4  # t_first, dt, hold flag; values tab_v[start:start + n] at t_first + k dt
-KIND_NAMES = ("constant", "ramp", "slope", "table", "uniform")
+K_SINE = 5     # amplitude, angular frequency (rad/s), phase (rad), fade-in time (s); its own time
+               # starts at 0 at the sine's t0 (the term's window opens there and its shift is t0)
+KIND_NAMES = ("constant", "ramp", "slope", "table", "uniform", "sine")
 
 #: Zero-order hold switches to a node's value when t is within this many seconds of the node (times
 #: built as k*dt may land a rounding error below it).
@@ -106,6 +113,16 @@ def _uniform(tv, s, n, tau, t_first, dt, hold):
     return tv[s + i] + f * (tv[s + i + 1] - tv[s + i])
 
 
+@inline_kernel
+def _sine(tau, amp, omega, phase, fade):
+    """amp w(tau) sin(omega tau + phase), tau >= 0 (s since the sine's start); w: a half-cosine rise
+    from 0 to 1 over `fade` s (1 without fade)."""
+    w = 1.0
+    if tau < fade:
+        w = 0.5 * (1.0 - math.cos(math.pi * tau / fade))
+    return amp * w * math.sin(omega * tau + phase)
+
+
 @kernel
 def eval_channel(p, c, t):
     """Value of channel c of the packed profiles `p` at time t (0 for a channel without terms)."""
@@ -135,8 +152,10 @@ def eval_channel(p, c, t):
                 val += c2 + b * (tau - a)
         elif kind == K_TABLE:
             val += _table(p.tab_t, p.tab_v, p.tab[k, 0], p.tab[k, 1], tau, a)
-        else:  # K_UNIFORM
+        elif kind == K_UNIFORM:
             val += _uniform(p.tab_v, p.tab[k, 0], p.tab[k, 1], tau, a, b, c2)
+        else:  # K_SINE
+            val += _sine(tau, a, b, c2, d)
     return val
 
 
@@ -289,6 +308,30 @@ class Uniform(Profile):
 
 
 @dataclass(frozen=True)
+class Sine(Profile):
+    """0 before t0, then amplitude w(t) sin(2 pi frequency (t - t0) + phase), w rising over
+    fade_cycles periods (see `sine`)."""
+    amplitude: float
+    frequency: float
+    phase: float = 0.0
+    t0: float = 0.0
+    fade_cycles: float = 0.0
+
+    def __post_init__(self):
+        for n in ("amplitude", "frequency", "phase", "t0", "fade_cycles"):
+            _finite(n, getattr(self, n))
+        if not self.frequency > 0.0:
+            raise ValueError(f"sine frequency = {self.frequency} Hz must be > 0")
+        if not self.fade_cycles >= 0.0:
+            raise ValueError(f"sine fade_cycles = {self.fade_cycles} must be >= 0")
+
+    def terms(self):
+        t0 = float(self.t0)
+        return [(K_SINE, t0, math.inf, t0, (float(self.amplitude), 2.0 * math.pi * self.frequency,
+                                            float(self.phase), self.fade_cycles / self.frequency), None, None)]
+
+
+@dataclass(frozen=True)
 class Sum(Profile):
     parts: tuple
 
@@ -361,6 +404,15 @@ def pulse(t0: float, value: float, rise: float, width: float, fall: float, base:
     return Sum((Constant(float(base)),
                 Ramp(float(t0), float(t0 + rise), 0.0, float(value - base)),
                 Ramp(float(t_down), float(t_down + fall), 0.0, float(base - value))))
+
+
+def sine(amplitude: float, frequency: float, phase: float = 0.0, t0: float = 0.0, offset: float = 0.0,
+         fade_cycles: float = 0.0) -> Profile:
+    """`offset` until t0, then offset + amplitude w sin(2 pi frequency (t - t0) + phase) for ever
+    (frequency in Hz, phase in rad); w rises from 0 to 1 over the first `fade_cycles` periods as a half
+    cosine (0: no fade, the sine starts at full amplitude)."""
+    s = Sine(float(amplitude), float(frequency), float(phase), float(t0), float(fade_cycles))
+    return s if offset == 0.0 else Sum((Constant(float(offset)), s))
 
 
 def total(parts: Iterable[Profile]) -> Sum:

@@ -39,6 +39,9 @@ Profiles (`type` selects; see `drivers.profiles` for the exact semantics; times 
     type = "step"       t0, after, before = 0, ramp = 0 (s from before to after)
     type = "ramp"       t0, t1, v0 = 0, v1 (or rate instead of v1); without t1: t0, v0, rate (for ever)
     type = "pulse"      t0, value, rise, width, fall, base = 0 (a trapezoid)
+    type = "sine"       amplitude (>= 0), frequency (Hz, 0 < f <= 100), phase = 0 (rad, -2 pi .. 2 pi),
+                        t0 = 0 (start), offset = 0 (the value before t0 and the sine's centre),
+                        fade_cycles = 0 (periods over which the amplitude rises from 0, 0 .. 1000)
     type = "sum"        [[...terms]]: profiles added
     type = "sequence"   [[...segments]]: profiles one after another, each with `duration` (s; the
                         last may omit it: for ever), each on its own clock starting at 0
@@ -108,6 +111,10 @@ Yaw = Range(-2.0 * math.pi, 2.0 * math.pi, "rad")
 Duration = Range(0.0, 3600.0, "s", lo_open=True)
 Step = Range(1e-5, 0.01, "s")
 Rate = Range(0.0, 1e4, "Hz", lo_open=True)
+Amplitude = Range(0.0, 1e9)
+Frequency = Range(0.0, 100.0, "Hz", lo_open=True)
+Phase = Range(-2.0 * math.pi, 2.0 * math.pi, "rad")
+Cycles = Range(0.0, 1000.0, "cycles")
 
 def _param_fields(ranges: dict, defaults) -> dict:
     return range_fields(ranges, {n: getattr(defaults, n) for n in ranges})
@@ -193,6 +200,16 @@ class PulseSpec(_Profile):
     base: Num = 0.0
 
 
+class SineSpec(_Profile):
+    type: Literal["sine"]
+    amplitude: Amplitude
+    frequency: Frequency
+    phase: Phase = 0.0
+    t0: Time = 0.0
+    offset: Num = 0.0
+    fade_cycles: Cycles = 0.0
+
+
 class SumSpec(_Profile):
     type: Literal["sum"]
     terms: list["ProfileSpec"] = Field(min_length=1)
@@ -212,9 +229,9 @@ class ReplaySpec(_Profile):
 
 
 ProfileSpec = Annotated[
-    Union[ConstantSpec, TableSpec, StepSpec, RampSpec, PulseSpec, SumSpec, SequenceSpec, ReplaySpec],
+    Union[ConstantSpec, TableSpec, StepSpec, RampSpec, PulseSpec, SineSpec, SumSpec, SequenceSpec, ReplaySpec],
     Field(discriminator="type")]
-PROFILE_TYPES = ("constant", "table", "step", "ramp", "pulse", "sum", "sequence", "replay")
+PROFILE_TYPES = ("constant", "table", "step", "ramp", "pulse", "sine", "sum", "sequence", "replay")
 SumSpec.model_rebuild()
 SequenceSpec.model_rebuild()
 
@@ -497,6 +514,12 @@ def _check_values(file: Path, key: str, ch: str, s: Any) -> None:
     elif isinstance(s, PulseSpec):
         check("base", s.base)
         check("value", s.value)
+    elif isinstance(s, SineSpec):
+        check("offset", s.offset)
+        for extreme in (s.offset - s.amplitude, s.offset + s.amplitude):
+            if not lo <= extreme <= hi:
+                raise _fail(file, f"{key}.amplitude", s.amplitude, f"offset {s.offset:+g} +- amplitude reaches "
+                            f"{extreme:g}, out of range for {ch} (allowed {lo:g} .. {hi:g} {unit})")
     elif isinstance(s, SequenceSpec):
         for i, t in enumerate(s.segments):
             _check_values(file, f"{key}.segments[{i}]", ch, t)
@@ -514,6 +537,9 @@ def _build(sc: Scenario, key: str, ch: str, s: Any) -> Profile:
             return P.ramp(s.t0, s.t1, v0=s.v0, v1=s.v1, rate=s.rate)
         if isinstance(s, PulseSpec):
             return P.pulse(s.t0, s.value, s.rise, s.width, s.fall, base=s.base)
+        if isinstance(s, SineSpec):
+            return P.sine(s.amplitude, s.frequency, phase=s.phase, t0=s.t0, offset=s.offset,
+                          fade_cycles=s.fade_cycles)
         if isinstance(s, SumSpec):
             return P.total(_build(sc, f"{key}.terms[{i}]", ch, t) for i, t in enumerate(s.terms))
         if isinstance(s, SequenceSpec):

@@ -6,6 +6,7 @@
     rtsim bench    benchmarks                              rtsim describe the vehicle model
     rtsim validate field runs vs the model: find, fit and add the missing effect, report
     rtsim plot     figures of a run (CSV or MCAP) as PNG
+    rtsim energy   the power audit of a run                rtsim feel     steering feel of a run (EPS car)
 """
 from __future__ import annotations
 
@@ -129,6 +130,31 @@ def _energy(args) -> int:
     return 0
 
 
+def _feel(args) -> int:
+    from pathlib import Path
+
+    from rtsim.analyses.feel import steering_feel, table
+    from rtsim.analyses.figures import read_recorded
+
+    for flag, value in (("--at", args.at), ("--half-width", args.half_width)):
+        if not (value > 0 and math.isfinite(value)):
+            raise RtsimError(f"{flag} must be a positive number of g, got {value}")
+    columns, data = read_recorded(args.run)
+    feel = steering_feel(columns, data, start=args.start, end=args.end, at=args.at,
+                         half_width=args.half_width, source=args.run)
+    if args.json:
+        print(json.dumps(feel.as_dict(), indent=2))
+    else:
+        from rich.console import Console
+        Console().print(table(feel, Path(args.run).name))
+    if args.plot is not None:
+        from rtsim.analyses.feel_figures import write_feel_figures
+        from rtsim.analyses.figures import default_dir
+        for path in write_feel_figures(columns, data, feel, args.plot or default_dir(args.run), Path(args.run).stem):
+            print(f"figure -> {path}")
+    return 0
+
+
 def _plot(args) -> int:
     from pathlib import Path
 
@@ -201,6 +227,21 @@ def build_parser() -> argparse.ArgumentParser:
     en = sub.add_parser("energy", help="the power audit of a recorded run: every port's energy and the balance")
     en.add_argument("run", help="a run's MCAP or CSV (rtsim run --out)")
     en.set_defaults(func=_energy)
+    fe = sub.add_parser("feel", help="steering feel of a recorded run: torque against lateral acceleration "
+                        "(gradients, hysteresis), angle gradient, the EPS motor's current, voltage and power")
+    fe.add_argument("run", help="a run's MCAP or CSV (rtsim run --out) of a car with electric power steering")
+    fe.add_argument("--from", dest="start", type=float, metavar="S",
+                    help="start of the analysed window, s (default: the steady cycles of the steering input)")
+    fe.add_argument("--to", dest="end", type=float, metavar="S", help="end of the analysed window, s")
+    fe.add_argument("--at", type=float, default=0.1, metavar="G",
+                    help="lateral acceleration of the second gradient, g (0.1)")
+    fe.add_argument("--half-width", type=float, default=0.02, metavar="G",
+                    help="half-width of the local fits' window, g (0.02)")
+    fe.add_argument("--json", action="store_true", help="print the report as JSON")
+    fe.add_argument("--plot", nargs="?", const="", metavar="DIR",
+                    help="also write PNG figures (torque against lateral acceleration; motor current, voltage "
+                         "and power) into DIR (default: <run stem>_plots/ beside the run)")
+    fe.set_defaults(func=_feel)
     pl = sub.add_parser("plot", help="write PNG figures of a recorded run (CSV or MCAP)")
     pl.add_argument("run", help="the run: .csv (header row) or .mcap recording")
     pl.add_argument("--out", metavar="DIR", help="folder for the figures (default: <run stem>_plots/ beside it)")

@@ -1,5 +1,5 @@
 """Open-loop profiles (drivers/profiles.py): exact values at table nodes, linear in between, steps,
-ramps, pulses, sums and sequences, and the packed all-channel kernel."""
+ramps, pulses, sines, sums and sequences, and the packed all-channel kernel."""
 from __future__ import annotations
 
 import math
@@ -60,6 +60,26 @@ def test_pulse_trapezoid():
                                [0.05, 0.05, 0.175, 0.3, 0.3, 0.175, 0.05, 0.05], atol=1e-12)
 
 
+def test_sine_against_its_formula():
+    """offset before t0; after it offset + A sin(2 pi f (t - t0) + phase), the amplitude rising over the
+    fade cycles as 1/2 (1 - cos(pi tau / T_fade)); value and rate continuous at t0 with phase 0."""
+    a, f, ph, t0, off = 0.3, 0.2, 0.4, 1.5, -0.05
+    s = P.sine(a, f, phase=ph, t0=t0, offset=off)
+    t = np.linspace(-2.0, 30.0, 3201)
+    want = np.where(t < t0, off, off + a * np.sin(2 * np.pi * f * (t - t0) + ph))
+    np.testing.assert_allclose(s.sample(t), want, rtol=0, atol=1e-12)
+    fade = P.sine(a, f, t0=t0, fade_cycles=1.5)
+    tf = 1.5 / f                                            # 7.5 s of fade
+    tau = t - t0
+    w = np.where(tau < 0, 0.0, np.where(tau < tf, 0.5 * (1 - np.cos(np.pi * np.clip(tau, 0, tf) / tf)), 1.0))
+    np.testing.assert_allclose(fade.sample(t), w * a * np.sin(2 * np.pi * f * tau), rtol=0, atol=1e-12)
+    # smooth start: the first millisecond moves by far less than a sine at full amplitude would
+    assert abs(fade.sample([t0 + 1e-3])[0]) < 1e-6
+    # on a sequence segment's own clock
+    seq = P.sequence([(2.0, P.constant(0.0)), (None, P.sine(1.0, 0.5))])
+    np.testing.assert_allclose(seq.sample([1.0, 2.0, 2.5, 3.0, 4.0]), [0.0, 0.0, 1.0, 0.0, 0.0], atol=1e-12)
+
+
 def test_sum_and_sequence():
     s = P.table([0.0, 4.0], [0.0, 4.0]) + P.step(2.0, 10.0) + P.constant(-1.0)
     np.testing.assert_allclose(s.sample([0.0, 1.0, 2.0, 3.0]), [-1.0, 0.0, 11.0, 12.0], atol=1e-12)
@@ -113,6 +133,9 @@ def test_uniform_table_o1_lookup():
     lambda: P.ramp(0.0, 1.0, 0.0, 1.0, rate=2.0),
     lambda: P.sequence([(None, P.constant(1.0)), (1.0, P.constant(2.0))]),
     lambda: P.sequence([(0.0, P.constant(1.0))]),
+    lambda: P.sine(1.0, 0.0),
+    lambda: P.sine(1.0, 1.0, fade_cycles=-1.0),
+    lambda: P.sine(np.inf, 1.0),
 ])
 def test_invalid_profiles_rejected(make):
     with pytest.raises(ValueError):

@@ -134,6 +134,10 @@ after = 0.1
 """
 
 
+STEP = 'type = "step"\nt0 = 1.0\nafter = 0.1\n'
+SINE = 'type = "sine"\namplitude = 0.3\nfrequency = 0.2\n'
+
+
 def write(tmp_path, text, name="sc.toml"):
     p = tmp_path / name
     p.write_text(text)
@@ -154,6 +158,13 @@ def write(tmp_path, text, name="sc.toml"):
     (BASE + "[inputs.path_follower]\nx = [0, 1]\ny = [0, 0]\n", "inputs.steering_wheel_angle_cmd", "'step'"),
     (BASE.replace("duration = 5.0", "duration = 5.0\nwheelbase = 2.6"), "wheelbase", "2.6"),
     (BASE.replace("after = 0.1", "after = 0.1\nduration = 3.0"), "inputs.steering_wheel_angle_cmd.duration", "3.0"),
+    (BASE.replace(STEP, SINE.replace("frequency = 0.2", "frequency = 0.0")),
+     "inputs.steering_wheel_angle_cmd.frequency", "0.0"),
+    (BASE.replace(STEP, SINE + "fade_cycles = -1\n"), "inputs.steering_wheel_angle_cmd.fade_cycles", "-1"),
+    (BASE.replace(STEP, SINE.replace("amplitude = 0.3", "amplitude = -0.3")),
+     "inputs.steering_wheel_angle_cmd.amplitude", "-0.3"),
+    (BASE.replace(STEP, SINE + "offset = 12.4\n"), "inputs.steering_wheel_angle_cmd.amplitude", "0.3"),
+    (BASE.replace(STEP, SINE + "cycles = 3\n"), "inputs.steering_wheel_angle_cmd.cycles", "3"),
 ])
 def test_bad_values_name_file_key_value(tmp_path, text, key, value):
     path = write(tmp_path, text)
@@ -178,6 +189,25 @@ def test_range_messages_state_the_allowed_range(tmp_path):
                    "t0 = 2.0\nafter = 6000\n")
     with pytest.raises(ConfigError, match=r"inputs.brake_pressure_cmd: the profile reaches 21000 kPa at t = 2 s"):
         load_scenario(write(tmp_path, text))
+
+
+def test_sine_input(tmp_path):
+    """A sine loads into the driver with its start, phase, offset and fade; its ranges are in the
+    messages."""
+    text = BASE.replace(STEP, SINE + "t0 = 1.0\nphase = 0.5\noffset = 0.02\nfade_cycles = 1.0\n")
+    sc = load_scenario(write(tmp_path, text))
+    t = np.array([0.0, 1.0, 3.5, 6.0, 6.25, 8.5])
+    got = sampled(sc, t)[:, I_STEER]
+    w = np.where(t < 1.0, 0.0, np.where(t < 6.0, 0.5 * (1 - np.cos(np.pi * (t - 1.0) / 5.0)), 1.0))
+    want = 0.02 + w * 0.3 * np.sin(2 * np.pi * 0.2 * (t - 1.0) + 0.5)
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    with pytest.raises(ConfigError, match=r"frequency = 500.0: out of range \(allowed 0 < frequency <= 100 Hz\)"):
+        load_scenario(write(tmp_path, BASE.replace(STEP, SINE.replace("0.2", "500.0"))))
+    with pytest.raises(ConfigError, match=r"phase = 7.0: out of range \(allowed -6.28319 <= phase <= 6.28319 rad\)"):
+        load_scenario(write(tmp_path, BASE.replace(STEP, SINE + "phase = 7.0\n")))
+    with pytest.raises(ConfigError, match=r"amplitude = 0.3: offset \+12.4 \+- amplitude reaches 12.7, out of "
+                                          r"range for steering_wheel_angle_cmd \(allowed -12.5664 .. 12.5664 rad\)"):
+        load_scenario(write(tmp_path, BASE.replace(STEP, SINE + "offset = 12.4\n")))
 
 
 def test_missing_and_syntax_errors(tmp_path):
