@@ -100,7 +100,8 @@ class HilLoop:
         mode (the stage on at the controller's first valid command)."""
         self.sim = sim
         names = self.codec.channels.command_names
-        if "motor_current_cmd" in names:
+        self.external_eps = any(n in INVALID_SLOTS for n in names)    # the DBC carries the EPS's command
+        if self.external_eps:
             sim.external_eps(True)
         driven = [i for i, n in enumerate(INPUT_NAMES) if n in COMMAND_SLOTS and n not in names]
         self.driver = driver if driver is not None and driven else Driver()
@@ -265,7 +266,7 @@ class HilLoop:
         f = {name: False for name in self.codec.faults}
         f.update(self.rx.faults)
         f["bus_error"] = self._bus_error()
-        if "motor_current_cmd" in self.codec.channels.command_names:
+        if self.external_eps:
             f["eps_safe_state"] = self.sim.eps_fault      # latched: assist off until a reset
         return f
 
