@@ -25,7 +25,7 @@ from rtsim.errors import ModelError
 
 from . import envelope
 from .model import (
-    CON_ANGLE2D, CON_ANGLE3D, CON_CRANK_ROD, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
+    CON_ANGLE2D, CON_ANGLE3D, CON_CRANK_ROD, CON_DISC_CONTACT, CON_DISC_ROLL, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
     FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
     FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
 )
@@ -35,6 +35,11 @@ def _structural_slots(kind: int, idx: np.ndarray, par) -> np.ndarray:
     """Slots of a row whose Jacobian entry can be nonzero: those with a coordinate, and for a poly
     point only the row's own component of each vector reference plus its scalars."""
     slots = np.nonzero(idx >= 0)[0]
+    if kind == CON_DISC_CONTACT:
+        return np.array([k for k in slots if k in (2, 5)], dtype=np.int64)
+    if kind == CON_DISC_ROLL:
+        comp = int(par[1])
+        return np.array([k for k in slots if k in (comp, 6 + comp, 9 + comp)], dtype=np.int64)
     if kind == CON_POLY_POINT:
         comp = int(par[1])
         keep = {3 * r + comp for r in range(5)} | {SCALAR, SCALAR2}
@@ -313,6 +318,19 @@ class MechanismBuilder:
         """theta is the angle from u to v about `axis` (all unit vectors, u and v normal to axis)."""
         self._add_con(CON_ANGLE3D, (u, v, axis, ZERO), theta, (0.0,) * 4, name or f"angle({theta.name})")
 
+    def rolling_disc(self, centre: Ref, axle: Ref, b: Ref, c: Ref, radius: float, height: float = 0.0,
+                     name: str = "disc") -> None:
+        """A knife-edge disc of `radius` (m) rolling without slip on the plane z = height: its lowest
+        point on the plane (one position row) and zero material velocity there along x and y (two
+        velocity rows). `axle` is the disc's unit axle, b and c its in-plane unit vectors."""
+        if self.dim != 3:
+            raise ModelError(f"{self.name}: rolling_disc() is for 3D mechanisms")
+        self._add_con(CON_DISC_CONTACT, (centre, axle), None, (float(radius), float(height), 0.0, 0.0),
+                      f"{name}: contact")
+        for comp in (0, 1):
+            self._add_con(CON_DISC_ROLL, (centre, axle, b, c), None, (float(radius), float(comp), 0.0, 0.0),
+                          f"{name}: no slip {'xy'[comp]}")
+
     def body_point(self, name: str, origin: Ref, directions: list[Direction], p: Ref) -> None:
         """Tie point p rigidly to a body given by origin and directions (linear constraints)."""
         self._body_member(name, origin, directions, p, is_point=True)
@@ -544,7 +562,7 @@ class MechanismBuilder:
             con_idx[i], con_cst[i] = idx, cst
             con_par[i] = con["par"]
             if con["kind"] == CON_LINEAR:
-                con_par[i, 0] = const
+                con_par[i, 0] = con["par"][0] + const   # the declared constant plus fixed refs
             con_drv[i] = con["drv"]
             used = np.unique(idx[_structural_slots(con["kind"], idx, con["par"])])
             pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))

@@ -4,13 +4,17 @@ and the velocity-quadratic term (Phi_q)' qd needed by the acceleration projectio
 Natural-coordinate constraints are at most quadratic in q (constant distances, unit vectors, constant
 dot products, linear combinations), so their second derivatives are exact and cheap. Relative angle
 coordinates add one smooth trigonometric equation each, written so that it never needs switching.
+
+A knife-edge wheel rolling on a plane adds one position row (its lowest point on the plane) and two
+velocity rows (the contact point's material velocity is zero: no slip); see `_disc_rows`.
 """
 from __future__ import annotations
 
 import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
-from .model import CON_ANGLE2D, CON_CRANK_ROD, CON_DOT, CON_LINEAR, CON_POLY_POINT, DRV_POLY, DRV_SINE, NSLOT, SCALAR, SCALAR2
+from .model import (CON_ANGLE2D, CON_CRANK_ROD, CON_DISC_CONTACT, CON_DISC_ROLL, CON_DOT, CON_LINEAR, CON_POLY_POINT,
+                    DRV_POLY, DRV_SINE, NSLOT, SCALAR, SCALAR2)
 
 
 @inline_kernel
@@ -222,6 +226,26 @@ def eval_constraints(m, d, q):
             jac[SCALAR] = dz
             jac[SCALAR2] = ds if ks >= 0 else 0.0
             d.phi[i] = val - f
+        elif kind == CON_DISC_CONTACT:
+            for s_ in range(NSLOT):
+                jac[s_] = 0.0
+            r = par[0]
+            az = ref(idx, cst, q, i, 1, 2)
+            sq = np.sqrt(max(1.0 - az * az, 1e-12))
+            jac[2] = 1.0
+            jac[5] = r * az / sq
+            d.phi[i] = ref(idx, cst, q, i, 0, 2) - r * sq - par[1] - f
+        elif kind == CON_DISC_ROLL:
+            comp = int(par[1])
+            rb, rc = _disc_lever(idx, cst, q, i, par[0])
+            scale = 2.0 / d.dt[0] if d.dt[0] > 0.0 else 1.0
+            for s_ in range(NSLOT):
+                jac[s_] = 0.0
+            jac[comp] = scale
+            jac[6 + comp] = scale * rb
+            jac[9 + comp] = scale * rc
+            d.phi[i] = (refd(idx, d.qd, i, 0, comp) + rb * refd(idx, d.qd, i, 2, comp)
+                        + rc * refd(idx, d.qd, i, 3, comp))
         else:  # CON_ANGLE3D: u = A, v = B, w = C
             th = q[idx[i, SCALAR]]
             sn = np.sin(th)
@@ -252,6 +276,60 @@ def eval_constraints(m, d, q):
             for s in range(9, NSLOT):
                 jac[s] = 0.0
             jac[SCALAR] = -g1 * sn - g2 * cs
+
+
+@inline_kernel
+def _disc_rows(idx, cst, q, qd, i, r):
+    """A disc (axle a = slot B, in-plane unit vectors b, c = slots C, D) touching the plane z = h at
+    its lowest point: nu = (e_z - a_z a) / s with s = sqrt(1 - a_z^2) is the in-plane unit vector
+    pointing up, the contact point is W - r nu, and the material velocity there is
+    W' + (rho.b) b' + (rho.c) c' with rho = -r nu. Returns (rho.b, rho.c) and their rates."""
+    a0 = ref(idx, cst, q, i, 1, 0)
+    a1 = ref(idx, cst, q, i, 1, 1)
+    a2 = ref(idx, cst, q, i, 1, 2)
+    ad0 = refd(idx, qd, i, 1, 0)
+    ad1 = refd(idx, qd, i, 1, 1)
+    ad2 = refd(idx, qd, i, 1, 2)
+    sq = np.sqrt(max(1.0 - a2 * a2, 1e-12))
+    sd = -a2 * ad2 / sq
+    out0 = 0.0
+    out1 = 0.0
+    rate0 = 0.0
+    rate1 = 0.0
+    for k in range(2):
+        slot = 2 + k
+        b0 = ref(idx, cst, q, i, slot, 0)
+        b1 = ref(idx, cst, q, i, slot, 1)
+        b2 = ref(idx, cst, q, i, slot, 2)
+        bd0 = refd(idx, qd, i, slot, 0)
+        bd1 = refd(idx, qd, i, slot, 1)
+        bd2 = refd(idx, qd, i, slot, 2)
+        ab = a0 * b0 + a1 * b1 + a2 * b2
+        abd = ad0 * b0 + ad1 * b1 + ad2 * b2 + a0 * bd0 + a1 * bd1 + a2 * bd2
+        num = b2 - a2 * ab                       # (e_z - a_z a).b
+        numd = bd2 - ad2 * ab - a2 * abd
+        lever = -r * num / sq
+        lever_d = -r * (numd / sq - num * sd / (sq * sq))
+        if k == 0:
+            out0 = lever
+            rate0 = lever_d
+        else:
+            out1 = lever
+            rate1 = lever_d
+    return out0, out1, rate0, rate1
+
+
+@inline_kernel
+def _disc_lever(idx, cst, q, i, r):
+    """(rho.b, rho.c) of a disc-roll row (see _disc_rows), positions only."""
+    a2 = ref(idx, cst, q, i, 1, 2)
+    sq = np.sqrt(max(1.0 - a2 * a2, 1e-12))
+    a0 = ref(idx, cst, q, i, 1, 0)
+    a1 = ref(idx, cst, q, i, 1, 1)
+    ab = a0 * ref(idx, cst, q, i, 2, 0) + a1 * ref(idx, cst, q, i, 2, 1) + a2 * ref(idx, cst, q, i, 2, 2)
+    ac = a0 * ref(idx, cst, q, i, 3, 0) + a1 * ref(idx, cst, q, i, 3, 1) + a2 * ref(idx, cst, q, i, 3, 2)
+    return (-r * (ref(idx, cst, q, i, 2, 2) - a2 * ab) / sq,
+            -r * (ref(idx, cst, q, i, 3, 2) - a2 * ac) / sq)
 
 
 @inline_kernel
@@ -338,6 +416,17 @@ def eval_hqd(m, d, q, qd):
                 ecd = refd(idx, qd, i, 2 + e, comp)
                 h -= (pzz * zd * zd + 2.0 * pzs * zd * sd + pss * sd * sd) * ec + 2.0 * (pz * zd + ps * sd) * ecd
             d.hqd[i] = h
+        elif kind == CON_DISC_CONTACT:
+            r = m.con_par[i, 0]
+            az = ref(idx, cst, q, i, 1, 2)
+            azd = refd(idx, qd, i, 1, 2)
+            sq = np.sqrt(max(1.0 - az * az, 1e-12))
+            d.hqd[i] = r * azd * azd / (sq * sq * sq)
+        elif kind == CON_DISC_ROLL:
+            comp = int(m.con_par[i, 1])
+            _rb, _rc, rbd, rcd = _disc_rows(idx, cst, q, qd, i, m.con_par[i, 0])
+            scale = 2.0 / d.dt[0] if d.dt[0] > 0.0 else 1.0
+            d.hqd[i] = scale * (rbd * refd(idx, qd, i, 2, comp) + rcd * refd(idx, qd, i, 3, comp))
         else:  # CON_ANGLE3D
             k = idx[i, SCALAR]
             th = q[k]

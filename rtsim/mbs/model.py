@@ -34,7 +34,16 @@ CON_POLY_POINT = 4  # A_c - B_c - sum_k p_k(z, s) E_k,c = 0 with frame vectors E
 CON_CRANK_ROD = 5   # (|d|^2 - L^2) / (2 L) = 0, planar crank and rod: a crank of angle theta = q[idx[SCALAR]]
 #                     about its pivot, a rod of length L to a slider at travel x = q[idx[SCALAR2]];
 #                     d = c + R(theta) a - (0, dir x), constants (c0, c1, a0) in slot A, (a1, dir, L) in B
-CON_KIND_NAMES = ("linear", "dot", "angle2d", "angle3d", "poly_point", "crank_rod")
+CON_DISC_CONTACT = 6  # knife-edge disc on the plane z = h: A_z - R sqrt(1 - B_z^2) - h = 0, A the disc's centre,
+#                       B its unit axle; par = (R, h)
+CON_DISC_ROLL = 7     # velocity level (nonholonomic): component c = par[1] of the velocity of the disc's material
+#                       point at the contact, A'_c + (rho.C) C'_c + (rho.D) D'_c = 0, with A the centre, B the
+#                       axle, C and D the disc's in-plane unit vectors, rho = -R nu the contact point from the
+#                       centre, nu = unit(e_z - B_z B); par = (R, c). Inside a step its Jacobian row is
+#                       (2/h) times the velocity coefficients: the trapezoidal rule makes qd = (2/h) q + const,
+#                       so the row is a function of q the Newton iteration can penalise like a position row.
+CON_KIND_NAMES = ("linear", "dot", "angle2d", "angle3d", "poly_point", "crank_rod", "disc_contact", "disc_roll")
+VELOCITY_KINDS = (CON_DISC_ROLL,)   # rows stated on velocities: not part of the position assembly
 
 # Force kinds.
 FRC_SPRING = 0      # point-to-point spring-damper-actuator between A and B: par = k, c, L0, F0

@@ -19,7 +19,7 @@ from .forces import eval_forces, potential_energy
 from .integrator import advance
 from .model import (
     ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION, NSLOT, OK,
-    ST_FAIL_INDEX, ST_LAST_RESIDUAL, Data, make_data,
+    ST_FAIL_INDEX, ST_LAST_RESIDUAL, VELOCITY_KINDS, Data, make_data,
 )
 
 
@@ -68,25 +68,35 @@ class Simulation:
         phi, jac = self.constraint_jacobian(q)
         return float(np.max(np.abs(phi), initial=0.0)), float(np.max(np.abs(jac @ qd + self.data.phit), initial=0.0))
 
+    @property
+    def velocity_rows(self) -> np.ndarray:
+        """Mask of the constraint rows stated on velocities (rolling without slip)."""
+        return np.isin(self.model.con_kind, VELOCITY_KINDS)
+
+    def _position_rows(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        phi, jac = self.constraint_jacobian(q)
+        pos = ~self.velocity_rows
+        return phi[pos], jac[pos]
+
     def _assemble(self, assemble: bool) -> None:
         m, d = self.model, self.data
-        names = self.mech.constraint_names
+        names = [n for n, v in zip(self.mech.constraint_names, self.velocity_rows) if not v]
         q = d.q.copy()
-        phi, jac = self.constraint_jacobian(q)
+        phi, jac = self._position_rows(q)
         scale = max(1.0, float(np.max(np.abs(q), initial=0.0)))
         if not assemble:
-            if m.nc and np.max(np.abs(phi)) > 1e-8 * scale:
+            if phi.size and np.max(np.abs(phi)) > 1e-8 * scale:
                 i = int(np.argmax(np.abs(phi)))
                 raise AssemblyError(f"{self.mech.name}: initial coordinates violate constraint "
                                     f"'{names[i]}' by {phi[i]:.3g}")
         else:
             for _ in range(60):
-                if m.nc == 0 or np.max(np.abs(phi)) <= 1e-13 * scale:
+                if phi.size == 0 or np.max(np.abs(phi)) <= 1e-13 * scale:
                     break
                 dq = np.linalg.lstsq(jac, -phi, rcond=None)[0]
                 q += dq
-                phi, jac = self.constraint_jacobian(q)
-            if m.nc and np.max(np.abs(phi)) > 1e-11 * scale:
+                phi, jac = self._position_rows(q)
+            if phi.size and np.max(np.abs(phi)) > 1e-11 * scale:
                 i = int(np.argmax(np.abs(phi)))
                 raise AssemblyError(f"{self.mech.name}: cannot assemble the initial position: constraint "
                                     f"'{names[i]}' stays violated by {phi[i]:.3g}")
@@ -94,6 +104,7 @@ class Simulation:
             d.q[:] = q
         # velocities: keep prescribed components, correct the others as little as possible
         given = self.mech.qd_given
+        names = self.mech.constraint_names
         qd = d.qd.copy()
         phi, jac = self.constraint_jacobian(d.q)
         if m.nc:
@@ -129,6 +140,8 @@ class Simulation:
         so that the penalty term dominates the inertia by p whatever the step and the units."""
         self.dt = float(dt)
         self.data.alpha[:] = self.mech.settings.penalty_ratio * 4.0 / dt ** 2 * self._mref / self._jn
+        # a velocity row's Jacobian inside a step is (2/dt) times its coefficients (rtsim.mbs.model)
+        self.data.alpha[self.velocity_rows] *= (0.5 * dt) ** 2
         self.data.flags[1] = 1
 
     def _initial_accelerations(self, jac: np.ndarray) -> None:

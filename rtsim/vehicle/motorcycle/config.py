@@ -1,0 +1,241 @@
+"""The two-wheeler's vehicle file (configs/vehicles/motorcycle.toml, whipple_benchmark.toml), validated
+on load.
+
+Frame of every position: the design frame, ISO 8855 (x forward, y left, z up), origin on the ground at
+the rear tyre's contact point, the motorcycle upright with both tyres touching the ground at their
+unloaded radius and the suspensions at their design travel (the static analysis finds the sag). The
+motorcycle is symmetric about y = 0, so positions are (x, z) pairs. Inertia tensors are about each
+body's centre of mass in design-frame axes: Ixx, Iyy, Izz and the product ixz_kgm2 = integral of x z dm
+(the tensor's xz entry is -ixz, as in the car's file).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from rtsim.configfile import Strict, load_toml, validate
+
+Vec2 = tuple[float, float]
+
+
+class Body(Strict):
+    """A rigid body's mass properties (massless bodies: mass_kg = 0)."""
+    mass_kg: float = Field(ge=0, le=2000)
+    cg_m: Vec2 = Field(default=(0.0, 0.0), description="centre of mass (x, z), design frame")
+    inertia_kgm2: tuple[float, float, float] = Field(default=(0.0, 0.0, 0.0), description="Ixx, Iyy, Izz about the CG")
+    ixz_kgm2: float = 0.0
+
+    @model_validator(mode="after")
+    def _physical(self):
+        ixx, iyy, izz = self.inertia_kgm2
+        tol = 1e-12 * max(1.0, ixx + iyy + izz)
+        if min(ixx, iyy, izz) < 0 or ixx + iyy < izz - tol or iyy + izz < ixx - tol or izz + ixx < iyy - tol:
+            raise ValueError(f"inertia_kgm2 {self.inertia_kgm2} is not a physical inertia (non-negative, "
+                             "triangle inequalities)")
+        if ixx * izz < self.ixz_kgm2 ** 2 - tol:
+            raise ValueError(f"ixz_kgm2 = {self.ixz_kgm2}: the x-z inertia block is not positive "
+                             "(need ixz^2 <= Ixx Izz)")
+        return self
+
+
+class Wheel(Strict):
+    mass_kg: float = Field(ge=0, le=100, description="wheel, tyre, disc(s) and sprocket")
+    radius_m: float = Field(gt=0.1, le=1.0, description="unloaded outer radius of the tyre")
+    spin_inertia_kgm2: float = Field(ge=0, le=10, description="about the axle")
+    diametral_inertia_kgm2: float = Field(ge=0, le=10, description="about a diameter")
+
+
+class Geometry(Strict):
+    wheelbase_m: float = Field(gt=0.3, le=3.0)
+    caster_deg: float = Field(ge=0, le=45, description="steering axis from the vertical (rake)")
+    trail_m: float | None = Field(default=None, ge=-0.2, le=0.3, description="ground trail; or fork_offset_m")
+    fork_offset_m: float | None = Field(default=None, ge=-0.2, le=0.3,
+                                        description="front wheel centre ahead of the steering axis")
+    fork_length_m: float = Field(gt=0.05, le=1.5, description=(
+        "along the steering axis from the head point (top of the fork) down to the foot of the front wheel "
+        "centre, at the design travel"))
+    swingarm_pivot_m: Vec2 = Field(description="swingarm pivot (x, z)")
+
+    @model_validator(mode="after")
+    def _one_of(self):
+        if (self.trail_m is None) == (self.fork_offset_m is None):
+            raise ValueError("give exactly one of trail_m and fork_offset_m")
+        return self
+
+
+class Characteristic(Strict):
+    """A force table: force (N, compression positive) against travel (m) or travel rate (m/s)."""
+    x: list[float] = Field(min_length=2)
+    force_n: list[float] = Field(min_length=2)
+
+    @model_validator(mode="after")
+    def _shape(self):
+        if len(self.x) != len(self.force_n):
+            raise ValueError("x and force_n need the same length")
+        if any(b <= a for a, b in zip(self.x, self.x[1:])):
+            raise ValueError("x must increase")
+        return self
+
+
+class Damper(Strict):
+    compression_ns_per_m: float = Field(default=0.0, ge=0, le=1e5)
+    rebound_ns_per_m: float = Field(default=0.0, ge=0, le=1e5)
+    table: Characteristic | None = Field(default=None, description="instead of the two rates")
+
+
+class Spring(Strict):
+    """Spring force against the element's compression from its fully extended length (m): a linear rate
+    with preload, or a table; stops: top-out below 0 and bottom-out beyond the stroke (linear stops)."""
+    stiffness_n_per_m: float = Field(default=0.0, ge=0, le=1e7)
+    preload_n: float = Field(default=0.0, ge=0, le=1e5)
+    table: Characteristic | None = None
+    stroke_m: float = Field(gt=0, le=0.5)
+    top_out_n_per_m: float = Field(default=2e6, ge=0, le=1e8)
+    bottom_out_n_per_m: float = Field(default=2e6, ge=0, le=1e8)
+
+
+class Fork(Strict):
+    spring: Spring
+    damper: Damper = Damper()
+    design_travel_m: float = Field(default=0.0, ge=0, le=0.5, description="compression at the design position")
+
+
+class Shock(Strict):
+    frame_mount_m: Vec2 = Field(description="shock's upper eye on the rear frame (x, z)")
+    swingarm_mount_m: Vec2 = Field(description="shock's lower eye on the swingarm (x, z), design position")
+    spring: Spring
+    damper: Damper = Damper()
+    design_travel_m: float = Field(default=0.0, ge=0, le=0.5, description="compression at the design position")
+
+
+class Suspension(Strict):
+    locked: bool = Field(default=False, description="fork and swingarm fixed at the design position")
+    fork: Fork | None = None
+    shock: Shock | None = None
+
+    @model_validator(mode="after")
+    def _free_needs_springs(self):
+        if not self.locked and (self.fork is None or self.shock is None):
+            raise ValueError("a free suspension needs [suspension.fork] and [suspension.shock]")
+        return self
+
+
+class Steering(Strict):
+    damper_nms_per_rad: float = Field(default=0.0, ge=0, le=200, description="steering damper")
+    lock_rad: float = Field(default=0.6, gt=0, le=1.5, description="steering stops at +-lock")
+    stop_nm_per_rad: float = Field(default=2000.0, ge=0, le=1e6)
+
+
+class Tyres(Strict):
+    model: Literal["knife_edge", "magic_formula", "linear"] = Field(description=(
+        "knife_edge: rolling without slip (the Whipple bicycle); magic_formula or linear: "
+        "rtsim.vehicle.kit.tyre.two_wheel"))
+    front: dict = Field(default_factory=dict, description="rtsim.vehicle.kit.tyre.two_wheel parameters")
+    rear: dict = Field(default_factory=dict)
+
+
+class Chain(Strict):
+    front_sprocket_m: Vec2 = Field(description="gearbox output sprocket centre (x, z), on the rear frame")
+    front_sprocket_radius_m: float = Field(gt=0.01, le=0.2)
+    rear_sprocket_radius_m: float = Field(gt=0.02, le=0.3)
+
+
+class Powertrain(Strict):
+    speed_rpm: list[float] = Field(min_length=2, description="engine speed breakpoints")
+    full_load_torque_nm: list[float] = Field(min_length=2, description="crankshaft torque at full throttle")
+    drag_torque_nm: list[float] = Field(min_length=2, description="closed-throttle drag (positive)")
+    primary_ratio: float = Field(gt=0.5, le=5)
+    gear_ratios: list[float] = Field(min_length=1)
+    upshift_rpm: float = Field(gt=1000, le=30000)
+    downshift_rpm: float = Field(gt=500, le=30000)
+    idle_rpm: float = Field(default=1200.0, gt=0, le=5000)
+    efficiency: float = Field(default=0.95, gt=0.5, le=1.0)
+
+    @model_validator(mode="after")
+    def _tables(self):
+        if not (len(self.speed_rpm) == len(self.full_load_torque_nm) == len(self.drag_torque_nm)):
+            raise ValueError("speed_rpm, full_load_torque_nm and drag_torque_nm need the same length")
+        if self.downshift_rpm >= self.upshift_rpm:
+            raise ValueError("downshift_rpm must be below upshift_rpm")
+        return self
+
+
+class Brakes(Strict):
+    front_nm_per_kpa: float = Field(gt=0, le=10, description="front brake torque per line pressure")
+    rear_nm_per_kpa: float = Field(gt=0, le=10)
+    max_pressure_kpa: float = Field(default=12000.0, gt=0, le=30000)
+    slip_speed_rad_s: float = Field(default=0.5, gt=0, le=10, description="smooth Coulomb regularisation")
+
+
+class Aero(Strict):
+    drag_area_m2: float = Field(default=0.0, ge=0, le=2, description="Cd A")
+    lift_area_m2: float = Field(default=0.0, ge=-2, le=2, description="Cl A, positive lifting")
+    centre_of_pressure_m: Vec2 = (0.7, 0.7)
+    air_density_kg_m3: float = Field(default=1.2, gt=0.5, le=1.5)
+
+
+class Sensors(Strict):
+    imu_position_m: Vec2 = Field(default=(0.6, 0.6), description="IMU on the rear frame (x, z)")
+
+
+class Interface(Strict):
+    dbc: str = Field(default="../can/motorcycle.dbc", description="DBC file, relative to the vehicle file")
+
+
+class MotorcycleConfig(Strict):
+    name: str
+    id: str = Field(pattern=r"^[a-z0-9_]+$")
+    kind: Literal["two_wheeler"] = "two_wheeler"
+    geometry: Geometry
+    rear_frame: Body = Field(description="frame, engine, tank; the rider's mass is in [rider]")
+    rider: Body | None = Field(default=None, description="rider rigidly attached to the rear frame")
+    swingarm: Body = Body(mass_kg=0.0)
+    upper_fork: Body = Field(description="upper fork, triple clamps and handlebars: turns with the steer")
+    lower_fork: Body = Body(mass_kg=0.0)
+    front_wheel: Wheel
+    rear_wheel: Wheel
+    tyres: Tyres
+    suspension: Suspension
+    steering: Steering = Steering()
+    chain: Chain | None = None
+    powertrain: Powertrain | None = None
+    brakes: Brakes | None = None
+    aero: Aero = Aero()
+    sensors: Sensors = Sensors()
+    interface: Interface = Interface()
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        if self.powertrain is not None and self.chain is None:
+            raise ValueError("a powertrain drives the rear wheel through [chain]")
+        px, pz = self.geometry.swingarm_pivot_m
+        if math.hypot(px, pz - self.rear_wheel.radius_m) < 0.05:
+            raise ValueError("swingarm_pivot_m is too close to the rear axle")
+        return self
+
+    @property
+    def caster_rad(self) -> float:
+        return math.radians(self.geometry.caster_deg)
+
+    @property
+    def fork_offset(self) -> float:
+        """Front wheel centre's distance ahead of the steering axis, m."""
+        g = self.geometry
+        if g.fork_offset_m is not None:
+            return g.fork_offset_m
+        eps = self.caster_rad
+        return self.front_wheel.radius_m * math.sin(eps) - g.trail_m * math.cos(eps)
+
+    @property
+    def trail(self) -> float:
+        eps = self.caster_rad
+        return (self.front_wheel.radius_m * math.sin(eps) - self.fork_offset) / math.cos(eps)
+
+
+def load_motorcycle(path: str | Path) -> tuple[MotorcycleConfig, Path]:
+    """The validated two-wheeler file and the folder its relative paths refer to."""
+    path = Path(path)
+    return validate(MotorcycleConfig, load_toml(path), str(path)), path.parent
