@@ -265,6 +265,7 @@ _DELEGATED = (
     ("play", "bridge.player", "put recorded CAN frames back on the bus with their original timing"),
     ("resim", "rtsim.service.resim", "re-run a recording (or a CAN log of commands) and compare the state"),
     ("validate", "rtsim.validate.cli", "compare the model with repeated field runs, name and add the missing effect"),
+    ("eigen", "rtsim.analyses.eigen_cli", "a two-wheeler's modes against speed in straight running (root locus, JSON)"),
 )
 
 

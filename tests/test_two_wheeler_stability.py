@@ -1,0 +1,108 @@
+"""The Whipple benchmark bicycle from the two-wheeler assembly: eigenvalues of the full nonlinear model,
+linearised numerically about straight running, against the published values of Meijaard, Papadopoulos,
+Ruina and Schwab (2007), Table 2, and the weave and capsize speeds of their section 5; and the model in
+the time domain: energy of the knife-edge (conservative) bicycle."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtsim.analyses.eigen import TwoWheelerLinearisation
+from rtsim.analyses.stability import sweep
+from rtsim.mbs.simulation import Simulation
+from rtsim.vehicle.motorcycle.build import build_motorcycle, straight_running_velocity
+from rtsim.vehicle.motorcycle.config import load_motorcycle
+from rtsim.vehicle.motorcycle.layout import D_ROLL, NDOF
+
+REPO = Path(__file__).resolve().parents[1]
+
+# Meijaard et al. 2007, Table 2: speed (m/s) and the four eigenvalues (1/s)
+TABLE2 = {
+    0: [5.53094371765393, 3.13164324790656, -3.13164324790656, -5.53094371765393],
+    1: [3.52696170990070 + 0.80774027519930j, 3.52696170990070 - 0.80774027519930j, -3.13423125066578,
+        -7.11008014637442],
+    2: [2.68234517512745 + 1.68066296590675j, 2.68234517512745 - 1.68066296590675j, -3.07158645641514,
+        -8.67387984831735],
+    3: [1.70675605663975 + 2.31582447384325j, 1.70675605663975 - 2.31582447384325j, -2.63366137253667,
+        -10.35101467245920],
+    4: [0.41325331521125 + 3.07910818603206j, 0.41325331521125 - 3.07910818603206j, -1.42944427361326,
+        -12.15861426576450],
+    5: [-0.77534188219585 + 4.46486771378823j, -0.77534188219585 - 4.46486771378823j, -0.32286642900409,
+        -14.07838969279820],
+    6: [-1.52644486584142 + 5.87673060598709j, -1.52644486584142 - 5.87673060598709j, -0.00406690076970,
+        -16.08537123098030],
+    7: [-2.13875644258362 + 7.19525913329805j, -2.13875644258362 - 7.19525913329805j, 0.10268170574766,
+        -18.15788466125260],
+    8: [-2.69348683581097 + 8.46037971396931j, -2.69348683581097 - 8.46037971396931j, 0.14327879765713,
+        -20.27940894394570],
+    9: [-3.21675402252485 + 9.69377351531791j, -3.21675402252485 - 9.69377351531791j, 0.15790184030917,
+        -22.43788559040860],
+    10: [-3.72016840437287 + 10.90681139476290j, -3.72016840437287 - 10.90681139476290j, 0.16105338653172,
+         -24.62459635017400],
+}
+WEAVE_SPEED, CAPSIZE_SPEED = 4.29238253634111, 6.02426201538837   # section 5
+
+
+@pytest.fixture(scope="module")
+def whipple():
+    cfg, base = load_motorcycle(REPO / "configs/vehicles/whipple_benchmark.toml")
+    return build_motorcycle(cfg, base)
+
+
+def _with_conjugates(modes):
+    out = []
+    for m in modes:
+        out.append(m.eigenvalue)
+        if abs(m.eigenvalue.imag) > 1e-9:
+            out.append(m.eigenvalue.conjugate())
+    return np.array(out)
+
+
+def test_published_eigenvalues_at_every_tabulated_speed(whipple):
+    lin = TwoWheelerLinearisation(whipple)
+    for speed, ref in TABLE2.items():
+        got = _with_conjugates([m for m in lin.modes(float(speed)).modes if m.name != "speed"])
+        assert got.size == 4, (speed, got)
+        for lam in ref:
+            err = np.min(np.abs(got - lam))
+            assert err <= 1e-6 * abs(lam), f"v = {speed} m/s: {lam} not found (nearest off by {err:.2e}) in {got}"
+
+
+def test_the_speed_mode_is_neutral_and_the_modes_are_named(whipple):
+    r = TwoWheelerLinearisation(whipple).modes(5.0)
+    names = {m.name: m for m in r.modes}
+    assert set(names) == {"weave", "capsize", "castering", "speed"}
+    assert abs(names["speed"].eigenvalue) < 1e-8
+    assert abs(names["weave"].eigenvalue - TABLE2[5][0]) < 1e-6 * abs(TABLE2[5][0])
+    assert names["castering"].shape["steer"] != 0 and abs(names["castering"].shape["steer"]) == 1.0
+
+
+def test_weave_and_capsize_speeds(whipple):
+    lin = TwoWheelerLinearisation(whipple)
+    _results, crossings = sweep(lin, np.array([3.5, 4.5, 5.5, 6.5]))
+    found = {(c.mode, c.becomes): c.speed for c in crossings}
+    assert found.keys() == {("weave", "stable"), ("capsize", "unstable")}
+    assert abs(found["weave", "stable"] - WEAVE_SPEED) < 1e-3
+    assert abs(found["capsize", "unstable"] - CAPSIZE_SPEED) < 1e-3
+
+
+def test_knife_edge_bicycle_conserves_energy_while_it_weaves(whipple):
+    """No slip and no dissipation: a roll disturbance at 5 m/s decays into the weave while the total
+    energy stays constant; the roll's envelope decays at the weave's rate."""
+    dof = np.zeros(NDOF)
+    q = whipple.coordinates(dof)
+    qd = straight_running_velocity(whipple, q, 5.0)
+    dof[D_ROLL] = 1e-6
+    roll_dir = (whipple.coordinates(dof) - q) / 1e-6
+    qd = qd + 0.3 * roll_dir                      # 0.3 rad/s of roll rate
+    sim = Simulation(whipple.mech, 1e-3, q0=q, qd0=qd)
+    tr = sim.run(4.0, stride=10)
+    e = sim.energy(tr)
+    assert np.max(np.abs(e - e[0])) < 1e-6 * abs(e[0])
+    roll = np.array([whipple.group(qq, "V")[2] for qq in tr.q])
+    late = np.abs(roll[tr.t > 3.0]).max()
+    early = np.abs(roll[(tr.t > 1.0) & (tr.t < 2.0)]).max()
+    # capsize (-0.32/s) outlasts the weave (-0.78/s) at 5 m/s: the slow mode bounds the late envelope
+    assert late < early * np.exp(-0.32 * 1.0) * 1.5
