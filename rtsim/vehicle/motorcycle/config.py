@@ -18,6 +18,8 @@ from pydantic import Field, model_validator
 
 from rtsim.configfile import Strict, load_toml, validate
 
+from ..kit.tyre.two_wheel import TwoWheelTyreSpec, sport_front, sport_rear
+
 Vec2 = tuple[float, float]
 
 
@@ -130,11 +132,28 @@ class Steering(Strict):
 
 
 class Tyres(Strict):
+    """The tyre model and, for the slip models, each tyre's parameters (rtsim.vehicle.kit.tyre.two_wheel;
+    keys not given take the sport front and rear values; the unloaded radius is the wheel's radius_m)."""
     model: Literal["knife_edge", "magic_formula", "linear"] = Field(description=(
         "knife_edge: rolling without slip (the Whipple bicycle); magic_formula or linear: "
         "rtsim.vehicle.kit.tyre.two_wheel"))
-    front: dict = Field(default_factory=dict, description="rtsim.vehicle.kit.tyre.two_wheel parameters")
-    rear: dict = Field(default_factory=dict)
+    front: TwoWheelTyreSpec = Field(default_factory=sport_front)
+    rear: TwoWheelTyreSpec = Field(default_factory=sport_rear)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _defaults(cls, data):
+        if isinstance(data, dict):
+            data = dict(data)
+            law = data.get("model")
+            for end, base in (("front", sport_front), ("rear", sport_rear)):
+                given = data.get(end, {})
+                if isinstance(given, dict):
+                    merged = {**base().model_dump(), **given}
+                    if law in ("magic_formula", "linear") and "model" not in given:
+                        merged["model"] = law
+                    data[end] = merged
+        return data
 
 
 class Chain(Strict):
