@@ -331,3 +331,48 @@ def test_closed_loop_figure_eight():
     d = cKDTree(np.c_[dx, dy]).query(rec[:, 1:3])[0]            # distance to the path
     assert np.sqrt(np.mean(d ** 2)) < 0.15 and np.max(d) < 0.4
     assert np.min(rec[:, 4]) < -0.25 and np.max(rec[:, 4]) > 0.25   # leaned both ways
+
+
+# --------------------------------------------------------------------------------------------------
+# Scenario files
+
+
+SCENARIO = """
+name = "rider_eight"
+description = "figure-eight ridden by the rider"
+road = "../roads/flat.toml"
+duration = 10.0
+
+[rider]
+speed = 6.0
+p_roll = 120.0
+delay = 0.1
+max_roll_rate = 0.5
+
+[rider.figure_eight]
+radius = 15.0
+straight = 10.0
+"""
+
+
+def test_rider_section_of_a_scenario(tmp_path):
+    from drivers.scenario import load_scenario
+    from rtsim.errors import ConfigError
+
+    f = tmp_path / "s.toml"
+    f.write_text(SCENARIO)
+    sc = load_scenario(f)
+    rd = sc.rider()
+    assert rd.par[R.P_P_ROLL] == 120.0 and rd.par[R.P_NDELAY] == 100 and rd.par[R.P_CLOSED] == 1.0
+    assert rd.par[R.P_D_ROLL] == R.RiderParams().d_roll              # defaults for the rest
+    assert rd.par[R.P_LENGTH] == pytest.approx(20.0 + 30.0 * (math.pi + 2.0 * math.atan(3.0)), rel=1e-3)
+    assert rd.tab_v[0] == 6.0 and sc.driver() is not None
+    f.write_text(SCENARIO.replace("p_roll = 120.0", "p_roll = -1.0"))
+    with pytest.raises(ConfigError, match=r"rider.p_roll = -1.0: out of range \(allowed 0 <= p_roll <= 100000 N m/rad\)"):
+        load_scenario(f)
+    f.write_text(SCENARIO.replace("speed = 6.0", "speed = [5.0, 8.0]\ndistance = [0.0, 50.0]"))
+    rd = load_scenario(f).rider()
+    assert list(rd.tab_x) == [0.0, 50.0] and rd.par[R.P_SPEED_BY_S] == 1.0
+    f.write_text(SCENARIO.replace("[rider.figure_eight]", "x = [0, 1]\ny = [0, 0]\n[rider.figure_eight]"))
+    with pytest.raises(ConfigError, match=r"exactly one of"):
+        load_scenario(f)
