@@ -8,7 +8,7 @@ adjacent segments) are interpolated along each segment, so the path heading is c
 Nearest point. The driver keeps the index of the segment it was nearest to at the previous call and
 walks from there to the neighbour segments while the distance decreases: O(1) per call amortised,
 and it cannot jump to another branch of a path that crosses itself. The first call searches the
-whole path once.
+whole path once. (The geometry and these kernels live in `drivers.paths`, shared with the rider.)
 
 Laws (rear axle at P_r = position - rear_offset * heading; wheelbase l):
 
@@ -43,6 +43,10 @@ from rtsim.configfile import Strict, check_ranges, range_fields
 from rtsim.jit import inline_kernel, kernel
 
 from .base import I_STEER, S_SPEED, S_X, S_Y, S_YAW
+from .paths import circle_points, nearest_segment, point_ahead, polyline, seg_project, wrap_angle
+
+__all__ = ["PathFollower", "PathFollowerParams", "PATH_FOLLOWER_RANGES", "path_follower", "path_follower_step",
+           "reset", "circle_points"]
 
 PURE_PURSUIT = 0
 STANLEY = 1
@@ -126,45 +130,8 @@ def path_follower(x, y, method: str = "pure_pursuit", closed: bool = False,
         params = PathFollowerParams(**{**asdict(params), **kw})
     if method not in METHODS:
         raise ValueError(f"path follower method {method!r}: use one of {', '.join(METHODS)}")
-    px = np.array(x, dtype=np.float64).reshape(-1)
-    py = np.array(y, dtype=np.float64).reshape(-1)
-    if px.shape != py.shape:
-        raise ValueError(f"path has {px.size} x and {py.size} y values")
-    if not (np.all(np.isfinite(px)) and np.all(np.isfinite(py))):
-        raise ValueError("path has non-finite coordinates")
-    if px.size >= 2 and px[0] == px[-1] and py[0] == py[-1]:
-        closed = True
-        px, py = px[:-1], py[:-1]
-    if px.size < 2 or (closed and px.size < 3):
-        raise ValueError(f"path needs at least {3 if closed else 2} distinct points")
-    if closed:
-        px = np.append(px, px[0])
-        py = np.append(py, py[0])
-    seg = np.hypot(np.diff(px), np.diff(py))
-    if np.any(seg <= 0.0):
-        i = int(np.argmin(seg > 0.0))
-        raise ValueError(f"path points {i} and {i + 1} coincide ({px[i]}, {py[i]})")
+    px, py, ps, hd, seg, closed = polyline(x, y, closed)
     nseg = seg.size
-    ps = np.concatenate(([0.0], np.cumsum(seg)))
-    tx, ty = np.diff(px) / seg, np.diff(py) / seg
-    # vertex headings: bisector of the adjacent segments (ends: the end segment's heading)
-    vx = np.empty(nseg + 1)
-    vy = np.empty(nseg + 1)
-    vx[1:-1] = tx[:-1] + tx[1:]
-    vy[1:-1] = ty[:-1] + ty[1:]
-    if closed:
-        vx[0] = vx[-1] = tx[-1] + tx[0]
-        vy[0] = vy[-1] = ty[-1] + ty[0]
-    else:
-        vx[0], vy[0] = tx[0], ty[0]
-        vx[-1], vy[-1] = tx[-1], ty[-1]
-    hd = np.arctan2(vy, vx)
-    # a U-turn vertex (bisector zero) takes the incoming segment's heading
-    flat = np.hypot(vx, vy) < 1e-9
-    if np.any(flat):
-        seg_h = np.arctan2(ty, tx)
-        idx = np.nonzero(flat)[0]
-        hd[idx] = seg_h[np.maximum(idx - 1, 0)]
     par = np.zeros(NPAR)
     par[P_METHOD] = METHODS[method]
     par[P_WB] = params.wheelbase
@@ -187,110 +154,32 @@ def reset(pf: PathFollower) -> None:
     pf.st[:] = 0.0
 
 
-def circle_points(radius: float, spacing: float = 0.5, center=(0.0, 0.0), start_angle: float = -0.5 * math.pi,
-                  ccw: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Points of a closed circle (first point not repeated), `spacing` m apart at most. The default
-    start angle puts the first point below the centre, heading +x when counter-clockwise."""
-    n = max(int(math.ceil(2.0 * math.pi * radius / spacing)), 8)
-    a = start_angle + (1.0 if ccw else -1.0) * 2.0 * math.pi * np.arange(n) / n
-    return center[0] + radius * np.cos(a), center[1] + radius * np.sin(a)
-
-
 # --------------------------------------------------------------------------------------------------
 # Kernels
 
 
 @inline_kernel
 def _wrap(a):
-    return math.atan2(math.sin(a), math.cos(a))
+    return wrap_angle(a)
 
 
 @inline_kernel
 def _proj(pf, i, x, y):
-    """Parameter u along segment i of the point nearest to (x, y), and the squared distance.
-    u is clipped to [0, 1], except beyond the ends of an open path."""
-    nseg = int(pf.par[P_NSEG])
-    ax = pf.px[i]
-    ay = pf.py[i]
-    dx = pf.px[i + 1] - ax
-    dy = pf.py[i + 1] - ay
-    u = ((x - ax) * dx + (y - ay) * dy) / (dx * dx + dy * dy)
-    if pf.par[P_CLOSED] != 0.0:
-        u = min(max(u, 0.0), 1.0)
-    else:
-        if u < 0.0 and i > 0:
-            u = 0.0
-        if u > 1.0 and i < nseg - 1:
-            u = 1.0
-    qx = ax + u * dx
-    qy = ay + u * dy
-    return u, (x - qx) * (x - qx) + (y - qy) * (y - qy)
+    """Parameter u along segment i of the point nearest to (x, y), and the squared distance."""
+    return seg_project(pf.px, pf.py, i, x, y, int(pf.par[P_NSEG]), pf.par[P_CLOSED] != 0.0)
 
 
 @inline_kernel
 def _nearest(pf, x, y):
     """Segment nearest to (x, y), walking from the last one (whole path on the first call)."""
-    nseg = int(pf.par[P_NSEG])
-    closed = pf.par[P_CLOSED] != 0.0
-    if pf.st[ST_INIT] == 0.0:
-        best = 0
-        u, dbest = _proj(pf, 0, x, y)
-        for j in range(1, nseg):
-            u, d = _proj(pf, j, x, y)
-            if d < dbest:
-                dbest = d
-                best = j
-        return best
-    i = int(pf.st[ST_IDX])
-    u, d = _proj(pf, i, x, y)
-    moved = False
-    for _ in range(nseg):
-        j = i + 1
-        if j >= nseg:
-            if not closed:
-                break
-            j = 0
-        u, dj = _proj(pf, j, x, y)
-        if dj < d:
-            i = j
-            d = dj
-            moved = True
-        else:
-            break
-    if not moved:
-        for _ in range(nseg):
-            j = i - 1
-            if j < 0:
-                if not closed:
-                    break
-                j = nseg - 1
-            u, dj = _proj(pf, j, x, y)
-            if dj < d:
-                i = j
-                d = dj
-            else:
-                break
-    return i
+    return nearest_segment(pf.px, pf.py, int(pf.par[P_NSEG]), pf.par[P_CLOSED] != 0.0,
+                           pf.st[ST_INIT] == 0.0, int(pf.st[ST_IDX]), x, y)
 
 
 @inline_kernel
 def _point_ahead(pf, i, u, dist):
-    """Point at arc length `dist` ahead of parameter u on segment i (wraps on a closed path,
-    extends the last segment of an open one)."""
-    nseg = int(pf.par[P_NSEG])
-    closed = pf.par[P_CLOSED] != 0.0
-    rem = u * pf.seg_len[i] + dist
-    for _ in range(4 * nseg + 4):
-        if rem <= pf.seg_len[i]:
-            break
-        if i == nseg - 1 and not closed:
-            break
-        rem -= pf.seg_len[i]
-        i = i + 1
-        if i >= nseg:
-            i = 0
-    f = rem / pf.seg_len[i]
-    return (pf.px[i] + f * (pf.px[i + 1] - pf.px[i]), pf.py[i] + f * (pf.py[i + 1] - pf.py[i]))
+    """Point at arc length `dist` ahead of parameter u on segment i."""
+    return point_ahead(pf.px, pf.py, pf.seg_len, int(pf.par[P_NSEG]), pf.par[P_CLOSED] != 0.0, i, u, dist)
 
 
 @kernel
