@@ -17,7 +17,12 @@ Lean reference. The steady turn at speed u on curvature kappa needs the lean -at
 (leaning into the turn). The rider takes kappa at a preview point d = preview_dist + preview_time u
 ahead of s, so he leans before the bend begins (and straightens before it ends):
 
-    phi_ff = -atan(u^2 kappa(s + d) / g),  its rate limited to max_roll_rate
+    phi_0 = -atan(u^2 kappa(s + d) / g),  phi_ff = phi_0 + asin(k sin phi_0),  its rate limited to max_roll_rate
+
+The second term is the extra lean of tyres of crown radius rho (Cossalter, Motorcycle Dynamics, ch. 2):
+the contact point moves round the crown towards the inside of the turn, so the frame must lean past
+phi_0 until the line from the contact to the mass centre (height h) leans by phi_0; k = rho / (h - rho)
+(`tyre_lean`, 0 for knife-edge wheels).
 
 Path correction (cascade, default). A rider corrects a path error by leaning more or less, not by a
 torque of its own: a motorcycle left of its path (e > 0) or heading left of it (psi_e > 0) must turn
@@ -133,7 +138,8 @@ P_CLOSED = 32     # 1 for a closed path
 P_NSEG = 33       # number of segments
 P_LENGTH = 34     # m, path length
 P_MAX_ROLL_RATE = 35  # rad/s, rate limit of the lean feed-forward
-NPAR = 36
+P_TYRE_LEAN = 36  # -, k = rho / (h - rho) of the tyres' crown radius rho and the mass centre's height h
+NPAR = 37
 
 # State indices (st).
 ST_INIT = 0
@@ -180,6 +186,7 @@ class RiderParams:
     max_correction: float = 0.35
     max_roll: float = 0.8
     max_roll_rate: float = 1.0
+    tyre_lean: float = 0.0
     preview_dist: float = 0.0
     preview_time: float = 0.3
     la_min: float = 1.0
@@ -223,6 +230,7 @@ RIDER_RANGES = {
     "max_correction": (0.0, 1.5, "rad", False),
     "max_roll": (0.0, 1.5, "rad", True),
     "max_roll_rate": (0.0, 100.0, "rad/s", True),
+    "tyre_lean": (0.0, 1.0, "", False),
     "preview_dist": (0.0, 500.0, "m", False),
     "preview_time": (0.0, 10.0, "s", False),
     "la_min": (0.0, 500.0, "m", False),
@@ -280,6 +288,7 @@ def rider(path_x, path_y, closed: bool = False, speed=10.0, speed_by: str = "s",
                               "band", "brake_front", "front_gain", "rear_gain", "brake_max")):
         par[i] = getattr(params, name)
     par[P_MAX_ROLL_RATE] = params.max_roll_rate
+    par[P_TYRE_LEAN] = params.tyre_lean
     par[P_NDELAY] = round(params.delay / params.period)
     par[P_TO_TORQUE] = 1.0 if params.path_to_torque else 0.0
     par[P_SPEED_BY_S] = 1.0 if speed_by == "s" else 0.0
@@ -376,6 +385,7 @@ def rider_step(r, view, out):
     # lean reference: preview curvature, then the path correction
     kap = value_at(r.ps, r.kap, closed, s + p[P_PREV_DIST] + p[P_PREV_TIME] * uf, 0.0)
     phi_ff = -math.atan(u * u * kap / G)
+    phi_ff += math.asin(p[P_TYRE_LEAN] * math.sin(phi_ff))
     if not first:
         lim = p[P_MAX_ROLL_RATE] * dt
         phi_ff = min(max(phi_ff, st[ST_PHI_FF_PREV] - lim), st[ST_PHI_FF_PREV] + lim)

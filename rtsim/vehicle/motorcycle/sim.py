@@ -118,3 +118,13 @@ def static_pose(mm: MotorcycleModel, seconds: float = 1.5, dt: float = 1e-3) -> 
     s = TwoWheelerSim(mm, dt=dt)
     s.run(seconds)
     return s.data.q.copy(), s.parts.tyre[:, TO_FZ].copy()
+
+
+def rear_contact(sim: TwoWheelerSim) -> np.ndarray:
+    """The rear wheel's lowest point (x, y), m: the motorcycle's reference point on the road."""
+    q = sim.data.q
+    w = sim._g(q, "W_R")
+    a = sim._g(q, "V")
+    up = np.array([0.0, 0.0, 1.0]) - a[2] * a
+    up /= np.linalg.norm(up)
+    return (w - sim.mm.config.rear_wheel.radius_m * up)[:2]
