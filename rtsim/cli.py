@@ -7,6 +7,7 @@
     rtsim validate field runs vs the model: find, fit and add the missing effect, report
     rtsim plot     figures of a run (CSV or MCAP) as PNG
     rtsim energy   the power audit of a run                rtsim feel     steering feel of a run (EPS car)
+    rtsim eigen    a two-wheeler's modes against speed     rtsim statics  a two-wheeler at rest, rider on
 """
 from __future__ import annotations
 
@@ -254,6 +255,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp = sub.add_parser(name, help=text)
         sp.set_defaults(func=_delegate(module))
         _import(module).add_arguments(sp)
+    st = sub.add_parser("statics", help="a two-wheeler at rest with the rider on: wheel loads, sag, attitude (JSON)")
+    st.set_defaults(func=lambda args: _import("rtsim.analyses.eigen_cli").statics_main(args))
+    _import("rtsim.analyses.eigen_cli").add_statics_arguments(st)
     return p
 
 

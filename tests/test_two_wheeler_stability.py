@@ -106,3 +106,24 @@ def test_knife_edge_bicycle_conserves_energy_while_it_weaves(whipple):
     early = np.abs(roll[(tr.t > 1.0) & (tr.t < 2.0)]).max()
     # capsize (-0.32/s) outlasts the weave (-0.78/s) at 5 m/s: the slow mode bounds the late envelope
     assert late < early * np.exp(-0.32 * 1.0) * 1.5
+
+
+def test_eigen_and_statics_commands(tmp_path):
+    """`rtsim eigen` writes the modes and the stability changes as JSON and the root locus; `rtsim
+    statics` the loads of the motorcycle with its rider, which carry the weight."""
+    import json
+
+    from rtsim.cli import main
+
+    out, png = tmp_path / "modes.json", tmp_path / "locus.png"
+    assert main(["eigen", "--vehicle", str(REPO / "configs/vehicles/whipple_benchmark.toml"), "--speeds", "4:5:1",
+                 "--out", str(out), "--plot", str(png)]) == 0
+    data = json.loads(out.read_text())
+    assert data["speeds_m_s"] == [4.0, 5.0]
+    assert [c["mode"] for c in data["stability_changes"]] == ["weave"]
+    assert abs(data["stability_changes"][0]["speed_m_s"] - WEAVE_SPEED) < 1e-3
+    assert png.stat().st_size > 10_000
+    st = tmp_path / "statics.json"
+    assert main(["statics", "--vehicle", str(REPO / "configs/vehicles/motorcycle.toml"), "--out", str(st)]) == 0
+    loads = json.loads(st.read_text())["wheel_loads_n"]
+    assert abs(loads["front"] + loads["rear"] - 275.0 * 9.81) < 0.5

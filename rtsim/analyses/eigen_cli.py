@@ -42,3 +42,40 @@ def main(args) -> int:
     if args.plot:
         root_locus(results, crossings, cfg.name, Path(args.plot))
     return 0
+
+
+def add_statics_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--vehicle", required=True, help="two-wheeler vehicle TOML")
+    p.add_argument("--out", metavar="JSON", help="write the result here (default: stdout)")
+
+
+def statics_main(args) -> int:
+    """The two-wheeler at rest with the rider on: wheel loads, suspension sag, the frame's attitude."""
+    import numpy as np
+
+    from rtsim.vehicle.motorcycle.build import build_motorcycle
+    from rtsim.vehicle.motorcycle.config import load_motorcycle
+    from rtsim.vehicle.motorcycle.sim import static_pose
+
+    cfg, base = load_motorcycle(args.vehicle)
+    mm = build_motorcycle(cfg, base)
+    q, loads = static_pose(mm)
+    q0 = mm.coordinates(np.zeros(11))
+    des = mm.design
+    fork = float(mm.group(q, "ZETA")[0])
+    up = lambda x: float((mm.group(x, "W_R") - mm.group(x, "P")) @ mm.group(x, "H_AX"))   # noqa: E731
+    x_axis = np.cos(cfg.caster_rad) * mm.group(q, "E1") - np.sin(cfg.caster_rad) * mm.group(q, "H_AX")
+    data = {"vehicle": cfg.name, "wheel_loads_n": {"front": float(loads[0]), "rear": float(loads[1])},
+            "front_share": float(loads[0] / loads.sum()),
+            "fork_compression_m": fork,
+            "fork_compression_from_design_m": fork - des.zeta0,
+            "rear_axle_rise_from_design_m": up(q) - up(q0),
+            "pivot_height_change_m": float(mm.group(q, "P")[2] - mm.group(q0, "P")[2]),
+            "pitch_rad": float(-np.arcsin(x_axis[2])),
+            "axes": "ISO 8855; pitch positive nose down"}
+    text = json.dumps(data, indent=1)
+    if args.out:
+        Path(args.out).write_text(text)
+    else:
+        print(text)
+    return 0

@@ -21,6 +21,8 @@ from rtsim.vehicle.kit.powertrain import powertrain_step
 from rtsim.vehicle.car.sim import VehicleSim
 from rtsim.vehicle.kit.steering import steering_control
 from rtsim.vehicle.kit.tyre.magic_formula import mf52_forces, transient_slip
+from rtsim.vehicle.motorcycle.step import two_wheeler_step
+from drivers.rider import rider_step
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -136,6 +138,64 @@ def _forces(m, d, veh, vd, road, parts, states, bq, hc, n):
                        parts.effects, states.effects, False, bq, hc)
 
 
+@nb.njit(cache=True, _nrt=False)
+def _two_wheeler_loop(m, d, h, n, idx, par, tab, u, tp, slip, tyre):
+    for _ in range(n):
+        status = two_wheeler_step(m, d, h, idx, par, tab, u, tp, slip, tyre)
+        if status != 0:
+            return status
+    return 0
+
+
+@nb.njit(cache=True, _nrt=False)
+def _rider_loop(r, view, out, n):
+    for k in range(n):
+        view[0] = k * 1e-3
+        rider_step(r, view, out)
+
+
+def run_motorcycle(steps: int = 3000) -> dict:
+    """The sport motorcycle at 20 m/s with a steering torque held (leaning into a turn), its step in a
+    compiled loop, and the rider's kernel on the figure-eight timed alone on a fixed view."""
+    from drivers.paths import figure_eight
+    from drivers.rider import NRO, NRV, RV_U, rider
+    from rtsim.vehicle.motorcycle.build import build_motorcycle
+    from rtsim.vehicle.motorcycle.config import load_motorcycle
+    from rtsim.vehicle.motorcycle.sim import TwoWheelerSim, static_pose
+    from rtsim.vehicle.motorcycle.step import U_STEER_TORQUE
+
+    cfg, base = load_motorcycle(ROOT / "configs" / "vehicles" / "motorcycle.toml")
+    mm = build_motorcycle(cfg, base)
+    q, _ = static_pose(mm)
+    sim = TwoWheelerSim(mm, speed=20.0, q=q)
+    p = sim.parts
+    p.u[U_STEER_TORQUE] = 2.0
+    args = (p.idx, p.par, p.tab, p.u, p.tp, p.slip, p.tyre)
+    _two_wheeler_loop(sim.model, sim.data, 1e-3, 200, *args)
+    s0 = sim.data.stats.copy()
+    t0 = time.perf_counter()
+    status = _two_wheeler_loop(sim.model, sim.data, 1e-3, steps, *args)
+    wall = time.perf_counter() - t0
+    if status != 0:
+        raise RuntimeError(f"motorcycle benchmark: step failed with status {status}")
+    s1 = sim.data.stats
+    px, py = figure_eight(20.0, straight=20.0)
+    r = rider(px, py, closed=True, speed=10.0)
+    view, out = np.zeros(NRV), np.zeros(NRO)
+    view[RV_U] = 10.0
+    rider_s = _clock(lambda n: _rider_loop(r, view, out, n), 20000)
+    step = wall / steps
+    return {
+        "scenario": "motorcycle 20 m/s, steering torque held, rider kernel",
+        "road": "plane", "dt": 1e-3, "steps": steps, "wall_s": wall,
+        "us_per_step": (step + rider_s) * 1e6,
+        "newton_iterations_per_step": float(s1[1] - s0[1]) / steps,
+        "factorizations_per_step": float(s1[2] - s0[2]) / steps,
+        "share": {"two-wheeler step": step / (step + rider_s), "rider": rider_s / (step + rider_s)},
+        "parts_us_per_step": {"two-wheeler step": step * 1e6, "rider": rider_s * 1e6},
+    }
+
+
 def suite() -> list[dict]:
     campus = ROOT / "configs" / "roads" / "campus.toml"
     return [
@@ -146,4 +206,5 @@ def suite() -> list[dict]:
         # the 16-DOF car with electric power steering, the study's first life situation's steer
         run_scenario("EPS car, 35 deg step steer 80 km/h, flat", None, 22.22, np.radians(35.0), vehicle="eps_car"),
         run_scenario("EPS car, same, power audit on", None, 22.22, np.radians(35.0), vehicle="eps_car", audit=True),
+        run_motorcycle(),
     ]
