@@ -29,7 +29,8 @@ import numpy as np
 from rtsim.mbs import Mechanism
 from rtsim.mbs.constraints import eval_constraints, eval_drivers, eval_hqd
 from rtsim.mbs.forces import eval_forces
-from rtsim.mbs.model import NSLOT, VELOCITY_KINDS, make_data
+from rtsim.mbs.model import VELOCITY_KINDS, make_data
+from rtsim.mbs.simulation import dense_jacobian
 
 FD_STEP = 1e-4       # relative finite-difference step of the fourth-order stencil
 
@@ -55,11 +56,7 @@ class Equations:
         d.qd[:] = qd
         eval_drivers(m, d, 0.0)
         eval_constraints(m, d, q)
-        c = np.zeros((m.nc, m.nq))
-        for s in range(NSLOT):
-            cols = m.con_idx[:, s]
-            ok = cols >= 0
-            np.add.at(c, (np.nonzero(ok)[0], cols[ok]), d.jac[ok, s])
+        c = dense_jacobian(m, d)
         eval_hqd(m, d, q, qd)
         return d.phi[~self.velocity_rows].copy(), c, d.hqd.copy()
 

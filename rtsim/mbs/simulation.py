@@ -23,6 +23,16 @@ from .model import (
 )
 
 
+def dense_jacobian(m, d) -> np.ndarray:
+    """The constraint Jacobian last evaluated into d.jac, as a dense (nc, nq) array."""
+    jac = np.zeros((m.nc, m.nq))
+    for s in range(NSLOT):
+        cols = m.con_idx[:, s]
+        ok = cols >= 0
+        np.add.at(jac, (np.nonzero(ok)[0], cols[ok]), d.jac[ok, s])
+    return jac
+
+
 @dataclass
 class Trajectory:
     t: np.ndarray    # (n,) s
@@ -56,12 +66,7 @@ class Simulation:
         m, d = self.model, self.data
         eval_drivers(m, d, d.t[0])
         eval_constraints(m, d, q)
-        jac = np.zeros((m.nc, m.nq))
-        for s in range(NSLOT):
-            cols = m.con_idx[:, s]
-            ok = cols >= 0
-            np.add.at(jac, (np.nonzero(ok)[0], cols[ok]), d.jac[ok, s])
-        return d.phi.copy(), jac
+        return d.phi.copy(), dense_jacobian(m, d)
 
     def violations(self, q: np.ndarray, qd: np.ndarray) -> tuple[float, float]:
         """max |Phi| and max |Phi_q qd + Phi_t| at the current time."""

@@ -49,6 +49,7 @@ from ..kit.steering import SO_SIZE, SO_SW_ANGLE, SO_TORQUE, steering_control, st
 from ..kit.eps import (EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_SIZE, EO_SW_ANGLE, EO_TB_TORQUE, EP_DRIVER,
                        EP_K_TB, EP_N, EP_RP, ES_EXT, ES_STAGE, ES_T_DRIVER, DRIVER_TORQUE, eps_commit, eps_control,
                        eps_forces, eps_outputs, external_command, hands_step)
+from ..kit.rigid import add_moment, angular_velocity, cross, vec3
 from ..kit.tables import table_eval
 from .energy_kernels import audit_commit
 from .layout import (
@@ -93,14 +94,8 @@ def make_vehicle_data(nq: int = 1) -> VehicleData:
                        qc_prev=np.zeros((2, nq)), audit_e=np.zeros(AUDIT_SIZE), e_base=np.zeros(3))
 
 
-@inline_kernel
-def _vec(q, k):
-    return q[k], q[k + 1], q[k + 2]
-
-
-@inline_kernel
-def _cross(a0, a1, a2, b0, b1, b2):
-    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+_vec = vec3
+_cross = cross
 
 
 @inline_kernel
@@ -116,24 +111,14 @@ def _body_to_world(veh, q, x0, x1, x2):
 def chassis_omega(veh, q, qd):
     """Angular velocity of the chassis frame: omega = (u x u' + v x v' + w x w') / 2."""
     ci = veh.chassis_idx
-    o0 = o1 = o2 = 0.0
-    for k in (3, 6, 9):
-        c = _cross(q[ci[k]], q[ci[k + 1]], q[ci[k + 2]], qd[ci[k]], qd[ci[k + 1]], qd[ci[k + 2]])
-        o0 += 0.5 * c[0]
-        o1 += 0.5 * c[1]
-        o2 += 0.5 * c[2]
-    return o0, o1, o2
+    return angular_velocity(q, qd, ci[3], ci[6], ci[9])
 
 
 @inline_kernel
 def _add_chassis_moment(veh, q, force, m0, m1, m2):
     """Generalized forces of a moment M on the chassis frame: Q_e += M x e / 2 for e = u, v, w."""
     ci = veh.chassis_idx
-    for k in (3, 6, 9):
-        c = _cross(m0, m1, m2, q[ci[k]], q[ci[k + 1]], q[ci[k + 2]])
-        force[ci[k]] += 0.5 * c[0]
-        force[ci[k + 1]] += 0.5 * c[1]
-        force[ci[k + 2]] += 0.5 * c[2]
+    add_moment(force, q, ci[3], ci[6], ci[9], m0, m1, m2)
 
 
 @inline_kernel

@@ -31,6 +31,7 @@ from rtsim.mbs.envelope import add_entry
 from rtsim.mbs.integrator import step_with
 
 from ..kit.layout import offsets
+from ..kit.rigid import add_moment, angular_velocity, cross, vec3
 from ..kit.tables import table_eval
 from ..kit.tyre.two_wheel import (advance_two_wheel_slip, contact_force_world, toroidal_contact,
                                   two_wheel_rolling_radius, two_wheel_transient_slip, two_wheel_tyre_forces,
@@ -49,26 +50,6 @@ U_STEER_TORQUE, U_DRIVE_TORQUE, U_BRAKE_FRONT, U_BRAKE_REAR, U_SIZE = offsets(1,
 # Per-tyre outputs (TwoWheelerParts.tyre[w, :]), w = 0 front, 1 rear.
 (TO_FX, TO_FY, TO_FZ, TO_MZ, TO_KAPPA, TO_ALPHA, TO_GAMMA, TO_VX, TO_OMEGA, TO_RE, TO_VSY, TO_SIZE) = offsets(*(1,) * 11)
 FRONT, REAR = 0, 1
-
-
-@inline_kernel
-def _v3(q, k):
-    return q[k], q[k + 1], q[k + 2]
-
-
-@inline_kernel
-def _cross(a0, a1, a2, b0, b1, b2):
-    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-
-
-@inline_kernel
-def _body_moment(f, q, ka, kb, kc, m0, m1, m2):
-    """Generalized forces of a moment M on a rigid body given by three orthonormal unit vectors."""
-    for k in (ka, kb, kc):
-        c = _cross(m0, m1, m2, q[k], q[k + 1], q[k + 2])
-        f[k] += 0.5 * c[0]
-        f[k + 1] += 0.5 * c[1]
-        f[k + 2] += 0.5 * c[2]
 
 
 @inline_kernel
@@ -96,24 +77,19 @@ def _tyre(m, d, idx, tp, slip, tyre, w, kw, ka, kb, kc, mu, tangent, bq, hc):
     qd = d.qd
     f = d.force
     p = tp[w]
-    wx, wy, wz = _v3(q, kw)
-    ax, ay, az = _v3(q, ka)
+    wx, wy, wz = vec3(q, kw)
+    ax, ay, az = vec3(q, ka)
     px, py, pz, pen, gamma, tx, ty, tz, lx, ly, lz = toroidal_contact(p, wx, wy, wz, ax, ay, az, wx, wy, 0.0,
                                                                       0.0, 0.0, 1.0)
     if pen <= 0.0:
         for k in range(TO_SIZE):
             tyre[w, k] = 0.0
         return
-    vwx, vwy, vwz = _v3(qd, kw)
+    vwx, vwy, vwz = vec3(qd, kw)
     fz = two_wheel_vertical_force(p, pen, -vwz)
     # material velocity at P: W' + omega x (P - W), omega the wheel's angular velocity (1/2 sum e x e')
-    o0 = o1 = o2 = 0.0
-    for k in (ka, kb, kc):
-        c = _cross(q[k], q[k + 1], q[k + 2], qd[k], qd[k + 1], qd[k + 2])
-        o0 += 0.5 * c[0]
-        o1 += 0.5 * c[1]
-        o2 += 0.5 * c[2]
-    r = _cross(o0, o1, o2, px - wx, py - wy, pz - wz)
+    o0, o1, o2 = angular_velocity(q, qd, ka, kb, kc)
+    r = cross(o0, o1, o2, px - wx, py - wy, pz - wz)
     vsx = vwx + r[0]
     vsy_w = vwy + r[1]
     vx = vwx * tx + vwy * ty + vwz * tz
@@ -128,7 +104,7 @@ def _tyre(m, d, idx, tp, slip, tyre, w, kw, ka, kb, kc, mu, tangent, bq, hc):
     f[kw] += f0
     f[kw + 1] += f1
     f[kw + 2] += f2
-    _body_moment(f, q, ka, kb, kc, m0, m1, m2)
+    add_moment(f, q, ka, kb, kc, m0, m1, m2)
     if tangent:
         add_entry(d.w_env, m.first, m.ptr, m.pinv, kw + 2, kw + 2, bq * p[TW_KZ] + hc * p[TW_CZ])
     t = tyre[w]
@@ -281,8 +257,8 @@ def _chain(f, q, idx, par, torque):
     f[kw] += w0
     f[kw + 1] += w1
     f[kw + 2] += w2
-    m0, m1, m2 = _cross(n0, n1, n2, w0, w1, w2)
-    _body_moment(f, q, idx[K_V], idx[K_B_R], idx[K_C_R], m0, m1, m2)
+    m0, m1, m2 = cross(n0, n1, n2, w0, w1, w2)
+    add_moment(f, q, idx[K_V], idx[K_B_R], idx[K_C_R], m0, m1, m2)
     _frame_point_force(f, idx, par[MP_CHAIN_CX], par[MP_CHAIN_CZ], -w0, -w1, -w2)
 
 
