@@ -162,26 +162,6 @@ class Chain(Strict):
     rear_sprocket_radius_m: float = Field(gt=0.02, le=0.3)
 
 
-class Powertrain(Strict):
-    speed_rpm: list[float] = Field(min_length=2, description="engine speed breakpoints")
-    full_load_torque_nm: list[float] = Field(min_length=2, description="crankshaft torque at full throttle")
-    drag_torque_nm: list[float] = Field(min_length=2, description="closed-throttle drag (positive)")
-    primary_ratio: float = Field(gt=0.5, le=5)
-    gear_ratios: list[float] = Field(min_length=1)
-    upshift_rpm: float = Field(gt=1000, le=30000)
-    downshift_rpm: float = Field(gt=500, le=30000)
-    idle_rpm: float = Field(default=1200.0, gt=0, le=5000)
-    efficiency: float = Field(default=0.95, gt=0.5, le=1.0)
-
-    @model_validator(mode="after")
-    def _tables(self):
-        if not (len(self.speed_rpm) == len(self.full_load_torque_nm) == len(self.drag_torque_nm)):
-            raise ValueError("speed_rpm, full_load_torque_nm and drag_torque_nm need the same length")
-        if self.downshift_rpm >= self.upshift_rpm:
-            raise ValueError("downshift_rpm must be below upshift_rpm")
-        return self
-
-
 class Brakes(Strict):
     front_nm_per_kpa: float = Field(gt=0, le=10, description="front brake torque per line pressure")
     rear_nm_per_kpa: float = Field(gt=0, le=10)
@@ -220,7 +200,6 @@ class MotorcycleConfig(Strict):
     suspension: Suspension
     steering: Steering = Steering()
     chain: Chain | None = None
-    powertrain: Powertrain | None = None
     brakes: Brakes | None = None
     aero: Aero = Aero()
     sensors: Sensors = Sensors()
@@ -228,8 +207,6 @@ class MotorcycleConfig(Strict):
 
     @model_validator(mode="after")
     def _consistent(self):
-        if self.powertrain is not None and self.chain is None:
-            raise ValueError("a powertrain drives the rear wheel through [chain]")
         px, pz = self.geometry.swingarm_pivot_m
         if math.hypot(px, pz - self.rear_wheel.radius_m) < 0.05:
             raise ValueError("swingarm_pivot_m is too close to the rear axle")

@@ -101,7 +101,7 @@ class TwoWheelerSim:
 
     @property
     def position(self) -> np.ndarray:
-        """The rear contact point's design origin below the pivot... the pivot's ground projection (x, y), m."""
+        """The swingarm pivot's position on the ground plane (x, y), m (`rear_contact` for the road point)."""
         return self._g(self.data.q, "P")[:2].copy()
 
     @property
