@@ -43,7 +43,7 @@ from rtsim.configfile import Strict, check_ranges, range_fields
 from rtsim.jit import inline_kernel, kernel
 
 from .base import I_STEER, S_SPEED, S_X, S_Y, S_YAW
-from .paths import circle_points, nearest_segment, point_ahead, polyline, seg_project, wrap_angle
+from .paths import circle_points, nearest_segment, on_segment, point_ahead, polyline, seg_project, wrap_angle
 
 __all__ = ["PathFollower", "PathFollowerParams", "PATH_FOLLOWER_RANGES", "path_follower", "path_follower_step",
            "reset", "circle_points"]
@@ -208,13 +208,7 @@ def path_follower_step(pf, t, state, out):
     st[ST_INIT] = 1.0
     st[ST_IDX] = i
     u, d2 = _proj(pf, i, qx, qy)
-    ax = pf.px[i]
-    ay = pf.py[i]
-    tx = (pf.px[i + 1] - ax) / pf.seg_len[i]
-    ty = (pf.py[i + 1] - ay) / pf.seg_len[i]
-    e = tx * (qy - ay) - ty * (qx - ax)
-    uc = min(max(u, 0.0), 1.0)
-    h = pf.hd[i] + uc * _wrap(pf.hd[i + 1] - pf.hd[i])
+    e, h = on_segment(pf.px, pf.py, pf.hd, pf.seg_len, i, u, qx, qy)
     he = _wrap(h - yaw)
     st[ST_E] = e
     st[ST_S] = pf.ps[i] + u * pf.seg_len[i]

@@ -220,6 +220,33 @@ def point_ahead(px, py, seg_len, nseg, closed, i, u, dist):
 
 
 @inline_kernel
+def bracket(xs, n, x):
+    """(lo, hi = lo + 1) with xs[lo] <= x < xs[hi] for increasing xs[:n] and xs[0] <= x <= xs[n-1]
+    (binary search)."""
+    lo = 0
+    hi = n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if xs[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo, hi
+
+
+@inline_kernel
+def on_segment(px, py, hd, seg_len, i, f, x, y):
+    """Signed offset of (x, y) from segment i (left positive, m) and the path heading at the fraction f
+    along it (vertex headings interpolated, rad)."""
+    ax = px[i]
+    ay = py[i]
+    tx = (px[i + 1] - ax) / seg_len[i]
+    ty = (py[i + 1] - ay) / seg_len[i]
+    fc = min(max(f, 0.0), 1.0)
+    return tx * (y - ay) - ty * (x - ax), hd[i] + fc * wrap_angle(hd[i + 1] - hd[i])
+
+
+@inline_kernel
 def value_at(ps, val, closed, s, beyond):
     """val (one per vertex) interpolated linearly at arc length s (m); a closed path wraps s, an open
     one returns `beyond` outside [0, length]. Binary search: O(log n)."""
@@ -229,14 +256,7 @@ def value_at(ps, val, closed, s, beyond):
         s = s - length * math.floor(s / length)
     elif s < 0.0 or s > length:
         return beyond
-    lo = 0
-    hi = n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if ps[mid] <= s:
-            lo = mid
-        else:
-            hi = mid
+    lo, hi = bracket(ps, n, s)
     ds = ps[hi] - ps[lo]
     f = (s - ps[lo]) / ds if ds > 0.0 else 0.0
     f = min(max(f, 0.0), 1.0)

@@ -75,7 +75,7 @@ from pydantic import create_model
 from rtsim.configfile import Strict, check_ranges, range_fields
 from rtsim.jit import inline_kernel, kernel
 
-from .paths import nearest_segment, polyline, seg_project, value_at, vertex_curvature, wrap_angle
+from .paths import bracket, nearest_segment, on_segment, polyline, seg_project, value_at, vertex_curvature, wrap_angle
 
 G = 9.81          # m/s^2
 NBUF = 1024       # rows of the delay ring buffer (0.5 s at 1 ms needs 501)
@@ -327,14 +327,7 @@ def _table(xs, vs, x):
         return vs[0], 0.0
     if x >= xs[n - 1]:
         return vs[n - 1], 0.0
-    lo = 0
-    hi = n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if xs[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
+    lo, hi = bracket(xs, n, x)
     slope = (vs[hi] - vs[lo]) / (xs[hi] - xs[lo])
     return vs[lo] + slope * (x - xs[lo]), slope
 
@@ -362,13 +355,7 @@ def rider_step(r, view, out):
     i = nearest_segment(r.px, r.py, nseg, closed, first, int(st[ST_IDX]), x, y)
     st[ST_IDX] = i
     f, d2 = seg_project(r.px, r.py, i, x, y, nseg, closed)
-    ax = r.px[i]
-    ay = r.py[i]
-    tx = (r.px[i + 1] - ax) / r.seg_len[i]
-    ty = (r.py[i + 1] - ay) / r.seg_len[i]
-    n = tx * (y - ay) - ty * (x - ax)
-    fc = min(max(f, 0.0), 1.0)
-    heading = r.hd[i] + fc * wrap_angle(r.hd[i + 1] - r.hd[i])
+    n, heading = on_segment(r.px, r.py, r.hd, r.seg_len, i, f, x, y)
     s = r.ps[i] + f * r.seg_len[i]
     psi = wrap_angle(yaw - heading)
     kap0 = value_at(r.ps, r.kap, closed, s, 0.0)

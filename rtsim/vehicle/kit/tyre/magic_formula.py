@@ -477,6 +477,12 @@ def _relax_step(x, rate_in, a, dt):
     return x * e + rate_in * (1.0 - e) / a
 
 
+@inline_kernel
+def wind_up_limit(u, v, ulim, vlim):
+    """Contact deflections (m) clipped to +-ulim, +-vlim: they never wind up past the sliding limit."""
+    return min(max(u, -ulim), ulim), min(max(v, -vlim), vlim)
+
+
 @kernel
 def advance_deflections(p, state, i, fz, gamma, vx, vsy, omega, re, dt):
     """Advance state[i, S_U], state[i, S_V] by dt (exact for inputs frozen over the step), then apply
@@ -511,18 +517,7 @@ def _advance_deflections(p, state, i, fz, gamma, vx, vsy, omega, re, dt, extra):
     lim_a = abs(vsy) / den
     if lim_a < apk:
         lim_a = apk
-    ulim = sk * lim_k
-    vlim = sa * lim_a
-    if u > ulim:
-        u = ulim
-    elif u < -ulim:
-        u = -ulim
-    if v > vlim:
-        v = vlim
-    elif v < -vlim:
-        v = -vlim
-    state[i, S_U] = u
-    state[i, S_V] = v
+    state[i, S_U], state[i, S_V] = wind_up_limit(u, v, sk * lim_k, sa * lim_a)
 
 
 def new_slip_state(n_tyres: int) -> np.ndarray:

@@ -100,7 +100,7 @@ from rtsim.configfile import Range, Strict, bad
 from rtsim.jit import inline_kernel, kernel
 from rtsim.vehicle.kit.layout import offsets
 
-from .magic_formula import _relax_step
+from .magic_formula import _relax_step, wind_up_limit
 
 # ---- packed parameters ----------------------------------------------------------------------------
 (TW_MODEL,          # 0: magic_formula, 1: linear
@@ -541,18 +541,7 @@ def advance_two_wheel_slip(p, state, i, fz, gamma, vx, vsy, omega, re, dt):
     apk = p[TW_SPK_Y] * p[TW_MUY] * mus / can
     if lim_a < apk:
         lim_a = apk
-    ulim = sk * lim_k
-    vlim = sa * lim_a
-    if u > ulim:
-        u = ulim
-    elif u < -ulim:
-        u = -ulim
-    if v > vlim:
-        v = vlim
-    elif v < -vlim:
-        v = -vlim
-    state[i, TW_S_U] = u
-    state[i, TW_S_V] = v
+    state[i, TW_S_U], state[i, TW_S_V] = wind_up_limit(u, v, sk * lim_k, sa * lim_a)
 
 
 # ---- wrench -------------------------------------------------------------------------------------
