@@ -258,6 +258,9 @@ def test_blocked_subscriber_does_not_block_publish(link, client):
 
     client.subscribe("state", blocking)
     wait_for(lambda: (link.publish("state", b'{"i":-1}'), got)[1], what="subscription")
+    # stall the subscriber first (its thread now waits on the gate), then flood: under congestion the
+    # flood's first message may be dropped too, so it cannot be the one that stalls the subscriber
+    wait_for(lambda: (link.publish("state", b'{"i":0}'), max(got) >= 0)[1], what="stalled subscriber")
     pad = "x" * 4000
     n = 5000                                    # 20 MB: more than the TCP buffers and queues hold
     done = []
