@@ -127,6 +127,83 @@ ENERGY: tuple[Channel, ...] = (
     _ch("assist_torque", "N*m", "EPS assistance torque at the pinion"),
 )
 
+#: A two-wheeler's sensors (rtsim.vehicle.motorcycle.plant): the IMU on the rear frame, the wheel-speed
+#: sensors, the steering head's angle, rate and torque sensors, the suspension potentiometers, the
+#: rider's demands (throttle grip, brake lever and pedal master cylinders) and the actuators' states.
+#: A rider-assist ECU reads the rider's demands and may replace them (see configs/can/motorcycle.dbc).
+TWO_WHEELER_SENSORS: tuple[Channel, ...] = (
+    _ch("accel_x", "m/s^2", "specific force at the IMU on the rear frame, frame x (forward)"),
+    _ch("accel_y", "m/s^2", "specific force at the IMU, frame y (left)"),
+    _ch("accel_z", "m/s^2", "specific force at the IMU, frame z (up)"),
+    _ch("gyro_x", "rad/s", "rear frame angular rate about its x (roll rate)"),
+    _ch("gyro_y", "rad/s", "rear frame angular rate about its y (pitch rate)"),
+    _ch("gyro_z", "rad/s", "rear frame angular rate about its z (yaw rate in the frame, positive turning left)"),
+    _ch("roll", "rad", "rear frame roll (the IMU's attitude), positive leaning right (right side down)"),
+    _ch("pitch", "rad", "rear frame pitch (the IMU's attitude), positive nose down"),
+    _ch("wheel_speed_front", "rad/s", "front wheel spin rate relative to the fork, positive rolling forward"),
+    _ch("wheel_speed_rear", "rad/s", "rear wheel spin rate relative to the swingarm, positive rolling forward"),
+    _ch("steer_angle", "rad", "handlebar angle about the steering axis, positive steering left"),
+    _ch("steer_rate", "rad/s", "handlebar rate about the steering axis, positive steering left"),
+    _ch("steering_torque", "N*m", "the rider's torque on the handlebars (steering-head torque sensor), positive steering left"),
+    _ch("fork_travel", "m", "fork compression from full extension"),
+    _ch("shock_travel", "m", "rear shock compression from full extension"),
+    _ch("rider_throttle", "1", "the rider's throttle grip, 0 closed .. 1 fully open"),
+    _ch("rider_brake_front", "kPa", "front master cylinder pressure (the rider's brake lever)"),
+    _ch("rider_brake_rear", "kPa", "rear master cylinder pressure (the rider's brake pedal)"),
+    _ch("throttle", "1", "throttle opening acting on the engine, 0 .. 1"),
+    _ch("brake_pressure_front", "kPa", "front caliper pressure acting on the brake"),
+    _ch("brake_pressure_rear", "kPa", "rear caliper pressure acting on the brake"),
+)
+
+#: A two-wheeler's commands from a rider-assist ECU: each replaces the rider's demand while it is valid
+#: (the rider's own demand acts when it is missing or timed out); the steering torque adds to the rider's.
+TWO_WHEELER_COMMANDS: tuple[Channel, ...] = (
+    _ch("throttle_cmd", "1", "commanded throttle opening, 0 .. 1 (ride-by-wire)"),
+    _ch("brake_pressure_front_cmd", "kPa", "commanded front caliper pressure (ABS modulator)"),
+    _ch("brake_pressure_rear_cmd", "kPa", "commanded rear caliper pressure (ABS modulator)"),
+    _ch("assist_torque_cmd", "N*m", "additional steering torque on the steering axis (steering assist), positive steering left"),
+)
+
+#: A two-wheeler's state for observers (Zenoh ``state``, MCAP ``state``): the rear frame's pose and
+#: motion, the steering, suspension and wheels, the tyres, the inputs and the rider's path error.
+TWO_WHEELER_STATE: tuple[Channel, ...] = (
+    _ch("pos_x", "m", "swingarm pivot (the rear frame's reference point) x, world frame"),
+    _ch("pos_y", "m", "swingarm pivot y, world frame"),
+    _ch("pos_z", "m", "swingarm pivot z, world frame"),
+    _ch("roll_angle", "rad", "rear frame roll, positive leaning right (right side down)"),
+    _ch("pitch_angle", "rad", "rear frame pitch, positive nose down"),
+    _ch("yaw_angle", "rad", "rear frame heading, positive turning left"),
+    _ch("vel_x", "m/s", "swingarm pivot velocity along the heading (forward)"),
+    _ch("vel_y", "m/s", "swingarm pivot velocity across the heading (left)"),
+    _ch("vel_z", "m/s", "swingarm pivot velocity, vertical"),
+    _ch("roll_rate", "rad/s", "rate of the roll angle (angular velocity about the heading)"),
+    _ch("pitch_rate", "rad/s", "rear frame angular rate about its y axis"),
+    _ch("yaw_rate", "rad/s", "angular rate about the vertical, positive turning left"),
+    _ch("speed", "m/s", "horizontal speed of the swingarm pivot"),
+    _ch("steer_angle", "rad", "steer angle about the steering axis, positive left"),
+    _ch("steer_rate", "rad/s", "steer rate, positive left"),
+    _ch("fork_travel", "m", "fork compression from full extension"),
+    _ch("shock_travel", "m", "rear shock compression from full extension"),
+    _ch("swingarm_angle", "rad", "swingarm angle from its design position, positive rear axle up relative to the frame"),
+    _ch("wheel_speed_front", "rad/s", "front wheel spin rate relative to the fork"),
+    _ch("wheel_speed_rear", "rad/s", "rear wheel spin rate relative to the swingarm"),
+    _ch("wheel_angle_front", "rad", "front wheel spin angle relative to the fork"),
+    _ch("wheel_angle_rear", "rad", "rear wheel spin angle relative to the rear frame"),
+    *(_ch(f"tyre_{k}_{w}", u, f"{what}, {w} tyre") for w in ("front", "rear") for k, u, what in (
+        ("fx", "N", "longitudinal tyre force (tyre frame)"), ("fy", "N", "lateral tyre force (tyre frame)"),
+        ("fz", "N", "vertical tyre load"), ("mz", "N*m", "tyre twisting moment"),
+        ("slip_ratio", "1", "longitudinal slip ratio"), ("slip_angle", "rad", "slip angle"),
+        ("camber", "rad", "camber angle"))),
+    _ch("steering_torque", "N*m", "the rider's torque on the handlebars"),
+    _ch("assist_torque", "N*m", "the assist torque applied (the ECU's command while valid)"),
+    _ch("drive_torque", "N*m", "drive torque at the rear wheel"),
+    _ch("throttle", "1", "throttle opening acting on the engine"),
+    _ch("brake_pressure_front", "kPa", "front caliper pressure acting"),
+    _ch("brake_pressure_rear", "kPa", "rear caliper pressure acting"),
+    _ch("path_offset", "m", "the rider's lateral offset from the path, left positive (0 without a rider)"),
+    _ch("constraint_violation", "1", "max |Phi| of the multibody constraints (coordinate units)"),
+)
+
 #: The units a channel may have: SI units and the SI-derived ones the interface uses (``1``: dimensionless).
 SI_UNITS = frozenset(("1", "s", "ms", "m", "m/s", "m/s^2", "rad", "rad/s", "rad/s^2", "N", "N*m", "Pa",
                       "kPa", "kg", "K", "A", "V", "W", "J"))
@@ -204,6 +281,11 @@ def car_channels(driven=("rl", "rr"), eps: bool = False) -> ChannelDictionary:
     if eps:
         return ChannelDictionary(car_sensors(driven) + EPS_SENSORS, EPS_COMMANDS, STATE)
     return ChannelDictionary(car_sensors(driven), COMMANDS, STATE)
+
+
+def two_wheeler_channels() -> ChannelDictionary:
+    """A two-wheeler's channel dictionary (the motorcycle's, and any two-wheeler the kit assembles)."""
+    return ChannelDictionary(TWO_WHEELER_SENSORS, TWO_WHEELER_COMMANDS, TWO_WHEELER_STATE)
 
 
 #: The rear-wheel-drive car's dictionary: the default where no vehicle is at hand (a vehicle in use

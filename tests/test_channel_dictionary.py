@@ -156,7 +156,7 @@ def test_the_service_loop_refuses_a_dictionary_its_kernel_does_not_produce(tmp_p
 
     sim, _ = build_sim(DEFAULT_SCENARIO)
     with pytest.raises(RtsimError, match=rf"small.dbc: the vehicle declares 20 sensor and {len(CAR.state)} state "
-                                         rf"channels; the car's loop produces 21 and {len(CAR.state)}"):
+                                         rf"channels; its loop produces 21 and {len(CAR.state)}"):
         HilLoop(sim, Codec(small_dbc(tmp_path / "small.dbc"), SMALL), mode="fast")
 
 

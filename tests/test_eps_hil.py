@@ -58,7 +58,7 @@ class Bench:
                 self.ctl.on_sample(self.ctl.decoder.time, self.ctl.decoder.values)
                 sample = True
         if sample and command:
-            self.loop.rx_writer.put(*self.ctl.command_frame())
+            self.loop.rx_writer.put(*self.ctl.command_frames()[0])
         self.loop.take_frames()
         self.loop.advance(1)
         v = self.loop.ls.values

@@ -17,6 +17,7 @@ from rtsim.configfile import Range, Strict, load_toml, validate
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_SCENARIO = ROOT / "configs" / "scenarios" / "hil_flat.toml"
+TWO_WHEELER_SCENARIO = ROOT / "configs" / "scenarios" / "motorcycle_hil.toml"
 DEFAULT_ZENOH_LISTEN = "tcp/127.0.0.1:7447"
 Step = Range(1e-5, 0.01, "s")
 Pressure = Range(0.0, 12000.0, "kPa")
@@ -37,12 +38,15 @@ class ServeOptions(BaseModel):
     """Everything `rtsim serve` can be told."""
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
-    scenario: Path = setting(DEFAULT_SCENARIO, "scenario TOML or name in configs/scenarios (road, start, step; "
-                             "default hil_flat)", "simulation.scenario")
+    scenario: Optional[Path] = setting(None, "scenario TOML or name in configs/scenarios (road, start, step; "
+                                       "default hil_flat, motorcycle_hil for a two-wheeler)", "simulation.scenario")
     vehicle: Optional[Path] = setting(None, "vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)",
                                       "simulation.vehicle")
     dt: Optional[Step] = setting(None, "fixed step, s (default: the scenario's, 0.001)",
                                                    "simulation.dt")
+    rider: Literal["on", "off"] = setting(
+        "on", "a two-wheeler's rider: on (default): the scenario's rider rides it inside the service; off: "
+        "nobody does (a controller on the bus steers, throttles and brakes)", "simulation.rider")
     mode: Literal["realtime", "lockstep", "fast"] = setting(
         "realtime", "realtime (default): paced by the wall clock; lockstep: steps only on request (CAN "
         "SIM_STEP_REQ or Zenoh control op=step); fast: as fast as possible", "simulation.mode")

@@ -5,7 +5,11 @@ that talks to it over CAN only (the same bus the service opened). ``--vehicle ep
 electric power steering) runs the EPS in the loop instead: the demo EPS controller (``drivers.eps_demo``)
 commands the motor current every 1 ms from the car's DBC, the driver is the scenario's inside the
 service (default: the bond-graph study's first life situation, a 35 deg step steer at 80 km/h), and the
-summary reports the lateral acceleration and yaw rate reached, the commands accepted and the assist. The ECU starts first and waits,
+summary reports the lateral acceleration and yaw rate reached, the commands accepted and the assist.
+``--vehicle motorcycle`` (a two-wheeler) serves it with its rider inside the service on its own scenario
+(``motorcycle_hil``, 20 s by default, lockstep) and runs the demo rider-assist ECU
+(``drivers.rider_assist_demo``: steering damper, ride-by-wire, traction control and anti-lock); the
+summary reports the distance, peak roll, the rider's path offset and the assist. The ECU starts first and waits,
 bounded and saying so, for the service's bus and first frames (a first run compiles the kernels for a
 minute or more; the service shows that progress). When the ECU finishes its manoeuvre (or
 ``--duration`` of simulated time) the service stops, the recording is finalised and a summary is
@@ -37,13 +41,14 @@ from rtsim.errors import RtsimError
 
 from .cli import format_summary
 from .ecu_process import EcuProcess
-from .server import ServeOptions, Service, resolve_scenario, resolve_vehicle
+from .server import ServeOptions, Service, resolve_scenario, resolve_vehicle, vehicle_kind
 
 ROOT = Path(__file__).resolve().parents[2]
 #: tests: the ECU command to run instead of ``python -m drivers.ecu_demo`` (shell words; the bus,
 #: manoeuvre and duration arguments are appended)
 ECU_COMMAND_ENV = "RTSIM_DEMO_ECU"
 EPS_SCENARIO = "step_steer_80kph"
+TWO_WHEELER_DURATION = 20.0      # s of simulated time: the figure-eight's two circles and straights
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -59,7 +64,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "host without real-time scheduling is not a given)")
     p.add_argument("--no-zenoh", action="store_true", help="do not publish over Zenoh")
     p.add_argument("--vehicle", help="vehicle TOML or name in configs/vehicles (default xbw; a car with [eps], "
-                                     "e.g. eps_car, runs the demo EPS controller in the loop)")
+                                     "e.g. eps_car, runs the demo EPS controller in the loop; a two-wheeler, "
+                                     "e.g. motorcycle, its rider in the service and the demo rider-assist ECU)")
     p.add_argument("--scenario", help="scenario TOML or name (default: hil_flat; with an EPS car "
                                       f"{EPS_SCENARIO}, the first life situation)")
     p.add_argument("--silent-after", type=float, help="EPS demo: the controller stops commanding after this "
@@ -128,9 +134,12 @@ def main(args) -> int:
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)     # progress lines show at once in a pipe too
     vehicle = resolve_vehicle(args.vehicle) if args.vehicle else None
-    eps = vehicle is not None and _has_eps(vehicle)
+    two_wheeler = vehicle is not None and vehicle_kind(vehicle) == "two_wheeler"
+    eps = vehicle is not None and not two_wheeler and _has_eps(vehicle)
     if args.mode is None:
-        args.mode = "lockstep" if eps else "realtime"
+        args.mode = "lockstep" if eps or two_wheeler else "realtime"
+    if two_wheeler and args.duration is None:
+        args.duration = TWO_WHEELER_DURATION
     kw = {"vehicle": vehicle} if vehicle is not None else {}
     if args.scenario or eps:
         kw["scenario"] = resolve_scenario(args.scenario or EPS_SCENARIO)
@@ -139,8 +148,9 @@ def main(args) -> int:
     opts.check()                # bad options fail before any process starts
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise RtsimError(f"--duration {args.duration}: must be a positive number of seconds")
-    if args.silent_after is not None and not (eps and args.silent_after > 0):
-        raise RtsimError("--silent-after: only with a car with electric power steering, a positive time in s")
+    if args.silent_after is not None and not ((eps or two_wheeler) and args.silent_after > 0):
+        raise RtsimError("--silent-after: only with a car with electric power steering or a two-wheeler, a "
+                         "positive time in s")
     if eps and args.duration is None:
         from drivers.scenario import load_scenario
         args.duration = load_scenario(opts.scenario).duration
@@ -150,7 +160,7 @@ def main(args) -> int:
             ("remote", chan or f"{HUB_HOST}:{default_hub_port()}")
     # the ECU starts first (its imports and its own kernels take seconds) and waits for the service's
     # bus and first frames (bounded, saying so); the service ends when the ECU does
-    ecu_module = "drivers.eps_demo" if eps else "drivers.ecu_demo"
+    ecu_module = "drivers.eps_demo" if eps else ("drivers.rider_assist_demo" if two_wheeler else "drivers.ecu_demo")
     cmd = shlex.split(os.environ.get(ECU_COMMAND_ENV, "")) or [sys.executable, "-m", ecu_module]
     cmd = cmd + ["--can-interface", iface, "--can-channel", chan, "--manoeuvre", args.manoeuvre]
     if args.silent_after is not None:
@@ -185,6 +195,8 @@ def main(args) -> int:
         return _fail(ecu.describe_end())
     if eps:
         return _report_eps(args, svc, summary, ecu.result)
+    if two_wheeler:
+        return _report_two_wheeler(args, svc, summary, ecu.result)
     return _report(args, svc, summary, ecu.result)
 
 
@@ -232,6 +244,43 @@ def _report_eps(args, svc: Service, summary: dict, result: dict) -> int:
         return _fail("no EPS sensor sample was exchanged")
     if accepted <= 0 or rec.get("stage_first_on") is None:
         return _fail("the service accepted no command from the EPS controller (see the rejection counters above)")
+    return 0
+
+
+def recorded_ride(path: Path, vehicle_id: str) -> dict:
+    """From a two-wheeler's recording: peak roll (rad), the rider's path offset (RMS and peak, m), the
+    distance (m), the assist torque's peak (N m) and the samples recorded."""
+    from bridge.mcap_recorder import read_recording
+
+    messages, _ = read_recording(path)
+    st = messages.get(f"rtsim/{vehicle_id}/state", [])
+    if not st:
+        return {"state_messages": 0}
+    d = {k: np.array([m.data[k] for m in st], dtype=float)
+         for k in ("pos_x", "pos_y", "roll_angle", "path_offset", "assist_torque")}
+    return {"state_messages": len(st), "peak_roll": float(np.max(np.abs(d["roll_angle"]))),
+            "path_offset_rms": float(np.sqrt(np.mean(d["path_offset"] ** 2))),
+            "path_offset_max": float(np.max(np.abs(d["path_offset"]))),
+            "distance": float(np.sum(np.hypot(np.diff(d["pos_x"]), np.diff(d["pos_y"])))),
+            "peak_assist": float(np.max(np.abs(d["assist_torque"])))}
+
+
+def _report_two_wheeler(args, svc: Service, summary: dict, result: dict) -> int:
+    """The closing lines of a two-wheeler demo: what the rider, the motorcycle and the ECU did."""
+    rec = recorded_ride(Path(args.record), svc.vehicle_id)
+    accepted = summary.get("accepted_frames", 0) or 0
+    print(f"rtsim demo: rider-assist ECU sent {result.get('commands_sent', 0)} commands over "
+          f"{result.get('ecu_time', 0):.2f} s, {accepted} accepted; the rider rode {rec.get('distance', 0):.0f} m, "
+          f"peak roll {math.degrees(rec.get('peak_roll', 0)):.1f} deg, path offset RMS "
+          f"{rec.get('path_offset_rms', 0):.2f} m (max {rec.get('path_offset_max', 0):.2f} m), peak assist "
+          f"torque {rec.get('peak_assist', 0):.2f} N m (recorded state)")
+    if summary.get("run_state") == "stopped":
+        print(f"rtsim demo: the session stopped: {summary.get('message')}")
+    print(f"rtsim demo: recording written to {args.record}")
+    if result.get("samples", 0) <= 0 or rec.get("state_messages", 0) <= 0:
+        return _fail("no sensor sample was exchanged")
+    if accepted <= 0:
+        return _fail("the service accepted no command from the rider-assist ECU (see the rejection counters above)")
     return 0
 
 

@@ -7,9 +7,9 @@
    (``bridge.can_e2e``), accepted values as command events; a SIM_STEP_REQ is checked (CRC, count,
    repeated counter) and, in lockstep mode, stops the intake and is left in ``LI_PENDING_STEPS`` for the
    caller, otherwise counted as ignored;
-2. ``nsteps`` times: the in-loop driver (a vehicle whose DBC does not carry the driver's commands, such
+2. ``nsteps`` times: the in-loop driver (a car whose DBC does not carry the driver's commands, such
    as the EPS car whose controller under test commands only the motor: the scenario's profiles and
-   followers, ``drivers.driver.driver_step``) writes its commands, the watchdog writes the CAN command
+   followers, ``drivers.driver.driver_step``; a two-wheeler's rider) writes its commands, the watchdog writes the CAN command
    values (or the safe values of timed-out commands) into their slots of the vehicle's command array (a
    change of its time-out mask is a command event), one vehicle step, and at the DBC's periods: every
    sensor channel (with the vehicle's sensor effects and the config's sensor model) packed into the
@@ -19,7 +19,8 @@
 
 One call instead of several matters: each call from Python unboxes the model and state tuples (about
 a hundred arrays, several microseconds), more than the checks, the sensors and the packing cost.
-Times are simulation times: ``k`` steps of ``dt`` s.
+Times are simulation times: ``k`` steps of ``dt`` s. The vehicle is any the service can serve: its
+eight arguments and the calls into it are in rtsim.service.vehicles.
 """
 from __future__ import annotations
 
@@ -32,14 +33,11 @@ from bridge.can_e2e import (C_COUNTER, C_CRC, C_DLC, C_RANGE, C_STEP_IGNORED, C_
                             rx_find, rx_watchdog, step_request)
 from rtsim.jit import inline_kernel, kernel, read_cycles
 from rtsim.mbs.model import OK
-from rtsim.vehicle.car.step import vehicle_step
-from rtsim.vehicle.car.effect_kernels import sensor_stage
-from rtsim.vehicle.car.observer import driver_view, vehicle_state_values
-from drivers.driver import driver_step
 from drivers.path_follower import PathFollower
 from drivers.profiles import Packed
 from drivers.speed_follower import SpeedFollower
 
+from .vehicles import vehicle_advance, vehicle_drive, vehicle_observe, vehicle_sensors
 from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SENSOR, H_STATE, H_TX, LOG_RX,
                     LOG_TX, RX_DATA)
 
@@ -204,17 +202,12 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
     k = li[LI_K]
     t = k * h
     if lp.ints[PI_DRIVER]:
-        driver_view(d, veh, ls.drv_state)
-        driver_step(lp.drv_packed, lp.drv_speed, lp.drv_path, lp.drv_flags, t + h, ls.drv_state, ls.drv_out)
-        for c in range(ls.drv_out.shape[0]):
-            if lp.drv_slot[c] >= 0:
-                live = ls.drv_live[c]
-                io.commands[lp.drv_slot[c]] = ls.drv_out[c] if live != live else live   # (NaN: none)
+        vehicle_drive(m, d, veh, vd, road, parts, states, io, lp, ls, t, h)
     mask = rx_watchdog(lp.rx, ls.rx, t, io.commands)
     if mask != li[LI_MASK]:
         li[LI_MASK] = mask
         _command_event(rg, lp.rx, t, CMD_MASK, mask, io.commands, True)
-    status = vehicle_step(m, d, veh, vd, road, parts, states, io, h)
+    status = vehicle_advance(m, d, veh, vd, road, parts, states, io, h)
     if status != OK:
         return status
     k += 1
@@ -222,7 +215,7 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
     t1 = k * h
     ints = lp.ints
     if k % ints[PI_SENSOR_EVERY] == 0:
-        sensor_stage(m, d, veh, io.signals, parts.effects, parts.sensors, states.sensors, ls.values)
+        vehicle_sensors(m, d, veh, vd, road, parts, states, io, ls.values)
         vals = ls.values
         pack_frames(vals, t1, lp.sensor_time_start, lp.sensor_time_mask, lp.sensor_sig_int,
                     lp.sensor_sig_float, ls.words)
@@ -237,7 +230,7 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
         rg.heads[H_SENSOR] += 1
         li[LI_SENT] += 1
     if k % ints[PI_STATE_EVERY] == 0:
-        vehicle_state_values(d, veh, vd, io.signals, ls.state)
+        vehicle_observe(m, d, veh, vd, road, parts, states, io, ls.state)
         j = rg.heads[H_STATE] % rg.state_t.shape[0]
         rg.state_t[j] = t1
         for c in range(ls.state.shape[0]):

@@ -32,8 +32,6 @@ from rtsim.boundcall import bind
 from rtsim.errors import RtsimError, SimulationError
 from rtsim.mbs.model import OK
 from rtsim.realtime.health import LoopHealth
-from rtsim.vehicle.car.observer import NSTATE_OUT
-from rtsim.vehicle.car.step import COMMAND_SLOTS, INVALID_SLOTS
 
 from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_OVERRUNS, LI_PENDING_COUNTER, LI_PENDING_STEPS,
                      LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, PI_ACK_ID, PI_DRIVER, PI_LOCKSTEP,
@@ -76,13 +74,13 @@ class HilLoop:
         self.scenario_name = scenario_name
         self.on_chunk = on_chunk
         ch = codec.channels               # the served vehicle's interface: ring widths, payload names
-        if (len(ch.sensors), len(ch.state)) != (sim.nsensor, NSTATE_OUT):
+        if (len(ch.sensors), len(ch.state)) != (sim.nsensor, sim.nstate):
             raise RtsimError(f"{codec.path}: the vehicle declares {len(ch.sensors)} sensor and "
-                             f"{len(ch.state)} state channels; the car's loop produces {sim.nsensor} and {NSTATE_OUT}")
+                             f"{len(ch.state)} state channels; its loop produces {sim.nsensor} and {sim.nstate}")
         self.rings = rings if rings is not None else make_rings(
             len(ch.sensors), len(codec.sensor_frames), len(ch.state), len(ch.commands))
         kw = {} if hold_pressure is None else {"hold_pressure": hold_pressure}
-        self.rx = CommandReceiver(codec, slots=COMMAND_SLOTS, invalid_slots=INVALID_SLOTS, **kw)   # the step's E2E state
+        self.rx = CommandReceiver(codec, slots=sim.command_slots, invalid_slots=sim.invalid_slots, **kw)   # the step's E2E state
         self.rx_writer = RxWriter(self.rings)            # for feeding frames by hand (re-simulation)
         self.state_rate = state_rate
         self.run_state = "running"
@@ -95,21 +93,23 @@ class HilLoop:
 
     # -- set-up ------------------------------------------------------------------------------------
     def _install(self, sim, driver: Driver | None = None) -> None:
-        """Take a (new) VehicleSim and its scenario's driver: step counters, sensor model, rates; the E2E
-        counters carry on. A vehicle whose DBC carries the EPS motor command gets its EPS in external
-        mode (the stage on at the controller's first valid command)."""
+        """Take a (new) vehicle sim (a car's VehicleSim, a two-wheeler's TwoWheelerHil) and its scenario's
+        driver: step counters, sensor model, rates; the E2E counters carry on. A car whose DBC carries the
+        EPS motor command gets its EPS in external mode (the stage on at the controller's first valid
+        command). A two-wheeler's in-loop driver is its rider (if it has one)."""
         self.sim = sim
         names = self.codec.channels.command_names
-        self.external_eps = any(n in INVALID_SLOTS for n in names)    # the DBC carries the EPS's command
+        car = sim.kind == "car"
+        self.external_eps = car and any(n in sim.invalid_slots for n in names)   # the DBC carries the EPS's command
         if self.external_eps:
             sim.external_eps(True)
-        driven = [i for i, n in enumerate(INPUT_NAMES) if n in COMMAND_SLOTS and n not in names]
+        driven = [i for i, n in enumerate(INPUT_NAMES) if car and n in sim.command_slots and n not in names]
         self.driver = driver if driver is not None and driven else Driver()
         self.driver.reset()
         drv_slot = np.full(NINPUT, -1, dtype=np.int64)
         if driver is not None:
             for i in driven:
-                drv_slot[i] = COMMAND_SLOTS[INPUT_NAMES[i]]
+                drv_slot[i] = sim.command_slots[INPUT_NAMES[i]]
         self.dt = sim.dt
         self.k = 0
         c = self.codec
@@ -131,7 +131,7 @@ class HilLoop:
         ints[PI_MODE_CODE] = c.modes[self.mode]
         ints[PI_STEP_REQ_ID], ints[PI_STATUS_ID], ints[PI_ACK_ID] = \
             c.step_request.frame_id, c.status_frame.frame_id, c.step_ack.frame_id
-        ints[PI_DRIVER] = bool(np.any(drv_slot >= 0))
+        ints[PI_DRIVER] = bool(np.any(drv_slot >= 0)) if car else sim.rider_on
         faults = self.rx.fault_names
         sources = c.status_sources
         assert sources[ST_FAULT0 + len(faults)] == "fault_bus_error"
@@ -141,7 +141,7 @@ class HilLoop:
                              np.array([sources.index(f"fault_{f}") for f in faults], dtype=np.int64),
                              self.frame_every, self.driver.packed, self.driver.speed, self.driver.path,
                              self.driver.flags, drv_slot)
-        self.ls = LoopState(self.rx.state, self.li, np.zeros(sim.nsensor), np.zeros(NSTATE_OUT),
+        self.ls = LoopState(self.rx.state, self.li, np.zeros(sim.nsensor), np.zeros(sim.nstate),
                             np.zeros(len(sources) + 1), np.zeros(3),
                             np.zeros(len(lay["frame_id"]), dtype=np.int64), np.zeros(1, dtype=np.int64),
                             self.cycles, np.zeros(NSTATE), np.zeros(NINPUT), np.full(NINPUT, np.nan))
@@ -153,8 +153,7 @@ class HilLoop:
         self._bus_errors_at_status = self.port.errors if self.port is not None else 0
         # one compiled call per step, its fixed arguments (model, state, loop arrays) bound once: passed
         # as one address table instead of unboxing ~120 arrays at every call (rtsim.boundcall)
-        self._loop_run = bind(loop_run, sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts,
-                              sim.states, sim.io, self.lp, self.ls, self.rings, n_free=3)
+        self._loop_run = bind(loop_run, *sim.loop_args(), self.lp, self.ls, self.rings, n_free=3)
 
     def _every(self, period: float, what: str) -> int:
         n = period / self.dt
@@ -197,7 +196,7 @@ class HilLoop:
         if status != OK:
             t = self.k * self.dt
             try:
-                self.sim.sim._raise(status, self.k + 1)
+                self.sim.raise_status(status, self.k + 1)
             except SimulationError as exc:
                 self.run_state = "stopped"
                 self.message = f"model stopped at t = {t:.3f} s: {exc}"

@@ -89,7 +89,7 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         notes.append(note)
         temps = [p for p in (spath, vpath) if p.name.startswith(".resim-")]
         try:
-            sim, sc = build_sim(spath, vpath, float(session["dt"]))
+            sim, sc = build_sim(spath, vpath, float(session["dt"]), rider=session.get("rider", "on") == "on")
         finally:
             for p in temps:
                 p.unlink(missing_ok=True)
@@ -143,10 +143,8 @@ def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | N
     ``models``: a cache of built vehicle models (see ``build_sim``)."""
     from bridge.can_logs import read_frames
 
-    from .config import DEFAULT_SCENARIO
-
     frames = read_frames(path)
-    sim, sc = build_sim(scenario or DEFAULT_SCENARIO, vehicle, dt, models)
+    sim, sc = build_sim(scenario, vehicle, dt, models)
     loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode="fast", driver=sc.driver())
     col = Collector(loop)
     t_first = frames[0].time if frames else 0.0

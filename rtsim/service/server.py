@@ -29,7 +29,7 @@ from rtsim.errors import ConfigError
 from rtsim.realtime.health import LoopHealth
 from rtsim.realtime.pacer import Pacer
 
-from .config import ServeOptions
+from .config import DEFAULT_SCENARIO, TWO_WHEELER_SCENARIO, ServeOptions
 from .loop import HilLoop, Request
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -56,10 +56,26 @@ def resolve_vehicle(name: str | Path) -> Path:
     return _resolve(name, "vehicle", "vehicles")
 
 
-def build_sim(scenario: Path, vehicle: Path | None = None, dt: float | None = None,
-              models: dict | None = None):
-    """(VehicleSim, Scenario) at the scenario's start. ``models`` caches built vehicle models by
-    resolved config path (a build solves the suspension linkages: seconds)."""
+def vehicle_kind(path: Path) -> str:
+    """"two_wheeler" for a two-wheeler's vehicle file (``kind = "two_wheeler"``), else "car"."""
+    from rtsim.configfile import load_toml
+
+    return "two_wheeler" if load_toml(Path(path)).get("kind") == "two_wheeler" else "car"
+
+
+def default_scenario(vehicle: Path | None) -> Path:
+    """The scenario served when none is given: the two-wheeler's own for a two-wheeler, else hil_flat."""
+    if vehicle is not None and vehicle_kind(resolve_vehicle(vehicle)) == "two_wheeler":
+        return TWO_WHEELER_SCENARIO
+    return DEFAULT_SCENARIO
+
+
+def build_sim(scenario: Path | None, vehicle: Path | None = None, dt: float | None = None,
+              models: dict | None = None, rider: bool = True):
+    """(vehicle sim, Scenario) at the scenario's start (None: ``default_scenario``): a car's VehicleSim
+    or a two-wheeler's TwoWheelerHil (with the scenario's rider unless ``rider`` is False). ``models``
+    caches built vehicle models by resolved config path (a build solves the suspension linkages or
+    settles the two-wheeler on its suspension: seconds)."""
     from drivers.scenario import load_scenario
     from rtsim.road.config import load_road
     from rtsim.vehicle.car.config import load_vehicle
@@ -67,9 +83,11 @@ def build_sim(scenario: Path, vehicle: Path | None = None, dt: float | None = No
     from rtsim.vehicle.offline import default_vehicle_path
     from rtsim.vehicle.car.sim import VehicleSim
 
-    sc = load_scenario(scenario, check_files=True)
-    vpath = Path(vehicle) if vehicle is not None else (sc.vehicle_path or default_vehicle_path())
+    sc = load_scenario(scenario if scenario is not None else default_scenario(vehicle), check_files=True)
+    vpath = resolve_vehicle(vehicle) if vehicle is not None else (sc.vehicle_path or default_vehicle_path())
     models = {} if models is None else models
+    if vehicle_kind(vpath) == "two_wheeler":
+        return _two_wheeler_sim(sc, vpath, dt, models, rider), sc
     model = models.get(vpath.resolve())
     if model is None:
         cfg, base = load_vehicle(vpath)
@@ -79,6 +97,39 @@ def build_sim(scenario: Path, vehicle: Path | None = None, dt: float | None = No
     sim = VehicleSim(model, road, dt if dt is not None else sc.dt, brake_pressure=0.0,
                      position=(ini.x, ini.y), yaw=ini.yaw, speed=ini.speed)
     return sim, sc
+
+
+def _two_wheeler_sim(sc, vpath: Path, dt: float | None, models: dict, rider: bool):
+    """A two-wheeler at the scenario's start (see ``build_sim``): on the flat road of the scenario (the
+    two-wheeler's tyres run on the plane z = 0 only), its friction scale the tyres' road friction."""
+    from rtsim.road.config import FlatRoadConfig, read_road_config
+    from rtsim.vehicle.motorcycle.build import build_motorcycle
+    from rtsim.vehicle.motorcycle.config import load_motorcycle
+    from drivers.rider import P_TYRE_LEAN
+    from rtsim.vehicle.motorcycle.hil import TwoWheelerHil
+    from rtsim.vehicle.motorcycle.ride import tyre_lean_ratio
+    from rtsim.vehicle.motorcycle.sim import static_pose
+
+    road = read_road_config(sc.road_path)
+    if not isinstance(road, FlatRoadConfig) or road.height != 0.0:
+        raise ConfigError(f"{sc.path}: road {sc.road_path}: a two-wheeler runs on a flat road at height 0 only")
+    if rider and sc.spec.rider is None:
+        raise ConfigError(f"{sc.path}: no [rider] section for the two-wheeler {vpath.name} (serve it with "
+                          f"--rider off for a controller on the bus to ride it)")
+    key = (vpath.resolve(), "two_wheeler")
+    if key not in models:
+        cfg, base = load_motorcycle(vpath)
+        mm = build_motorcycle(cfg, base)
+        models[key] = (mm, (base / cfg.interface.dbc).resolve(), static_pose(mm)[0])
+    mm, dbc, q = models[key]
+    ini = sc.spec.initial
+    r = None
+    if rider:
+        r = sc.rider()
+        if "tyre_lean" not in sc.spec.rider.model_fields_set:      # the vehicle's own tyres' crown correction
+            r.par[P_TYRE_LEAN] = tyre_lean_ratio(mm)
+    return TwoWheelerHil(mm, dbc, q, dt if dt is not None else sc.dt, speed=ini.speed, x=ini.x, y=ini.y,
+                         yaw=ini.yaw, rider=r, mu=road.mu)
 
 
 class Service:
@@ -104,9 +155,9 @@ class Service:
     # -- assembly ------------------------------------------------------------------------------------
     def _build(self) -> None:
         o = self.opts
-        self.scenario_path = resolve_scenario(o.scenario)
+        self.scenario_path = resolve_scenario(o.scenario) if o.scenario is not None else default_scenario(o.vehicle)
         self.models: dict = {}
-        self.sim, self.sc = build_sim(self.scenario_path, o.vehicle, o.dt, self.models)
+        self.sim, self.sc = build_sim(self.scenario_path, o.vehicle, o.dt, self.models, o.rider == "on")
         self.model = self.sim.vm
         self.vehicle_id = o.vehicle_id or self.model.config.id
         ch = self.model.channels
@@ -178,11 +229,11 @@ class Service:
         mode and the watchdog's hold pressure (MCAP metadata records)."""
         from rtsim.vehicle.offline import default_vehicle_path
 
-        vpath = Path(self.opts.vehicle) if self.opts.vehicle else (self.sc.vehicle_path or default_vehicle_path())
+        vpath = resolve_vehicle(self.opts.vehicle) if self.opts.vehicle else (self.sc.vehicle_path or default_vehicle_path())
         return {
             "rtsim.session": {"mode": self.opts.mode, "dt": repr(self.sim.dt), "vehicle_id": self.vehicle_id,
                               "scenario": self.sc.name, "hold_pressure": repr(self.loop_hold_pressure()),
-                              "state_rate": repr(self.opts.state_rate),
+                              "state_rate": repr(self.opts.state_rate), "rider": self.opts.rider,
                               "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
             "rtsim.scenario": {"path": str(self.scenario_path.resolve()), "toml": self.scenario_path.read_text()},
             "rtsim.vehicle": {"path": str(vpath.resolve()), "toml": vpath.read_text()},
@@ -202,7 +253,7 @@ class Service:
         args = {k: v for k, v in request.items() if k != "op"}
         if op in ("reset", "load_scenario"):
             path = self.scenario_path if op == "reset" else resolve_scenario(str(args.get("scenario", "")))
-            sim, sc = build_sim(path, self.opts.vehicle, self.opts.dt, self.models)
+            sim, sc = build_sim(path, self.opts.vehicle, self.opts.dt, self.models, self.opts.rider == "on")
             if op == "load_scenario":
                 self.scenario_path, self.sc, self.model = path, sc, sim.vm
             args = {"_sim": sim, "_name": sc.name, "_driver": sc.driver()}

@@ -30,7 +30,9 @@ from .effect_kernels import (FS_DL, FS_LAG, FS_SIZE, FX_B_LAG, FX_DL, FX_DL_K, F
                              neutral_params, physical_sensors, sensor_stage)
 from .effects import pack_effects, validate_effects
 from .layout import CI_PHI, WHEELS
-from .step import CMD_BRAKE, EX_SELECTOR, Parts, States, make_io, make_vehicle_data, vehicle_advance
+from .observer import NSTATE_OUT
+from .step import (CMD_BRAKE, COMMAND_SLOTS, EX_SELECTOR, INVALID_SLOTS, Parts, States, make_io, make_vehicle_data,
+                   vehicle_advance)
 
 
 def _align_z(n: np.ndarray) -> np.ndarray:
@@ -196,6 +198,21 @@ class VehicleSim:
         if ss[SM_ST_SLOTS] > 0:
             fill_history(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, ss, np.zeros(self.nsensor))
         self.states = self.states._replace(sensors=ss)
+
+    # ---- what the HIL service's loop needs of a vehicle (rtsim.service.vehicles) ------------------------
+    kind = "car"
+
+    def loop_args(self) -> tuple:
+        """The eight arguments of the service's compiled step (rtsim.service.vehicles)."""
+        return (self.m, self.data, self.vm.vehicle, self.vd, self.road, self.parts, self.states, self.io)
+
+    command_slots = COMMAND_SLOTS     # where each bus command's value goes in io.commands
+    invalid_slots = INVALID_SLOTS     # where 1.0 goes while a command has no valid value
+    nstate = NSTATE_OUT               # observer state channels
+
+    def raise_status(self, status: int, step: int) -> None:
+        """The exception of a failed step's status."""
+        self.sim._raise(status, step)
 
     def seed_sensor_noise(self, seed: int) -> None:
         """Restart the sensor model's noise generator at `seed` (reproducible noise)."""

@@ -1,0 +1,120 @@
+"""A controller on the service's bus, sample by sample: the loop of the demo controllers (drivers.eps_demo,
+drivers.rider_assist_demo). ``ctl`` has a ``decoder`` (bridge.can_pack.SensorDecoder: ``receive``
+returns True when a frame completes a sample; ``time`` and ``values``), ``on_sample(t, values)``,
+``command_frames()`` (the frames to send after a sample), ``summary()`` and ``t`` (the last sample's
+simulated time, s). In lockstep the controller also drives simulated time: one SIM_STEP_REQ of one
+step after each acknowledgement."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+
+from bridge.bus_wait import Waiting, add_client_arguments, bus_name, positive_seconds, wait_for_bus
+from rtsim.errors import RtsimError
+
+
+def run(bus, ctl, duration: float | None = None, lockstep: bool = False,
+        silent_after: float | None = None, linger: float = 0.25, timeout: float = 5.0,
+        first_frame_timeout: float = 60.0, waiting: Waiting | None = None) -> dict:
+    """Command every sample until ``duration`` s of simulated time (or ``silent_after`` + ``linger``),
+    or no frame for ``timeout`` s of wall time once frames flowed. Returns the summary plus counters."""
+    import can
+
+    sent = received = commands = 0
+    step_counter = 0
+    last_command_t = None
+
+    def send(fid, data):
+        nonlocal sent
+        try:
+            bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+        except Exception as exc:  # noqa: BLE001  (backends raise many types)
+            raise RtsimError(f"lost the CAN bus ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+        sent += 1
+
+    def request_step():
+        nonlocal step_counter
+        step_counter = (step_counter + 1) & 0xF
+        send(*ctl.codec.encode_step_request(1, step_counter))
+
+    end = math.inf if duration is None else duration
+    if silent_after is not None:
+        end = min(end, silent_after + linger)
+    if lockstep:
+        request_step()
+    ack_id = ctl.codec.step_ack.frame_id
+    last_rx = time.monotonic()
+    while ctl.t < end - 1e-9:
+        try:
+            msg = bus.recv(0.1)
+        except Exception as exc:  # noqa: BLE001
+            raise RtsimError(f"lost the CAN bus ({type(exc).__name__})") from None
+        if msg is None:
+            if time.monotonic() - last_rx > (timeout if received else first_frame_timeout):
+                break
+            if not received and waiting is not None:
+                waiting.tick("the service's first sensor frames")
+            continue
+        last_rx = time.monotonic()
+        if not received and waiting is not None:
+            waiting.done("first frames from the service")
+        received += 1
+        if lockstep and msg.arbitration_id == ack_id:
+            _, ctr = ctl.codec.decode_step_ack(msg.data)
+            if ctr == step_counter:
+                request_step()
+            continue
+        if ctl.decoder.receive(msg.arbitration_id, msg.data):
+            ctl.on_sample(ctl.decoder.time, ctl.decoder.values)
+            if silent_after is None or ctl.t < silent_after - 1e-9:
+                for frame in ctl.command_frames():
+                    send(*frame)
+                    commands += 1
+                last_command_t = ctl.t
+    out = ctl.summary()
+    out.update({"frames_sent": sent, "frames_received": received, "commands_sent": commands,
+                "last_command_sample_t": last_command_t})
+    return out
+
+
+def main(name: str, doc: str, make_ctl, argv: list[str] | None = None) -> int:
+    """A demo controller's command line (``python -m drivers.<name>``): the bus and waiting options,
+    ``--silent-after`` and ``--linger``; ``make_ctl()`` builds the controller. Prints the run's JSON
+    summary last; a failure is one ``<name>: error: ...`` line on stderr and exit 2."""
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+
+    p = argparse.ArgumentParser(prog=f"python -m drivers.{name}", description=doc.split("\n\n")[0])
+    add_client_arguments(p)
+    p.add_argument("--silent-after", type=positive_seconds, help="stop commanding after this much simulated time, s")
+    p.add_argument("--linger", type=positive_seconds, default=0.25,
+                   help="with --silent-after: keep stepping (lockstep) or listening this long, s (default 0.25)")
+    p.add_argument("--manoeuvre", help="(accepted for the demo's interface; the scenario drives the driver)")
+    args = p.parse_args(argv)
+    try:
+        ctl = make_ctl()
+        waiting = Waiting(name, say, args.report_every)
+        bus = wait_for_bus(args.can_interface, args.can_channel, waiting.start + args.connect_timeout, waiting)
+        try:
+            first = max(1.0, waiting.start + args.connect_timeout - time.monotonic())
+            result = run(bus, ctl, args.duration, args.lockstep, args.silent_after, args.linger, args.timeout,
+                         first, waiting)
+        finally:
+            try:
+                bus.shutdown()
+            except Exception:  # noqa: BLE001
+                pass
+    except RtsimError as exc:
+        say(f"{name}: error: {exc}")
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    print(json.dumps(result), flush=True)
+    if result["samples"] == 0:
+        say(f"{name}: error: no sensor sample from the service on "
+            f"{bus_name(args.can_interface, args.can_channel)} after {waiting.elapsed:.0f} s")
+        return 2
+    return 0

@@ -1,0 +1,102 @@
+"""A two-wheeler ready for the HIL service (`rtsim serve --vehicle configs/vehicles/motorcycle.toml`): settled
+on its suspension with the rider on, placed at the scenario's start, rolling at its speed, with the
+rider (or none: ``--rider off``) inside the compiled step (rtsim.vehicle.motorcycle.plant)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rtsim.channels import ChannelDictionary, two_wheeler_channels
+from drivers.rider import rider as make_rider
+
+from .build import MotorcycleModel
+from .config import MotorcycleConfig
+from .layout import NAMES, POINTS, VECTORS
+from .plant import (COMMAND_SLOTS, FALL_ROLL, FELL, INVALID_SLOTS, NCOMMAND, NPP, PP_BRAKE_GAIN_F, PP_BRAKE_GAIN_R,
+                    PP_COS_CASTER, PP_IMU_E1, PP_IMU_H, PP_MAX_DRIVE, PP_MAX_PRESSURE, PP_REAR_RADIUS, PP_RIDER,
+                    PP_SIN_CASTER, PP_SLIP_TYRES, PlantIO, PlantParams, new_plant_state)
+from .parts import frame_coordinates
+from .ride import MAX_WHEEL_TORQUE
+from .sim import Fall, TwoWheelerSim
+
+
+@dataclass(frozen=True)
+class ServedTwoWheeler:
+    """What the service shows of the vehicle it serves: its configuration, interface and DBC."""
+    config: MotorcycleConfig
+    channels: ChannelDictionary
+    dbc: Path
+    model: MotorcycleModel
+
+
+def place(mm: MotorcycleModel, q: np.ndarray, x: float, y: float, yaw: float) -> np.ndarray:
+    """q moved on the ground plane: turned by yaw (rad) about the vertical through the origin, then
+    shifted by (x, y) m. The rear contact point at the origin lands at (x, y)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    out = q.copy()
+    for name in POINTS + VECTORS:
+        k = mm.bike.idx[NAMES.index(name)]
+        if k < 0:
+            continue
+        out[k:k + 3] = rot @ q[k:k + 3]
+        if name in POINTS:
+            out[k:k + 2] += (x, y)
+    return out
+
+
+class TwoWheelerHil:
+    """The served two-wheeler (see the module docstring): the interface the service's loop needs
+    (``loop_args``, command slots, channel counts, ``raise_status``) over a TwoWheelerSim."""
+
+    kind = "two_wheeler"
+    command_slots = COMMAND_SLOTS
+    invalid_slots = INVALID_SLOTS
+
+    def __init__(self, mm: MotorcycleModel, dbc: Path, q_static: np.ndarray, dt: float, speed: float = 0.0,
+                 x: float = 0.0, y: float = 0.0, yaw: float = 0.0, rider=None, mu: float = 1.0):
+        self.tw = TwoWheelerSim(mm, dt=dt, speed=speed, q=place(mm, q_static, x, y, yaw), mu=mu)
+        self.dt = self.tw.dt
+        self.m, self.data = self.tw.model, self.tw.data
+        self.parts = self.tw.parts
+        self.sim = self.tw.sim
+        self.vm = ServedTwoWheeler(mm.config, two_wheeler_channels(), dbc, mm)
+        self.nsensor = len(self.vm.channels.sensors)
+        self.nstate = len(self.vm.channels.state)
+        self.rider_on = rider is not None
+        # without a rider the step still needs one of the rider's type: a straight line it never reads
+        self.rider = rider if rider is not None else make_rider(np.array([0.0, 1.0]), np.zeros(2))
+        cfg = mm.config
+        pp = np.zeros(NPP)
+        pp[PP_IMU_E1], pp[PP_IMU_H] = frame_coordinates(mm, cfg.sensors.imu_position_m)
+        pp[PP_COS_CASTER], pp[PP_SIN_CASTER] = np.cos(cfg.caster_rad), np.sin(cfg.caster_rad)
+        pp[PP_REAR_RADIUS] = cfg.rear_wheel.radius_m
+        if cfg.brakes is not None:
+            pp[PP_BRAKE_GAIN_F], pp[PP_BRAKE_GAIN_R] = cfg.brakes.front_nm_per_kpa, cfg.brakes.rear_nm_per_kpa
+            pp[PP_MAX_PRESSURE] = cfg.brakes.max_pressure_kpa
+        pp[PP_MAX_DRIVE] = MAX_WHEEL_TORQUE if cfg.chain is not None else 0.0
+        pp[PP_RIDER] = float(self.rider_on)
+        pp[PP_SLIP_TYRES] = 0.0 if mm.knife_edge else 1.0
+        self.params = PlantParams(pp)
+        self.state = new_plant_state()
+        self.io = PlantIO(np.zeros(NCOMMAND))
+        self._unused = np.zeros(1)            # the step's `states` argument (a car's; unused here)
+        self.io.commands[[INVALID_SLOTS[n] for n in INVALID_SLOTS]] = 1.0     # no command yet
+
+    def loop_args(self) -> tuple:
+        """The eight arguments of the service's compiled step (rtsim.service.vehicles)."""
+        return (self.m, self.data, self.params, self.state, self.rider, self.parts, self._unused, self.io)
+
+    def seed_sensor_noise(self, seed: int) -> None:
+        """(The two-wheeler's sensors are ideal: nothing to seed.)"""
+
+    def raise_status(self, status: int, step: int) -> None:
+        """The exception of a failed step's status: a fall, or the multibody step's failure."""
+        if status == FELL:
+            t = step * self.dt
+            tyres = "both tyres off the road" if abs(self.tw.roll) <= FALL_ROLL else \
+                f"roll {np.degrees(self.tw.roll):.0f} deg"
+            raise Fall(f"{self.vm.config.id}: fell at t = {t:.3f} s ({tyres})", t)
+        self.sim._raise(status, step)

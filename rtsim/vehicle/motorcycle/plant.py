@@ -1,0 +1,303 @@
+"""The two-wheeler as the HIL service steps it: the rider inside the compiled step, the bus commands of
+a rider-assist ECU, the sensors and the observer state, in the vehicle's channel dictionary
+(rtsim.channels.two_wheeler_channels, configs/can/motorcycle.dbc).
+
+Each step (``plant_step``): the inputs are formed from the rider's outputs and the bus commands, the
+two-wheeler steps (rtsim.vehicle.motorcycle.step), and a fall ends the run with the status ``FELL``:
+
+- throttle and the two caliper pressures: the ECU's command while it is valid (received and not timed
+  out: the watchdog writes 1.0 into the command's ``*_INVALID`` slot otherwise), else the rider's own
+  demand, as a mechanical fallback would give it (no rider: zero);
+- steering torque: the rider's plus the ECU's assist torque (while valid);
+- brake torque = pressure times the brake's gain (N m/kPa); drive torque at the rear wheel = throttle
+  times ``MAX_WHEEL_TORQUE`` (rtsim.vehicle.motorcycle.ride, until the engine model drives it).
+
+The rider (``plant_rider``, drivers.rider) reads the same view as offline (rtsim.vehicle.motorcycle.ride):
+the rear contact point, the pivot's velocity in the heading frame, yaw, roll and steer with their rates.
+
+Sensors (``plant_sensors``): the IMU at ``[sensors] imu_position_m`` on the rear frame in the frame's
+axes (x along the ground line at zero pitch, y left, z up): specific force ``R^T (r'' - g)``, angular
+rate ``R^T omega`` with ``omega = 1/2 sum e x e'`` over the frame's unit vectors; roll ``asin(v_z)``
+and pitch ``asin(-x_z)``; wheel speeds relative to their carriers; the steering head's angle, rate
+and the rider's torque; fork and shock compressions; the rider's demands and the actuators' states.
+They are ideal (no noise or bias model yet); the DBC quantises them.
+
+Model/data: ``PlantParams`` (immutable, the ``veh`` slot of the service's step) and ``PlantState`` (the
+rider's view and outputs, the applied inputs) are named tuples of arrays; the kernels allocate nothing.
+"""
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+from math import asin, atan2, cos, sin, sqrt
+
+import numpy as np
+
+from rtsim.jit import inline_kernel, kernel
+from drivers.rider import (RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_DELTA, RV_DELTADOT, RV_PHI,
+                           RV_PHIDOT, RV_R, RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, NRO, NRV, ST_N, rider_step)
+
+from ..kit.layout import offsets
+from .layout import (K_DELTA, K_E1, K_H, K_P, K_PHI_F, K_PHI_R, K_THETA, K_V, K_W_R, K_ZETA)
+from .step import (MP_FREE_SUSPENSION, MP_SHOCK_C0, MP_SHOCK_L0, MP_THETA0, TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_GAMMA,
+                   TO_KAPPA, TO_MZ, U_BRAKE_FRONT, U_BRAKE_REAR, U_DRIVE_TORQUE, U_STEER_TORQUE, _shock_length,
+                   two_wheeler_step)
+
+FELL = 64                       # plant_step's status for a fall (rtsim.mbs.model codes are below)
+FALL_ROLL = math.radians(70.0)  # rad: a lean past this is a fall (as rtsim.vehicle.motorcycle.sim)
+LIFT_GRACE = 0.5                # s: both tyres may be unloaded this long at the start (settling)
+G = 9.81
+
+# The command array the service's watchdog fills (bridge.can_e2e.rx_watchdog): each bus command's value
+# and, in its *_INVALID slot, 1.0 while it has no valid value.
+(C_THROTTLE, C_BRAKE_FRONT, C_BRAKE_REAR, C_ASSIST, C_THROTTLE_INVALID, C_BRAKE_FRONT_INVALID,
+ C_BRAKE_REAR_INVALID, C_ASSIST_INVALID, NCOMMAND) = offsets(*(1,) * 8)
+COMMAND_SLOTS = {"throttle_cmd": C_THROTTLE, "brake_pressure_front_cmd": C_BRAKE_FRONT,
+                 "brake_pressure_rear_cmd": C_BRAKE_REAR, "assist_torque_cmd": C_ASSIST}
+INVALID_SLOTS = {"throttle_cmd": C_THROTTLE_INVALID, "brake_pressure_front_cmd": C_BRAKE_FRONT_INVALID,
+                 "brake_pressure_rear_cmd": C_BRAKE_REAR_INVALID, "assist_torque_cmd": C_ASSIST_INVALID}
+
+# PlantParams.pp: IMU position in the frame's (e1, h) axes from the pivot (m), the caster's cosine and
+# sine (the frame's x and z from e1 and the steering axis h), rear wheel radius (m), brake gains (N m/kPa),
+# maximum caliper pressure (kPa), drive torque at full throttle (N m), 1 with a rider, 1 with slip tyres.
+(PP_IMU_E1, PP_IMU_H, PP_COS_CASTER, PP_SIN_CASTER, PP_REAR_RADIUS, PP_BRAKE_GAIN_F, PP_BRAKE_GAIN_R,
+ PP_MAX_PRESSURE, PP_MAX_DRIVE, PP_RIDER, PP_SLIP_TYRES, NPP) = offsets(*(1,) * 11)
+# PlantState.inp: what acted over the last step, for the sensors and the state.
+(IN_RIDER_TORQUE, IN_ASSIST, IN_THROTTLE, IN_BRAKE_F, IN_BRAKE_R, IN_RIDER_THROTTLE, IN_RIDER_BRAKE_F,
+ IN_RIDER_BRAKE_R, IN_DRIVE, NIN) = offsets(*(1,) * 9)
+
+PlantParams = namedtuple("PlantParams", ["pp"])
+PlantState = namedtuple("PlantState", ["rider_view", "rider_out", "inp"])
+PlantIO = namedtuple("PlantIO", ["commands"])
+
+
+def new_plant_state() -> PlantState:
+    return PlantState(np.zeros(NRV), np.zeros(NRO), np.zeros(NIN))
+
+
+# ---- the rear frame's kinematics -----------------------------------------------------------------------
+@inline_kernel
+def _triad_rates(q, v, idx):
+    """omega = 1/2 sum e x e' over the rear frame's unit vectors e1, v, h (v: qd for the angular
+    velocity, qdd for the angular acceleration)."""
+    w0 = w1 = w2 = 0.0
+    for k in (idx[K_E1], idx[K_V], idx[K_H]):
+        e0, e1, e2 = q[k], q[k + 1], q[k + 2]
+        d0, d1, d2 = v[k], v[k + 1], v[k + 2]
+        w0 += 0.5 * (e1 * d2 - e2 * d1)
+        w1 += 0.5 * (e2 * d0 - e0 * d2)
+        w2 += 0.5 * (e0 * d1 - e1 * d0)
+    return w0, w1, w2
+
+
+@inline_kernel
+def _frame_axis(q, idx, pp, which):
+    """The rear frame's x (which = 0) or z (which = 2) axis in the world, from e1 and the steering axis."""
+    c, s = pp[PP_COS_CASTER], pp[PP_SIN_CASTER]
+    ke, kh = idx[K_E1], idx[K_H]
+    if which == 0:
+        return c * q[ke] - s * q[kh], c * q[ke + 1] - s * q[kh + 1], c * q[ke + 2] - s * q[kh + 2]
+    return s * q[ke] + c * q[kh], s * q[ke + 1] + c * q[kh + 1], s * q[ke + 2] + c * q[kh + 2]
+
+
+@inline_kernel
+def _yaw(q, idx):
+    kv = idx[K_V]
+    return atan2(-q[kv], q[kv + 1])
+
+
+@inline_kernel
+def _roll(q, idx):
+    return asin(max(-1.0, min(1.0, q[idx[K_V] + 2])))
+
+
+@inline_kernel
+def _heading_velocity(q, qd, idx):
+    """The pivot's velocity (forward, lateral) in the heading frame, m/s."""
+    psi = _yaw(q, idx)
+    c, s = cos(psi), sin(psi)
+    kp = idx[K_P]
+    return qd[kp] * c + qd[kp + 1] * s, -qd[kp] * s + qd[kp + 1] * c
+
+
+@inline_kernel
+def _shock_travel(q, idx, par):
+    if par[MP_FREE_SUSPENSION] < 0.5:
+        return 0.0
+    length, _dl = _shock_length(par, q[idx[K_THETA]])
+    return par[MP_SHOCK_C0] + par[MP_SHOCK_L0] - length
+
+
+@inline_kernel
+def _scalar(x, idx, k):
+    return x[idx[k]] if idx[k] >= 0 else 0.0
+
+
+# ---- the rider and the inputs --------------------------------------------------------------------------
+@kernel
+def plant_rider(d, idx, pp, rider, view, out):
+    """The rider's view of the two-wheeler (as rtsim.vehicle.motorcycle.ride) and one rider call."""
+    q, qd = d.q, d.qd
+    kv, kw = idx[K_V], idx[K_W_R]
+    # rear contact: the wheel centre less the radius along the wheel plane's up direction
+    a2 = q[kv + 2]
+    u0, u1, u2 = -a2 * q[kv], -a2 * q[kv + 1], 1.0 - a2 * a2
+    un = sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    r = pp[PP_REAR_RADIUS] / un
+    psi = _yaw(q, idx)
+    fwd, lat = _heading_velocity(q, qd, idx)
+    w0, w1, w2 = _triad_rates(q, qd, idx)
+    view[RV_T] = d.t[0]
+    view[RV_X] = q[kw] - r * u0
+    view[RV_Y] = q[kw + 1] - r * u1
+    view[RV_YAW] = psi
+    view[RV_U] = fwd
+    view[RV_V] = lat
+    view[RV_R] = w2
+    view[RV_PHI] = _roll(q, idx)
+    view[RV_PHIDOT] = w0 * cos(psi) + w1 * sin(psi)
+    view[RV_DELTA] = q[idx[K_DELTA]]
+    view[RV_DELTADOT] = qd[idx[K_DELTA]]
+    rider_step(rider, view, out)
+
+
+@inline_kernel
+def _clip(x, lo, hi):
+    return lo if x < lo else (hi if x > hi else x)
+
+
+@kernel
+def plant_inputs(pp, commands, out, u, inp):
+    """The inputs over the next step from the rider's outputs and the bus commands (module docstring)."""
+    rider_thr, rider_bf, rider_br = out[RO_THROTTLE], out[RO_BRAKE_F], out[RO_BRAKE_R]
+    thr = rider_thr if commands[C_THROTTLE_INVALID] > 0.5 else commands[C_THROTTLE]
+    bf = rider_bf if commands[C_BRAKE_FRONT_INVALID] > 0.5 else commands[C_BRAKE_FRONT]
+    br = rider_br if commands[C_BRAKE_REAR_INVALID] > 0.5 else commands[C_BRAKE_REAR]
+    assist = 0.0 if commands[C_ASSIST_INVALID] > 0.5 else commands[C_ASSIST]
+    thr = _clip(thr, 0.0, 1.0)
+    bf = _clip(bf, 0.0, pp[PP_MAX_PRESSURE])
+    br = _clip(br, 0.0, pp[PP_MAX_PRESSURE])
+    u[U_STEER_TORQUE] = out[RO_TORQUE] + assist
+    u[U_DRIVE_TORQUE] = thr * pp[PP_MAX_DRIVE]
+    u[U_BRAKE_FRONT] = bf * pp[PP_BRAKE_GAIN_F]
+    u[U_BRAKE_REAR] = br * pp[PP_BRAKE_GAIN_R]
+    inp[IN_RIDER_TORQUE] = out[RO_TORQUE]
+    inp[IN_ASSIST] = assist
+    inp[IN_THROTTLE] = thr
+    inp[IN_BRAKE_F] = bf
+    inp[IN_BRAKE_R] = br
+    inp[IN_RIDER_THROTTLE] = rider_thr
+    inp[IN_RIDER_BRAKE_F] = rider_bf
+    inp[IN_RIDER_BRAKE_R] = rider_br
+    inp[IN_DRIVE] = u[U_DRIVE_TORQUE]
+
+
+@kernel
+def plant_step(m, d, veh, vd, parts, io, h):
+    """The inputs, one two-wheeler step of h s, the fall check. Returns OK, a step failure or FELL."""
+    pp = veh.pp
+    plant_inputs(pp, io.commands, vd.rider_out, parts.u, vd.inp)
+    status = two_wheeler_step(m, d, h, parts.idx, parts.par, parts.tab, parts.u, parts.tp, parts.slip, parts.tyre)
+    if status != 0:
+        return status
+    if abs(_roll(d.q, parts.idx)) > FALL_ROLL:
+        return FELL
+    if pp[PP_SLIP_TYRES] > 0.5 and parts.tyre[0, TO_FZ] <= 0.0 and parts.tyre[1, TO_FZ] <= 0.0 \
+            and d.t[0] > LIFT_GRACE:
+        return FELL
+    return 0
+
+
+# ---- sensors and state ---------------------------------------------------------------------------------
+@kernel
+def plant_sensors(d, idx, par, pp, inp, out):
+    """The sensor channels (rtsim.channels.TWO_WHEELER_SENSORS order) of the current state into out."""
+    q, qd, qdd = d.q, d.qd, d.qdd
+    x0, x1, x2 = _frame_axis(q, idx, pp, 0)
+    z0, z1, z2 = _frame_axis(q, idx, pp, 2)
+    kv, kp, ke, kh = idx[K_V], idx[K_P], idx[K_E1], idx[K_H]
+    y0, y1, y2 = q[kv], q[kv + 1], q[kv + 2]
+    a, b = pp[PP_IMU_E1], pp[PP_IMU_H]
+    # IMU point r = P + a e1 + b h: r'' is linear in the coordinates' accelerations
+    f0 = qdd[kp] + a * qdd[ke] + b * qdd[kh]
+    f1 = qdd[kp + 1] + a * qdd[ke + 1] + b * qdd[kh + 1]
+    f2 = qdd[kp + 2] + a * qdd[ke + 2] + b * qdd[kh + 2] + G
+    w0, w1, w2 = _triad_rates(q, qd, idx)
+    out[0] = f0 * x0 + f1 * x1 + f2 * x2
+    out[1] = f0 * y0 + f1 * y1 + f2 * y2
+    out[2] = f0 * z0 + f1 * z1 + f2 * z2
+    out[3] = w0 * x0 + w1 * x1 + w2 * x2
+    out[4] = w0 * y0 + w1 * y1 + w2 * y2
+    out[5] = w0 * z0 + w1 * z1 + w2 * z2
+    out[6] = _roll(q, idx)
+    out[7] = asin(max(-1.0, min(1.0, -x2)))
+    out[8] = qd[idx[K_PHI_F]]
+    out[9] = qd[idx[K_PHI_R]] - _scalar(qd, idx, K_THETA)
+    out[10] = q[idx[K_DELTA]]
+    out[11] = qd[idx[K_DELTA]]
+    out[12] = inp[IN_RIDER_TORQUE]
+    out[13] = _scalar(q, idx, K_ZETA)
+    out[14] = _shock_travel(q, idx, par)
+    out[15] = inp[IN_RIDER_THROTTLE]
+    out[16] = inp[IN_RIDER_BRAKE_F]
+    out[17] = inp[IN_RIDER_BRAKE_R]
+    out[18] = inp[IN_THROTTLE]
+    out[19] = inp[IN_BRAKE_F]
+    out[20] = inp[IN_BRAKE_R]
+
+
+@kernel
+def plant_state(d, idx, par, pp, tyre, inp, path_offset, out):
+    """The observer state (rtsim.channels.TWO_WHEELER_STATE order) into out."""
+    q, qd = d.q, d.qd
+    kp = idx[K_P]
+    psi = _yaw(q, idx)
+    fwd, lat = _heading_velocity(q, qd, idx)
+    w0, w1, w2 = _triad_rates(q, qd, idx)
+    _x0, _x1, x2 = _frame_axis(q, idx, pp, 0)
+    kv = idx[K_V]
+    out[0] = q[kp]
+    out[1] = q[kp + 1]
+    out[2] = q[kp + 2]
+    out[3] = _roll(q, idx)
+    out[4] = asin(max(-1.0, min(1.0, -x2)))
+    out[5] = psi
+    out[6] = fwd
+    out[7] = lat
+    out[8] = qd[kp + 2]
+    out[9] = w0 * cos(psi) + w1 * sin(psi)
+    out[10] = w0 * q[kv] + w1 * q[kv + 1] + w2 * q[kv + 2]
+    out[11] = w2
+    out[12] = sqrt(fwd * fwd + lat * lat)
+    out[13] = q[idx[K_DELTA]]
+    out[14] = qd[idx[K_DELTA]]
+    out[15] = _scalar(q, idx, K_ZETA)
+    out[16] = _shock_travel(q, idx, par)
+    out[17] = _scalar(q, idx, K_THETA) - par[MP_THETA0] if idx[K_THETA] >= 0 else 0.0
+    out[18] = qd[idx[K_PHI_F]]
+    out[19] = qd[idx[K_PHI_R]] - _scalar(qd, idx, K_THETA)
+    out[20] = q[idx[K_PHI_F]]
+    out[21] = q[idx[K_PHI_R]]
+    j = 22
+    for w in range(2):
+        t = tyre[w]
+        for k in (TO_FX, TO_FY, TO_FZ, TO_MZ, TO_KAPPA, TO_ALPHA, TO_GAMMA):
+            out[j] = t[k]
+            j += 1
+    out[j] = inp[IN_RIDER_TORQUE]
+    out[j + 1] = inp[IN_ASSIST]
+    out[j + 2] = inp[IN_DRIVE]
+    out[j + 3] = inp[IN_THROTTLE]
+    out[j + 4] = inp[IN_BRAKE_F]
+    out[j + 5] = inp[IN_BRAKE_R]
+    out[j + 6] = path_offset
+    viol = 0.0
+    for i in range(d.phi.shape[0]):
+        viol = max(viol, abs(d.phi[i]))
+    out[j + 7] = viol
+
+
+@kernel
+def rider_offset_kernel(rider, pp):
+    """The rider's lateral offset from the path, m (0 without a rider)."""
+    return rider.st[ST_N] if pp[PP_RIDER] > 0.5 else 0.0
