@@ -8,6 +8,7 @@
     rtsim plot     figures of a run (CSV or MCAP) as PNG
     rtsim energy   the power audit of a run                rtsim feel     steering feel of a run (EPS car)
     rtsim eigen    a two-wheeler's modes against speed     rtsim statics  a two-wheeler at rest, rider on
+    rtsim inverse  a motorcycle's steering and drive torques for a path and speed
 """
 from __future__ import annotations
 
@@ -301,6 +302,8 @@ _DELEGATED = (
     ("resim", "rtsim.service.resim", "re-run a recording (or a CAN log of commands) and compare the state"),
     ("validate", "rtsim.validate.cli", "compare the model with repeated field runs, name and add the missing effect"),
     ("eigen", "rtsim.analyses.eigen_cli", "a two-wheeler's modes against speed in straight running (root locus, JSON)"),
+    ("inverse", "rtsim.vehicle.motorcycle.inverse", "a motorcycle's inverse dynamics: the steering and drive "
+     "torques that follow a path at a speed"),
 )
 
 
