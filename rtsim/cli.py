@@ -8,6 +8,7 @@
     rtsim plot     figures of a run (CSV or MCAP) as PNG
     rtsim energy   the power audit of a run                rtsim feel     steering feel of a run (EPS car)
     rtsim eigen    a two-wheeler's modes against speed     rtsim statics  a two-wheeler at rest, rider on
+    rtsim inverse  a motorcycle's steering and drive torques for a path and speed
 """
 from __future__ import annotations
 
@@ -93,11 +94,16 @@ def _run(args) -> int:
 
     from rtsim.vehicle.offline import prepare, run, write_csv
 
+    from drivers.scenario import load_scenario
+
     out = args.out
     kind = Path(out).suffix.lower()
     if kind not in (".csv", ".mcap"):
         raise RtsimError(f"{out}: output must end in .csv or .mcap")
-    sim, sc = prepare(args.vehicle, args.scenario)
+    sc = load_scenario(args.scenario, check_files=True)
+    if sc.two_wheeler:
+        return _run_two_wheeler(args, sc, kind)
+    sim, sc = prepare(args.vehicle, sc)
     shown = [-1]
 
     def progress(frac):
@@ -118,6 +124,29 @@ def _run(args) -> int:
     if args.plot is not None:
         _write_figures(res.columns, res.data, args.plot or None, out, sc.name)
     return 0
+
+
+def _run_two_wheeler(args, sc, kind) -> int:
+    """A motorcycle scenario: rows to CSV/MCAP, the summary to the console (and --summary JSON); exit
+    status 3 when the motorcycle fell."""
+    from rtsim.vehicle.motorcycle.offline import prepare, run, write_csv, write_mcap
+
+    ride, sc = prepare(args.vehicle, sc)
+    res = run(ride, sc)
+    if kind == ".csv":
+        write_csv(res, args.out)
+    else:
+        write_mcap(res, args.out, ride.sim.mm.config.id)
+    text = json.dumps(res.summary, indent=2)
+    if args.summary:
+        from pathlib import Path
+        Path(args.summary).write_text(text + "\n")
+    print(text)
+    print(f"{sc.name}: {res.summary.get('simulated_s')} s simulated in {res.wall_s:.2f} s, {len(res.data)} rows "
+          f"-> {args.out}; status {res.status}{': ' + res.message if res.message else ''}")
+    if args.plot is not None:
+        _write_figures(res.columns, res.data, args.plot or None, args.out, sc.name)
+    return 0 if res.status == "ok" else 3
 
 
 def _energy(args) -> int:
@@ -217,10 +246,13 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--ecu", choices=["light", "demo"], default="light",
                    help="service suite: command-only ECU (default) or the demo ECU decoding every frame")
     b.set_defaults(func=_bench)
-    r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV")
+    r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV (a motorcycle's "
+                       "scenario: also its summary; exit status 3 if it fell)")
     r.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")
     r.add_argument("--scenario", required=True, help="scenario TOML (configs/scenarios/)")
     r.add_argument("--out", required=True, help="output file: .csv or .mcap")
+    r.add_argument("--summary", metavar="JSON", help="two-wheeler scenarios: also write the summary (measured "
+                   "against the manoeuvre's analytic references) to this JSON file")
     r.add_argument("--plot", nargs="?", const="", metavar="DIR",
                    help="also write PNG figures (lateral acceleration, tyre loads, steering) into DIR "
                         "(default: <output stem>_plots/ beside the output)")
@@ -270,6 +302,8 @@ _DELEGATED = (
     ("resim", "rtsim.service.resim", "re-run a recording (or a CAN log of commands) and compare the state"),
     ("validate", "rtsim.validate.cli", "compare the model with repeated field runs, name and add the missing effect"),
     ("eigen", "rtsim.analyses.eigen_cli", "a two-wheeler's modes against speed in straight running (root locus, JSON)"),
+    ("inverse", "rtsim.vehicle.motorcycle.inverse", "a motorcycle's inverse dynamics: the steering and drive "
+     "torques that follow a path at a speed"),
 )
 
 

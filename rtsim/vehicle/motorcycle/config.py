@@ -16,7 +16,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from rtsim.configfile import Strict, load_toml, validate
+from rtsim.configfile import Strict, bad, load_toml, validate
 
 from ..kit.tyre.two_wheel import TwoWheelTyreSpec, sport_front, sport_rear
 
@@ -162,6 +162,58 @@ class Chain(Strict):
     rear_sprocket_radius_m: float = Field(gt=0.02, le=0.3)
 
 
+class Powertrain(Strict):
+    """Engine, clutch and gearbox (rtsim.vehicle.motorcycle.engine); the final ratio is the chain's
+    sprocket radii (rear / front). Engine speeds in rpm here, rad/s in the kernel."""
+    engine_speed_rpm: list[float] = Field(min_length=2, max_length=16, description="axis of the torque tables")
+    full_load_torque_nm: list[float] = Field(min_length=2, max_length=16, description="at full throttle, crank")
+    closed_throttle_torque_nm: list[float] = Field(min_length=2, max_length=16, description=(
+        "friction and pumping torque with the throttle shut (engine braking), a positive magnitude"))
+    idle_rpm: float = Field(ge=300, le=5000)
+    launch_rpm: float = Field(ge=300, le=15000, description="clutch slip speed at full throttle")
+    rev_limit_rpm: float = Field(ge=1000, le=25000)
+    limiter_band_rpm: float = Field(default=200.0, gt=0, le=2000, description="fuel ramp below the limit")
+    clutch_capacity_nm: float = Field(gt=0, le=2000)
+    primary_ratio: float = Field(ge=1.0, le=4.0)
+    gear_ratios: list[float] = Field(min_length=1, max_length=8, description="first to top")
+    efficiency: float = Field(default=0.92, gt=0.5, le=1.0, description="gearbox and chain")
+    gear: int = Field(default=0, ge=0, le=8, description="0: automatic, else the fixed gear")
+    upshift_rpm: float = Field(ge=1000, le=25000)
+    downshift_rpm: float = Field(ge=300, le=25000)
+    shift_time_s: float = Field(default=0.05, ge=0, le=1, description="drive interrupted per shift")
+    shift_hold_s: float = Field(default=0.5, ge=0, le=10, description="minimum time between automatic shifts")
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        w = self.engine_speed_rpm
+        for key in ("full_load_torque_nm", "closed_throttle_torque_nm"):
+            v = getattr(self, key)
+            if len(v) != len(w):
+                raise bad(key, v, f"needs as many values as engine_speed_rpm ({len(w)})")
+            if any(not (0.0 <= x <= 2000.0) for x in v):
+                raise bad(key, v, "values must lie in 0 .. 2000 N m")
+        if any(b <= a for a, b in zip(w, w[1:])) or w[0] <= 0:
+            raise bad("engine_speed_rpm", w, "must be positive and strictly increasing")
+        if not w[0] <= self.idle_rpm < self.launch_rpm < self.rev_limit_rpm <= w[-1]:
+            raise bad("launch_rpm", self.launch_rpm, "need engine_speed_rpm[0] <= idle_rpm < launch_rpm < "
+                      f"rev_limit_rpm <= engine_speed_rpm[-1] (got {w[0]:g}, {self.idle_rpm:g}, {self.launch_rpm:g}, "
+                      f"{self.rev_limit_rpm:g}, {w[-1]:g})")
+        r = self.gear_ratios
+        if any(not (0.3 <= x <= 5.0) for x in r) or any(b >= a for a, b in zip(r, r[1:])):
+            raise bad("gear_ratios", r, "must lie in 0.3 .. 5 and decrease from first to top gear")
+        if self.gear > len(r):
+            raise bad("gear", self.gear, f"the gearbox has gears 1..{len(r)} (0: automatic)")
+        if not self.idle_rpm < self.downshift_rpm < self.upshift_rpm < self.rev_limit_rpm - self.limiter_band_rpm:
+            raise bad("upshift_rpm", self.upshift_rpm, "need idle_rpm < downshift_rpm < upshift_rpm < "
+                      "rev_limit_rpm - limiter_band_rpm")
+        for k in range(len(r) - 1):
+            after = self.upshift_rpm * r[k + 1] / r[k]
+            if after <= self.downshift_rpm:
+                raise bad("downshift_rpm", self.downshift_rpm, f"an upshift from gear {k + 1} at upshift_rpm "
+                          f"lands at {after:.0f} rpm, at or below the downshift speed: the box would hunt")
+        return self
+
+
 class Brakes(Strict):
     front_nm_per_kpa: float = Field(gt=0, le=10, description="front brake torque per line pressure")
     rear_nm_per_kpa: float = Field(gt=0, le=10)
@@ -201,6 +253,7 @@ class MotorcycleConfig(Strict):
     steering: Steering = Steering()
     chain: Chain | None = None
     brakes: Brakes | None = None
+    powertrain: Powertrain | None = Field(default=None, description="engine and gearbox; needs [chain]")
     aero: Aero = Aero()
     sensors: Sensors = Sensors()
     interface: Interface = Interface()
@@ -210,7 +263,14 @@ class MotorcycleConfig(Strict):
         px, pz = self.geometry.swingarm_pivot_m
         if math.hypot(px, pz - self.rear_wheel.radius_m) < 0.05:
             raise ValueError("swingarm_pivot_m is too close to the rear axle")
+        if self.powertrain is not None and self.chain is None:
+            raise ValueError("[powertrain] needs [chain] (its sprockets give the final ratio)")
         return self
+
+    @property
+    def final_ratio(self) -> float:
+        """Rear-wheel turns per gearbox output turn: the chain's sprocket radii, rear / front."""
+        return self.chain.rear_sprocket_radius_m / self.chain.front_sprocket_radius_m
 
     @property
     def caster_rad(self) -> float:

@@ -1,0 +1,391 @@
+"""Offline runs of the motorcycle's scenarios (a scenario file with [rider] and/or [two_wheeler], see
+drivers.scenario): the rider or the open-loop profiles on the two-wheeler sim, as fast as the machine
+allows, logged at the scenario's output rate to CSV or MCAP (`CHANNELS`: the car's state names where
+the quantity is the same, `_f`/`_r` for the front and rear wheel), and a summary of what the
+manoeuvre measures against its analytic reference:
+
+- every run: status (`ok`, or `fall` with the time and the reason: roll past 70 deg, both tyres off the
+  road, pitched over), distance, speeds, peak roll;
+- a rider: the lateral error to the path (RMS after the first second, peak);
+- a steering-torque profile (open loop): the counter-steering signs, the first yaw rate after the torque
+  step and the last (`counter_steering`);
+- a circle: the steady turn over the last third of the run: roll against atan(u^2 kappa / g) and its
+  crown correction (`steady_turn`), the steady steering torque;
+- brakes: deceleration, loads, fork travel and stopping distance against mu g and g b / h
+  (`braking`).
+
+A fall never leaves a NaN or a traceback: the run stops, the rows so far are written, the summary says
+`fall` and the command exits non-zero.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from drivers.profiles import eval_channel, pack
+from drivers.rider import ST_N, ST_PHI_REF
+from drivers.scenario import Scenario, load_scenario
+from rtsim.channels import Channel, ChannelDictionary
+from rtsim.errors import ConfigError, SimulationError
+from rtsim.configfile import problem
+
+from .build import build_motorcycle, combine
+from .config import Body, load_motorcycle
+from .engine import ES_ENGINE_SPEED, ES_GEAR
+from .layout import K_E1, K_P, K_PHI_F, K_PHI_R, K_THETA, K_ZETA
+from .ride import Ride, tyre_lean_ratio
+from .sim import Fall, TwoWheelerSim, static_pose
+from .step import (MP_MU, TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_GAMMA, TO_KAPPA, U_BRAKE_FRONT, U_BRAKE_REAR,
+                   U_DRIVE_TORQUE, U_STEER_TORQUE)
+
+G = 9.81
+PITCH_OVER = math.radians(45.0)      # rad: the rear frame pitched nose-down past this has gone over the front
+
+
+def _c(name, unit, text):
+    return Channel(name, unit, text)
+
+
+#: The columns of a run (after `time`), all state channels.
+CHANNELS = ChannelDictionary(sensors=(), commands=(), state=(
+    _c("pos_x", "m", "rear contact point x, road frame"),
+    _c("pos_y", "m", "rear contact point y, road frame"),
+    _c("yaw_angle", "rad", "rear frame yaw, positive turning left"),
+    _c("roll_angle", "rad", "rear frame roll, positive leaning right"),
+    _c("pitch_angle", "rad", "rear frame pitch from the static pose, positive nose down"),
+    _c("steer_angle", "rad", "steer angle about the steering axis, positive left"),
+    _c("roll_rate", "rad/s", "roll rate"),
+    _c("yaw_rate", "rad/s", "yaw rate"),
+    _c("steer_rate", "rad/s", "steer rate"),
+    _c("speed", "m/s", "forward speed of the swingarm pivot"),
+    _c("vel_y", "m/s", "lateral speed of the swingarm pivot, heading frame"),
+    _c("accel_x", "m/s^2", "forward acceleration of the swingarm pivot, heading frame"),
+    _c("steering_torque", "N*m", "rider's torque on the handlebars, positive steering left"),
+    _c("throttle", "1", "twist grip 0..1"),
+    _c("brake_pressure_f", "kPa", "front brake line pressure"),
+    _c("brake_pressure_r", "kPa", "rear brake line pressure"),
+    _c("brake_torque_f", "N*m", "front brake torque"),
+    _c("brake_torque_r", "N*m", "rear brake torque"),
+    _c("drive_torque", "N*m", "engine torque at the rear wheel (chain)"),
+    _c("engine_speed", "rad/s", "engine crankshaft speed"),
+    _c("gear", "1", "engaged gear"),
+    _c("wheel_speed_f", "rad/s", "front wheel spin relative to the fork"),
+    _c("wheel_speed_r", "rad/s", "rear wheel spin relative to the frame"),
+    *(_c(f"tyre_{k}_{w}", u, f"{t} {w}") for k, u, t in (("fx", "N", "longitudinal tyre force"),
+                                                         ("fy", "N", "lateral tyre force"),
+                                                         ("fz", "N", "tyre load")) for w in "fr"),
+    *(_c(f"slip_ratio_{w}", "1", f"longitudinal slip {w}") for w in "fr"),
+    *(_c(f"slip_angle_{w}", "rad", f"slip angle {w}") for w in "fr"),
+    *(_c(f"camber_{w}", "rad", f"tyre camber {w}") for w in "fr"),
+    _c("fork_travel", "m", "fork compression from full extension"),
+    _c("swingarm_angle", "rad", "swingarm angle from the frame"),
+    _c("lateral_error", "m", "rider: offset of the rear contact from the path, left positive"),
+    _c("roll_reference", "rad", "rider: lean reference"),
+))
+COLUMNS = ("time", *CHANNELS.state_names)
+
+
+@dataclass
+class MotorcycleRun:
+    columns: tuple[str, ...]
+    data: np.ndarray
+    wall_s: float
+    steps: int
+    status: str = "ok"
+    message: str = ""
+    fall_time: float | None = None
+    summary: dict = field(default_factory=dict)
+
+    def column(self, name: str) -> np.ndarray:
+        return self.data[:, self.columns.index(name)]
+
+
+def check_flat_road(sc: Scenario) -> float:
+    """The road's friction scale; ConfigError unless it is the flat plane z = 0 (the two-wheeler's
+    contact is computed on that plane only)."""
+    from rtsim.road.config import FlatRoadConfig, read_road_config
+
+    cfg = read_road_config(sc.road_path)
+    if not isinstance(cfg, FlatRoadConfig) or cfg.height != 0.0 or cfg.rolling_resistance != 0.0:
+        raise problem(sc.path, "road", sc.spec.road, "the two-wheeler runs on a flat road at height 0 without "
+                      "surface rolling resistance only (its tyres carry their own)")
+    return cfg.mu
+
+
+def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario) -> tuple[Ride, Scenario]:
+    """The ride of a motorcycle scenario: the vehicle (argument, else the scenario's), its static pose
+    with the rider on, straight running at the initial speed from the origin heading +x, the rider
+    (its tyre-crown lean ratio from the vehicle unless the scenario sets `tyre_lean`) and the profiles."""
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, check_files=True)
+    if not sc.two_wheeler:
+        raise ConfigError(f"{sc.path}: not a two-wheeler scenario (no [rider] or [two_wheeler])")
+    ini = sc.spec.initial
+    if ini.x != 0.0 or ini.y != 0.0 or ini.yaw != 0.0:
+        raise problem(sc.path, "initial", f"x = {ini.x}, y = {ini.y}, yaw = {ini.yaw}",
+                      "a two-wheeler starts at the origin heading +x (paths are given in that frame)")
+    mu = check_flat_road(sc)
+    vpath = vehicle if vehicle is not None else sc.vehicle_path
+    if vpath is None:
+        raise problem(sc.path, "vehicle", None, "a two-wheeler scenario names its vehicle file (or give --vehicle)")
+    cfg, base = load_motorcycle(vpath)
+    mm = build_motorcycle(cfg, base)
+    q, loads = static_pose(mm, dt=sc.dt)
+    sim = TwoWheelerSim(mm, dt=sc.dt, speed=ini.speed, q=q, mu=mu)
+    rider = None
+    if sc.spec.rider is not None:
+        spec = sc.spec.rider
+        if "tyre_lean" not in spec.model_fields_set:
+            spec = spec.model_copy(update={"tyre_lean": tyre_lean_ratio(mm)})
+        rider = spec.model_copy(update={"period": sc.dt}).build() if "period" not in spec.model_fields_set \
+            else spec.build()
+    tw = sc.spec.two_wheeler
+    gear = None if tw is None else tw.gear
+    open_loop = {}
+    for name, prof in sc.two_wheeler_profiles.items():
+        packed = pack({0: prof}, nch=1)
+        open_loop[name] = (lambda p: lambda t: eval_channel(p, 0, t))(packed)
+    ride = Ride(sim, rider, gear=gear, open_loop=open_loop)
+    ride.pitch0 = _pitch(sim)
+    ride.static_loads = loads
+    sim.parts.tyre[:, TO_FZ] = loads       # the first row's loads: the static pose's
+    return ride, sc
+
+
+def _pitch(sim: TwoWheelerSim) -> float:
+    """Nose-down angle of the frame's forward axis below the horizontal, rad."""
+    k = sim.parts.idx[K_E1]
+    return math.asin(max(-1.0, min(1.0, -float(sim.data.q[k + 2]))))
+
+
+def _row(ride: Ride, row: np.ndarray) -> None:
+    s = ride.sim
+    q, qd, qdd = s.data.q, s.data.qd, s.data.qdd
+    idx = s.parts.idx
+    u = s.parts.u
+    ty = s.parts.tyre
+    es = ride.engine_state
+    from .sim import rear_contact
+
+    x, y = rear_contact(s)
+    fwd, lat = s.velocity
+    yaw = s.yaw
+    kp = idx[K_P]
+    ax = qdd[kp] * math.cos(yaw) + qdd[kp + 1] * math.sin(yaw)
+    out = ride.out
+    st = ride.rider.st if ride.rider is not None else None
+    vals = (x, y, yaw, s.roll, _pitch(s) - ride.pitch0, s.steer, s.roll_rate, s.yaw_rate, s.steer_rate, fwd, lat, ax,
+            u[U_STEER_TORQUE], out[1], max(out[2], 0.0), max(out[3], 0.0),
+            u[U_BRAKE_FRONT], u[U_BRAKE_REAR], u[U_DRIVE_TORQUE],
+            es[ES_ENGINE_SPEED] if ride.engine is not None else 0.0, es[ES_GEAR] if ride.engine is not None else 0.0,
+            qd[idx[K_PHI_F]], qd[idx[K_PHI_R]],
+            ty[0, TO_FX], ty[1, TO_FX], ty[0, TO_FY], ty[1, TO_FY], ty[0, TO_FZ], ty[1, TO_FZ],
+            ty[0, TO_KAPPA], ty[1, TO_KAPPA], ty[0, TO_ALPHA], ty[1, TO_ALPHA], ty[0, TO_GAMMA], ty[1, TO_GAMMA],
+            q[idx[K_ZETA]], q[idx[K_THETA]],
+            st[ST_N] if st is not None else 0.0, st[ST_PHI_REF] if st is not None else 0.0)
+    row[0] = s.time
+    row[1:] = vals
+
+
+def run(ride: Ride, sc: Scenario, progress=None) -> MotorcycleRun:
+    """Run to the scenario's duration or a fall; rows at the output rate; the summary filled in."""
+    dt = sc.dt
+    nsteps = int(round(sc.duration / dt))
+    every = max(1, int(round(1.0 / (sc.spec.output_rate * dt))))
+    rows = np.zeros((nsteps // every + 2, len(COLUMNS)))
+    nrow = 0
+    status, message, t_fall = "ok", "", None
+    t0 = time.perf_counter()
+    n = 0
+    try:
+        for n in range(nsteps + 1):
+            if n % every == 0:
+                _row(ride, rows[nrow])
+                nrow += 1
+                if progress is not None and nrow % 50 == 0:
+                    progress(n / nsteps)
+            if n == nsteps:
+                break
+            ride.step()
+            if abs(_pitch(ride.sim) - ride.pitch0) > PITCH_OVER:
+                raise Fall(f"{ride.sim.mm.config.id}: pitched over at t = {ride.sim.time:.3f} s", ride.sim.time)
+    except SimulationError as exc:
+        status = "fall" if isinstance(exc, Fall) else "failed"
+        message, t_fall = str(exc), ride.sim.time
+        if np.all(np.isfinite(ride.sim.data.q)):
+            _row(ride, rows[nrow])
+            nrow += 1
+    wall = time.perf_counter() - t0
+    res = MotorcycleRun(COLUMNS, rows[:nrow], wall, n, status, message, t_fall)
+    res.summary = summarise(res, ride, sc)
+    return res
+
+
+# ---- the summary -------------------------------------------------------------------------------------
+
+
+def mass_centre(mm) -> tuple[float, float, float]:
+    """(mass kg, x, z m) of the whole machine with the rider at the design position (x from the rear
+    contact)."""
+    cfg = mm.config
+    wheels = [Body(mass_kg=w.mass_kg, cg_m=(x, w.radius_m)) for w, x in
+              ((cfg.front_wheel, cfg.geometry.wheelbase_m), (cfg.rear_wheel, 0.0))]
+    bodies = [b for b in (cfg.rear_frame, cfg.rider, cfg.swingarm, cfg.upper_fork, cfg.lower_fork) if b is not None]
+    m, cg, _ = combine(*bodies, *wheels)
+    return float(m), float(cg[0]), float(cg[2])
+
+
+def _f(x, nd=4):
+    return None if x is None or not math.isfinite(x) else round(float(x), nd)
+
+
+def summarise(res: MotorcycleRun, ride: Ride, sc: Scenario) -> dict:
+    c = res.column
+    t = c("time")
+    out: dict = {"scenario": sc.name, "status": res.status, "simulated_s": _f(t[-1] if t.size else 0.0, 3)}
+    if res.status != "ok":
+        out["message"], out["fall_time_s"] = res.message, _f(res.fall_time, 3)
+    if t.size < 2:
+        return out
+    out["distance_m"] = _f(float(np.sum(np.hypot(np.diff(c("pos_x")), np.diff(c("pos_y"))))), 2)
+    out["speed_start_end_m_s"] = [_f(c("speed")[0], 3), _f(c("speed")[-1], 3)]
+    out["peak_roll_deg"] = _f(math.degrees(float(np.max(np.abs(c("roll_angle"))))), 2)
+    if ride.rider is not None:
+        n = c("lateral_error")[t > 1.0]
+        if n.size:
+            out["lateral_error_rms_m"] = _f(float(np.sqrt(np.mean(n ** 2))), 4)
+            out["lateral_error_peak_m"] = _f(float(np.max(np.abs(n))), 4)
+        out["peak_steering_torque_nm"] = _f(float(np.max(np.abs(c("steering_torque")))), 2)
+    tw = sc.spec.two_wheeler
+    if tw is not None and tw.steering_torque is not None:
+        out["counter_steering"] = _counter_steering(res)
+    if sc.spec.rider is not None and sc.spec.rider.circle is not None:
+        out["steady_turn"] = _steady_turn(res, ride, sc.spec.rider.circle.radius)
+    if tw is not None and (tw.brake_front is not None or tw.brake_rear is not None):
+        out["braking"] = _braking(res, ride)
+    return out
+
+
+def _counter_steering(res: MotorcycleRun) -> dict:
+    c = res.column
+    t, tau, r = c("time"), c("steering_torque"), c("yaw_rate")
+    on = np.nonzero(np.abs(tau) > 1e-9)[0]
+    if on.size == 0:
+        return {}
+    i0 = on[0]
+    sign = float(np.sign(tau[i0]))
+    after = np.nonzero(np.abs(r[i0:]) > 5e-3)[0]
+    first = float(r[i0 + after[0]]) if after.size else 0.0
+    last = float(r[-1])
+    return {"torque_onset_s": _f(t[i0], 3), "torque_nm": _f(tau[i0 + min(10, t.size - 1 - i0)], 3),
+            "first_yaw_rate_rad_s": _f(first, 5), "final_yaw_rate_rad_s": _f(last, 5),
+            "final_roll_deg": _f(math.degrees(c("roll_angle")[-1]), 3),
+            "initial_turn_with_the_steer": bool(np.sign(first) == sign),
+            "final_turn_against_the_steer": bool(np.sign(last) == -sign)}
+
+
+def _steady_turn(res: MotorcycleRun, ride: Ride, radius: float) -> dict:
+    c = res.column
+    t = c("time")
+    win = t >= t[-1] - t[-1] / 3.0
+    u = float(np.mean(c("speed")[win]))
+    roll = float(np.mean(c("roll_angle")[win]))
+    phi0 = math.atan(u * u / (G * radius))
+    k = tyre_lean_ratio(ride.sim.mm)
+    ref = phi0 + math.asin(k * math.sin(phi0))
+    return {"window_s": [_f(t[win][0], 2), _f(t[-1], 2)], "radius_m": radius, "speed_m_s": _f(u, 4),
+            "roll_deg": _f(-math.degrees(roll), 3), "roll_std_deg": _f(math.degrees(float(np.std(c("roll_angle")[win]))), 3),
+            "atan_u2_over_gR_deg": _f(math.degrees(phi0), 3), "crown_corrected_reference_deg": _f(math.degrees(ref), 3),
+            "roll_over_reference": _f(-roll / ref, 4),
+            "steer_deg": _f(math.degrees(float(np.mean(c("steer_angle")[win]))), 3),
+            "steering_torque_nm": _f(float(np.mean(c("steering_torque")[win])), 3),
+            "lateral_error_mean_m": _f(float(np.mean(c("lateral_error")[win])), 4)}
+
+
+def braking_limits(ride: Ride) -> dict:
+    """The analytic limits of a straight-line stop: the front tyre's grip with all the weight on it, and
+    the stoppie, where the rear load reaches zero: a = g b / h (b: the mass centre's distance behind
+    the front contact, h its height) -- from the design geometry."""
+    mm = ride.sim.mm
+    m, x, h = mass_centre(mm)
+    b = mm.config.geometry.wheelbase_m - x
+    from .parts import make_parts
+    from ..kit.tyre.two_wheel import two_wheel_friction
+
+    tp = make_parts(mm).tp
+    mu_front = two_wheel_friction(tp[0], m * G, ride.sim.parts.par[MP_MU])[0] / (m * G)
+    return {"mass_kg": _f(m, 2), "cg_height_m": _f(h, 4), "cg_to_front_contact_m": _f(b, 4),
+            "stoppie_decel_m_s2": _f(G * b / h, 4), "front_grip_decel_m_s2": _f(mu_front * G, 4)}
+
+
+def _braking(res: MotorcycleRun, ride: Ride) -> dict:
+    c = res.column
+    t, v = c("time"), c("speed")
+    braking = (c("brake_torque_f") + c("brake_torque_r")) > 1.0
+    if not braking.any():
+        return {}
+    i0 = int(np.argmax(braking))
+    stopped = np.nonzero((v < 0.5) & (t > t[i0]))[0]
+    i1 = int(stopped[0]) if stopped.size else t.size - 1
+    x, y = c("pos_x"), c("pos_y")
+    dist = float(np.sum(np.hypot(np.diff(x[i0:i1 + 1]), np.diff(y[i0:i1 + 1]))))
+    seg = slice(i0, i1 + 1)
+    decel = -c("accel_x")[seg]
+    # the deceleration of the speed itself over 50 ms (the pivot's acceleration also holds the pitch motion)
+    k = max(1, int(round(0.05 / max(t[1] - t[0], 1e-9))))
+    vs, ts = v[seg], t[seg]
+    d_speed = (vs[:-k] - vs[k:]) / (ts[k:] - ts[:-k]) if vs.size > k else np.zeros(1)
+    # the steady phase: pressure at its final value and above 3 m/s (below the brakes' regularisation and
+    # low-speed tyre terms act)
+    full = (c("brake_torque_f")[seg] >= 0.98 * np.max(c("brake_torque_f"))) & (v[seg] > 3.0)
+    lim = braking_limits(ride)
+    a_lim = min(lim["stoppie_decel_m_s2"], lim["front_grip_decel_m_s2"])
+    v0 = float(v[i0])
+    m = lim["mass_kg"]
+    out = {"brake_onset_s": _f(t[i0], 3), "speed_at_onset_m_s": _f(v0, 3), "stopped": bool(stopped.size),
+           "stop_time_s": _f(t[i1] - t[i0], 3), "stopping_distance_m": _f(dist, 3),
+           "mean_decel_m_s2": _f(v0 ** 2 / (2.0 * dist) if stopped.size and dist > 0 else None, 4),
+           "steady_decel_m_s2": _f(float(np.mean(decel[full])) if full.any() else None, 4),
+           "peak_decel_m_s2": _f(float(np.max(d_speed)), 4),
+           "front_load_max_n": _f(float(np.max(c("tyre_fz_f")[seg])), 1),
+           "rear_load_min_n": _f(float(np.min(c("tyre_fz_r")[seg])), 1),
+           "static_loads_n": [_f(ride.static_loads[0], 1), _f(ride.static_loads[1], 1)],
+           "rear_lifted_s": _f(float(np.sum(c("tyre_fz_r")[seg] <= 0.0)) * (t[1] - t[0]), 3),
+           "front_locked_s": _f(float(np.sum(c("slip_ratio_f")[seg] < -0.5)) * (t[1] - t[0]), 3),
+           "fork_travel_max_m": _f(float(np.max(c("fork_travel")[seg])), 4),
+           "fork_dive_m": _f(float(np.max(c("fork_travel")[seg]) - c("fork_travel")[0]), 4),
+           "pitch_max_deg": _f(math.degrees(float(np.max(c("pitch_angle")[seg]))), 3),
+           **{f"limit_{k}": val for k, val in lim.items() if k != "mass_kg"},
+           "limit_decel_m_s2": _f(a_lim, 4),
+           "limit_stopping_distance_m": _f(v0 ** 2 / (2.0 * a_lim), 3)}
+    on_ground = (c("tyre_fz_r")[seg] > 0.0) & (v[seg] > 3.0) & (decel > 1.0)
+    if on_ground.sum() > 10 and np.ptp(decel[on_ground]) > 1.0:
+        # rear load against deceleration, a straight line through the braking: where it reaches zero
+        slope, icpt = np.polyfit(decel[on_ground], c("tyre_fz_r")[seg][on_ground], 1)
+        out["rear_load_zero_at_decel_m_s2"] = _f(-icpt / slope, 4)
+    if full.any():
+        a = decel[full]
+        # the rear load the quasi-static balance predicts at the measured deceleration
+        h, b = lim["cg_height_m"], lim["cg_to_front_contact_m"]
+        wb = ride.sim.mm.config.geometry.wheelbase_m
+        out["rear_load_quasi_static_n"] = _f(float(np.mean(m * (G * b - a * h) / wb)), 1)
+        out["rear_load_steady_n"] = _f(float(np.mean(c("tyre_fz_r")[seg][full])), 1)
+    return out
+
+
+def write_csv(res: MotorcycleRun, path: str | Path) -> None:
+    with Path(path).open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(res.columns)
+        for r in res.data:
+            w.writerow([f"{v:.9g}" for v in r])
+
+
+def write_mcap(res: MotorcycleRun, path: str | Path, vehicle_id: str) -> None:
+    from bridge.mcap_log import write_run
+
+    write_run(path, res.columns, res.data, vehicle_id, CHANNELS)
