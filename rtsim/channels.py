@@ -200,6 +200,8 @@ TWO_WHEELER_STATE: tuple[Channel, ...] = (
     _ch("throttle", "1", "throttle opening acting on the engine"),
     _ch("brake_pressure_front", "kPa", "front caliper pressure acting"),
     _ch("brake_pressure_rear", "kPa", "rear caliper pressure acting"),
+    _ch("engine_speed", "rad/s", "engine crankshaft speed (0 without an engine model)"),
+    _ch("gear", "1", "engaged gear, 1 .. n (0 without an engine model)"),
     _ch("path_offset", "m", "the rider's lateral offset from the path, left positive (0 without a rider)"),
     _ch("constraint_violation", "1", "max |Phi| of the multibody constraints (coordinate units)"),
 )

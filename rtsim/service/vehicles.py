@@ -102,5 +102,6 @@ def _observe(m, d, veh, vd, road, parts, states, io, out):
         return car
 
     def two_wheeler(m, d, veh, vd, road, parts, states, io, out):
-        plant_state(d, parts.idx, parts.par, veh.pp, parts.tyre, vd.inp, rider_offset_kernel(road, veh.pp), out)
+        plant_state(d, parts.idx, parts.par, veh.pp, parts.tyre, vd.inp, vd.es, rider_offset_kernel(road, veh.pp),
+                    out)
     return two_wheeler

@@ -14,11 +14,7 @@ from drivers.rider import rider as make_rider
 from .build import MotorcycleModel
 from .config import MotorcycleConfig
 from .layout import NAMES, POINTS, VECTORS
-from .plant import (COMMAND_SLOTS, FALL_ROLL, FELL, INVALID_SLOTS, NCOMMAND, NPP, PP_BRAKE_GAIN_F, PP_BRAKE_GAIN_R,
-                    PP_COS_CASTER, PP_IMU_E1, PP_IMU_H, PP_MAX_DRIVE, PP_MAX_PRESSURE, PP_REAR_RADIUS, PP_RIDER,
-                    PP_SIN_CASTER, PP_SLIP_TYRES, PlantIO, PlantParams, new_plant_state)
-from .parts import frame_coordinates
-from .ride import MAX_WHEEL_TORQUE
+from .plant import COMMAND_SLOTS, FALL_ROLL, FELL, INVALID_SLOTS, NCOMMAND, PlantIO, make_plant
 from .sim import Fall, TwoWheelerSim
 
 
@@ -68,19 +64,7 @@ class TwoWheelerHil:
         self.rider_on = rider is not None
         # without a rider the step still needs one of the rider's type: a straight line it never reads
         self.rider = rider if rider is not None else make_rider(np.array([0.0, 1.0]), np.zeros(2))
-        cfg = mm.config
-        pp = np.zeros(NPP)
-        pp[PP_IMU_E1], pp[PP_IMU_H] = frame_coordinates(mm, cfg.sensors.imu_position_m)
-        pp[PP_COS_CASTER], pp[PP_SIN_CASTER] = np.cos(cfg.caster_rad), np.sin(cfg.caster_rad)
-        pp[PP_REAR_RADIUS] = cfg.rear_wheel.radius_m
-        if cfg.brakes is not None:
-            pp[PP_BRAKE_GAIN_F], pp[PP_BRAKE_GAIN_R] = cfg.brakes.front_nm_per_kpa, cfg.brakes.rear_nm_per_kpa
-            pp[PP_MAX_PRESSURE] = cfg.brakes.max_pressure_kpa
-        pp[PP_MAX_DRIVE] = MAX_WHEEL_TORQUE if cfg.chain is not None else 0.0
-        pp[PP_RIDER] = float(self.rider_on)
-        pp[PP_SLIP_TYRES] = 0.0 if mm.knife_edge else 1.0
-        self.params = PlantParams(pp)
-        self.state = new_plant_state()
+        self.params, self.state = make_plant(mm, self.rider_on)
         self.io = PlantIO(np.zeros(NCOMMAND))
         self._unused = np.zeros(1)            # the step's `states` argument (a car's; unused here)
         self.io.commands[[INVALID_SLOTS[n] for n in INVALID_SLOTS]] = 1.0     # no command yet

@@ -9,8 +9,12 @@ two-wheeler steps (rtsim.vehicle.motorcycle.step), and a fall ends the run with 
   out: the watchdog writes 1.0 into the command's ``*_INVALID`` slot otherwise), else the rider's own
   demand, as a mechanical fallback would give it (no rider: zero);
 - steering torque: the rider's plus the ECU's assist torque (while valid);
-- brake torque = pressure times the brake's gain (N m/kPa); drive torque at the rear wheel = throttle
-  times ``MAX_WHEEL_TORQUE`` (rtsim.vehicle.motorcycle.ride, until the engine model drives it).
+- brake torque = pressure times the brake's gain (N m/kPa); the drive torque at the rear wheel from the
+  engine and gearbox of the vehicle's [powertrain] (rtsim.vehicle.motorcycle.engine; a vehicle without
+  one: the throttle times ``MAX_WHEEL_TORQUE``, an ideal drive).
+
+The offline ride (rtsim.vehicle.motorcycle.ride) calls the same view and inputs kernels, with no bus
+commands: a scenario run and a served session form their inputs alike.
 
 The rider (``plant_rider``, drivers.rider) reads the same view as offline (rtsim.vehicle.motorcycle.ride):
 the rear contact point, the pivot's velocity in the heading frame, yaw, roll and steer with their rates.
@@ -38,11 +42,13 @@ from drivers.rider import (RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_DE
                            RV_PHIDOT, RV_R, RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, NRO, NRV, ST_N, rider_step)
 
 from ..kit.layout import offsets
+from .engine import ES_ENGINE_SPEED, ES_GEAR, engine_state, pack_engine, rear_wheel_torque
 from .layout import (K_DELTA, K_E1, K_H, K_P, K_PHI_F, K_PHI_R, K_THETA, K_V, K_W_R, K_ZETA)
 from .step import (MP_FREE_SUSPENSION, MP_SHOCK_C0, MP_SHOCK_L0, MP_THETA0, TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_GAMMA,
                    TO_KAPPA, TO_MZ, U_BRAKE_FRONT, U_BRAKE_REAR, U_DRIVE_TORQUE, U_STEER_TORQUE, _shock_length,
                    two_wheeler_step)
 
+MAX_WHEEL_TORQUE = 1200.0       # N m at the rear wheel at full throttle, for a vehicle without [powertrain]
 FELL = 64                       # plant_step's status for a fall (rtsim.mbs.model codes are below)
 FALL_ROLL = math.radians(70.0)  # rad: a lean past this is a fall (as rtsim.vehicle.motorcycle.sim)
 LIFT_GRACE = 0.5                # s: both tyres may be unloaded this long at the start (settling)
@@ -59,20 +65,38 @@ INVALID_SLOTS = {"throttle_cmd": C_THROTTLE_INVALID, "brake_pressure_front_cmd":
 
 # PlantParams.pp: IMU position in the frame's (e1, h) axes from the pivot (m), the caster's cosine and
 # sine (the frame's x and z from e1 and the steering axis h), rear wheel radius (m), brake gains (N m/kPa),
-# maximum caliper pressure (kPa), drive torque at full throttle (N m), 1 with a rider, 1 with slip tyres.
+# maximum caliper pressure (kPa), drive torque at full throttle without an engine (N m), 1 with a rider,
+# 1 with slip tyres, 1 with an engine (PlantParams.ep: rtsim.vehicle.motorcycle.engine.pack_engine).
 (PP_IMU_E1, PP_IMU_H, PP_COS_CASTER, PP_SIN_CASTER, PP_REAR_RADIUS, PP_BRAKE_GAIN_F, PP_BRAKE_GAIN_R,
- PP_MAX_PRESSURE, PP_MAX_DRIVE, PP_RIDER, PP_SLIP_TYRES, NPP) = offsets(*(1,) * 11)
+ PP_MAX_PRESSURE, PP_MAX_DRIVE, PP_RIDER, PP_SLIP_TYRES, PP_ENGINE, NPP) = offsets(*(1,) * 12)
 # PlantState.inp: what acted over the last step, for the sensors and the state.
 (IN_RIDER_TORQUE, IN_ASSIST, IN_THROTTLE, IN_BRAKE_F, IN_BRAKE_R, IN_RIDER_THROTTLE, IN_RIDER_BRAKE_F,
  IN_RIDER_BRAKE_R, IN_DRIVE, NIN) = offsets(*(1,) * 9)
 
-PlantParams = namedtuple("PlantParams", ["pp"])
-PlantState = namedtuple("PlantState", ["rider_view", "rider_out", "inp"])
+PlantParams = namedtuple("PlantParams", ["pp", "ep"])
+PlantState = namedtuple("PlantState", ["rider_view", "rider_out", "inp", "es"])
 PlantIO = namedtuple("PlantIO", ["commands"])
 
 
-def new_plant_state() -> PlantState:
-    return PlantState(np.zeros(NRV), np.zeros(NRO), np.zeros(NIN))
+def make_plant(mm, rider_on: bool, gear: int | None = None) -> tuple[PlantParams, PlantState]:
+    """The plant's parameters and a fresh state for the two-wheeler `mm` (rtsim.vehicle.motorcycle.build);
+    gear: a fixed gear for the engine (None: the vehicle file's choice; 0: automatic)."""
+    from .parts import frame_coordinates
+
+    cfg = mm.config
+    pp = np.zeros(NPP)
+    pp[PP_IMU_E1], pp[PP_IMU_H] = frame_coordinates(mm, cfg.sensors.imu_position_m)
+    pp[PP_COS_CASTER], pp[PP_SIN_CASTER] = np.cos(cfg.caster_rad), np.sin(cfg.caster_rad)
+    pp[PP_REAR_RADIUS] = cfg.rear_wheel.radius_m
+    if cfg.brakes is not None:
+        pp[PP_BRAKE_GAIN_F], pp[PP_BRAKE_GAIN_R] = cfg.brakes.front_nm_per_kpa, cfg.brakes.rear_nm_per_kpa
+        pp[PP_MAX_PRESSURE] = cfg.brakes.max_pressure_kpa
+    pp[PP_MAX_DRIVE] = MAX_WHEEL_TORQUE
+    pp[PP_RIDER] = float(rider_on)
+    pp[PP_SLIP_TYRES] = 0.0 if mm.knife_edge else 1.0
+    pp[PP_ENGINE] = float(cfg.powertrain is not None)
+    ep = pack_engine(cfg.powertrain, cfg.final_ratio, gear) if cfg.powertrain is not None else np.zeros(1)
+    return PlantParams(pp, ep), PlantState(np.zeros(NRV), np.zeros(NRO), np.zeros(NIN), engine_state())
 
 
 # ---- the rear frame's kinematics -----------------------------------------------------------------------
@@ -136,7 +160,15 @@ def _scalar(x, idx, k):
 # ---- the rider and the inputs --------------------------------------------------------------------------
 @kernel
 def plant_rider(d, idx, pp, rider, view, out):
-    """The rider's view of the two-wheeler (as rtsim.vehicle.motorcycle.ride) and one rider call."""
+    """The rider's view of the two-wheeler and one rider call."""
+    plant_view(d, idx, pp, view)
+    rider_step(rider, view, out)
+
+
+@kernel
+def plant_view(d, idx, pp, view):
+    """The rider's view (drivers.rider RV_*): the rear contact point, the pivot's velocity in the
+    heading frame, yaw, roll and steer with their rates."""
     q, qd = d.q, d.qd
     kv, kw = idx[K_V], idx[K_W_R]
     # rear contact: the wheel centre less the radius along the wheel plane's up direction
@@ -158,7 +190,6 @@ def plant_rider(d, idx, pp, rider, view, out):
     view[RV_PHIDOT] = w0 * cos(psi) + w1 * sin(psi)
     view[RV_DELTA] = q[idx[K_DELTA]]
     view[RV_DELTADOT] = qd[idx[K_DELTA]]
-    rider_step(rider, view, out)
 
 
 @inline_kernel
@@ -167,8 +198,9 @@ def _clip(x, lo, hi):
 
 
 @kernel
-def plant_inputs(pp, commands, out, u, inp):
-    """The inputs over the next step from the rider's outputs and the bus commands (module docstring)."""
+def plant_inputs(pp, ep, es, commands, out, u, inp, wheel_speed, h):
+    """The inputs over the next step of h s from the rider's outputs and the bus commands (module
+    docstring); wheel_speed: the rear wheel's spin relative to the frame, rad/s (the gearbox's)."""
     rider_thr, rider_bf, rider_br = out[RO_THROTTLE], out[RO_BRAKE_F], out[RO_BRAKE_R]
     thr = rider_thr if commands[C_THROTTLE_INVALID] > 0.5 else commands[C_THROTTLE]
     bf = rider_bf if commands[C_BRAKE_FRONT_INVALID] > 0.5 else commands[C_BRAKE_FRONT]
@@ -178,7 +210,10 @@ def plant_inputs(pp, commands, out, u, inp):
     bf = _clip(bf, 0.0, pp[PP_MAX_PRESSURE])
     br = _clip(br, 0.0, pp[PP_MAX_PRESSURE])
     u[U_STEER_TORQUE] = out[RO_TORQUE] + assist
-    u[U_DRIVE_TORQUE] = thr * pp[PP_MAX_DRIVE]
+    if pp[PP_ENGINE] > 0.5:
+        u[U_DRIVE_TORQUE] = rear_wheel_torque(ep, es, thr, wheel_speed, h)
+    else:
+        u[U_DRIVE_TORQUE] = thr * pp[PP_MAX_DRIVE]
     u[U_BRAKE_FRONT] = bf * pp[PP_BRAKE_GAIN_F]
     u[U_BRAKE_REAR] = br * pp[PP_BRAKE_GAIN_R]
     inp[IN_RIDER_TORQUE] = out[RO_TORQUE]
@@ -196,7 +231,7 @@ def plant_inputs(pp, commands, out, u, inp):
 def plant_step(m, d, veh, vd, parts, io, h):
     """The inputs, one two-wheeler step of h s, the fall check. Returns OK, a step failure or FELL."""
     pp = veh.pp
-    plant_inputs(pp, io.commands, vd.rider_out, parts.u, vd.inp)
+    plant_inputs(pp, veh.ep, vd.es, io.commands, vd.rider_out, parts.u, vd.inp, d.qd[parts.idx[K_PHI_R]], h)
     status = two_wheeler_step(m, d, h, parts.idx, parts.par, parts.tab, parts.u, parts.tp, parts.slip, parts.tyre)
     if status != 0:
         return status
@@ -247,7 +282,7 @@ def plant_sensors(d, idx, par, pp, inp, out):
 
 
 @kernel
-def plant_state(d, idx, par, pp, tyre, inp, path_offset, out):
+def plant_state(d, idx, par, pp, tyre, inp, es, path_offset, out):
     """The observer state (rtsim.channels.TWO_WHEELER_STATE order) into out."""
     q, qd = d.q, d.qd
     kp = idx[K_P]
@@ -290,11 +325,13 @@ def plant_state(d, idx, par, pp, tyre, inp, path_offset, out):
     out[j + 3] = inp[IN_THROTTLE]
     out[j + 4] = inp[IN_BRAKE_F]
     out[j + 5] = inp[IN_BRAKE_R]
-    out[j + 6] = path_offset
+    out[j + 6] = es[ES_ENGINE_SPEED] if pp[PP_ENGINE] > 0.5 else 0.0
+    out[j + 7] = es[ES_GEAR] if pp[PP_ENGINE] > 0.5 else 0.0
+    out[j + 8] = path_offset
     viol = 0.0
     for i in range(d.phi.shape[0]):
         viol = max(viol, abs(d.phi[i]))
-    out[j + 7] = viol
+    out[j + 9] = viol
 
 
 @kernel

@@ -1,5 +1,6 @@
 """The rider (drivers.rider) on the two-wheeler: each step the rider reads the motorcycle's view and
-its commands act on the handlebars, the rear wheel and the brakes. The throttle drives the engine and
+its commands act on the handlebars, the rear wheel and the brakes, through the same kernels as in the
+HIL service (rtsim.vehicle.motorcycle.plant, with no bus commands): the throttle drives the engine and
 gearbox of the vehicle file's [powertrain] (rtsim.vehicle.motorcycle.engine), whose rear-wheel torque
 the step turns into chain tension; a vehicle without one takes the throttle as a rear-wheel torque
 demand up to `max_wheel_torque_nm` (an ideal drive). Brake pressures map by the vehicle's brake gains."""
@@ -7,16 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivers.rider import (NRO, NRV, ST_KAPPA, ST_N, ST_PHI_FF, RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_DELTA, RV_DELTADOT, RV_PHI,
-                           RV_PHIDOT, RV_R, RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, rider_step)
+from drivers.rider import (ST_KAPPA, ST_N, ST_PHI_FF, RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_PHI,
+                           RV_DELTA, RV_U, RV_X, RV_Y, rider_step)
 
 from .build import MotorcycleModel, combine
-from .engine import engine_state, pack_engine, rear_wheel_torque
 from .layout import K_PHI_R
-from .sim import TwoWheelerSim, rear_contact
-from .step import U_BRAKE_FRONT, U_BRAKE_REAR, U_DRIVE_TORQUE, U_STEER_TORQUE
-
-MAX_WHEEL_TORQUE = 1200.0    # N m at the rear wheel at full throttle, for a vehicle without [powertrain]
+from .plant import INVALID_SLOTS, MAX_WHEEL_TORQUE, NCOMMAND, PP_MAX_DRIVE, make_plant, plant_inputs, plant_view
+from .sim import TwoWheelerSim
 
 
 #: The commands a rider (or an open-loop profile) gives, in the order of drivers.rider's RO_* outputs.
@@ -49,14 +47,13 @@ class Ride:
     def __init__(self, sim: TwoWheelerSim, rider, max_wheel_torque_nm: float = MAX_WHEEL_TORQUE,
                  gear: int | None = None, open_loop: dict | None = None):
         self.sim, self.rider = sim, rider
-        self.view = np.zeros(NRV)
-        self.out = np.zeros(NRO)
-        self.max_torque = max_wheel_torque_nm
-        cfg = sim.mm.config
-        brakes = cfg.brakes
-        self.brake_gain = (0.0, 0.0) if brakes is None else (brakes.front_nm_per_kpa, brakes.rear_nm_per_kpa)
-        self.engine = None if cfg.powertrain is None else pack_engine(cfg.powertrain, cfg.final_ratio, gear)
-        self.engine_state = engine_state()
+        self.params, self.state = make_plant(sim.mm, rider is not None, gear)
+        self.params.pp[PP_MAX_DRIVE] = max_wheel_torque_nm
+        self.view, self.out = self.state.rider_view, self.state.rider_out
+        self.engine = self.params.ep if sim.mm.config.powertrain is not None else None
+        self.engine_state = self.state.es
+        self.commands = np.zeros(NCOMMAND)
+        self.commands[list(INVALID_SLOTS.values())] = 1.0          # no bus: the rider's demands act
         self.open_loop = {} if open_loop is None else dict(open_loop)
         unknown = set(self.open_loop) - set(COMMANDS)
         if unknown:
@@ -70,28 +67,20 @@ class Ride:
 
     def step(self) -> None:
         s, v, out = self.sim, self.view, self.out
-        x, y = rear_contact(s)
-        u, lat = s.velocity
+        p = s.parts
+        plant_view(s.data, p.idx, self.params.pp, v)
         if self.rider is not None:
-            v[RV_T], v[RV_X], v[RV_Y], v[RV_YAW] = s.time, x, y, s.yaw
-            v[RV_U], v[RV_V], v[RV_R] = u, lat, s.yaw_rate
-            v[RV_PHI], v[RV_PHIDOT], v[RV_DELTA], v[RV_DELTADOT] = s.roll, s.roll_rate, s.steer, s.steer_rate
             rider_step(self.rider, v, out)
         for name, f in self.open_loop.items():
             out[COMMANDS.index(name)] = f(s.time)
-        inp = s.parts.u
-        inp[U_STEER_TORQUE] = out[RO_TORQUE]
-        if self.engine is not None:
-            inp[U_DRIVE_TORQUE] = rear_wheel_torque(self.engine, self.engine_state, out[RO_THROTTLE],
-                                                    self.wheel_speed, s.dt)
-        else:
-            inp[U_DRIVE_TORQUE] = min(max(out[RO_THROTTLE], 0.0), 1.0) * self.max_torque
-        inp[U_BRAKE_FRONT] = max(out[RO_BRAKE_F], 0.0) * self.brake_gain[0]
-        inp[U_BRAKE_REAR] = max(out[RO_BRAKE_R], 0.0) * self.brake_gain[1]
+        plant_inputs(self.params.pp, self.params.ep, self.state.es, self.commands, out, p.u, self.state.inp,
+                     self.wheel_speed, s.dt)
+        x, y, u = v[RV_X], v[RV_Y], v[RV_U]
         s.step()
         if self.rider is not None:
             st = self.rider.st
-            self.log.append((s.time, x, y, s.roll, s.steer, out[RO_TORQUE], u, st[ST_N], st[ST_PHI_FF], st[ST_KAPPA]))
+            self.log.append((s.time, x, y, v[RV_PHI], v[RV_DELTA], out[RO_TORQUE], u, st[ST_N], st[ST_PHI_FF],
+                             st[ST_KAPPA]))
 
     def run(self, seconds: float) -> np.ndarray:
         for _ in range(int(round(seconds / self.sim.dt))):
