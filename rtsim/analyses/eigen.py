@@ -1,16 +1,34 @@
 """Stability of a two-wheeler in straight running: eigenvalues, mode shapes and names against speed,
 from the full nonlinear model linearised numerically (rtsim.analyses.linearise).
 
-At each speed the motorcycle (or bicycle) runs upright and straight; its state matrix on the constraint
-manifold, less the symmetries of straight running (translation, yaw, wheel spins), gives the modes.
-Each mode is read out in physical quantities (roll, steer, yaw, lateral, pitch, bounce, the suspension
-travels and the forward speed) and named:
+What is in the analysis: the multibody model (masses, inertias, geometry, the wheels' gyroscopics) and
+every force element of the vehicle file (rtsim.analyses.applied): slip tyres with their contact
+deflections as first-order states (relaxation), the suspension springs and dampers (or the locked
+suspension's rows), the steering damper, the chain, aero drag and lift; knife-edge wheels are rolling
+constraints instead. The linearisation of a damper whose compression and rebound rates differ is the
+mean of the two (the central difference across the kink at zero speed).
 
-- out of plane (roll, steer, yaw): *weave* (oscillatory, roll and yaw with the steer, below ~5 Hz),
-  *wobble* (oscillatory, steer-dominated, above it), *capsize* (real, roll-dominated), *castering*
-  (real, steer-dominated);
-- in plane: *speed* (the forward speed), *bounce* and *pitch* of the frame, *front hop* and *rear hop*
-  (a wheel on its tyre), and the tyre's *relaxation* states.
+The operating point at each speed is a relative equilibrium of the full model, solved for: upright,
+straight, the frame's height and pitch and the suspension travels at their sag under the loads of that
+speed (aero lift and drag, the drive's squat or anti-squat), each wheel's spin rate and longitudinal
+contact deflection at their steady slip, and the drive torque (rider's throttle, held constant in the
+linearisation) that balances rolling resistance and drag. The speed is then a state like the others; its
+mode (*speed*) is the slow decay of a speed change against drag.
+
+The modes split exactly into in-plane and out-of-plane ones (the upright machine is mirror symmetric);
+each is read out in physical quantities (roll, steer, yaw, lateral, pitch, bounce, the suspension
+travels, the wheels' heights and spin rates, the forward speed, the tyres' deflections) and named:
+
+- out of plane: *weave* (oscillatory, roll and yaw with the steer, below ~5 Hz), *wobble* (oscillatory,
+  steer-dominated, above it), *capsize* (the slowest real, roll-dominated mode; a faster one, the frame
+  rolling on the tyres' lateral compliance, is *roll*), *castering* (real, steer-dominated), and *front
+  tyre lateral* / *rear tyre lateral* where a tyre's lateral deflection (as the slip angle v/sigma it
+  carries) dominates the angles (the relaxation modes, near -V/sigma at speed) or the frame sways in yaw
+  on the contacts' lateral stiffness (oscillatory, yaw-dominated; the tyre with the larger slip names it);
+- in plane: *speed*, *front tyre longitudinal* / *rear tyre longitudinal* (the wheel's spin against the
+  tyre's longitudinal slip stiffness, and the longitudinal relaxation), *front hop* / *rear hop* (a wheel
+  moving on its suspension more than the frame above it), and the frame's *bounce* (its vertical motion
+  at the two axles in phase: node outside the wheelbase) and *pitch* (in opposition: node between them).
 A mode changes stability where its real part changes sign; those speeds are refined by bisection.
 """
 from __future__ import annotations
@@ -19,21 +37,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rtsim.errors import ModelError
 from rtsim.vehicle.motorcycle.build import G, MotorcycleModel, combine, straight_running_velocity
 from rtsim.vehicle.motorcycle.config import Body
-from rtsim.vehicle.motorcycle.layout import NAMES, POINTS, VECTORS
-
-from rtsim.vehicle.motorcycle.layout import D_FORK, D_PITCH, D_SWING, D_Z, NDOF
+from rtsim.vehicle.motorcycle.layout import D_FORK, D_PITCH, D_SWING, D_Z, NAMES, NDOF, POINTS, VECTORS
 
 from .applied import SLIP_NAMES, AppliedForces
 from .linearise import Equations, reduced_matrix
 
 OP_ITERATIONS = 30
-OP_TOL = 1e-9
+OP_TOL = 1e-9          # residual (m/s^2, m/s) of a converged operating point
+OP_STALL = 1e-3        # ... or a last step below this fraction of the difference steps
+OP_ACCEPT = 1e-4       # largest residual accepted after a stalled solve
 
 EZ = np.array([0.0, 0.0, 1.0])
-OUT_OF_PLANE = ("roll", "steer", "yaw", "lateral")
-IN_PLANE = ("pitch", "bounce", "fork", "swingarm", "speed")
+OUT_OF_PLANE = ("roll", "steer", "yaw", "lateral", "v_front", "v_rear")
+IN_PLANE = ("pitch", "bounce", "fork", "swingarm", "front_wheel", "rear_wheel", "speed", "spin_front", "spin_rear",
+            "u_front", "u_rear")
 WOBBLE_HZ = 5.0
 DOMINANT = 3.0      # one quantity names a mode when it exceeds the others by this factor
 
@@ -53,6 +73,7 @@ class Mode:
 class SpeedResult:
     speed: float
     modes: list[Mode] = field(default_factory=list)
+    operating: dict[str, float] = field(default_factory=dict)   # TwoWheelerLinearisation.operating
 
     def eigenvalues(self, exclude=("speed",)) -> np.ndarray:
         return np.array([m.eigenvalue for m in self.modes if m.name not in exclude])
@@ -106,6 +127,7 @@ class TwoWheelerLinearisation:
         Gauss-Newton on f(x) - xi(x) = 0 together with the constraints. A given `q` skips the solve
         (straight running from that configuration, no drive)."""
         if q is not None:
+            self.operating = {"speed_m_s": speed}
             if self.applied is not None:
                 self.applied.drive = 0.0
             return np.concatenate([q, straight_running_velocity(self.mm, q, speed), np.zeros(self.n_aux)])
@@ -113,7 +135,8 @@ class TwoWheelerLinearisation:
         p = np.zeros(5 + (4 if self.n_aux else 0))
         steps = [1e-6, 1e-6, 1e-6, 1e-6]
         if self.n_aux:
-            p[:2] = self._tyre_deflection_guess()
+            p[:2], deflection = self._tyre_deflection_guess()
+            steps = [min(1e-6, 1e-3 * deflection)] * 4      # well inside the contact
             p[4:6] = speed / cfg.front_wheel.radius_m, speed / cfg.rear_wheel.radius_m
             steps += [1e-6 * max(1.0, p[4]), 1e-6 * max(1.0, p[5]), 1e-7, 1e-7]
         steps.append(1e-3)
@@ -137,24 +160,27 @@ class TwoWheelerLinearisation:
                 if np.linalg.norm(r_new) < np.linalg.norm(r):
                     break
             p, r = p + alpha * dp, r_new
+            if np.max(np.abs(alpha * dp / steps)) < OP_STALL:
+                break                # converged to the rounding of the forces (very stiff tyres)
         r = residual(p)              # leaves the drive torque of p in the force model
-        if np.linalg.norm(r) >= OP_TOL:
-            raise ValueError(f"{cfg.id}: no straight running at {speed} m/s (residual {np.linalg.norm(r):.3g})")
+        if np.linalg.norm(r) >= OP_ACCEPT:
+            raise ModelError(f"{cfg.id}: no straight running at {speed} m/s (residual {np.linalg.norm(r):.3g})")
         x0 = self._state(speed, p)
-        self.operating = {"speed_m_s": speed, "bounce_m": p[0], "pitch_rad": p[1], "fork_m": p[2],
-                          "swingarm_rad": p[3], "drive_torque_nm": p[-1]}
+        # the frame's pose from the design position (pitch positive nose down), the suspension travels
+        self.operating = {"speed_m_s": speed, "height_m": p[0], "pitch_rad": p[1], "fork_travel_m": p[2],
+                          "swingarm_rotation_rad": p[3], "drive_torque_nm": p[-1]}
         if self.n_aux:
             self.applied(x0[:self.nq], x0[self.nq:2 * self.nq], x0[2 * self.nq:])
             loads = self.applied.loads()
             if np.any(loads <= 0.0):
-                raise ValueError(f"{cfg.id}: a wheel leaves the road at {speed} m/s (loads {loads} N)")
+                raise ModelError(f"{cfg.id}: a wheel leaves the road at {speed} m/s (loads {loads} N)")
             self.operating.update(spin_front_rad_s=p[4], spin_rear_rad_s=p[5], load_front_n=loads[0],
                                   load_rear_n=loads[1])
         return x0
 
-    def _tyre_deflection_guess(self) -> tuple[float, float]:
-        """(height, pitch) of the frame with each tyre deflected by its static load (m, rad): the start of
-        the solve (at the design position the tyres just touch the road)."""
+    def _tyre_deflection_guess(self) -> tuple[np.ndarray, float]:
+        """((height, pitch) of the frame with each tyre deflected by its static load (m, rad), the smaller
+        deflection (m)): the start of the solve (at the design position the tyres just touch the road)."""
         cfg = self.mm.config
         wheels = [Body(mass_kg=w.mass_kg, cg_m=(x, w.radius_m)) for w, x in
                   ((cfg.front_wheel, cfg.geometry.wheelbase_m), (cfg.rear_wheel, 0.0))]
@@ -162,7 +188,7 @@ class TwoWheelerLinearisation:
         share = cg[0] / cfg.geometry.wheelbase_m
         d_f = share * mass * G / cfg.tyres.front.radial_stiffness_n_per_m
         d_r = (1.0 - share) * mass * G / cfg.tyres.rear.radial_stiffness_n_per_m
-        return -0.5 * (d_f + d_r), (d_f - d_r) / cfg.geometry.wheelbase_m
+        return np.array([-0.5 * (d_f + d_r), (d_f - d_r) / cfg.geometry.wheelbase_m]), min(d_f, d_r)
 
     def _slices(self, names):
         for n in names:
@@ -247,7 +273,11 @@ class TwoWheelerLinearisation:
                 # the slip angle each tyre's lateral deflection carries (v / sigma_alpha)
                 a_f = mag["v_front"] / tyres.front.relaxation_length_lat_m
                 a_r = mag["v_rear"] / tyres.rear.relaxation_length_lat_m
-                if max(a_f, a_r) > DOMINANT * mech:
+                oscillating = abs(lam.imag) > 1e-6 * max(1.0, abs(lam))
+                # a deflection dominating the angles, or the frame swaying in yaw on the contacts'
+                # lateral stiffness (K_alpha / sigma_alpha)
+                sway = oscillating and mag["yaw"] > 2.0 * max(mag["steer"], mag["roll"])
+                if max(a_f, a_r) > DOMINANT * mech or sway:
                     return "front tyre lateral" if a_f >= a_r else "rear tyre lateral"
             oscillating = abs(lam.imag) > 1e-6 * max(1.0, abs(lam))
             steer_led = mag["steer"] > DOMINANT * mag["roll"]
@@ -272,8 +302,10 @@ class TwoWheelerLinearisation:
             return "front tyre longitudinal" if slip[0] >= slip[1] else "rear tyre longitudinal"
         if mag["speed"] > heave:
             return "speed"
-        # a wheel moving more than the frame above it (more tyre deflection than suspension travel) hops
-        hop_f, hop_r = mag["front_wheel"] / max(abs(frame_f), 1e-300), mag["rear_wheel"] / max(abs(frame_r), 1e-300)
+        # a wheel hops when it moves more than the frame above it, on its suspension (a locked suspension
+        # has no hop: the machine bounces and pitches on its tyres)
+        hop_f = mag["front_wheel"] / max(abs(frame_f), 1e-300) if mag["fork"] > 0.5 * mag["front_wheel"] else 0.0
+        hop_r = mag["rear_wheel"] / max(abs(frame_r), 1e-300) if mag["swingarm"] > 0.5 * mag["rear_wheel"] else 0.0
         if max(hop_f, hop_r) > 1.0:
             return "front hop" if hop_f >= hop_r else "rear hop"
         # the frame's vertical motion at the two axles: in phase (node outside the wheelbase) is bounce,
@@ -287,7 +319,7 @@ class TwoWheelerLinearisation:
         a, basis = reduced_matrix(self.eqs, x0, sym, lambda x: self._motion(x, speed))
         lam, vec = np.linalg.eig(a)
         mirror = self.mirror()
-        out = SpeedResult(speed)
+        out = SpeedResult(speed, operating={k: float(v) for k, v in self.operating.items()})
         for k in np.argsort(lam.real):
             if lam[k].imag < -1e-9 * max(1.0, abs(lam[k])):
                 continue            # one of each conjugate pair
