@@ -9,7 +9,11 @@ x = (q, qd) the accelerations follow from
     [C  0  ] [lambda] = [-(d/dt C) qd        ],
 
 so f(x) = (qd, qdd) is the model's own vector field, defined on and off the constraint manifold.
-Its Jacobian J is taken by fourth-order central differences (error ~1e-12 for smooth forces).
+Force elements with first-order states of their own (a tyre's contact deflections) extend the state:
+x = (q, qd, z) with dz/dt = g(q, qd, z) from the same call that gives their forces (`Equations.aux`).
+The Jacobian J of f is taken by fourth-order central differences (error ~1e-12 for smooth forces; at a
+kink, such as a damper with different compression and rebound rates at zero speed, the stencil gives
+the mean of the two slopes).
 
 The motion is a steady one, not an equilibrium: straight running moves the state along the model's
 symmetries (translation along the ground, the wheels' spin), x(t) = exp(t xi) x0, with f(x0) = xi(x0)
@@ -38,17 +42,24 @@ FD_STEP = 1e-4       # relative finite-difference step of the fourth-order stenc
 @dataclass
 class Equations:
     """The equations of motion of `mech`, with optional extra applied forces `extra(q, qd) -> Q` (N, N m),
-    e.g. a vehicle's tyre forces."""
+    or applied forces with `n_aux` first-order states z of their own: `aux(q, qd, z) -> (Q, dz/dt)`."""
     mech: Mechanism
     extra: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    aux: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+    n_aux: int = 0
 
     def __post_init__(self):
-        m = self.mech.model
-        self.model = m
+        m = self.model = self.mech.model
         self.data = make_data(m, self.mech.q0)     # dt = 0: velocity rows give their plain coefficients
         self.nq = m.nq
         self.velocity_rows = np.isin(m.con_kind, VELOCITY_KINDS)
         self.mass = self.mech.mass_dense
+        if self.n_aux and self.aux is None:
+            raise ValueError("n_aux states need their aux(q, qd, z) rates")
+
+    def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        n = self.nq
+        return x[:n], x[n:2 * n], x[2 * n:]
 
     def constraint_matrix(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(Phi of the position rows, C (all rows' velocity coefficients), (d/dt C) qd)."""
@@ -60,32 +71,42 @@ class Equations:
         eval_hqd(m, d, q, qd)
         return d.phi[~self.velocity_rows].copy(), c, d.hqd.copy()
 
-    def forces(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    def forces(self, q: np.ndarray, qd: np.ndarray, z: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(Q, dz/dt): the generalized forces at (q, qd, z) and the rates of the force elements' states."""
         m, d = self.model, self.data
         d.q_ext[:] = 0.0
         eval_forces(m, d, q, qd, False, 0.0, 0.0)
         out = d.force.copy()
         if self.extra is not None:
             out += self.extra(q, qd)
-        return out
+        zd = np.zeros(self.n_aux)
+        if self.aux is not None:
+            f, zd = self.aux(q, qd, np.zeros(0) if z is None else z)
+            out += f
+        return out, zd
 
-    def accelerations(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    def accelerations(self, q: np.ndarray, qd: np.ndarray, z: np.ndarray | None = None) -> np.ndarray:
+        return self._solve(q, qd, self.forces(q, qd, z)[0])
+
+    def _solve(self, q, qd, force):
         _phi, c, hqd = self.constraint_matrix(q, qd)
         n, k = self.nq, c.shape[0]
         kkt = np.zeros((n + k, n + k))
         kkt[:n, :n] = self.mass
         kkt[:n, n:] = c.T
         kkt[n:, :n] = c
-        rhs = np.concatenate([self.forces(q, qd), -hqd])
+        rhs = np.concatenate([force, -hqd])
         return np.linalg.solve(kkt, rhs)[:n]
 
     def rates(self, x: np.ndarray) -> np.ndarray:
-        q, qd = x[:self.nq], x[self.nq:]
-        return np.concatenate([qd, self.accelerations(q, qd)])
+        q, qd, z = self.split(x)
+        force, zd = self.forces(q, qd, z)
+        return np.concatenate([qd, self._solve(q, qd, force), zd])
 
     def manifold(self, x: np.ndarray) -> np.ndarray:
-        """The state constraints g(x) = (Phi(q), C(q) qd): zero on the manifold of consistent states."""
-        q, qd = x[:self.nq], x[self.nq:]
+        """The state constraints g(x) = (Phi(q), C(q) qd): zero on the manifold of consistent states (the
+        force elements' states z are free)."""
+        q, qd, _z = self.split(x)
         phi, c, _ = self.constraint_matrix(q, qd)
         return np.concatenate([phi, c @ qd])
 

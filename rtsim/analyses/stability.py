@@ -12,6 +12,7 @@ from .eigen import SpeedResult, TwoWheelerLinearisation
 
 BISECT_TOL = 1e-6     # m/s
 CONTINUITY = 1e-3     # 1/s: |real part| on both sides of a refined crossing
+ZOOM = 60.0           # 1/s: the root locus's view when faster (tyre) modes exist
 
 
 @dataclass
@@ -72,7 +73,8 @@ def as_dict(vehicle: str, results: list[SpeedResult], crossings: list[Crossing])
                           for k, v in m.shape.items()}}
     return {"vehicle": vehicle, "axes": "ISO 8855; roll positive right side down, steer positive left",
             "speeds_m_s": [r.speed for r in results],
-            "modes": [{"speed_m_s": r.speed, "modes": [mode(m) for m in r.modes]} for r in results],
+            "modes": [{"speed_m_s": r.speed, "operating_point": r.operating, "modes": [mode(m) for m in r.modes]}
+                      for r in results],
             "stability_changes": [{"mode": c.mode, "speed_m_s": c.speed, "becomes": c.becomes} for c in crossings]}
 
 
@@ -90,7 +92,7 @@ def root_locus(results: list[SpeedResult], crossings: list[Crossing], title: str
     fig = Figure(figsize=(11, 4.8))
     ax, ax2 = fig.subplots(1, 2)
     names = sorted({m.name for r in results for m in r.modes})
-    markers = dict(zip(names, "osd^v<>pPX*"))
+    markers = {name: "osd^v<>pPX*hH8+x"[i % 16] for i, name in enumerate(names)}
     vmin, vmax = results[0].speed, results[-1].speed
     sc = None
     for name in names:
@@ -102,6 +104,12 @@ def root_locus(results: list[SpeedResult], crossings: list[Crossing], title: str
         ax.scatter(lam.real, -lam.imag, c=v, cmap="viridis", vmin=vmin, vmax=vmax, s=4, marker=markers[name])
         ax2.plot(v, lam.real, markers[name], ms=3, label=name)
     ax.axvline(0, color="k", lw=0.6)
+    fastest = min(m.eigenvalue.real for r in results for m in r.modes)
+    if fastest < -ZOOM:          # tyre modes at -V/sigma: keep the vehicle's modes readable
+        ax.set_xlim(-ZOOM, None)
+        ax.set_ylim(-2 * ZOOM, 2 * ZOOM)
+        ax2.set_ylim(-ZOOM, None)
+        ax.set_title(f"faster modes (real part < -{ZOOM:g}/s) off the axes", fontsize=8)
     ax.set_xlabel("real part (1/s)")
     ax.set_ylabel("imaginary part (rad/s)")
     ax.legend(fontsize=7)
