@@ -49,7 +49,7 @@ def test_stoppie_ends_in_a_fall_with_the_rear_load_zero_at_g_b_over_h(tmp_path):
     assert b["rear_load_zero_at_decel_m_s2"] == pytest.approx(b["limit_stoppie_decel_m_s2"], rel=0.02)
     assert b["rear_lifted_s"] > 0.1
     # before the rear lifts the deceleration stays below the stoppie limit
-    fz_r = data[:, header.index("tyre_fz_r")]
+    fz_r = data[:, header.index("tyre_fz_rear")]
     t, v = data[:, 0], data[:, header.index("speed")]
     lift = int(np.argmax(fz_r <= 0.0))
     decel = -np.diff(v[:lift]) / np.diff(t[:lift])

@@ -30,18 +30,17 @@ import numpy as np
 from drivers.profiles import eval_channel, pack
 from drivers.rider import ST_N, ST_PHI_REF
 from drivers.scenario import Scenario, load_scenario
-from rtsim.channels import Channel, ChannelDictionary
+from rtsim.channels import TWO_WHEELER_STATE, Channel, ChannelDictionary
 from rtsim.errors import ConfigError, SimulationError
 from rtsim.configfile import problem
 
 from .build import build_motorcycle, combine
 from .config import Body, load_motorcycle
-from .engine import ES_ENGINE_SPEED, ES_GEAR
-from .layout import K_E1, K_P, K_PHI_F, K_PHI_R, K_THETA, K_ZETA
+from .layout import K_E1, K_P
+from .plant import plant_state
 from .ride import Ride, tyre_lean_ratio
 from .sim import Fall, TwoWheelerSim, static_pose
-from .step import (MP_MU, TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_GAMMA, TO_KAPPA, U_BRAKE_FRONT, U_BRAKE_REAR,
-                   U_DRIVE_TORQUE, U_STEER_TORQUE)
+from .step import MP_MU, TO_FZ, U_BRAKE_FRONT, U_BRAKE_REAR
 
 G = 9.81
 PITCH_OVER = math.radians(45.0)      # rad: the rear frame pitched nose-down past this has gone over the front
@@ -51,42 +50,16 @@ def _c(name, unit, text):
     return Channel(name, unit, text)
 
 
-#: The columns of a run (after `time`), all state channels.
-CHANNELS = ChannelDictionary(sensors=(), commands=(), state=(
-    _c("pos_x", "m", "rear contact point x, road frame"),
-    _c("pos_y", "m", "rear contact point y, road frame"),
-    _c("yaw_angle", "rad", "rear frame yaw, positive turning left"),
-    _c("roll_angle", "rad", "rear frame roll, positive leaning right"),
-    _c("pitch_angle", "rad", "rear frame pitch from the static pose, positive nose down"),
-    _c("steer_angle", "rad", "steer angle about the steering axis, positive left"),
-    _c("roll_rate", "rad/s", "roll rate"),
-    _c("yaw_rate", "rad/s", "yaw rate"),
-    _c("steer_rate", "rad/s", "steer rate"),
-    _c("speed", "m/s", "forward speed of the swingarm pivot"),
-    _c("vel_y", "m/s", "lateral speed of the swingarm pivot, heading frame"),
-    _c("accel_x", "m/s^2", "forward acceleration of the swingarm pivot, heading frame"),
-    _c("steering_torque", "N*m", "rider's torque on the handlebars, positive steering left"),
-    _c("throttle", "1", "twist grip 0..1"),
-    _c("brake_pressure_f", "kPa", "front brake line pressure"),
-    _c("brake_pressure_r", "kPa", "rear brake line pressure"),
-    _c("brake_torque_f", "N*m", "front brake torque"),
-    _c("brake_torque_r", "N*m", "rear brake torque"),
-    _c("drive_torque", "N*m", "engine torque at the rear wheel (chain)"),
-    _c("engine_speed", "rad/s", "engine crankshaft speed"),
-    _c("gear", "1", "engaged gear"),
-    _c("wheel_speed_f", "rad/s", "front wheel spin relative to the fork"),
-    _c("wheel_speed_r", "rad/s", "rear wheel spin relative to the frame"),
-    *(_c(f"tyre_{k}_{w}", u, f"{t} {w}") for k, u, t in (("fx", "N", "longitudinal tyre force"),
-                                                         ("fy", "N", "lateral tyre force"),
-                                                         ("fz", "N", "tyre load")) for w in "fr"),
-    *(_c(f"slip_ratio_{w}", "1", f"longitudinal slip {w}") for w in "fr"),
-    *(_c(f"slip_angle_{w}", "rad", f"slip angle {w}") for w in "fr"),
-    *(_c(f"camber_{w}", "rad", f"tyre camber {w}") for w in "fr"),
-    _c("fork_travel", "m", "fork compression from full extension"),
-    _c("swingarm_angle", "rad", "swingarm angle from the frame"),
-    _c("lateral_error", "m", "rider: offset of the rear contact from the path, left positive"),
+#: The columns of a run (after `time`): the two-wheeler's state channels (rtsim.channels, as the HIL
+#: service publishes them), then what only an offline run reports.
+OFFLINE_ONLY = (
+    _c("accel_forward", "m/s^2", "forward acceleration of the swingarm pivot, heading frame"),
+    _c("pitch_change", "rad", "rear frame pitch from the static pose, positive nose down"),
+    _c("brake_torque_front", "N*m", "front brake torque"),
+    _c("brake_torque_rear", "N*m", "rear brake torque"),
     _c("roll_reference", "rad", "rider: lean reference"),
-))
+)
+CHANNELS = ChannelDictionary(sensors=(), commands=(), state=TWO_WHEELER_STATE + OFFLINE_ONLY)
 COLUMNS = ("time", *CHANNELS.state_names)
 
 
@@ -163,32 +136,19 @@ def _pitch(sim: TwoWheelerSim) -> float:
 
 
 def _row(ride: Ride, row: np.ndarray) -> None:
+    """One output row: time, the state channels (rtsim.vehicle.motorcycle.plant.plant_state), OFFLINE_ONLY."""
     s = ride.sim
-    q, qd, qdd = s.data.q, s.data.qd, s.data.qdd
-    idx = s.parts.idx
-    u = s.parts.u
-    ty = s.parts.tyre
-    es = ride.engine_state
-    from .sim import rear_contact
-
-    x, y = rear_contact(s)
-    fwd, lat = s.velocity
-    yaw = s.yaw
-    kp = idx[K_P]
-    ax = qdd[kp] * math.cos(yaw) + qdd[kp + 1] * math.sin(yaw)
-    out = ride.out
+    idx, u = s.parts.idx, s.parts.u
     st = ride.rider.st if ride.rider is not None else None
-    vals = (x, y, yaw, s.roll, _pitch(s) - ride.pitch0, s.steer, s.roll_rate, s.yaw_rate, s.steer_rate, fwd, lat, ax,
-            u[U_STEER_TORQUE], out[1], max(out[2], 0.0), max(out[3], 0.0),
-            u[U_BRAKE_FRONT], u[U_BRAKE_REAR], u[U_DRIVE_TORQUE],
-            es[ES_ENGINE_SPEED] if ride.engine is not None else 0.0, es[ES_GEAR] if ride.engine is not None else 0.0,
-            qd[idx[K_PHI_F]], qd[idx[K_PHI_R]],
-            ty[0, TO_FX], ty[1, TO_FX], ty[0, TO_FY], ty[1, TO_FY], ty[0, TO_FZ], ty[1, TO_FZ],
-            ty[0, TO_KAPPA], ty[1, TO_KAPPA], ty[0, TO_ALPHA], ty[1, TO_ALPHA], ty[0, TO_GAMMA], ty[1, TO_GAMMA],
-            q[idx[K_ZETA]], q[idx[K_THETA]],
-            st[ST_N] if st is not None else 0.0, st[ST_PHI_REF] if st is not None else 0.0)
+    n = len(TWO_WHEELER_STATE)
+    plant_state(s.data, idx, s.parts.par, ride.params.pp, s.parts.tyre, ride.state.inp, ride.engine_state,
+                st[ST_N] if st is not None else 0.0, row[1:1 + n])
+    kp = idx[K_P]
+    qdd = s.data.qdd
+    yaw = s.yaw
     row[0] = s.time
-    row[1:] = vals
+    row[1 + n:] = (qdd[kp] * math.cos(yaw) + qdd[kp + 1] * math.sin(yaw), _pitch(s) - ride.pitch0,
+                   u[U_BRAKE_FRONT], u[U_BRAKE_REAR], st[ST_PHI_REF] if st is not None else 0.0)
 
 
 def run(ride: Ride, sc: Scenario, progress=None) -> MotorcycleRun:
@@ -255,7 +215,7 @@ def summarise(res: MotorcycleRun, ride: Ride, sc: Scenario) -> dict:
     out["speed_start_end_m_s"] = [_f(c("speed")[0], 3), _f(c("speed")[-1], 3)]
     out["peak_roll_deg"] = _f(math.degrees(float(np.max(np.abs(c("roll_angle"))))), 2)
     if ride.rider is not None:
-        n = c("lateral_error")[t > 1.0]
+        n = c("path_offset")[t > 1.0]
         if n.size:
             out["lateral_error_rms_m"] = _f(float(np.sqrt(np.mean(n ** 2))), 4)
             out["lateral_error_peak_m"] = _f(float(np.max(np.abs(n))), 4)
@@ -303,7 +263,7 @@ def _steady_turn(res: MotorcycleRun, ride: Ride, radius: float) -> dict:
             "roll_over_reference": _f(-roll / ref, 4),
             "steer_deg": _f(math.degrees(float(np.mean(c("steer_angle")[win]))), 3),
             "steering_torque_nm": _f(float(np.mean(c("steering_torque")[win])), 3),
-            "lateral_error_mean_m": _f(float(np.mean(c("lateral_error")[win])), 4)}
+            "lateral_error_mean_m": _f(float(np.mean(c("path_offset")[win])), 4)}
 
 
 def braking_limits(ride: Ride) -> dict:
@@ -325,7 +285,7 @@ def braking_limits(ride: Ride) -> dict:
 def _braking(res: MotorcycleRun, ride: Ride) -> dict:
     c = res.column
     t, v = c("time"), c("speed")
-    braking = (c("brake_torque_f") + c("brake_torque_r")) > 1.0
+    braking = (c("brake_torque_front") + c("brake_torque_rear")) > 1.0
     if not braking.any():
         return {}
     i0 = int(np.argmax(braking))
@@ -334,14 +294,14 @@ def _braking(res: MotorcycleRun, ride: Ride) -> dict:
     x, y = c("pos_x"), c("pos_y")
     dist = float(np.sum(np.hypot(np.diff(x[i0:i1 + 1]), np.diff(y[i0:i1 + 1]))))
     seg = slice(i0, i1 + 1)
-    decel = -c("accel_x")[seg]
+    decel = -c("accel_forward")[seg]
     # the deceleration of the speed itself over 50 ms (the pivot's acceleration also holds the pitch motion)
     k = max(1, int(round(0.05 / max(t[1] - t[0], 1e-9))))
     vs, ts = v[seg], t[seg]
     d_speed = (vs[:-k] - vs[k:]) / (ts[k:] - ts[:-k]) if vs.size > k else np.zeros(1)
     # the steady phase: pressure at its final value and above 3 m/s (below the brakes' regularisation and
     # low-speed tyre terms act)
-    full = (c("brake_torque_f")[seg] >= 0.98 * np.max(c("brake_torque_f"))) & (v[seg] > 3.0)
+    full = (c("brake_torque_front")[seg] >= 0.98 * np.max(c("brake_torque_front"))) & (v[seg] > 3.0)
     lim = braking_limits(ride)
     a_lim = min(lim["stoppie_decel_m_s2"], lim["front_grip_decel_m_s2"])
     v0 = float(v[i0])
@@ -351,21 +311,21 @@ def _braking(res: MotorcycleRun, ride: Ride) -> dict:
            "mean_decel_m_s2": _f(v0 ** 2 / (2.0 * dist) if stopped.size and dist > 0 else None, 4),
            "steady_decel_m_s2": _f(float(np.mean(decel[full])) if full.any() else None, 4),
            "peak_decel_m_s2": _f(float(np.max(d_speed)), 4),
-           "front_load_max_n": _f(float(np.max(c("tyre_fz_f")[seg])), 1),
-           "rear_load_min_n": _f(float(np.min(c("tyre_fz_r")[seg])), 1),
+           "front_load_max_n": _f(float(np.max(c("tyre_fz_front")[seg])), 1),
+           "rear_load_min_n": _f(float(np.min(c("tyre_fz_rear")[seg])), 1),
            "static_loads_n": [_f(ride.static_loads[0], 1), _f(ride.static_loads[1], 1)],
-           "rear_lifted_s": _f(float(np.sum(c("tyre_fz_r")[seg] <= 0.0)) * (t[1] - t[0]), 3),
-           "front_locked_s": _f(float(np.sum(c("slip_ratio_f")[seg] < -0.5)) * (t[1] - t[0]), 3),
+           "rear_lifted_s": _f(float(np.sum(c("tyre_fz_rear")[seg] <= 0.0)) * (t[1] - t[0]), 3),
+           "front_locked_s": _f(float(np.sum(c("tyre_slip_ratio_front")[seg] < -0.5)) * (t[1] - t[0]), 3),
            "fork_travel_max_m": _f(float(np.max(c("fork_travel")[seg])), 4),
            "fork_dive_m": _f(float(np.max(c("fork_travel")[seg]) - c("fork_travel")[0]), 4),
-           "pitch_max_deg": _f(math.degrees(float(np.max(c("pitch_angle")[seg]))), 3),
+           "pitch_max_deg": _f(math.degrees(float(np.max(c("pitch_change")[seg]))), 3),
            **{f"limit_{k}": val for k, val in lim.items() if k != "mass_kg"},
            "limit_decel_m_s2": _f(a_lim, 4),
            "limit_stopping_distance_m": _f(v0 ** 2 / (2.0 * a_lim), 3)}
-    on_ground = (c("tyre_fz_r")[seg] > 0.0) & (v[seg] > 3.0) & (decel > 1.0)
+    on_ground = (c("tyre_fz_rear")[seg] > 0.0) & (v[seg] > 3.0) & (decel > 1.0)
     if on_ground.sum() > 10 and np.ptp(decel[on_ground]) > 1.0:
         # rear load against deceleration, a straight line through the braking: where it reaches zero
-        slope, icpt = np.polyfit(decel[on_ground], c("tyre_fz_r")[seg][on_ground], 1)
+        slope, icpt = np.polyfit(decel[on_ground], c("tyre_fz_rear")[seg][on_ground], 1)
         out["rear_load_zero_at_decel_m_s2"] = _f(-icpt / slope, 4)
     if full.any():
         a = decel[full]
@@ -373,7 +333,7 @@ def _braking(res: MotorcycleRun, ride: Ride) -> dict:
         h, b = lim["cg_height_m"], lim["cg_to_front_contact_m"]
         wb = ride.sim.mm.config.geometry.wheelbase_m
         out["rear_load_quasi_static_n"] = _f(float(np.mean(m * (G * b - a * h) / wb)), 1)
-        out["rear_load_steady_n"] = _f(float(np.mean(c("tyre_fz_r")[seg][full])), 1)
+        out["rear_load_steady_n"] = _f(float(np.mean(c("tyre_fz_rear")[seg][full])), 1)
     return out
 
 
