@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.mbs import Mechanism, MechanismBuilder, Settings
+from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import Body, MotorcycleConfig
 from .geometry import Design, design, pose
@@ -146,6 +147,9 @@ def build_motorcycle(cfg: MotorcycleConfig, base: Path) -> MotorcycleModel:
         b.rolling_disc(w_f, e_u, b_f, c_f, cfg.front_wheel.radius_m, name="front wheel")
     b.gravity((0.0, 0.0, -G))
     mech = b.compile()
+    # the step's own forces (rtsim.vehicle.motorcycle.step) add stiffness and damping: the finishing stage
+    # rebuilds W = M before they add theirs for the projections (otherwise they would be added twice)
+    mech.model.iset[IS_TANGENT_FORCES] = 1
     idx = -np.ones(NK, dtype=np.int64)
     for k, name in enumerate(NAMES):
         if name in refs:
