@@ -76,6 +76,16 @@ def refresh_factor(m, d, bq):
     return OK
 
 
+@inline_kernel
+def _max_abs(x, n):
+    s = 0.0
+    for i in range(n):
+        a = abs(x[i])
+        if a > s:
+            s = a
+    return s
+
+
 @kernel
 def _dot_alpha(d, a, b, nc):
     s = 0.0
@@ -292,13 +302,24 @@ def newton_update(m, d, h):
     if not np.isfinite(nrm):
         d.stats[ST_LAST_RESIDUAL] = nrm
         return ERR_NONFINITE_STATE
-    phimax = 0.0
-    for i in range(nc):
-        a = abs(d.phi[i])
-        if a > phimax:
-            phimax = a
-    if phimax <= m.fset[FS_TOL_PHI] and nrm <= m.fset[FS_TOL_DQ] * qmax:
-        return CONVERGED
+    # Error of the new iterate: |dq| itself on the first iteration; afterwards, with the observed
+    # contraction rate theta = |dq_k| / |dq_k-1| < 1, the remaining error theta / (1 - theta) |dq_k|
+    # (the increments left form a geometric series).
+    err = nrm
+    if d.newton[NW_IT] >= 2.0 and nrm < d.newton[NW_PREV]:
+        theta = nrm / d.newton[NW_PREV]
+        err = theta / (1.0 - theta) * nrm
+    if err <= m.fset[FS_TOL_DQ] * qmax:
+        # constraints: those at the iterate the increment was computed from, else those at the new one
+        tol_phi = m.fset[FS_TOL_PHI]
+        if _max_abs(d.phi, nc) <= tol_phi:
+            return CONVERGED
+        c1 = 2.0 / h
+        for i in range(nq):     # velocity rows (rolling) are stated on qd = (2/h) q + qhd
+            d.qd[i] = c1 * d.q[i] + d.qhd[i]
+        eval_constraints(m, d, d.q)
+        if _max_abs(d.phi, nc) <= tol_phi:
+            return CONVERGED
     # A slowly contracting modified Newton means the reused factor is too stale: refresh it
     # (not when it was just made: then the slowness is the problem's, not the factor's).
     d.newton[NW_AGE] += 1.0
