@@ -23,7 +23,7 @@ import numpy as np
 
 from rtsim.errors import ModelError
 
-from . import envelope
+from . import envelope, sparse
 from .model import (
     CON_ANGLE2D, CON_ANGLE3D, CON_CRANK_ROD, CON_DISC_CONTACT, CON_DISC_ROLL, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
     FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
@@ -45,6 +45,41 @@ def _structural_slots(kind: int, idx: np.ndarray, par) -> np.ndarray:
         keep = {3 * r + comp for r in range(5)} | {SCALAR, SCALAR2}
         slots = np.array([k for k in slots if k in keep], dtype=np.int64)
     return slots
+
+
+def _factor_layout(nq: int, pairs: np.ndarray, perm, pinv, first, ptr) -> dict:
+    """The Cholesky factor's layout (rtsim.mbs.sparse) on the cheaper of minimum degree and the envelope's
+    ordering, with the envelope slot of W for each of its positions."""
+    fac = min((sparse.symbolic(nq, pairs, p) for p in (sparse.minimum_degree(nq, pairs), perm)),
+              key=lambda f: f["macs"])
+    w_map = -np.ones(fac["rowidx"].size, dtype=np.int64)
+    for p in range(w_map.size):
+        i, j = fac["perm"][fac["rowidx"][p]], fac["perm"][fac["pcol"][p]]
+        r, c = max(pinv[i], pinv[j]), min(pinv[i], pinv[j])
+        if c >= first[r]:
+            w_map[p] = ptr[r] + c - first[r]
+    fac["w_map"] = w_map
+    return fac
+
+
+def _assembly(fac: dict, con_idx, con_act, con_nact) -> dict:
+    """Each constraint row's contributions to the factor's pattern: pairs of active slots s <= u (a pair on
+    one coordinate through two slots counts twice; off-diagonal pairs are stored once)."""
+    where = {(int(r), int(c)): p for p, (r, c) in enumerate(zip(fac["rowidx"], fac["pcol"]))}
+    out = {k: [] for k in ("asm_row", "asm_s", "asm_u", "asm_pos", "asm_mult")}
+    for i in range(con_idx.shape[0]):
+        act = con_act[i, :con_nact[i]]
+        for a in range(act.size):
+            for b in range(a, act.size):
+                s_, u = int(act[a]), int(act[b])
+                js, ju = con_idx[i, s_], con_idx[i, u]
+                r, c = fac["pinv"][js], fac["pinv"][ju]
+                out["asm_row"].append(i)
+                out["asm_s"].append(s_)
+                out["asm_u"].append(u)
+                out["asm_pos"].append(where[(int(max(r, c)), int(min(r, c)))])
+                out["asm_mult"].append(2.0 if u != s_ and ju == js else 1.0)
+    return {k: np.array(v, dtype=float if k == "asm_mult" else np.int64) for k, v in out.items()}
 
 
 @dataclass(frozen=True)
@@ -581,7 +616,9 @@ class MechanismBuilder:
             tangent = 1
         for used in self._coupled:
             pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
-        perm, pinv, first, ptr = envelope.symbolic(nq, np.vstack(pairs))
+        allpairs = np.vstack(pairs)
+        perm, pinv, first, ptr = envelope.symbolic(nq, allpairs)
+        fac = _factor_layout(nq, allpairs, perm, pinv, first, ptr)
         nd = len(self._drivers)
         drv_kind = np.array([k for k, _ in self._drivers], dtype=np.int64)
         drv_par = np.array([p for _, p in self._drivers], dtype=float).reshape(nd, 4)
@@ -600,6 +637,7 @@ class MechanismBuilder:
             act = _structural_slots(con_kind[i], con_idx[i], con_par[i])
             con_nact[i] = act.size
             con_act[i, :act.size] = act
+        asm = _assembly(fac, con_idx, con_act, con_nact)
         model = Model(
             nq=nq, nc=nc, dim=self.dim,
             con_kind=con_kind, con_idx=con_idx, con_cst=con_cst, con_par=con_par, con_drv=con_drv,
@@ -611,6 +649,8 @@ class MechanismBuilder:
             poly_exp=self._poly_exp if self._poly_exp is not None else np.zeros((1, 2), dtype=np.int64),
             perm=perm, pinv=pinv, first=first, ptr=ptr,
             m_env=envelope.to_envelope(mass, first, ptr, perm),
+            fperm=fac["perm"], fpinv=fac["pinv"], fcolptr=fac["colptr"], frowidx=fac["rowidx"], fuptr=fac["uptr"],
+            fupos=fac["upos"], fpcol=fac["pcol"], fw_map=fac["w_map"], **asm,
             iset=iset, fset=fset,
         )
         return Mechanism(

@@ -8,8 +8,10 @@ One step from t_n to t_{n+1} = t_n + h:
    f(q) = (h^2/4) [M qdd + Phi_q^T (alpha Phi + lambda*) - Q] = 0  (eq. 1),
    tangent  A = M + (h/2) C + (h^2/4) (Phi_q^T alpha Phi_q + K),
    with the multiplier iteration lambda* <- lambda* + alpha Phi after every update (eq. 2).
-   The envelope Cholesky factor of A is reused across iterations and steps while Newton contracts
-   fast enough; it is refreshed when it does not (a modified Newton method with a fallback).
+   The sparse Cholesky factor of A (rtsim.mbs.sparse) is reused across iterations and steps while
+   Newton contracts fast enough; it is refreshed when it does not (a modified Newton method with a
+   fallback). Newton stops when the estimated error of the accepted iterate and its constraints are
+   within tolerance.
 3. Projections of velocities and accelerations onto Phi' = 0 and Phi'' = 0 in the metric
    W = M + (h/2) C + (h^2/4) K:  A qd = W qd* - (h^2/4) Phi_q^T alpha Phi_t, and the same for qdd with
    (Phi_q)' qd + Phi_tt. Both are iterated augmented-Lagrangian projections that reuse the factor of
@@ -24,8 +26,9 @@ import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
 from .constraints import eval_constraints, eval_drivers, eval_hqd, jac_matvec, jac_t_matvec_add
-from .envelope import add_entry, cholesky, matvec_add, solve
+from .envelope import matvec_add
 from .forces import eval_forces
+from .sparse import cholesky, solve
 from .model import (
     ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION,
     FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
@@ -39,27 +42,16 @@ NEED_FACTOR = 1
 
 @kernel
 def factorize(m, d, bq):
-    """a_env = w_env + bq Phi_q^T alpha Phi_q, then l_env = chol(a_env). Returns the failing row or -1."""
-    for k in range(d.w_env.shape[0]):
-        d.a_env[k] = d.w_env[k]
-    idx = m.con_idx
-    for i in range(m.nc):
-        ai = bq * d.alpha[i]
-        na = m.con_nact[i]
-        for a in range(na):
-            s = m.con_act[i, a]
-            js = idx[i, s]
-            vs = d.jac[i, s]
-            if vs == 0.0:
-                continue
-            for b in range(a, na):
-                u = m.con_act[i, b]
-                ju = idx[i, u]
-                val = ai * vs * d.jac[i, u]
-                if u != s and ju == js:
-                    val *= 2.0
-                add_entry(d.a_env, m.first, m.ptr, m.pinv, js, ju, val)
-    return cholesky(d.a_env, m.first, m.ptr, d.l_env)
+    """a_env = W + bq Phi_q^T alpha Phi_q in the factor's pattern (rtsim.mbs.sparse), then l_env = chol(a_env).
+    Returns the failing (factor-permuted) row or -1."""
+    a = d.a_env
+    for p in range(a.shape[0]):
+        k = m.fw_map[p]
+        a[p] = d.w_env[k] if k >= 0 else 0.0
+    for e in range(m.asm_row.shape[0]):
+        i = m.asm_row[e]
+        a[m.asm_pos[e]] += bq * d.alpha[i] * m.asm_mult[e] * d.jac[i, m.asm_s[e]] * d.jac[i, m.asm_u[e]]
+    return cholesky(a, m.fcolptr, m.frowidx, m.fuptr, m.fupos, m.fpcol, d.l_env, d.work)
 
 
 @kernel
@@ -69,7 +61,7 @@ def refresh_factor(m, d, bq):
     d.stats[ST_FACTORIZATIONS] += 1
     if row >= 0:
         d.flags[HAVE_FACTOR] = 0
-        d.stats[ST_FAIL_INDEX] = m.perm[row]
+        d.stats[ST_FAIL_INDEX] = m.fperm[row]
         return ERR_FACTOR
     d.flags[HAVE_FACTOR] = 1
     d.flags[NEED_FACTOR] = 0
@@ -111,7 +103,7 @@ def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
         d.z[i] = d.alpha[i] * c[i]
         d.mu[i] = 0.0
     jac_t_matvec_add(m, d, d.z, b, -bq)
-    solve(d.l_env, m.first, m.ptr, m.perm, m.pinv, b, x, d.work)
+    solve(d.l_env, m.fcolptr, m.frowidx, m.fperm, m.fpinv, b, x, d.work)
     r = d.g           # CG residual = g(mu)
     p = d.sig         # search direction
     sp = d.sp         # S p
@@ -130,7 +122,7 @@ def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
         for i in range(nq):
             d.r[i] = 0.0
         jac_t_matvec_add(m, d, p, d.r, bq)
-        solve(d.l_env, m.first, m.ptr, m.perm, m.pinv, d.r, d.x, d.work)
+        solve(d.l_env, m.fcolptr, m.frowidx, m.fperm, m.fpinv, d.r, d.x, d.work)
         jac_matvec(m, d, d.x, sp)
         psp = 0.0
         for i in range(nc):
@@ -191,7 +183,7 @@ def project(m, d, x, c, bq, tol, tol_fail):
         for i in range(nc):
             d.z[i] = d.alpha[i] * c[i] + d.sig[i]
         jac_t_matvec_add(m, d, d.z, d.r, -bq)
-        solve(d.l_env, m.first, m.ptr, m.perm, m.pinv, d.r, x, d.work)
+        solve(d.l_env, m.fcolptr, m.frowidx, m.fperm, m.fpinv, d.r, x, d.work)
         jac_matvec(m, d, x, d.g)
         gmax = 0.0
         for i in range(nc):
