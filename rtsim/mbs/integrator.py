@@ -10,8 +10,9 @@ One step from t_n to t_{n+1} = t_n + h:
    with the multiplier iteration lambda* <- lambda* + alpha Phi after every update (eq. 2).
    The sparse Cholesky factor of A (rtsim.mbs.sparse) is reused across iterations and steps while
    Newton contracts fast enough; it is refreshed when it does not (a modified Newton method with a
-   fallback). Newton stops when the estimated error of the accepted iterate and its constraints are
-   within tolerance.
+   fallback). Newton stops when the last increment and the constraints at the iterate it was computed
+   from are within tolerance, or (IS_ERROR_TEST) the estimated error of the new iterate and its
+   constraints.
 3. Projections of velocities and accelerations onto Phi' = 0 and Phi'' = 0 in the metric
    W = M + (h/2) C + (h^2/4) K:  A qd = W qd* - (h^2/4) Phi_q^T alpha Phi_t, and the same for qdd with
    (Phi_q)' qd + Phi_tt. Both are iterated augmented-Lagrangian projections that reuse the factor of
@@ -32,7 +33,7 @@ from .sparse import cholesky, solve
 from .model import (
     ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION,
     FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
-    IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
+    IS_ERROR_TEST, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
     ST_LAST_RESIDUAL, ST_MAX_PHI, ST_MAX_PHID, ST_MAX_PHIDD, ST_PROJ_ITER, ST_STEPS,
 )
 
@@ -294,24 +295,29 @@ def newton_update(m, d, h):
     if not np.isfinite(nrm):
         d.stats[ST_LAST_RESIDUAL] = nrm
         return ERR_NONFINITE_STATE
-    # Error of the new iterate: |dq| itself on the first iteration; afterwards, with the observed
-    # contraction rate theta = |dq_k| / |dq_k-1| < 1, the remaining error theta / (1 - theta) |dq_k|
-    # (the increments left form a geometric series).
-    err = nrm
-    if d.newton[NW_IT] >= 2.0 and nrm < d.newton[NW_PREV]:
-        theta = nrm / d.newton[NW_PREV]
-        err = theta / (1.0 - theta) * nrm
-    if err <= m.fset[FS_TOL_DQ] * qmax:
-        # constraints: those at the iterate the increment was computed from, else those at the new one
-        tol_phi = m.fset[FS_TOL_PHI]
-        if _max_abs(d.phi, nc) <= tol_phi:
+    tol_phi = m.fset[FS_TOL_PHI]
+    tol_dq = m.fset[FS_TOL_DQ] * qmax
+    if m.iset[IS_ERROR_TEST] == 0:
+        # the last increment and the constraints at the iterate it was computed from
+        if _max_abs(d.phi, nc) <= tol_phi and nrm <= tol_dq:
             return CONVERGED
-        c1 = 2.0 / h
-        for i in range(nq):     # velocity rows (rolling) are stated on qd = (2/h) q + qhd
-            d.qd[i] = c1 * d.q[i] + d.qhd[i]
-        eval_constraints(m, d, d.q)
-        if _max_abs(d.phi, nc) <= tol_phi:
-            return CONVERGED
+    else:
+        # the error of the new iterate: |dq| on the first iteration; afterwards, with the observed
+        # contraction rate theta = |dq_k| / |dq_k-1| < 1, theta / (1 - theta) |dq_k| (the increments
+        # left form a geometric series); and the constraints at the new iterate
+        err = nrm
+        if d.newton[NW_IT] >= 2.0 and nrm < d.newton[NW_PREV]:
+            theta = nrm / d.newton[NW_PREV]
+            err = theta / (1.0 - theta) * nrm
+        if err <= tol_dq:
+            if _max_abs(d.phi, nc) <= tol_phi:
+                return CONVERGED
+            c1 = 2.0 / h
+            for i in range(nq):     # velocity rows (rolling) are stated on qd = (2/h) q + qhd
+                d.qd[i] = c1 * d.q[i] + d.qhd[i]
+            eval_constraints(m, d, d.q)
+            if _max_abs(d.phi, nc) <= tol_phi:
+                return CONVERGED
     # A slowly contracting modified Newton means the reused factor is too stale: refresh it
     # (not when it was just made: then the slowness is the problem's, not the factor's).
     d.newton[NW_AGE] += 1.0

@@ -61,6 +61,8 @@ IS_MAX_PROJ = 1        # augmented-Lagrangian projection iterations
 IS_TANGENT_FORCES = 2  # 1 if any force contributes stiffness/damping to the tangent
 IS_REUSE_STEPS = 3     # 1: keep the factorization across steps while Newton contracts; 0: refactor each step
 IS_PROJECTION_FACTOR = 4  # 1: refactor at the converged q for the projections; 0: reuse Newton's factor
+IS_ERROR_TEST = 5      # Newton stops on 0: the last increment and the constraints it started from;
+#                        1: the estimated error of the new iterate and the constraints there
 FS_TOL_DQ = 0          # Newton increment tolerance (coordinate units)
 FS_TOL_PHI = 1         # position constraint tolerance
 FS_TOL_VEL = 2         # velocity constraint tolerance

@@ -87,7 +87,8 @@ def build_motorcycle(cfg: MotorcycleConfig, base: Path) -> MotorcycleModel:
     p0 = pose(des, np.zeros(11))
     # the projections refactor at the converged q: reusing the Newton factor for them feeds energy into
     # fast-spinning bodies in natural coordinates (a wheel at 17 rad/s gained 0.3 %/s at 1 ms)
-    b = MechanismBuilder(dim=3, name=cfg.id, settings=Settings(projection_factor=True, tol_phi=2e-9))
+    b = MechanismBuilder(dim=3, name=cfg.id, settings=Settings(projection_factor=True, error_test=True,
+                                                              tol_phi=2e-9))
     refs: dict = {}
     for name in NAMES:
         if name == "N_S" and cfg.swingarm.mass_kg == 0:
