@@ -23,11 +23,11 @@ import numpy as np
 
 from rtsim.errors import ModelError
 
-from . import envelope
+from . import envelope, sparse
 from .model import (
     CON_ANGLE2D, CON_ANGLE3D, CON_CRANK_ROD, CON_DISC_CONTACT, CON_DISC_ROLL, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
     FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
-    FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
+    FS_TOL_VEL_FAIL, IS_ERROR_TEST, IS_MAX_ITER, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
 )
 
 
@@ -45,6 +45,41 @@ def _structural_slots(kind: int, idx: np.ndarray, par) -> np.ndarray:
         keep = {3 * r + comp for r in range(5)} | {SCALAR, SCALAR2}
         slots = np.array([k for k in slots if k in keep], dtype=np.int64)
     return slots
+
+
+def _factor_layout(nq: int, pairs: np.ndarray, perm, pinv, first, ptr) -> dict:
+    """The Cholesky factor's layout (rtsim.mbs.sparse) on the cheaper of minimum degree and the envelope's
+    ordering, with the envelope slot of W for each of its positions."""
+    fac = min((sparse.symbolic(nq, pairs, p) for p in (sparse.minimum_degree(nq, pairs), perm)),
+              key=lambda f: f["macs"])
+    w_map = -np.ones(fac["rowidx"].size, dtype=np.int64)
+    for p in range(w_map.size):
+        i, j = fac["perm"][fac["rowidx"][p]], fac["perm"][fac["pcol"][p]]
+        r, c = max(pinv[i], pinv[j]), min(pinv[i], pinv[j])
+        if c >= first[r]:
+            w_map[p] = ptr[r] + c - first[r]
+    fac["w_map"] = w_map
+    return fac
+
+
+def _assembly(fac: dict, con_idx, con_act, con_nact) -> dict:
+    """Each constraint row's contributions to the factor's pattern: pairs of active slots s <= u (a pair on
+    one coordinate through two slots counts twice; off-diagonal pairs are stored once)."""
+    where = {(int(r), int(c)): p for p, (r, c) in enumerate(zip(fac["rowidx"], fac["pcol"]))}
+    out = {k: [] for k in ("asm_row", "asm_s", "asm_u", "asm_pos", "asm_mult")}
+    for i in range(con_idx.shape[0]):
+        act = con_act[i, :con_nact[i]]
+        for a in range(act.size):
+            for b in range(a, act.size):
+                s_, u = int(act[a]), int(act[b])
+                js, ju = con_idx[i, s_], con_idx[i, u]
+                r, c = fac["pinv"][js], fac["pinv"][ju]
+                out["asm_row"].append(i)
+                out["asm_s"].append(s_)
+                out["asm_u"].append(u)
+                out["asm_pos"].append(where[(int(max(r, c)), int(min(r, c)))])
+                out["asm_mult"].append(2.0 if u != s_ and ju == js else 1.0)
+    return {k: np.array(v, dtype=float if k == "asm_mult" else np.int64) for k, v in out.items()}
 
 
 @dataclass(frozen=True)
@@ -85,6 +120,10 @@ class Settings:
     reuse_rate: float = 0.2           # refresh the Newton factor when |dq| shrinks by less than this
     penalty_ratio: float = 1e4        # p in alpha_i = p (4/dt^2) m_i / |Phi_q,i|^2
     reuse_across_steps: bool = False  # keep the factor into the next step (pays off for large dense models)
+    error_test: bool = False          # Newton stops on the estimated error of the new iterate (contraction
+    #                                   rate) and its constraints, not on the last increment and the
+    #                                   constraints it started from (which costs an iteration that only
+    #                                   confirms; the default keeps it for problems through singular positions)
     projection_factor: bool = True    # refactor at the converged q for the projections (needed at
     #                                   singular positions; a model without them may save it)
 
@@ -581,15 +620,18 @@ class MechanismBuilder:
             tangent = 1
         for used in self._coupled:
             pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
-        perm, pinv, first, ptr = envelope.symbolic(nq, np.vstack(pairs))
+        allpairs = np.vstack(pairs)
+        perm, pinv, first, ptr = envelope.symbolic(nq, allpairs)
+        fac = _factor_layout(nq, allpairs, perm, pinv, first, ptr)
         nd = len(self._drivers)
         drv_kind = np.array([k for k, _ in self._drivers], dtype=np.int64)
         drv_par = np.array([p for _, p in self._drivers], dtype=float).reshape(nd, 4)
         s = self.settings
-        iset = np.zeros(5, dtype=np.int64)
+        iset = np.zeros(6, dtype=np.int64)
         iset[IS_PROJECTION_FACTOR] = int(s.projection_factor)
         iset[IS_MAX_ITER], iset[IS_MAX_PROJ] = s.max_iter, s.max_proj_iter
         iset[IS_TANGENT_FORCES], iset[IS_REUSE_STEPS] = tangent, int(s.reuse_across_steps)
+        iset[IS_ERROR_TEST] = int(s.error_test)
         fset = np.zeros(7)
         fset[FS_TOL_DQ], fset[FS_TOL_PHI], fset[FS_TOL_VEL], fset[FS_TOL_ACC] = s.tol_dq, s.tol_phi, s.tol_vel, s.tol_acc
         fset[FS_TOL_VEL_FAIL], fset[FS_TOL_ACC_FAIL] = s.tol_vel_fail, s.tol_acc_fail
@@ -600,6 +642,7 @@ class MechanismBuilder:
             act = _structural_slots(con_kind[i], con_idx[i], con_par[i])
             con_nact[i] = act.size
             con_act[i, :act.size] = act
+        asm = _assembly(fac, con_idx, con_act, con_nact)
         model = Model(
             nq=nq, nc=nc, dim=self.dim,
             con_kind=con_kind, con_idx=con_idx, con_cst=con_cst, con_par=con_par, con_drv=con_drv,
@@ -611,6 +654,8 @@ class MechanismBuilder:
             poly_exp=self._poly_exp if self._poly_exp is not None else np.zeros((1, 2), dtype=np.int64),
             perm=perm, pinv=pinv, first=first, ptr=ptr,
             m_env=envelope.to_envelope(mass, first, ptr, perm),
+            fperm=fac["perm"], fpinv=fac["pinv"], fcolptr=fac["colptr"], frowidx=fac["rowidx"], fuptr=fac["uptr"],
+            fupos=fac["upos"], fpcol=fac["pcol"], fw_map=fac["w_map"], **asm,
             iset=iset, fset=fset,
         )
         return Mechanism(

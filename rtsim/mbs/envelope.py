@@ -6,6 +6,8 @@ the profile small, then store, for each permuted row r, the columns first[r]..r 
 Cholesky factor of a matrix fits in the same envelope (fill-in stays inside the profile), so
 factorization costs O(n b^2) and a solve O(n b) for an average half-bandwidth b: a chain of bodies
 (the N-four-bar) costs linear time in N instead of the O(N^3) of a dense solve.
+The integrator keeps M, W and the forces' tangent here, and factors A in its own sparse pattern
+(rtsim.mbs.sparse), which skips the zeros inside the profile.
 
 All kernels work in *permuted* indices: entry (i, j) of the original matrix lives at permuted
 (pinv[i], pinv[j]).

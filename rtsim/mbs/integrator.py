@@ -8,8 +8,11 @@ One step from t_n to t_{n+1} = t_n + h:
    f(q) = (h^2/4) [M qdd + Phi_q^T (alpha Phi + lambda*) - Q] = 0  (eq. 1),
    tangent  A = M + (h/2) C + (h^2/4) (Phi_q^T alpha Phi_q + K),
    with the multiplier iteration lambda* <- lambda* + alpha Phi after every update (eq. 2).
-   The envelope Cholesky factor of A is reused across iterations and steps while Newton contracts
-   fast enough; it is refreshed when it does not (a modified Newton method with a fallback).
+   The sparse Cholesky factor of A (rtsim.mbs.sparse) is reused across iterations and steps while
+   Newton contracts fast enough; it is refreshed when it does not (a modified Newton method with a
+   fallback). Newton stops when the last increment and the constraints at the iterate it was computed
+   from are within tolerance, or (IS_ERROR_TEST) the estimated error of the new iterate and its
+   constraints.
 3. Projections of velocities and accelerations onto Phi' = 0 and Phi'' = 0 in the metric
    W = M + (h/2) C + (h^2/4) K:  A qd = W qd* - (h^2/4) Phi_q^T alpha Phi_t, and the same for qdd with
    (Phi_q)' qd + Phi_tt. Both are iterated augmented-Lagrangian projections that reuse the factor of
@@ -24,12 +27,13 @@ import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
 from .constraints import eval_constraints, eval_drivers, eval_hqd, jac_matvec, jac_t_matvec_add
-from .envelope import add_entry, cholesky, matvec_add, solve
+from .envelope import matvec_add
 from .forces import eval_forces
+from .sparse import cholesky, solve
 from .model import (
     ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION,
     FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
-    IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
+    IS_ERROR_TEST, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
     ST_LAST_RESIDUAL, ST_MAX_PHI, ST_MAX_PHID, ST_MAX_PHIDD, ST_PROJ_ITER, ST_STEPS,
 )
 
@@ -39,27 +43,16 @@ NEED_FACTOR = 1
 
 @kernel
 def factorize(m, d, bq):
-    """a_env = w_env + bq Phi_q^T alpha Phi_q, then l_env = chol(a_env). Returns the failing row or -1."""
-    for k in range(d.w_env.shape[0]):
-        d.a_env[k] = d.w_env[k]
-    idx = m.con_idx
-    for i in range(m.nc):
-        ai = bq * d.alpha[i]
-        na = m.con_nact[i]
-        for a in range(na):
-            s = m.con_act[i, a]
-            js = idx[i, s]
-            vs = d.jac[i, s]
-            if vs == 0.0:
-                continue
-            for b in range(a, na):
-                u = m.con_act[i, b]
-                ju = idx[i, u]
-                val = ai * vs * d.jac[i, u]
-                if u != s and ju == js:
-                    val *= 2.0
-                add_entry(d.a_env, m.first, m.ptr, m.pinv, js, ju, val)
-    return cholesky(d.a_env, m.first, m.ptr, d.l_env)
+    """a_env = W + bq Phi_q^T alpha Phi_q in the factor's pattern (rtsim.mbs.sparse), then l_env = chol(a_env).
+    Returns the failing (factor-permuted) row or -1."""
+    a = d.a_env
+    for p in range(a.shape[0]):
+        k = m.fw_map[p]
+        a[p] = d.w_env[k] if k >= 0 else 0.0
+    for e in range(m.asm_row.shape[0]):
+        i = m.asm_row[e]
+        a[m.asm_pos[e]] += bq * d.alpha[i] * m.asm_mult[e] * d.jac[i, m.asm_s[e]] * d.jac[i, m.asm_u[e]]
+    return cholesky(a, m.fcolptr, m.frowidx, m.fuptr, m.fupos, m.fpcol, d.l_env, d.work)
 
 
 @kernel
@@ -69,11 +62,21 @@ def refresh_factor(m, d, bq):
     d.stats[ST_FACTORIZATIONS] += 1
     if row >= 0:
         d.flags[HAVE_FACTOR] = 0
-        d.stats[ST_FAIL_INDEX] = m.perm[row]
+        d.stats[ST_FAIL_INDEX] = m.fperm[row]
         return ERR_FACTOR
     d.flags[HAVE_FACTOR] = 1
     d.flags[NEED_FACTOR] = 0
     return OK
+
+
+@inline_kernel
+def _max_abs(x, n):
+    s = 0.0
+    for i in range(n):
+        a = abs(x[i])
+        if a > s:
+            s = a
+    return s
 
 
 @kernel
@@ -101,7 +104,7 @@ def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
         d.z[i] = d.alpha[i] * c[i]
         d.mu[i] = 0.0
     jac_t_matvec_add(m, d, d.z, b, -bq)
-    solve(d.l_env, m.first, m.ptr, m.perm, m.pinv, b, x, d.work)
+    solve(d.l_env, m.fcolptr, m.frowidx, m.fperm, m.fpinv, b, x, d.work)
     r = d.g           # CG residual = g(mu)
     p = d.sig         # search direction
     sp = d.sp         # S p
@@ -120,7 +123,7 @@ def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
         for i in range(nq):
             d.r[i] = 0.0
         jac_t_matvec_add(m, d, p, d.r, bq)
-        solve(d.l_env, m.first, m.ptr, m.perm, m.pinv, d.r, d.x, d.work)
+        solve(d.l_env, m.fcolptr, m.frowidx, m.fperm, m.fpinv, d.r, d.x, d.work)
         jac_matvec(m, d, d.x, sp)
         psp = 0.0
         for i in range(nc):
@@ -181,7 +184,7 @@ def project(m, d, x, c, bq, tol, tol_fail):
         for i in range(nc):
             d.z[i] = d.alpha[i] * c[i] + d.sig[i]
         jac_t_matvec_add(m, d, d.z, d.r, -bq)
-        solve(d.l_env, m.first, m.ptr, m.perm, m.pinv, d.r, x, d.work)
+        solve(d.l_env, m.fcolptr, m.frowidx, m.fperm, m.fpinv, d.r, x, d.work)
         jac_matvec(m, d, x, d.g)
         gmax = 0.0
         for i in range(nc):
@@ -292,13 +295,29 @@ def newton_update(m, d, h):
     if not np.isfinite(nrm):
         d.stats[ST_LAST_RESIDUAL] = nrm
         return ERR_NONFINITE_STATE
-    phimax = 0.0
-    for i in range(nc):
-        a = abs(d.phi[i])
-        if a > phimax:
-            phimax = a
-    if phimax <= m.fset[FS_TOL_PHI] and nrm <= m.fset[FS_TOL_DQ] * qmax:
-        return CONVERGED
+    tol_phi = m.fset[FS_TOL_PHI]
+    tol_dq = m.fset[FS_TOL_DQ] * qmax
+    if m.iset[IS_ERROR_TEST] == 0:
+        # the last increment and the constraints at the iterate it was computed from
+        if _max_abs(d.phi, nc) <= tol_phi and nrm <= tol_dq:
+            return CONVERGED
+    else:
+        # the error of the new iterate: |dq| on the first iteration; afterwards, with the observed
+        # contraction rate theta = |dq_k| / |dq_k-1| < 1, theta / (1 - theta) |dq_k| (the increments
+        # left form a geometric series); and the constraints at the new iterate
+        err = nrm
+        if d.newton[NW_IT] >= 2.0 and nrm < d.newton[NW_PREV]:
+            theta = nrm / d.newton[NW_PREV]
+            err = theta / (1.0 - theta) * nrm
+        if err <= tol_dq:
+            if _max_abs(d.phi, nc) <= tol_phi:
+                return CONVERGED
+            c1 = 2.0 / h
+            for i in range(nq):     # velocity rows (rolling) are stated on qd = (2/h) q + qhd
+                d.qd[i] = c1 * d.q[i] + d.qhd[i]
+            eval_constraints(m, d, d.q)
+            if _max_abs(d.phi, nc) <= tol_phi:
+                return CONVERGED
     # A slowly contracting modified Newton means the reused factor is too stale: refresh it
     # (not when it was just made: then the slowness is the problem's, not the factor's).
     d.newton[NW_AGE] += 1.0

@@ -61,6 +61,8 @@ IS_MAX_PROJ = 1        # augmented-Lagrangian projection iterations
 IS_TANGENT_FORCES = 2  # 1 if any force contributes stiffness/damping to the tangent
 IS_REUSE_STEPS = 3     # 1: keep the factorization across steps while Newton contracts; 0: refactor each step
 IS_PROJECTION_FACTOR = 4  # 1: refactor at the converged q for the projections; 0: reuse Newton's factor
+IS_ERROR_TEST = 5      # Newton stops on 0: the last increment and the constraints it started from;
+#                        1: the estimated error of the new iterate and the constraints there
 FS_TOL_DQ = 0          # Newton increment tolerance (coordinate units)
 FS_TOL_PHI = 1         # position constraint tolerance
 FS_TOL_VEL = 2         # velocity constraint tolerance
@@ -105,6 +107,11 @@ Model = namedtuple("Model", [
     "poly_coef", "poly_exp",
     # tangent-matrix envelope layout and the constant mass matrix in it
     "perm", "pinv", "first", "ptr", "m_env",
+    # the tangent's Cholesky factor (rtsim.mbs.sparse): ordering, pattern and update lists, the envelope
+    # slot of W for each of its positions (-1: none), and the constraint rows' contributions
+    # bq alpha_i Phi_q[i, s] Phi_q[i, u] mult (row, slots s and u, position in the factor's pattern, mult)
+    "fperm", "fpinv", "fcolptr", "frowidx", "fuptr", "fupos", "fpcol", "fw_map",
+    "asm_row", "asm_s", "asm_u", "asm_pos", "asm_mult",
     # settings
     "iset", "fset",
 ])
@@ -119,7 +126,8 @@ Data = namedtuple("Data", [
     "drv_ext",        # (nd, 3) external driver value, rate, acceleration
     "drv",            # (nd, 3) evaluated drivers at the current time
     "phi", "jac", "phit", "phitt", "hqd",   # constraint values, Jacobian values, time derivatives, (Phi_q)' qd
-    "force", "w_env", "a_env", "l_env",     # forces, W = M + dt/2 C + dt^2/4 K (= M without K, C), tangent, factor
+    "force", "w_env",  # forces, W = M + dt/2 C + dt^2/4 K (= M without K, C) in envelope storage
+    "a_env", "l_env",  # the tangent A = W + bq Phi_q^T alpha Phi_q and its factor, in the factor's pattern
     "qn", "qhd", "qhdd", "r", "x", "y", "z", "work", "sig", "g", "sp", "mu",
     "flags",          # int64 [have_factor, need_factor]
     "newton",         # float64 (4,) Newton bookkeeping between the stages of a step
@@ -132,7 +140,7 @@ def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: f
     """Allocate a fresh state for `model` with coordinates q0 (not assembled here)."""
     nq, nc = model.nq, model.nc
     nd = model.drv_kind.shape[0]
-    nenv = model.m_env.shape[0]
+    nfac = model.frowidx.shape[0]
     z = lambda n: np.zeros(n)  # noqa: E731
     return Data(
         t=np.array([t0]), dt=np.zeros(1),
@@ -141,7 +149,7 @@ def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: f
         qdd=z(nq), lam=z(nc), alpha=z(nc), q_ext=z(nq),
         drv_ext=np.zeros((nd, 3)), drv=np.zeros((nd, 3)),
         phi=z(nc), jac=np.zeros((nc, NSLOT)), phit=z(nc), phitt=z(nc), hqd=z(nc),
-        force=z(nq), w_env=model.m_env.copy(), a_env=z(nenv), l_env=z(nenv),
+        force=z(nq), w_env=model.m_env.copy(), a_env=z(nfac), l_env=z(nfac),
         qn=z(nq), qhd=z(nq), qhdd=z(nq), r=z(nq), x=z(nq), y=z(nq), z=z(max(nq, nc)), work=z(nq), sig=z(nc), g=z(nc), sp=z(nc), mu=z(nc),
         flags=np.zeros(2, dtype=np.int64),
         newton=np.zeros(4),

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.mbs import Mechanism, MechanismBuilder, Settings
+from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import Body, MotorcycleConfig
 from .geometry import Design, design, pose
@@ -86,7 +87,8 @@ def build_motorcycle(cfg: MotorcycleConfig, base: Path) -> MotorcycleModel:
     p0 = pose(des, np.zeros(11))
     # the projections refactor at the converged q: reusing the Newton factor for them feeds energy into
     # fast-spinning bodies in natural coordinates (a wheel at 17 rad/s gained 0.3 %/s at 1 ms)
-    b = MechanismBuilder(dim=3, name=cfg.id, settings=Settings(projection_factor=True, tol_phi=2e-9))
+    b = MechanismBuilder(dim=3, name=cfg.id, settings=Settings(projection_factor=True, error_test=True,
+                                                              tol_phi=2e-9))
     refs: dict = {}
     for name in NAMES:
         if name == "N_S" and cfg.swingarm.mass_kg == 0:
@@ -146,6 +148,9 @@ def build_motorcycle(cfg: MotorcycleConfig, base: Path) -> MotorcycleModel:
         b.rolling_disc(w_f, e_u, b_f, c_f, cfg.front_wheel.radius_m, name="front wheel")
     b.gravity((0.0, 0.0, -G))
     mech = b.compile()
+    # the step's own forces (rtsim.vehicle.motorcycle.step) add stiffness and damping: the finishing stage
+    # rebuilds W = M before they add theirs for the projections (otherwise they would be added twice)
+    mech.model.iset[IS_TANGENT_FORCES] = 1
     idx = -np.ones(NK, dtype=np.int64)
     for k, name in enumerate(NAMES):
         if name in refs:
