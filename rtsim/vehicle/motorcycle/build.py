@@ -86,8 +86,11 @@ def build_motorcycle(cfg: MotorcycleConfig, base: Path) -> MotorcycleModel:
     des = design(cfg)
     p0 = pose(des, np.zeros(11))
     # the projections refactor at the converged q: reusing the Newton factor for them feeds energy into
-    # fast-spinning bodies in natural coordinates (a wheel at 17 rad/s gained 0.3 %/s at 1 ms)
-    b = MechanismBuilder(dim=3, name=cfg.id, settings=Settings(projection_factor=True, error_test=True,
+    # fast-spinning bodies in natural coordinates (a wheel at 17 rad/s gained 0.3 %/s at 1 ms). Newton's
+    # error test stays the plain one: the contraction-rate test (Settings.error_test) stops after 2
+    # iterations and saves 10 us a step, but at full throttle the top speed then settles 4 % above the
+    # drive = drag + rolling resistance balance (57.4 against 55.0 m/s, tests/test_motorcycle_engine.py)
+    b = MechanismBuilder(dim=3, name=cfg.id, settings=Settings(projection_factor=True, error_test=False,
                                                               tol_phi=2e-9))
     refs: dict = {}
     for name in NAMES:
