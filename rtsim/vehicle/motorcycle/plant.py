@@ -31,26 +31,27 @@ rider's view and outputs, the applied inputs) are named tuples of arrays; the ke
 """
 from __future__ import annotations
 
-import math
 from collections import namedtuple
 from math import asin, atan2, cos, sin, sqrt
 
 import numpy as np
 
+from rtsim.channels import TWO_WHEELER_SENSORS, TWO_WHEELER_STATE
 from rtsim.jit import inline_kernel, kernel
 from drivers.rider import (RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_DELTA, RV_DELTADOT, RV_PHI,
                            RV_PHIDOT, RV_R, RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, NRO, NRV, ST_N, rider_step)
 
 from ..kit.layout import offsets
+from ..kit.rigid import angular_velocity
 from .engine import ES_ENGINE_SPEED, ES_GEAR, engine_state, pack_engine, rear_wheel_torque
 from .layout import (K_DELTA, K_E1, K_H, K_P, K_PHI_F, K_PHI_R, K_THETA, K_V, K_W_R, K_ZETA)
 from .step import (MP_FREE_SUSPENSION, MP_SHOCK_C0, MP_SHOCK_L0, MP_THETA0, TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_GAMMA,
                    TO_KAPPA, TO_MZ, U_BRAKE_FRONT, U_BRAKE_REAR, U_DRIVE_TORQUE, U_STEER_TORQUE, _shock_length,
                    two_wheeler_step)
+from .sim import FALL_ROLL
 
 MAX_WHEEL_TORQUE = 1200.0       # N m at the rear wheel at full throttle, for a vehicle without [powertrain]
 FELL = 64                       # plant_step's status for a fall (rtsim.mbs.model codes are below)
-FALL_ROLL = math.radians(70.0)  # rad: a lean past this is a fall (as rtsim.vehicle.motorcycle.sim)
 LIFT_GRACE = 0.5                # s: both tyres may be unloaded this long at the start (settling)
 G = 9.81
 
@@ -72,6 +73,32 @@ INVALID_SLOTS = {"throttle_cmd": C_THROTTLE_INVALID, "brake_pressure_front_cmd":
 # PlantState.inp: what acted over the last step, for the sensors and the state.
 (IN_RIDER_TORQUE, IN_ASSIST, IN_THROTTLE, IN_BRAKE_F, IN_BRAKE_R, IN_RIDER_THROTTLE, IN_RIDER_BRAKE_F,
  IN_RIDER_BRAKE_R, IN_DRIVE, NIN) = offsets(*(1,) * 9)
+
+# Where each channel goes in the sensor and state arrays: its position in the channel dictionary.
+_SENSORS = [c.name for c in TWO_WHEELER_SENSORS]
+(S_ACCEL_X, S_ACCEL_Y, S_ACCEL_Z, S_GYRO_X, S_GYRO_Y, S_GYRO_Z, S_ROLL, S_PITCH, S_WHEEL_F, S_WHEEL_R, S_STEER,
+ S_STEER_RATE, S_STEER_TORQUE, S_FORK, S_SHOCK, S_RIDER_THROTTLE, S_RIDER_BRAKE_F, S_RIDER_BRAKE_R, S_THROTTLE,
+ S_BRAKE_F, S_BRAKE_R) = (_SENSORS.index(n) for n in (
+    "accel_x", "accel_y", "accel_z", "gyro_x", "gyro_y", "gyro_z", "roll", "pitch", "wheel_speed_front",
+    "wheel_speed_rear", "steer_angle", "steer_rate", "steering_torque", "fork_travel", "shock_travel",
+    "rider_throttle", "rider_brake_front", "rider_brake_rear", "throttle", "brake_pressure_front",
+    "brake_pressure_rear"))
+_STATE = [c.name for c in TWO_WHEELER_STATE]
+(X_POS_X, X_ROLL, X_PITCH, X_YAW, X_VEL_X, X_VEL_Y, X_VEL_Z, X_ROLL_RATE, X_PITCH_RATE, X_YAW_RATE, X_SPEED,
+ X_STEER, X_STEER_RATE, X_FORK, X_SHOCK, X_SWINGARM, X_WHEEL_SPEED_F, X_WHEEL_SPEED_R, X_WHEEL_ANGLE_F,
+ X_WHEEL_ANGLE_R, X_TYRES, X_RIDER_TORQUE, X_ASSIST, X_DRIVE, X_THROTTLE, X_BRAKE_F, X_BRAKE_R, X_ENGINE_SPEED,
+ X_GEAR, X_PATH_OFFSET, X_VIOLATION) = (_STATE.index(n) for n in (
+    "pos_x", "roll_angle", "pitch_angle", "yaw_angle", "vel_x", "vel_y", "vel_z", "roll_rate", "pitch_rate",
+    "yaw_rate", "speed", "steer_angle", "steer_rate", "fork_travel", "shock_travel", "swingarm_angle",
+    "wheel_speed_front", "wheel_speed_rear", "wheel_angle_front", "wheel_angle_rear", "tyre_fx_front",
+    "steering_torque", "assist_torque", "drive_torque", "throttle", "brake_pressure_front", "brake_pressure_rear",
+    "engine_speed", "gear", "path_offset", "constraint_violation"))
+# the tyres' channels: front then rear, each in this order of the tyre outputs (TO_*)
+TYRE_OUTPUTS = (("fx", TO_FX), ("fy", TO_FY), ("fz", TO_FZ), ("mz", TO_MZ), ("slip_ratio", TO_KAPPA),
+                ("slip_angle", TO_ALPHA), ("camber", TO_GAMMA))
+assert _STATE[X_POS_X:X_POS_X + 3] == ["pos_x", "pos_y", "pos_z"]
+assert _STATE[X_TYRES:X_TYRES + 14] == [f"tyre_{k}_{w}" for w in ("front", "rear") for k, _ in TYRE_OUTPUTS]
+TYRE_KEYS = np.array([k for _, k in TYRE_OUTPUTS], dtype=np.int64)
 
 PlantParams = namedtuple("PlantParams", ["pp", "ep"])
 PlantState = namedtuple("PlantState", ["rider_view", "rider_out", "inp", "es"])
@@ -100,20 +127,6 @@ def make_plant(mm, rider_on: bool, gear: int | None = None) -> tuple[PlantParams
 
 
 # ---- the rear frame's kinematics -----------------------------------------------------------------------
-@inline_kernel
-def _triad_rates(q, v, idx):
-    """omega = 1/2 sum e x e' over the rear frame's unit vectors e1, v, h (v: qd for the angular
-    velocity, qdd for the angular acceleration)."""
-    w0 = w1 = w2 = 0.0
-    for k in (idx[K_E1], idx[K_V], idx[K_H]):
-        e0, e1, e2 = q[k], q[k + 1], q[k + 2]
-        d0, d1, d2 = v[k], v[k + 1], v[k + 2]
-        w0 += 0.5 * (e1 * d2 - e2 * d1)
-        w1 += 0.5 * (e2 * d0 - e0 * d2)
-        w2 += 0.5 * (e0 * d1 - e1 * d0)
-    return w0, w1, w2
-
-
 @inline_kernel
 def _frame_axis(q, idx, pp, which):
     """The rear frame's x (which = 0) or z (which = 2) axis in the world, from e1 and the steering axis."""
@@ -178,7 +191,7 @@ def plant_view(d, idx, pp, view):
     r = pp[PP_REAR_RADIUS] / un
     psi = _yaw(q, idx)
     fwd, lat = _heading_velocity(q, qd, idx)
-    w0, w1, w2 = _triad_rates(q, qd, idx)
+    w0, w1, w2 = angular_velocity(q, qd, idx[K_E1], idx[K_V], idx[K_H])
     view[RV_T] = d.t[0]
     view[RV_X] = q[kw] - r * u0
     view[RV_Y] = q[kw + 1] - r * u1
@@ -246,7 +259,7 @@ def plant_step(m, d, veh, vd, parts, io, h):
 # ---- sensors and state ---------------------------------------------------------------------------------
 @kernel
 def plant_sensors(d, idx, par, pp, inp, out):
-    """The sensor channels (rtsim.channels.TWO_WHEELER_SENSORS order) of the current state into out."""
+    """The sensor channels (the S_* slots of rtsim.channels.TWO_WHEELER_SENSORS) of the current state into out."""
     q, qd, qdd = d.q, d.qd, d.qdd
     x0, x1, x2 = _frame_axis(q, idx, pp, 0)
     z0, z1, z2 = _frame_axis(q, idx, pp, 2)
@@ -257,81 +270,79 @@ def plant_sensors(d, idx, par, pp, inp, out):
     f0 = qdd[kp] + a * qdd[ke] + b * qdd[kh]
     f1 = qdd[kp + 1] + a * qdd[ke + 1] + b * qdd[kh + 1]
     f2 = qdd[kp + 2] + a * qdd[ke + 2] + b * qdd[kh + 2] + G
-    w0, w1, w2 = _triad_rates(q, qd, idx)
-    out[0] = f0 * x0 + f1 * x1 + f2 * x2
-    out[1] = f0 * y0 + f1 * y1 + f2 * y2
-    out[2] = f0 * z0 + f1 * z1 + f2 * z2
-    out[3] = w0 * x0 + w1 * x1 + w2 * x2
-    out[4] = w0 * y0 + w1 * y1 + w2 * y2
-    out[5] = w0 * z0 + w1 * z1 + w2 * z2
-    out[6] = _roll(q, idx)
-    out[7] = asin(max(-1.0, min(1.0, -x2)))
-    out[8] = qd[idx[K_PHI_F]]
-    out[9] = qd[idx[K_PHI_R]] - _scalar(qd, idx, K_THETA)
-    out[10] = q[idx[K_DELTA]]
-    out[11] = qd[idx[K_DELTA]]
-    out[12] = inp[IN_RIDER_TORQUE]
-    out[13] = _scalar(q, idx, K_ZETA)
-    out[14] = _shock_travel(q, idx, par)
-    out[15] = inp[IN_RIDER_THROTTLE]
-    out[16] = inp[IN_RIDER_BRAKE_F]
-    out[17] = inp[IN_RIDER_BRAKE_R]
-    out[18] = inp[IN_THROTTLE]
-    out[19] = inp[IN_BRAKE_F]
-    out[20] = inp[IN_BRAKE_R]
+    w0, w1, w2 = angular_velocity(q, qd, idx[K_E1], idx[K_V], idx[K_H])
+    out[S_ACCEL_X] = f0 * x0 + f1 * x1 + f2 * x2
+    out[S_ACCEL_Y] = f0 * y0 + f1 * y1 + f2 * y2
+    out[S_ACCEL_Z] = f0 * z0 + f1 * z1 + f2 * z2
+    out[S_GYRO_X] = w0 * x0 + w1 * x1 + w2 * x2
+    out[S_GYRO_Y] = w0 * y0 + w1 * y1 + w2 * y2
+    out[S_GYRO_Z] = w0 * z0 + w1 * z1 + w2 * z2
+    out[S_ROLL] = _roll(q, idx)
+    out[S_PITCH] = asin(max(-1.0, min(1.0, -x2)))
+    out[S_WHEEL_F] = qd[idx[K_PHI_F]]
+    out[S_WHEEL_R] = qd[idx[K_PHI_R]] - _scalar(qd, idx, K_THETA)
+    out[S_STEER] = q[idx[K_DELTA]]
+    out[S_STEER_RATE] = qd[idx[K_DELTA]]
+    out[S_STEER_TORQUE] = inp[IN_RIDER_TORQUE]
+    out[S_FORK] = _scalar(q, idx, K_ZETA)
+    out[S_SHOCK] = _shock_travel(q, idx, par)
+    out[S_RIDER_THROTTLE] = inp[IN_RIDER_THROTTLE]
+    out[S_RIDER_BRAKE_F] = inp[IN_RIDER_BRAKE_F]
+    out[S_RIDER_BRAKE_R] = inp[IN_RIDER_BRAKE_R]
+    out[S_THROTTLE] = inp[IN_THROTTLE]
+    out[S_BRAKE_F] = inp[IN_BRAKE_F]
+    out[S_BRAKE_R] = inp[IN_BRAKE_R]
 
 
 @kernel
 def plant_state(d, idx, par, pp, tyre, inp, es, path_offset, out):
-    """The observer state (rtsim.channels.TWO_WHEELER_STATE order) into out."""
+    """The observer state (the X_* slots of rtsim.channels.TWO_WHEELER_STATE) into out."""
     q, qd = d.q, d.qd
     kp = idx[K_P]
     psi = _yaw(q, idx)
     fwd, lat = _heading_velocity(q, qd, idx)
-    w0, w1, w2 = _triad_rates(q, qd, idx)
+    w0, w1, w2 = angular_velocity(q, qd, idx[K_E1], idx[K_V], idx[K_H])
     _x0, _x1, x2 = _frame_axis(q, idx, pp, 0)
     kv = idx[K_V]
-    out[0] = q[kp]
-    out[1] = q[kp + 1]
-    out[2] = q[kp + 2]
-    out[3] = _roll(q, idx)
-    out[4] = asin(max(-1.0, min(1.0, -x2)))
-    out[5] = psi
-    out[6] = fwd
-    out[7] = lat
-    out[8] = qd[kp + 2]
-    out[9] = w0 * cos(psi) + w1 * sin(psi)
-    out[10] = w0 * q[kv] + w1 * q[kv + 1] + w2 * q[kv + 2]
-    out[11] = w2
-    out[12] = sqrt(fwd * fwd + lat * lat)
-    out[13] = q[idx[K_DELTA]]
-    out[14] = qd[idx[K_DELTA]]
-    out[15] = _scalar(q, idx, K_ZETA)
-    out[16] = _shock_travel(q, idx, par)
-    out[17] = _scalar(q, idx, K_THETA) - par[MP_THETA0] if idx[K_THETA] >= 0 else 0.0
-    out[18] = qd[idx[K_PHI_F]]
-    out[19] = qd[idx[K_PHI_R]] - _scalar(qd, idx, K_THETA)
-    out[20] = q[idx[K_PHI_F]]
-    out[21] = q[idx[K_PHI_R]]
-    j = 22
+    for c in range(3):
+        out[X_POS_X + c] = q[kp + c]
+    out[X_ROLL] = _roll(q, idx)
+    out[X_PITCH] = asin(max(-1.0, min(1.0, -x2)))
+    out[X_YAW] = psi
+    out[X_VEL_X] = fwd
+    out[X_VEL_Y] = lat
+    out[X_VEL_Z] = qd[kp + 2]
+    out[X_ROLL_RATE] = w0 * cos(psi) + w1 * sin(psi)
+    out[X_PITCH_RATE] = w0 * q[kv] + w1 * q[kv + 1] + w2 * q[kv + 2]
+    out[X_YAW_RATE] = w2
+    out[X_SPEED] = sqrt(fwd * fwd + lat * lat)
+    out[X_STEER] = q[idx[K_DELTA]]
+    out[X_STEER_RATE] = qd[idx[K_DELTA]]
+    out[X_FORK] = _scalar(q, idx, K_ZETA)
+    out[X_SHOCK] = _shock_travel(q, idx, par)
+    out[X_SWINGARM] = _scalar(q, idx, K_THETA) - par[MP_THETA0] if idx[K_THETA] >= 0 else 0.0
+    out[X_WHEEL_SPEED_F] = qd[idx[K_PHI_F]]
+    out[X_WHEEL_SPEED_R] = qd[idx[K_PHI_R]] - _scalar(qd, idx, K_THETA)
+    out[X_WHEEL_ANGLE_F] = q[idx[K_PHI_F]]
+    out[X_WHEEL_ANGLE_R] = q[idx[K_PHI_R]]
+    j = X_TYRES
     for w in range(2):
-        t = tyre[w]
-        for k in (TO_FX, TO_FY, TO_FZ, TO_MZ, TO_KAPPA, TO_ALPHA, TO_GAMMA):
-            out[j] = t[k]
+        for k in TYRE_KEYS:
+            out[j] = tyre[w, k]
             j += 1
-    out[j] = inp[IN_RIDER_TORQUE]
-    out[j + 1] = inp[IN_ASSIST]
-    out[j + 2] = inp[IN_DRIVE]
-    out[j + 3] = inp[IN_THROTTLE]
-    out[j + 4] = inp[IN_BRAKE_F]
-    out[j + 5] = inp[IN_BRAKE_R]
-    out[j + 6] = es[ES_ENGINE_SPEED] if pp[PP_ENGINE] > 0.5 else 0.0
-    out[j + 7] = es[ES_GEAR] if pp[PP_ENGINE] > 0.5 else 0.0
-    out[j + 8] = path_offset
+    out[X_RIDER_TORQUE] = inp[IN_RIDER_TORQUE]
+    out[X_ASSIST] = inp[IN_ASSIST]
+    out[X_DRIVE] = inp[IN_DRIVE]
+    out[X_THROTTLE] = inp[IN_THROTTLE]
+    out[X_BRAKE_F] = inp[IN_BRAKE_F]
+    out[X_BRAKE_R] = inp[IN_BRAKE_R]
+    out[X_ENGINE_SPEED] = es[ES_ENGINE_SPEED] if pp[PP_ENGINE] > 0.5 else 0.0
+    out[X_GEAR] = es[ES_GEAR] if pp[PP_ENGINE] > 0.5 else 0.0
+    out[X_PATH_OFFSET] = path_offset
     viol = 0.0
     for i in range(d.phi.shape[0]):
         viol = max(viol, abs(d.phi[i]))
-    out[j + 9] = viol
+    out[X_VIOLATION] = viol
 
 
 @kernel
