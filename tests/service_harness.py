@@ -114,3 +114,13 @@ class Listener:
     def close(self) -> None:
         self._stop.set()
         self._t.join(EVENT)
+
+
+def free_port() -> int:
+    """A free TCP port on 127.0.0.1 (for a test's own CAN hub: RTSIM_CAN_HUB_PORT), so that a test never
+    shares the default hub with another run on the machine."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

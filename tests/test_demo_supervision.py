@@ -15,7 +15,6 @@ import json
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -27,15 +26,9 @@ pytest.importorskip("can")
 pytest.importorskip("can_remote")
 
 from bridge.mcap_recorder import read_recording  # noqa: E402
-from service_harness import ROOT  # noqa: E402
+from service_harness import ROOT, free_port  # noqa: E402
 
 pytestmark = pytest.mark.realtime_e2e
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Proc:
@@ -95,7 +88,7 @@ class Proc:
 
 def _demo(tmp_path, *args, env=None) -> Proc:
     return Proc([sys.executable, "-m", "rtsim.cli", "demo", "--no-zenoh", "--record", str(tmp_path / "demo.mcap"),
-                 *args], env={"RTSIM_CAN_HUB_PORT": str(_free_port()), **(env or {})})
+                 *args], env={"RTSIM_CAN_HUB_PORT": str(free_port()), **(env or {})})
 
 
 def _ecu(channel: str, *args) -> Proc:
@@ -157,7 +150,7 @@ def test_an_ecu_that_dies_while_the_service_starts_ends_the_demo(tmp_path):
 
 
 def test_an_ecu_without_a_service_gives_one_clear_error_at_its_bound():
-    channel = f"127.0.0.1:{_free_port()}"                  # nothing listens there
+    channel = f"127.0.0.1:{free_port()}"                  # nothing listens there
     ecu = _ecu(channel, "--connect-timeout", "3", "--report-every", "1")
     try:
         rc = ecu.wait(300)
@@ -184,7 +177,7 @@ def test_an_ecu_on_a_bus_that_cannot_work_fails_at_once_without_waiting():
 
 
 def test_an_ecu_started_before_the_service_waits_and_then_drives_it():
-    port = _free_port()
+    port = free_port()
     channel = f"127.0.0.1:{port}"
     ecu = _ecu(channel, "--connect-timeout", "600", "--report-every", "1", "--manoeuvre", "straight_line",
                "--duration", "3")

@@ -15,6 +15,7 @@ turning, the safe state within 3 periods of the controller going silent, the fau
 """
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -28,7 +29,7 @@ from rtsim.service.loop import HilLoop
 from rtsim.service.rings import H_TX, RingReader
 from rtsim.service.server import build_sim
 from rtsim.vehicle.offline import prepare, run
-from service_harness import ROOT
+from service_harness import ROOT, free_port
 
 VEHICLE = ROOT / "configs" / "vehicles" / "eps_car.toml"
 LS1 = ROOT / "configs" / "scenarios" / "step_steer_80kph.toml"
@@ -182,7 +183,8 @@ def test_demo_over_can_end_to_end(tmp_path):
     rec = tmp_path / "eps.mcap"
     out = subprocess.run([sys.executable, "-m", "rtsim.cli", "demo", "--vehicle", "eps_car", "--no-zenoh",
                           "--record", str(rec), "--duration", "2.5", "--silent-after", "2.0"],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=1200)
+                         cwd=tmp_path, capture_output=True, text=True, timeout=1200,
+                         env={**os.environ, "RTSIM_CAN_HUB_PORT": str(free_port())})
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
     messages, _ = read_recording(rec)
     codec = Codec(ROOT / "configs" / "can" / "eps_car.dbc", build_sim(LS1, VEHICLE)[0].vm.channels)

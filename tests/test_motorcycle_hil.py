@@ -11,6 +11,7 @@ rider's own demand; a fall ending the session with a status, never a NaN."""
 from __future__ import annotations
 
 import math
+import os
 import subprocess
 import sys
 
@@ -24,7 +25,7 @@ from rtsim.service.server import build_sim
 from rtsim.vehicle.motorcycle.plant import IN_ASSIST, IN_RIDER_TORQUE, IN_THROTTLE
 from rtsim.vehicle.motorcycle.ride import Ride, tyre_lean_ratio
 from rtsim.vehicle.motorcycle.sim import TwoWheelerSim
-from service_harness import ROOT
+from service_harness import ROOT, free_port
 
 VEHICLE = ROOT / "configs" / "vehicles" / "motorcycle.toml"
 MODELS: dict = {}
@@ -141,7 +142,8 @@ def test_demo_over_can_end_to_end(tmp_path):
     rec = tmp_path / "moto.mcap"
     out = subprocess.run([sys.executable, "-m", "rtsim.cli", "demo", "--vehicle", "motorcycle", "--no-zenoh",
                           "--record", str(rec), "--silent-after", "1.5"],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=1200)
+                         cwd=tmp_path, capture_output=True, text=True, timeout=1200,
+                         env={**os.environ, "RTSIM_CAN_HUB_PORT": str(free_port())})
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
     messages, _ = read_recording(rec)
     codec = Codec(ROOT / "configs" / "can" / "motorcycle.dbc", build_sim(None, VEHICLE, models=MODELS)[0].vm.channels)
