@@ -30,6 +30,8 @@ RUN_STATES = ("running", "paused", "stopped")
 COMMAND_SOURCES = ("can", "zenoh", "safe")
 FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error")
 REJECTIONS = ("dlc", "crc", "counter", "range", "unknown_id")
+DRIVER_SOURCES = ("user", "ecu", "scenario", "rider", "safe", "none", "user+ecu", "rider+ecu", "none+ecu")
+STATUS_OPTIONAL = ("wall_time", "drivers", "user")
 
 # ----------------------------------------------------------------------------------------- schemas
 
@@ -100,6 +102,27 @@ def _status_props() -> dict:
         "zenoh_dropped": _count("Zenoh publications that failed (congestion control DROP)"),
         "scenario": {"type": ["string", "null"], "description": "loaded scenario, null if none"},
         "message": {"type": "string", "description": "last event, free text"},
+        # (optional: absent from recordings made before the user command source existed)
+        "wall_time": _seconds("the service's wall clock (Unix time) when the status was made; with sim_time "
+                              "it maps simulation to wall time in realtime mode (latency of observers)",
+                              nullable=False),
+        "drivers": {"title": "who drives", "type": "object",
+                    "description": "per driving input (a car: throttle_angle_cmd, brake_pressure_cmd, "
+                                   "steering_wheel_angle_cmd; a two-wheeler: throttle_cmd, brake_pressure_front_cmd, "
+                                   "brake_pressure_rear_cmd, roll_angle_demand): user (rtsim view), ecu (a valid bus "
+                                   "command), scenario (the in-loop driver), rider, safe (watchdog), none; '+ecu' "
+                                   "when a bus assist torque adds to a two-wheeler's steering",
+                    "additionalProperties": {"type": "string", "enum": list(DRIVER_SOURCES)}},
+        "user": {"title": "the user command source (rtsim view, control op drive)", "type": "object",
+                 "properties": {
+                     "channels": {"type": "object", "description": "channels the user drives now, SI values",
+                                  "additionalProperties": {"type": "number"}},
+                     "takeover": {"type": "boolean", "description": "the user has taken over from the bus ECU"},
+                     "seq": {"type": ["integer", "null"], "description": "sequence number of the last request"},
+                     "requests": _count("drive requests taken"),
+                     "accepted": {"type": "boolean", "description": "the service accepts user commands"}},
+                 "required": ["channels", "takeover", "seq", "requests", "accepted"],
+                 "additionalProperties": False},
     }
 
 
@@ -122,7 +145,8 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
     return {
         "sensors": ("rtsim.sensors", _obj("rtsim sensors", sensors, sensors)),
         "state": ("rtsim.state", _obj("rtsim state", state, state)),
-        "status": ("rtsim.status", _obj("rtsim service status", status, status)),
+        "status": ("rtsim.status", _obj("rtsim service status", status,
+                                        [k for k in status if k not in STATUS_OPTIONAL])),
         "commands": ("rtsim.commands", _obj("rtsim applied actuator commands (after the watchdog)",
                                             commands, ["time", "source"])),
         # one schema (one name) for both directions: MCAP registers a schema name once

@@ -27,7 +27,7 @@ import zenoh
 from bridge.payloads import TOPIC_KEYS, decode, encode_json
 from rtsim.errors import RtsimError
 
-CONTROL_OPS = ("reset", "pause", "resume", "load_scenario", "step", "driver")
+CONTROL_OPS = ("reset", "pause", "resume", "load_scenario", "step", "driver", "drive")
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 _VID = re.compile(r"[A-Za-z0-9_\-]+\Z")
 _LOOPBACK_NAMES = ("localhost",)
@@ -313,14 +313,16 @@ class ZenohClient:
         info = self._session.info
         return bool(info.peers_zid() or info.routers_zid())
 
-    def subscribe(self, kind: str, callback: Callable[[dict], Any]) -> None:
-        """Call ``callback(message_dict)`` for every message on ``rtsim/<vid>/<kind>``."""
+    def subscribe(self, kind: str, callback: Callable[[dict], Any], raw: bool = False) -> None:
+        """Call ``callback(message_dict)`` for every message on ``rtsim/<vid>/<kind>`` (``raw``: the
+        payload's JSON bytes as they came, undecoded: for a relay that only forwards them)."""
         if kind not in TOPIC_KEYS:
             raise ValueError(f"unknown topic kind {kind!r}; allowed: {', '.join(TOPIC_KEYS)}")
 
         def on_sample(sample):
             try:
-                callback(decode(sample.payload.to_bytes()))
+                data = sample.payload.to_bytes()
+                callback(data if raw else decode(data))
             except Exception as e:
                 self.errors += 1
                 self.last_error = f"{kind}: {type(e).__name__}: {e}"

@@ -74,6 +74,10 @@ class ServeOptions(BaseModel):
                                                    "zenoh.state_rate")
     status_rate: StatusRate = setting(10.0, "status publication rate, Hz (1-10, default 10)",
                                                   "zenoh.status_rate")
+    user_input: bool = setting(True, "refuse driving commands from `rtsim view` (the Zenoh control op drive; by "
+                               "default a user's commands replace the in-loop driver's, and the bus ECU's where it "
+                               "has no valid command or the user takes over)", "simulation.user_input",
+                               "--no-user-input")
     record: Optional[Path] = setting(None, "record the session to MCAP (FILE.mcap)", "record.path")
     spin: Spin = setting(0.0002, "busy-wait before each step, s (default 0.0002; a value >= "
                                           "the step never sleeps: for a dedicated core)", None)

@@ -11,7 +11,9 @@
    as the EPS car whose controller under test commands only the motor: the scenario's profiles and
    followers, ``drivers.driver.driver_step``; a two-wheeler's rider) writes its commands, the watchdog writes the CAN command
    values (or the safe values of timed-out commands) into their slots of the vehicle's command array (a
-   change of its time-out mask is a command event), one vehicle step, and at the DBC's periods: every
+   change of its time-out mask is a command event), the user's commands (``rtsim view``: the ``drive``
+   control op; rtsim.service.user_input) replace the in-loop driver's and, where the bus has no valid
+   command or the user took over, the bus's, one vehicle step, and at the DBC's periods: every
    sensor channel (with the vehicle's sensor effects and the config's sensor model) packed into the
    sensor frames and handed to the publisher at the fastest frame's period, each frame queued for
    sending at its own period; the observer state; the SIM_STATUS frame;
@@ -37,7 +39,7 @@ from drivers.path_follower import PathFollower
 from drivers.profiles import Packed
 from drivers.speed_follower import SpeedFollower
 
-from .vehicles import vehicle_advance, vehicle_drive, vehicle_observe, vehicle_sensors
+from .vehicles import vehicle_advance, vehicle_drive, vehicle_observe, vehicle_sensors, vehicle_user
 from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SENSOR, H_STATE, H_TX, LOG_RX,
                     LOG_TX, RX_DATA)
 
@@ -76,6 +78,9 @@ class LoopParams(NamedTuple):
     drv_path: PathFollower       # path follower,
     drv_flags: np.ndarray        # which followers drive (drivers.driver.F_*),
     drv_slot: np.ndarray         # per driver output (drivers.base.INPUT_NAMES): its command slot, -1 none
+    usr_slot: np.ndarray         # per user channel (rtsim.service.user_input): its command slot (a car's) or
+                                 # the slot of its bus command's invalid flag (a two-wheeler's), -1 none
+    usr_rx: np.ndarray           # per user channel: the index of the bus command it competes with, -1 none
 
 
 class LoopState(NamedTuple):
@@ -91,6 +96,9 @@ class LoopState(NamedTuple):
     drv_state: np.ndarray        # (drivers.base.NSTATE,) what the in-loop driver reads
     drv_out: np.ndarray          # (drivers.base.NINPUT,) its outputs
     drv_live: np.ndarray         # (NINPUT,) live inputs (the ``driver`` control): NaN where the scenario drives
+    usr: np.ndarray              # (user_input.NUSR,) the user's commands (``drive`` control), NaN: not driven
+    usr_mode: np.ndarray         # (1,) int64: 1 while the user has taken over from the bus
+    usr_work: np.ndarray         # (user_input.NWORK,) the user source's own state (a two-wheeler's lean loop)
 
 
 @inline_kernel
@@ -207,6 +215,7 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
     if mask != li[LI_MASK]:
         li[LI_MASK] = mask
         _command_event(rg, lp.rx, t, CMD_MASK, mask, io.commands, True)
+    vehicle_user(m, d, veh, vd, road, parts, states, io, lp, ls, h)
     status = vehicle_advance(m, d, veh, vd, road, parts, states, io, h)
     if status != OK:
         return status

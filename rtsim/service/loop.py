@@ -20,12 +20,13 @@ from __future__ import annotations
 
 import queue
 import threading
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from bridge.can_codec import Codec, CommandReceiver
-from bridge.can_e2e import C_STEP_IGNORED, C_STEP_REJECTED
+from bridge.can_e2e import C_STEP_IGNORED, C_STEP_REJECTED, IV_HAS_VALUE, IV_TIMED_OUT
 from drivers.base import INPUT_NAMES, INPUT_UNITS, LIMITS, NINPUT, NSTATE
 from drivers.driver import Driver
 from rtsim.boundcall import bind
@@ -38,6 +39,7 @@ from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_OVERRUNS, LI_PENDING_COUNTE
                      PI_MODE_CODE, PI_SENSOR_EVERY, PI_STATE_EVERY, PI_STATUS_EVERY, PI_STATUS_ID,
                      PI_STEP_REQ_ID, ST_FAULT0, LoopParams, LoopState, loop_run)
 from .rings import Rings, RxWriter, make_rings
+from .user_input import NUSR, NWORK, TWO_WHEELER_BUS, USER_HOLD, check_value, user_channels
 
 RUN_STATES = ("running", "paused", "stopped")
 CYCLE_WINDOW = 65536   # steps of compiled-call durations kept (as LoopHealth's window)
@@ -64,7 +66,7 @@ class HilLoop:
     def __init__(self, sim, codec: Codec, rings: Rings | None = None, *, mode: str = "realtime",
                  state_rate: float = 100.0, hold_pressure: float | None = None, inbox=None,
                  health: LoopHealth | None = None, scenario_name: str | None = None, on_chunk=None,
-                 driver: Driver | None = None):
+                 driver: Driver | None = None, user_input: bool = True):
         self.codec = codec
         self.port = None                 # set by the service: bus state for the status, writer wake-up
         self.outbox = None               # set by the service: recorder/Zenoh figures for the status
@@ -73,6 +75,10 @@ class HilLoop:
         self.health = health if health is not None else LoopHealth()
         self.scenario_name = scenario_name
         self.on_chunk = on_chunk
+        self.user_input = user_input       # the ``drive`` op (rtsim.service.user_input) accepted
+        self._usr_deadline = None          # monotonic time the user's commands lapse at
+        self._usr_seq = None
+        self._usr_requests = 0
         ch = codec.channels               # the served vehicle's interface: ring widths, payload names
         if (len(ch.sensors), len(ch.state)) != (sim.nsensor, sim.nstate):
             raise RtsimError(f"{codec.path}: the vehicle declares {len(ch.sensors)} sensor and "
@@ -132,6 +138,7 @@ class HilLoop:
         ints[PI_STEP_REQ_ID], ints[PI_STATUS_ID], ints[PI_ACK_ID] = \
             c.step_request.frame_id, c.status_frame.frame_id, c.step_ack.frame_id
         ints[PI_DRIVER] = bool(np.any(drv_slot >= 0)) if car else sim.rider_on
+        usr_slot, usr_rx = self._user_slots(sim)
         faults = self.rx.fault_names
         sources = c.status_sources
         assert sources[ST_FAULT0 + len(faults)] == "fault_bus_error"
@@ -140,11 +147,13 @@ class HilLoop:
                              status["sig_float"], ack["sig_int"], ack["sig_float"], np.zeros(1, dtype=np.int64),
                              np.array([sources.index(f"fault_{f}") for f in faults], dtype=np.int64),
                              self.frame_every, self.driver.packed, self.driver.speed, self.driver.path,
-                             self.driver.flags, drv_slot)
+                             self.driver.flags, drv_slot, usr_slot, usr_rx)
         self.ls = LoopState(self.rx.state, self.li, np.zeros(sim.nsensor), np.zeros(sim.nstate),
                             np.zeros(len(sources) + 1), np.zeros(3),
                             np.zeros(len(lay["frame_id"]), dtype=np.int64), np.zeros(1, dtype=np.int64),
-                            self.cycles, np.zeros(NSTATE), np.zeros(NINPUT), np.full(NINPUT, np.nan))
+                            self.cycles, np.zeros(NSTATE), np.zeros(NINPUT), np.full(NINPUT, np.nan),
+                            np.full(NUSR, np.nan), np.zeros(1, dtype=np.int64), np.zeros(NWORK))
+        self._usr_deadline = None
         li = self.li
         li[LI_K] = 0
         li[LI_MASK] = -1
@@ -154,6 +163,23 @@ class HilLoop:
         # one compiled call per step, its fixed arguments (model, state, loop arrays) bound once: passed
         # as one address table instead of unboxing ~120 arrays at every call (rtsim.boundcall)
         self._loop_run = bind(loop_run, *sim.loop_args(), self.lp, self.ls, self.rings, n_free=3)
+
+    def _user_slots(self, sim) -> tuple[np.ndarray, np.ndarray]:
+        """Per user channel (rtsim.service.user_input): the command slot it writes (a car's) or the
+        invalid-flag slot of the bus command it overrides on a takeover (a two-wheeler's), and the index of
+        that bus command among the DBC's commands (-1: not on the bus)."""
+        names = self.codec.channels.command_names
+        slot = np.full(NUSR, -1, dtype=np.int64)
+        rx = np.full(NUSR, -1, dtype=np.int64)
+        for u, name in enumerate(user_channels(sim.kind)):
+            bus = name if sim.kind == "car" else TWO_WHEELER_BUS[name]
+            if sim.kind == "car":
+                slot[u] = sim.command_slots.get(name, -1)
+            elif bus in names:
+                slot[u] = sim.invalid_slots.get(bus, -1)
+            if bus in names:
+                rx[u] = names.index(bus)
+        return slot, rx
 
     def _every(self, period: float, what: str) -> int:
         n = period / self.dt
@@ -256,6 +282,8 @@ class HilLoop:
         """What the SIM_STATUS frame needs from outside the step: loop overruns, the bus state."""
         self.li[LI_OVERRUNS] = self.health.overruns
         self.li[LI_BUS_ERROR] = self._bus_error()
+        if self._usr_deadline is not None and time.monotonic() > self._usr_deadline:
+            self._user_release()
         self._bus_errors_at_status = self.port.errors if self.port is not None else 0
 
     def _bus_error(self) -> bool:
@@ -322,7 +350,92 @@ class HilLoop:
             return {"ok": True, "scenario": self.scenario_name, "sim_time": 0.0}
         if op == "driver":
             return self._live_driver(args)
-        return {"ok": False, "error": f"unknown op {op!r}; ops: reset, pause, resume, load_scenario, step, driver"}
+        if op == "drive":
+            return self._drive(args)
+        return {"ok": False, "error": f"unknown op {op!r}; ops: reset, pause, resume, load_scenario, step, driver, "
+                                     f"drive"}
+
+    # -- the user's command source (rtsim.service.user_input) ---------------------------------------
+    def _drive(self, args: dict) -> dict:
+        """The ``drive`` op: ``{channel: value | null, ..., "takeover": bool, "release": bool, "seq": n}``.
+        Values are checked first (one bad value rejects the whole request); the reply says when they were
+        applied (``sim_time``, ``wall_time``: the service's clock) and who drives each channel now."""
+        if not self.user_input:
+            return {"ok": False, "error": "drive: this service does not accept user commands (--no-user-input)"}
+        kind = self.sim.kind
+        new = {}
+        takeover = args.get("takeover")
+        if takeover is not None and not isinstance(takeover, bool):
+            return {"ok": False, "error": f"drive: takeover = {takeover!r} must be true or false"}
+        chans = list(user_channels(kind))
+        for name, value in args.items():
+            if name in ("takeover", "release", "seq"):
+                continue
+            if value is None:
+                if name not in chans:
+                    return {"ok": False, "error": f"drive: {name!r} is not a user channel (those are: "
+                                                  f"{', '.join(chans)})"}
+                new[chans.index(name)] = np.nan
+                continue
+            try:
+                v = check_value(kind, name, value)
+            except ValueError as exc:
+                return {"ok": False, "error": f"drive: {exc}"}
+            new[chans.index(name)] = v
+        if args.get("release"):
+            self._user_release()
+        else:
+            usr = self.ls.usr
+            for u, v in new.items():
+                usr[u] = v
+            if takeover is not None:
+                self.ls.usr_mode[0] = int(takeover)
+            self._usr_deadline = time.monotonic() + USER_HOLD if not np.all(np.isnan(usr)) else None
+        self._usr_requests += 1
+        self._usr_seq = args.get("seq") if isinstance(args.get("seq"), int) else self._usr_seq
+        return {"ok": True, "seq": self._usr_seq, "sim_time": self.sim_time, "wall_time": time.time(),
+                "drivers": self.drivers(), "user": self.user_status()}
+
+    def _user_release(self) -> None:
+        self.ls.usr[:] = np.nan
+        self.ls.usr_mode[0] = 0
+        self._usr_deadline = None
+
+    def user_status(self) -> dict:
+        """The user source: the channels it drives now (SI values), whether it took over, the last request's
+        sequence number and how many requests came."""
+        usr = self.ls.usr
+        return {"channels": {n: float(usr[u]) for u, n in enumerate(user_channels(self.sim.kind))
+                             if not np.isnan(usr[u])},
+                "takeover": bool(self.ls.usr_mode[0]), "seq": self._usr_seq, "requests": self._usr_requests,
+                "accepted": self.user_input}
+
+    def drivers(self) -> dict[str, str]:
+        """Who drives each of the vehicle's driving inputs now: "user" (rtsim view), "ecu" (a valid bus
+        command), "scenario" (a car's in-loop driver), "rider" (a two-wheeler's), "safe" (the watchdog's
+        safe value) or "none" (nobody: zero)."""
+        kind = self.sim.kind
+        names = self.codec.channels.command_names
+        iv = self.rx.state.iv
+        usr, takeover = self.ls.usr, bool(self.ls.usr_mode[0])
+        out = {}
+        for u, name in enumerate(user_channels(kind)):
+            bus = name if kind == "car" else TWO_WHEELER_BUS[name]
+            valid = bus in names and bool(iv[names.index(bus), IV_HAS_VALUE]) and not iv[names.index(bus), IV_TIMED_OUT]
+            user = not np.isnan(usr[u]) and (takeover or not valid or (kind == "two_wheeler" and bus != name))
+            if kind == "car":
+                in_loop = int(self.lp.drv_slot[u]) >= 0 if u < len(self.lp.drv_slot) else False
+                who = "user" if user else "ecu" if valid else "scenario" if in_loop else "safe"
+            else:
+                rider = bool(self.sim.rider_on)
+                if bus != name:             # the steering: the rider's (or the user's) torque plus the assist
+                    who = "user" if user else "rider" if rider else "none"
+                    if valid and not (user and takeover):
+                        who += "+ecu"
+                else:
+                    who = "user" if user else "ecu" if valid else "rider" if rider else "none"
+            out[name] = who
+        return out
 
     def _live_driver(self, args: dict) -> dict:
         """Live driver inputs (a person at a steering wheel, a joystick bridge): ``{channel: value}`` for
@@ -398,5 +511,8 @@ class HilLoop:
             "zenoh_dropped": getattr(zen, "dropped", 0) if zen is not None else 0,
             "scenario": self.scenario_name,
             "message": self.message,
+            "wall_time": time.time(),
+            "drivers": self.drivers(),
+            "user": self.user_status(),
         }
 

@@ -178,7 +178,7 @@ class Service:
         self.health = LoopHealth(period=self.sim.dt)
         self.loop = HilLoop(self.sim, self.codec, self.rings, mode=o.mode, state_rate=o.state_rate,
                             hold_pressure=o.hold_pressure, inbox=self.inbox, health=self.health,
-                            scenario_name=self.sc.name, driver=self.sc.driver())
+                            scenario_name=self.sc.name, driver=self.sc.driver(), user_input=o.user_input)
         self.loop.port = self.port
         from .outbox import Outbox
         self.outbox = Outbox(self.rings, self.loop.lp.sensor_ids, zenoh=self.zenoh, recorder=self.recorder,

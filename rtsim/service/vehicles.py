@@ -5,6 +5,9 @@ io`` (what ``sim.loop_args()`` returns) and calls, per step:
 
 - ``vehicle_drive``: the in-loop driver (when the loop's PI_DRIVER is set): for the car, the scenario's
   driver (drivers.driver) writing the commands its DBC does not carry; for a two-wheeler, the rider;
+- ``vehicle_user``: the user's commands (rtsim.service.user_input), after the watchdog: a car's into its
+  command array, a two-wheeler's in place of the rider's outputs (the lean demand through the lean loop,
+  drivers.lean_demand);
 - ``vehicle_advance``: one step of the vehicle (its inputs from ``io.commands``, which the watchdog filled);
 - ``vehicle_sensors`` and ``vehicle_observe``: the sensor channels and the observer state.
 
@@ -21,13 +24,16 @@ from __future__ import annotations
 
 from numba.extending import overload
 
+from bridge.can_e2e import IV_HAS_VALUE, IV_TIMED_OUT
 from drivers.driver import driver_step
+from drivers.lean_demand import W_ON, lean_torque
+from drivers.rider import RO_THROTTLE, RO_TORQUE
 from rtsim.vehicle.car.effect_kernels import sensor_stage
 from rtsim.vehicle.car.layout import Vehicle
 from rtsim.vehicle.car.observer import driver_view, vehicle_state_values
 from rtsim.vehicle.car.step import vehicle_step
 from rtsim.vehicle.motorcycle.plant import (PlantParams, plant_rider, plant_sensors, plant_state, plant_step,
-                                            rider_offset_kernel)
+                                            plant_view, rider_offset_kernel, PP_RIDER)
 
 JIT = {"_nrt": False}
 
@@ -43,6 +49,10 @@ def _kind(veh) -> str:
 
 def vehicle_drive(m, d, veh, vd, road, parts, states, io, lp, ls, t, h):
     """The in-loop driver's commands for the step from t to t + h (see the module docstring)."""
+
+
+def vehicle_user(m, d, veh, vd, road, parts, states, io, lp, ls, h):
+    """The user's commands for the step of h s (see the module docstring)."""
 
 
 def vehicle_advance(m, d, veh, vd, road, parts, states, io, h):
@@ -71,6 +81,47 @@ def _drive(m, d, veh, vd, road, parts, states, io, lp, ls, t, h):
 
     def two_wheeler(m, d, veh, vd, road, parts, states, io, lp, ls, t, h):
         plant_rider(d, parts.idx, veh.pp, road, vd.rider_view, vd.rider_out)
+    return two_wheeler
+
+
+@overload(vehicle_user, jit_options=JIT)
+def _user(m, d, veh, vd, road, parts, states, io, lp, ls, h):
+    if _kind(veh) == "car":
+        def car(m, d, veh, vd, road, parts, states, io, lp, ls, h):
+            iv = ls.rx.iv
+            takeover = ls.usr_mode[0] != 0
+            for u in range(lp.usr_slot.shape[0]):
+                v = ls.usr[u]
+                s = lp.usr_slot[u]
+                if s < 0 or v != v:                     # (NaN: the user does not drive it)
+                    continue
+                r = lp.usr_rx[u]
+                if r < 0 or takeover or iv[r, IV_HAS_VALUE] == 0 or iv[r, IV_TIMED_OUT] != 0:
+                    io.commands[s] = v
+        return car
+
+    def two_wheeler(m, d, veh, vd, road, parts, states, io, lp, ls, h):
+        out = vd.rider_out
+        takeover = ls.usr_mode[0] != 0
+        rider = veh.pp[PP_RIDER] > 0.5               # the scenario's rider rides it
+        for u in range(3):                              # throttle, front and rear brake
+            v = ls.usr[u]
+            if v == v:
+                out[RO_THROTTLE + u] = v
+                if takeover and lp.usr_slot[u] >= 0:
+                    io.commands[lp.usr_slot[u]] = 1.0   # the bus command's invalid flag: the rider's input acts
+            elif not rider:
+                out[RO_THROTTLE + u] = 0.0
+        phi = ls.usr[3]
+        if phi == phi:
+            plant_view(d, parts.idx, veh.pp, vd.rider_view)
+            out[RO_TORQUE] = lean_torque(road.par, vd.rider_view, phi, ls.usr_work, h)
+            if takeover and lp.usr_slot[3] >= 0:
+                io.commands[lp.usr_slot[3]] = 1.0
+        else:
+            ls.usr_work[W_ON] = 0.0
+            if not rider:
+                out[RO_TORQUE] = 0.0
     return two_wheeler
 
 
