@@ -2,6 +2,7 @@
 
     rtsim serve    the HIL service (CAN, Zenoh, MCAP)      rtsim demo     service + demo ECU, recorded
     rtsim watch    live dashboard over Zenoh               rtsim play     recorded frames back on the bus
+    rtsim view     the driving simulator in the browser (the live car, keyboard and gamepad)
     rtsim resim    re-run a recording, compare the state   rtsim run      a scenario offline to CSV/MCAP
     rtsim bench    benchmarks                              rtsim describe the vehicle model
     rtsim validate field runs vs the model: find, fit and add the missing effect, report
@@ -298,6 +299,8 @@ _DELEGATED = (
     ("serve", "rtsim.service.cli", "run the HIL service: the vehicle behind CAN, Zenoh state, MCAP recording"),
     ("demo", "rtsim.service.demo", "the service plus a demo ECU process driving over CAN, recorded"),
     ("watch", "rtsim.watch", "live terminal dashboard of a running service (Zenoh)"),
+    ("view", "rtsim.viewer.cli", "the driving simulator in the browser: a local web page of the live car, "
+     "driven by keyboard or gamepad"),
     ("play", "bridge.player", "put recorded CAN frames back on the bus with their original timing"),
     ("resim", "rtsim.service.resim", "re-run a recording (or a CAN log of commands) and compare the state"),
     ("validate", "rtsim.validate.cli", "compare the model with repeated field runs, name and add the missing effect"),

@@ -1,0 +1,177 @@
+"""`rtsim view`'s web server: one page (rtsim/viewer/web) and one WebSocket per page, on 127.0.0.1 unless
+told otherwise (``--bind``).
+
+Why ``websockets`` (and no web framework): one small, dependency-free, well-kept package serves both the
+WebSocket and the few static files the page needs (``process_request`` answers plain HTTP GETs); the
+page's libraries (three.js, uPlot) come from ``web/node_modules``, installed by ``npm ci`` from the
+committed lockfile (tools/setup), and are served from there: nothing loads from the internet.
+
+Per page, over its WebSocket (JSON text messages):
+
+- server -> page: ``hello`` (the scene: rtsim.viewer.scene.describe; ``source`` live), ``data`` (answer to a
+  ``pull``: the samples new since the page's last pull, rtsim.viewer.relay.Relay.batch), ``drive_ack``
+  (the service's reply to the page's command, with the page's own stamp and the query's round trip),
+  ``pong`` (the server's clock, for the page's clock offset);
+- page -> server: ``pull`` (once per drawn frame: the page sets its own rate), ``drive`` (the user's
+  commands, rtsim.service.user_input channels), ``ping``.
+"""
+from __future__ import annotations
+
+import asyncio
+import http
+import json
+import mimetypes
+import time
+from pathlib import Path
+
+from rtsim.errors import RtsimError
+
+from .relay import DriveSender, Relay, encode
+from .scene import describe
+
+WEB = Path(__file__).resolve().parent / "web"
+NODE = WEB / "node_modules"
+#: URL -> file for the libraries (the page's import map names these URLs)
+LIBS = {
+    "/lib/three.module.js": NODE / "three" / "build" / "three.module.js",
+    "/lib/three.core.js": NODE / "three" / "build" / "three.core.js",
+    "/lib/OrbitControls.js": NODE / "three" / "examples" / "jsm" / "controls" / "OrbitControls.js",
+    "/lib/uPlot.esm.js": NODE / "uplot" / "dist" / "uPlot.esm.js",
+    "/lib/uPlot.min.css": NODE / "uplot" / "dist" / "uPlot.min.css",
+}
+PAGE_FILES = ("index.html", "app.js", "scene.js", "plots.js", "input.js", "style.css")
+
+
+def check_libraries() -> None:
+    """RtsimError naming what is missing when the page's npm packages are not installed."""
+    missing = [str(p.relative_to(WEB)) for p in LIBS.values() if not p.is_file()]
+    if missing:
+        raise RtsimError(f"the page's libraries are not installed ({', '.join(missing)} missing under "
+                         f"{WEB}): run ./tools/setup, which runs `npm ci` there (needs node and npm)")
+
+
+def _file_response(path: Path):
+    from websockets.datastructures import Headers
+    from websockets.http11 import Response
+
+    body = path.read_bytes()
+    ctype = mimetypes.guess_type(path.name)[0] or "application/octet-stream"
+    if path.suffix == ".js":
+        ctype = "text/javascript"
+    headers = Headers([("Content-Type", f"{ctype}; charset=utf-8" if ctype.startswith("text") else ctype),
+                       ("Content-Length", str(len(body))), ("Cache-Control", "no-cache"),
+                       ("Connection", "close")])
+    return Response(200, "OK", headers, body)
+
+
+class ViewServer:
+    """The server (see the module docstring) for one source of samples: a live service (``Relay``)."""
+
+    def __init__(self, relay: Relay, bind: str = "127.0.0.1", port: int = 8470, config_timeout: float = 30.0):
+        check_libraries()
+        self.relay = relay
+        self.bind = bind
+        self.port = port
+        self.config_timeout = config_timeout
+        self._info: dict | None = None
+        self.pages = 0
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self._conns: set = set()
+        self.drive = DriveSender(relay.client, self._drive_done)
+        self._drive_from: dict[int, object] = {}
+        self._server = None
+
+    # -- scene ------------------------------------------------------------------------------------------
+    def info(self) -> dict:
+        if self._info is None:
+            cfg = self.relay.config(timeout=self.config_timeout)
+            self._info = describe(cfg)
+        return self._info
+
+    # -- HTTP -------------------------------------------------------------------------------------------
+    def _http(self, connection, request):
+        path = request.path.split("?", 1)[0]
+        if path == "/ws":
+            return None                               # the WebSocket handshake goes on
+        if path == "/":
+            path = "/index.html"
+        if path in LIBS:
+            return _file_response(LIBS[path])
+        name = path.lstrip("/")
+        if name in PAGE_FILES:
+            return _file_response(WEB / name)
+        if path == "/api/info":
+            from websockets.datastructures import Headers
+            from websockets.http11 import Response
+            body = encode(self.info()).encode()
+            return Response(200, "OK", Headers([("Content-Type", "application/json"),
+                                                ("Content-Length", str(len(body))), ("Connection", "close")]), body)
+        return connection.respond(http.HTTPStatus.NOT_FOUND, f"not found: {path}\n")
+
+    # -- WebSocket --------------------------------------------------------------------------------------
+    async def _page(self, ws) -> None:
+        self.pages += 1
+        self._conns.add(ws)
+        last: dict[str, int] = {}
+        try:
+            info = await asyncio.get_running_loop().run_in_executor(None, self.info)
+            await ws.send(encode({"type": "hello", "source": "live", "info": info, "server_time": time.time()}))
+            async for text in ws:
+                try:
+                    msg = json.loads(text)
+                except ValueError:
+                    continue
+                kind = msg.get("type") if isinstance(msg, dict) else None
+                if kind == "pull":
+                    await ws.send(self.relay.batch(last))
+                elif kind == "drive":
+                    self._drive_from[id(msg)] = ws
+                    msg["_ws"] = id(msg)
+                    self.drive.submit(msg)
+                elif kind == "ping":
+                    await ws.send(encode({"type": "pong", "client_time": msg.get("client_time"),
+                                          "server_time": time.time()}))
+        except Exception as exc:  # noqa: BLE001  (a page that goes away must not stop the server)
+            if not type(exc).__name__.startswith("Connection"):
+                try:
+                    await ws.send(encode({"type": "error", "error": f"{type(exc).__name__}: {exc}"}))
+                except Exception:  # noqa: BLE001
+                    pass
+        finally:
+            self._conns.discard(ws)
+            self.pages -= 1
+
+    def _drive_done(self, req: dict, reply: dict, seconds: float) -> None:
+        """(DriveSender's thread) the service's reply, back to the page that sent the command."""
+        ws = self._drive_from.pop(req.get("_ws"), None)
+        for k in [k for k in self._drive_from if k != req.get("_ws")]:
+            if len(self._drive_from) > 64:               # replaced commands never get a reply
+                self._drive_from.pop(k, None)
+        if ws is None or self.loop is None:
+            return
+        ack = encode({"type": "drive_ack", "seq": req.get("seq"), "t_page": req.get("t_page"),
+                      "query_s": seconds, "reply": reply})
+        asyncio.run_coroutine_threadsafe(self._send(ws, ack), self.loop)
+
+    @staticmethod
+    async def _send(ws, text: str) -> None:
+        try:
+            await ws.send(text)
+        except Exception:  # noqa: BLE001  (the page left)
+            pass
+
+    async def serve(self, stop: asyncio.Event, started=None) -> None:
+        from websockets.asyncio.server import serve
+
+        self.loop = asyncio.get_running_loop()
+        async with serve(self._page, self.bind, self.port, process_request=self._http, max_size=2 ** 20,
+                         compression=None) as server:
+            self._server = server
+            self.port = server.sockets[0].getsockname()[1]
+            if started is not None:
+                started(self)
+            await stop.wait()
+
+    def close(self) -> None:
+        self.drive.close()
+        self.relay.close()

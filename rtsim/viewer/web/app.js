@@ -1,0 +1,207 @@
+// rtsim view: the page. A source of samples (the live service through the server's WebSocket) feeds the
+// scene, the plots and the panel; the user's inputs go back as the service's `drive` commands.
+// Each drawn frame pulls what is new (the page sets its own rate: nothing queues for a slow page).
+//
+// Measured and shown:
+// - frame rate: frames drawn over the last second;
+// - key -> model input: the round trip of a drive command, from the input's time stamp on the page to the
+//   service's reply, which it sends once the loop has put the command into the model's input arrays
+//   (p50 and max over the last 50);
+// - model -> screen: from the wall time the model produced a state sample (its simulation time mapped to
+//   the service's clock with the status' wall_time; realtime mode) to the frame that draws it, on the
+//   page's clock corrected by the offset to the server's clock (ping/pong); and server -> screen, from
+//   the sample's arrival at the server to that frame (any mode).
+import { Scene3D } from './scene.js';
+import { Plots } from './plots.js';
+import { Input } from './input.js';
+
+const $ = (id) => document.getElementById(id);
+const wall = () => (performance.timeOrigin + performance.now()) / 1000;     // s, the page's wall clock
+const view = window.rtsimView = { ready: false, frames: 0, fps: 0, errors: [], latency: {}, drive: {}, pose: null };
+window.addEventListener('error', (e) => view.errors.push(String(e.message)));
+view.setVehicleVisible = (on) => { if (scene.vehicle) scene.vehicle.group.visible = on; };   // (tests: an empty scene)
+
+const scene = new Scene3D($('view'));
+const plots = new Plots($('plot-channels'), $('plot-health'), $('pick'));
+const input = new Input();
+let info = null, state = null, sensors = null, status = null, commands = null;
+let pulling = false, clockOffset = 0, bestPing = Infinity, simWall = null;
+const simWallSamples = [];
+let driveSeq = 0, lastSent = null, lastSentAt = 0, newState = false, stateRx = 0;
+const rtts = [], queries = [], screen = [], modelScreen = [];
+
+function median(a) { if (!a.length) return null; const s = [...a].sort((x, y) => x - y); return s[s.length >> 1]; }
+function keep(a, x, n = 50) { a.push(x); if (a.length > n) a.shift(); }
+function fmt(x, d = 1) { return x == null || !Number.isFinite(x) ? '–' : x.toFixed(d); }
+
+// ---- the source ---------------------------------------------------------------------------------------
+const ws = new WebSocket(`ws://${location.host}/ws`);
+ws.onmessage = (ev) => {
+  const m = JSON.parse(ev.data);
+  if (m.type === 'hello') start(m.info);
+  else if (m.type === 'data') take(m);
+  else if (m.type === 'drive_ack') ack(m);
+  else if (m.type === 'pong') {
+    const now = wall(), rtt = now - m.client_time;
+    if (rtt < bestPing) { bestPing = rtt; clockOffset = m.server_time - (m.client_time + now) / 2; }
+  } else if (m.type === 'error') view.errors.push('server: ' + m.error);
+};
+ws.onclose = () => { $('run').textContent = 'disconnected from the rtsim view server'; };
+function ping() { if (ws.readyState === 1) ws.send(JSON.stringify({ type: 'ping', client_time: wall() })); }
+
+function start(i) {
+  info = view.info = i;
+  $('vehicle').textContent = `${i.vehicle_id} · ${i.name}`;
+  scene.build(i);
+  const defaults = i.kind === 'car' ? ['speed', 'yaw_rate', 'steering_wheel_angle']
+    : ['speed', 'roll_angle', 'steer_angle'];
+  plots.init(i, defaults);
+  if (i.road.note) $('run').textContent = i.road.note;
+  for (let k = 0; k < 5; k++) setTimeout(ping, 200 * k);
+  setInterval(() => { bestPing *= 1.02; ping(); }, 2000);     // (let the best sample age: clocks drift)
+  requestAnimationFrame(frame);
+}
+
+function take(m) {
+  pulling = false;
+  if (m.state && m.state.length) {
+    state = m.state[m.state.length - 1]; newState = true; stateRx = m.state_rx;
+    plots.push(m.state);
+  }
+  if (m.sensors && m.sensors.length) { sensors = m.sensors[m.sensors.length - 1]; plots.push(m.sensors); }
+  if (m.commands && m.commands.length) commands = m.commands[m.commands.length - 1];
+  if (m.status && m.status.length) {
+    status = m.status[m.status.length - 1];
+    plots.pushStatus(status);
+    if (status.wall_time != null && status.mode === 'realtime') {
+      keep(simWallSamples, status.wall_time - status.sim_time, 10);
+      simWall = Math.min(...simWallSamples);     // the status is made after its step: the least offset is the best
+    }
+  }
+}
+
+// ---- driving ------------------------------------------------------------------------------------------
+function channels(inp) {
+  const u = info.user, fs = (n) => u[n].full_scale;
+  if (info.kind === 'car') {
+    return { throttle_angle_cmd: inp.throttle * fs('throttle_angle_cmd'),
+             brake_pressure_cmd: inp.brake * fs('brake_pressure_cmd'),
+             steering_wheel_angle_cmd: -inp.steer * fs('steering_wheel_angle_cmd') };     // ISO: left positive
+  }
+  return { throttle_cmd: inp.throttle, brake_pressure_front_cmd: inp.brake * fs('brake_pressure_front_cmd'),
+           brake_pressure_rear_cmd: inp.brake * fs('brake_pressure_rear_cmd'),
+           roll_angle_demand: inp.steer * fs('roll_angle_demand') };                       // right: lean right
+}
+
+function drive(inp, now) {
+  if (!$('drive').checked && input.touched && !view.driveDeclined) $('drive').checked = true;   // first input: drive
+  if (!$('drive').checked || ws.readyState !== 1) return;
+  const ch = channels(inp);
+  const key = JSON.stringify(Object.values(ch).map((x) => x.toFixed(4))) + $('takeover').checked;
+  if (key === lastSent && now - lastSentAt < 100) return;          // unchanged: every 100 ms (the service holds 1 s)
+  lastSent = key; lastSentAt = now;
+  ws.send(JSON.stringify({ type: 'drive', seq: ++driveSeq, t_page: performance.now(), takeover: $('takeover').checked, ...ch }));
+}
+
+function ack(m) {
+  const r = m.reply || {};
+  view.drive.last = r;
+  if (!r.ok) { view.drive.error = r.error; return; }
+  if (m.t_page != null) { keep(rtts, performance.now() - m.t_page); keep(queries, m.query_s * 1e3); }
+  view.latency.key_to_model_ms = median(rtts);
+  view.latency.key_to_model_max_ms = rtts.length ? Math.max(...rtts) : null;
+  view.latency.query_ms = median(queries);
+}
+
+$('release').onclick = () => {
+  $('drive').checked = false; view.driveDeclined = true;
+  ws.send(JSON.stringify({ type: 'drive', seq: ++driveSeq, release: true }));
+};
+$('drive').onchange = () => { view.driveDeclined = !$('drive').checked; if (!$('drive').checked) $('release').onclick(); };
+$('camera').onchange = () => scene.setCamera($('camera').value);
+$('arrows').onchange = () => { scene.showArrows = $('arrows').checked; };
+$('friction').onchange = () => scene.setFriction($('friction').checked);
+window.addEventListener('keydown', (e) => {
+  if (e.key === 'c') { const o = ['chase', 'cockpit', 'free']; $('camera').value = o[(o.indexOf($('camera').value) + 1) % 3]; scene.setCamera($('camera').value); }
+  if (e.key === 't') $('takeover').checked = !$('takeover').checked;
+});
+window.addEventListener('beforeunload', () => { if ($('drive').checked) ws.send(JSON.stringify({ type: 'drive', release: true })); });
+
+// ---- controller settings ------------------------------------------------------------------------------
+function settings() {
+  const m = input.map, rows = [];
+  const num = (path, v, lo, hi) => `<input type="number" data-p="${path}" value="${v}" min="${lo}" max="${hi}" style="width:4em">`;
+  const chk = (path, v) => `<input type="checkbox" data-p="${path}" ${v ? 'checked' : ''}>`;
+  rows.push(`<tr><td>steering axis</td><td>${num('steer.axis', m.steer.axis, -1, 15)} invert ${chk('steer.invert', m.steer.invert)}</td></tr>`);
+  for (const p of ['throttle', 'brake']) {
+    rows.push(`<tr><td>${p} axis</td><td>${num(p + '.axis', m[p].axis, -1, 15)} invert ${chk(p + '.invert', m[p].invert)}
+      pedal ${chk(p + '.pedal', m[p].pedal)}</td></tr><tr><td>${p} button</td><td>${num(p + '.button', m[p].button, -1, 31)}</td></tr>`);
+  }
+  rows.push(`<tr><td>dead zone</td><td>${num('deadzone', m.deadzone, 0, 0.5)}</td></tr>`);
+  $('pad-map').innerHTML = rows.join('');
+  for (const el of $('pad-map').querySelectorAll('input')) {
+    el.onchange = () => {
+      const [a, b] = el.dataset.p.split('.');
+      const v = el.type === 'checkbox' ? el.checked : Number(el.value);
+      if (b) m[a][b] = v; else m[a] = v;
+      input.saveMap();
+    };
+  }
+}
+$('settings-btn').onclick = () => { settings(); $('settings').hidden = false; };
+$('settings-close').onclick = () => { $('settings').hidden = true; };
+$('settings-reset').onclick = () => { input.resetMap(); settings(); };
+
+// ---- the frame ----------------------------------------------------------------------------------------
+let last = performance.now(), fpsCount = 0, fpsT0 = performance.now(), panelAt = 0;
+function frame(now) {
+  const dt = Math.min(0.1, (now - last) / 1000); last = now;
+  if (!pulling && ws.readyState === 1) { ws.send('{"type":"pull"}'); pulling = true; }
+  const inp = input.poll(dt);
+  drive(inp, now);
+  if (state) scene.update(state, sensors, dt);
+  scene.render(dt);
+  view.frames++; fpsCount++;
+  if (newState && state) {
+    newState = false;
+    const t = wall() + clockOffset;                      // this frame, on the server's clock
+    keep(screen, (t - stateRx) * 1e3);
+    if (simWall !== null) keep(modelScreen, (t - (state.time + simWall)) * 1e3);
+    view.latency.server_to_screen_ms = median(screen);
+    view.latency.model_to_screen_ms = simWall !== null ? median(modelScreen) : null;
+  }
+  if (now - fpsT0 >= 1000) { view.fps = fpsCount * 1000 / (now - fpsT0); fpsCount = 0; fpsT0 = now; scene.adapt(view.fps); }
+  plots.draw(now);
+  if (now - panelAt > 250) { panelAt = now; panel(inp); }
+  view.pose = scene.pose;
+  view.ready = true;
+  requestAnimationFrame(frame);
+}
+
+function panel(inp) {
+  const s = status || {}, p = scene.pose || {};
+  $('run').textContent = status ? `${s.mode} · ${s.run_state} · t = ${fmt(s.sim_time, 2)} s · ${s.scenario || ''}` +
+    (s.message ? ` · ${s.message}` : '') : 'waiting for the service…';
+  $('numbers').innerHTML = `<tr><td>speed</td><td class="v">${fmt((p.speed || 0) * 3.6)} km/h</td>
+    <td>frame rate</td><td class="v">${fmt(view.fps, 0)} fps</td></tr>
+    <tr><td>x, y</td><td class="v">${fmt(p.x)}, ${fmt(p.y)} m</td><td>yaw</td><td class="v">${fmt((p.yaw || 0) * 57.2958)}°</td></tr>`;
+  const bar = (x) => `<span class="bar" style="width:${Math.round(60 * Math.abs(x))}px"></span>`;
+  $('inputs').innerHTML = `throttle ${bar(inp.throttle)} brake ${bar(inp.brake)} steer ${fmt(inp.steer, 2)}` +
+    (input.padName ? ` · pad: ${input.padName.slice(0, 24)}` : '');
+  const who = s.drivers || {}, cmd = commands || {};
+  $('drivers').innerHTML = '<tr><td><b>input</b></td><td><b>driven by</b></td></tr>' + Object.entries(who).map(([n, w]) =>
+    `<tr><td>${n}</td><td class="${w.startsWith('user') ? 'user' : ''}">${w}</td></tr>`).join('') +
+    (cmd.source ? `<tr><td>bus commands</td><td>${cmd.source} at ${fmt(cmd.time, 2)} s</td></tr>` : '');
+  const us = (x) => x == null ? '–' : `${(x * 1e6).toFixed(0)} us`, ms = (x) => x == null ? '–' : `${(x * 1e3).toFixed(2)} ms`;
+  $('health').innerHTML = `<tr><td><b>loop</b></td><td>p50</td><td>p99</td><td>max</td></tr>
+    <tr><td>lateness</td><td class="v">${ms(s.lateness_p50)}</td><td class="v">${ms(s.lateness_p99)}</td><td class="v">${ms(s.lateness_max)}</td></tr>
+    <tr><td>cpu/step</td><td class="v">${us(s.cpu_p50)}</td><td class="v">${us(s.cpu_p99)}</td><td class="v">${us(s.cpu_max)}</td></tr>
+    <tr><td>overruns ${s.overruns ?? '–'}</td><td colspan="3">stalls ${s.stalls ?? '–'} · skipped ${s.skipped_steps ?? '–'} · faults ${
+      Object.entries(s.faults || {}).filter(([, v]) => v).map(([k]) => k).join(', ') || 'none'}</td></tr>`;
+  const L = view.latency;
+  $('latency').innerHTML = `<tr><td><b>latency</b> (median)</td><td></td></tr>
+    <tr><td>key → model input (round trip)</td><td class="v">${fmt(L.key_to_model_ms)} ms</td></tr>
+    <tr><td>model state → screen</td><td class="v">${L.model_to_screen_ms == null ? 'realtime mode only' : fmt(L.model_to_screen_ms) + ' ms'}</td></tr>
+    <tr><td>server → screen</td><td class="v">${fmt(L.server_to_screen_ms)} ms</td></tr>` +
+    (view.drive.error ? `<tr><td colspan="2" class="user">${view.drive.error}</td></tr>` : '');
+}

@@ -1,0 +1,147 @@
+"""`rtsim view` in a real browser: headless Chromium (Debian's, driven by Playwright) opens the page of a
+running service (realtime, recorded), holds the throttle key and steers; the service's recording shows
+the car accelerating and turning left, driven by the user's command source; a screenshot shows the car
+(pixel statistics against the same view with the car hidden); the page draws at least 30 frames a
+second and reports no console error.
+
+One service, one view server and one browser page for the module (a few tens of seconds in all). The
+waits are bounded by simulated time the page reports and by generous wall-clock limits (waits.py),
+never asserted; the frame rate is the one figure the bar asks of the browser.
+"""
+from __future__ import annotations
+
+import io
+import os
+
+import numpy as np
+import pytest
+
+from service_harness import ServiceProcess, free_port
+from viewer_harness import ViewThread, launch, require_page_libraries
+from waits import EVENT
+
+playwright_api = pytest.importorskip("playwright.sync_api", reason="playwright (the test extra) not installed")
+SHOT = os.environ.get("RTSIM_VIEW_SCREENSHOT")     # save the test's screenshot here (the README's)
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory):
+    require_page_libraries()
+    rec = tmp_path_factory.mktemp("view") / "view.mcap"
+    zport = free_port()
+    svc = ServiceProcess("virtual", f"rtsim-view-test-{os.getpid()}", "--zenoh-listen", f"tcp/127.0.0.1:{zport}",
+                         "--record", str(rec), "--mode", "realtime")
+    try:
+        yield svc, f"tcp/127.0.0.1:{zport}", rec
+    finally:
+        svc.stop()
+        svc.close()
+
+
+@pytest.fixture(scope="module")
+def page(service):
+    _, endpoint, _ = service
+    view = ViewThread("xbw", [endpoint])
+    pw = playwright_api.sync_playwright().start()
+    browser = None
+    try:
+        browser = launch(pw)
+        pg = browser.new_page(viewport={"width": 1280, "height": 720})
+        logs = []
+        pg.on("console", lambda m: logs.append((m.type, m.text)))
+        pg.on("pageerror", lambda e: logs.append(("pageerror", str(e))))
+        pg.goto(view.url)
+        pg.wait_for_function("window.rtsimView && window.rtsimView.pose !== null", timeout=EVENT * 1000)
+        yield pg, logs, view
+    finally:
+        if browser is not None:
+            browser.close()
+        pw.stop()
+        view.close()
+
+
+def _sim_time(pg) -> float:
+    return float(pg.evaluate("rtsimView.pose.t"))
+
+
+def _wait_sim(pg, t: float) -> None:
+    """Until the page has drawn a state sample of simulation time >= t (bounded by EVENT s of wall time)."""
+    pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {t}", timeout=EVENT * 1000, polling=50)
+
+
+def _pixels(png: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
+
+
+def test_the_page_shows_the_car_at_30_frames_a_second(page):
+    pg, _logs, _view = page
+    _wait_sim(pg, _sim_time(pg) + 1.0)
+    pg.wait_for_timeout(2500)                            # the frame rate settles (software rendering)
+    fps = []
+    for _ in range(3):
+        fps.append(pg.evaluate("rtsimView.fps"))
+        pg.wait_for_timeout(1000)
+    assert np.median(fps) >= 30.0, f"frame rate {fps} /s"
+    with_car = pg.screenshot()
+    pg.evaluate("rtsimView.setVehicleVisible(false)")
+    pg.wait_for_timeout(300)
+    empty = pg.screenshot()
+    pg.evaluate("rtsimView.setVehicleVisible(true)")
+    a, b = _pixels(with_car), _pixels(empty)
+    assert a.std() > 20.0, "the screenshot is blank"
+    red = lambda im: (im[..., 0] > 140) & (im[..., 1] < 80) & (im[..., 2] < 80)       # the car's paint
+    changed = np.abs(a - b).max(axis=2) > 40
+    h, w = changed.shape
+    assert red(a).sum() - red(b).sum() > 0.002 * h * w, "no car paint in the view"
+    assert changed.mean() > 0.005, "the car changes less than 0.5 % of the view"
+    ys, xs = np.nonzero(changed)
+    # the chase camera looks at the car: what it changes lies about the middle of the view
+    assert 0.25 * w < np.median(xs) < 0.75 * w and 0.25 * h < np.median(ys) < 0.85 * h
+
+
+def test_the_keyboard_drives_the_car_through_the_service(page, service):
+    from bridge.mcap_recorder import read_recording
+
+    pg, _logs, _view = page
+    _, _, rec = service
+    t0 = _sim_time(pg)
+    pg.keyboard.down("ArrowUp")
+    _wait_sim(pg, t0 + 3.0)
+    t1 = _sim_time(pg)
+    pg.keyboard.down("ArrowLeft")
+    _wait_sim(pg, t1 + 2.0)
+    t2 = _sim_time(pg)
+    pg.keyboard.up("ArrowUp")
+    pg.keyboard.up("ArrowLeft")
+    latency = pg.evaluate("rtsimView.latency")
+    if SHOT:                                            # the README's picture: the car turning, the plots live
+        os.makedirs(os.path.dirname(SHOT) or ".", exist_ok=True)
+        pg.screenshot(path=SHOT)
+    _wait_sim(pg, t2 + 1.5)                             # the recorder closes a chunk every second
+    msgs, _info = read_recording(rec)
+    state = [m.data for m in msgs["rtsim/xbw/state"]]
+    t = np.array([s["time"] for s in state])
+    col = lambda name: np.array([s[name] for s in state], dtype=float)
+    speed, yaw, yaw_rate, thr = col("speed"), col("yaw_angle"), col("yaw_rate"), col("throttle_angle")
+    before = t <= t0
+    assert before.any() and np.max(speed[before][-50:]) < 0.5      # held by the watchdog's brake pressure
+    accel = (t >= t0 + 0.5) & (t <= t1)
+    assert np.max(thr[accel]) > 0.5, "the throttle never opened"
+    speed_t1 = np.interp(t1, t, speed)
+    assert speed_t1 > 3.0, f"speed {speed_t1:.2f} m/s after {t1 - t0:.1f} s of throttle"
+    turn = (t >= t1 + 0.7) & (t <= t2)
+    assert np.all(yaw_rate[turn] > 0.0), "steering left must turn the car left (yaw rate > 0, ISO 8855)"
+    dyaw = np.interp(t2, t, np.unwrap(yaw)) - np.interp(t1, t, np.unwrap(yaw))
+    assert dyaw > 0.2, f"yaw changed by {dyaw:.3f} rad while steering left"
+    status = [m.data for m in msgs["rtsim/xbw/status"] if t1 <= m.data["time"] <= t2]
+    assert status and all(set(s["drivers"].values()) == {"user"} for s in status)
+    assert latency["key_to_model_ms"] is not None and latency["server_to_screen_ms"] is not None
+
+
+def test_no_console_errors(page):
+    pg, logs, _view = page
+    errors = [text for kind, text in logs if kind in ("error", "pageerror")]
+    errors += pg.evaluate("rtsimView.errors")
+    assert errors == []

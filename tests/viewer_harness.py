@@ -1,0 +1,80 @@
+"""Helpers for the browser tests of `rtsim view`: the headless browser (Debian's chromium driven by
+Playwright with that executable; never a browser download) and the view server run in a thread.
+
+``chromium_path()`` finds the browser: ``$RTSIM_CHROMIUM``, else ``chromium`` / ``chromium-browser`` on the
+PATH. ``./tools/test`` installs Debian's ``chromium`` package when it is missing and it may (root, apt-get);
+elsewhere the browser tests skip, naming what to install."""
+from __future__ import annotations
+
+import asyncio
+import os
+import shutil
+import threading
+
+import pytest
+
+CHROMIUM_ARGS = ["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
+                 "--disable-background-timer-throttling", "--disable-renderer-backgrounding"]
+NO_CHROMIUM = ("headless Chromium not found: install Debian's chromium package (as root: apt-get update && "
+               "apt-get install -y chromium; ./tools/test does this by itself when run as root), or point "
+               "RTSIM_CHROMIUM at a Chromium binary")
+
+
+def chromium_path() -> str | None:
+    env = os.environ.get("RTSIM_CHROMIUM")
+    if env:
+        return env if os.path.isfile(env) else None
+    for name in ("chromium", "chromium-browser"):
+        p = shutil.which(name)
+        if p:
+            return p
+    return None
+
+
+def require_page_libraries() -> None:
+    """Skip (no npm on this machine to install them) or fail (set-up not run) without the page's libraries."""
+    from rtsim.errors import RtsimError
+    from rtsim.viewer.server import check_libraries
+
+    try:
+        check_libraries()
+    except RtsimError as exc:
+        if shutil.which("npm") is None:
+            pytest.skip(f"{exc} (and npm is not installed here)")
+        raise
+
+
+def launch(playwright):
+    exe = chromium_path()
+    if exe is None:
+        pytest.skip(NO_CHROMIUM)
+    return playwright.chromium.launch(executable_path=exe, args=CHROMIUM_ARGS)
+
+
+class ViewThread:
+    """A ViewServer (rtsim.viewer.server) on a free port of 127.0.0.1, in a thread with its own event loop."""
+
+    def __init__(self, vehicle_id: str, connect: list[str], timeout: float = 60.0):
+        from rtsim.viewer.relay import Relay
+        from rtsim.viewer.server import ViewServer
+
+        self.server = ViewServer(Relay(vehicle_id, connect), "127.0.0.1", 0)
+        self._started = threading.Event()
+        self._loop = None
+        self._stop = None
+        self._thread = threading.Thread(target=lambda: asyncio.run(self._run()), daemon=True)
+        self._thread.start()
+        if not self._started.wait(timeout):
+            raise RuntimeError("rtsim view server did not start")
+        self.url = f"http://127.0.0.1:{self.server.port}/"
+
+    async def _run(self):
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        await self.server.serve(self._stop, lambda s: self._started.set())
+
+    def close(self) -> None:
+        if self._loop is not None and self._stop is not None:
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(10.0)
+        self.server.close()
