@@ -38,8 +38,10 @@ def _bench(args) -> int:
         from rtsim.benchmarks.service import format_report, run_service_bench
         if not (args.duration > 0 and math.isfinite(args.duration)):
             raise RtsimError(f"--duration must be a positive number of seconds, got {args.duration}")
+        if not 0 <= args.pages <= 16:
+            raise RtsimError(f"--pages must be 0..16, got {args.pages}")
         res = run_service_bench(args.duration, record=not args.no_record, zenoh=not args.no_zenoh, ecu=args.ecu,
-                                spin=args.spin)
+                                spin=args.spin, pages=args.pages)
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
     if args.suite == "dispatch":
@@ -244,6 +246,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--no-zenoh", action="store_true", help="service suite: without Zenoh")
     b.add_argument("--spin", type=float, default=0.0002,
                    help="service suite: busy-wait before each step, s (>= 0.001: never sleep)")
+    b.add_argument("--pages", type=int, default=0, metavar="N",
+                   help="service suite: also N pages of `rtsim view` in headless Chromium, drawing the live car")
     b.add_argument("--ecu", choices=["light", "demo"], default="light",
                    help="service suite: command-only ECU (default) or the demo ECU decoding every frame")
     b.set_defaults(func=_bench)

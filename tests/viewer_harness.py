@@ -1,35 +1,17 @@
 """Helpers for the browser tests of `rtsim view`: the headless browser (Debian's chromium driven by
 Playwright with that executable; never a browser download) and the view server run in a thread.
 
-``chromium_path()`` finds the browser: ``$RTSIM_CHROMIUM``, else ``chromium`` / ``chromium-browser`` on the
-PATH. ``./tools/test`` installs Debian's ``chromium`` package when it is missing and it may (root, apt-get);
+``chromium_path()`` (rtsim.viewer.browser) finds the browser. ``./tools/test`` installs Debian's ``chromium`` package when it is missing and it may (root, apt-get);
 elsewhere the browser tests skip, naming what to install."""
 from __future__ import annotations
 
 import asyncio
-import os
 import shutil
 import threading
 
 import pytest
 
-CHROMIUM_ARGS = ["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader",
-                 "--disable-background-timer-throttling", "--disable-renderer-backgrounding"]
-NO_CHROMIUM = ("headless Chromium not found: install Debian's chromium package (as root: apt-get update && "
-               "apt-get install -y chromium; ./tools/test does this by itself when run as root), or point "
-               "RTSIM_CHROMIUM at a Chromium binary")
-
-
-def chromium_path() -> str | None:
-    env = os.environ.get("RTSIM_CHROMIUM")
-    if env:
-        return env if os.path.isfile(env) else None
-    for name in ("chromium", "chromium-browser"):
-        p = shutil.which(name)
-        if p:
-            return p
-    return None
-
+from rtsim.viewer.browser import CHROMIUM_ARGS, NO_CHROMIUM, chromium_path
 
 def require_page_libraries() -> None:
     """Skip (no npm on this machine to install them) or fail (set-up not run) without the page's libraries."""

@@ -19,6 +19,10 @@ After ``duration`` s of wall time it reports:
   per simulated step (every thread: publisher, recorder, CAN reader and writer, Zenoh, the spin-wait);
 * lateness of the step starts (p50 / p99 / max), overruns, stalls, catch-up and skipped steps, and the
   machine's steal time over the run (/proc/stat), which explains the stalls on a virtual machine.
+
+``pages=N`` adds `rtsim view` in its own process and N pages of it in headless Chromium (Playwright with
+Debian's chromium, rtsim.viewer.browser), drawing the live car all along; the report then has the pages'
+frame rates too. Run it with and without pages to see what they cost the loop (same machine, same minute).
 """
 from __future__ import annotations
 
@@ -76,6 +80,57 @@ bus.shutdown()
 """
 
 
+_PAGES = r"""
+import json, sys
+from playwright.sync_api import sync_playwright
+url, n, exe = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+args = json.loads(sys.argv[4])
+with sync_playwright() as p:
+    b = p.chromium.launch(executable_path=exe, args=args)
+    pages = [b.new_page(viewport={"width": 1280, "height": 720}) for _ in range(n)]
+    for pg in pages:
+        pg.goto(url)
+    for pg in pages:
+        pg.wait_for_function("window.rtsimView && rtsimView.pose !== null", timeout=180000)
+    print("ready", flush=True)
+    sys.stdin.read()
+    print(json.dumps([{"fps": pg.evaluate("rtsimView.fps"), "frames": pg.evaluate("rtsimView.frames"),
+                       "errors": pg.evaluate("rtsimView.errors")} for pg in pages]), flush=True)
+    b.close()
+"""
+
+
+def _open_pages(endpoint: str, n: int, env: dict, procs: list) -> tuple:
+    """`rtsim view` in a child process and a headless Chromium with n pages of it (children appended to
+    procs); returns the browser's process, once every page draws the car."""
+    import json
+    import socket
+
+    from rtsim.errors import RtsimError
+    from rtsim.viewer.browser import CHROMIUM_ARGS, NO_CHROMIUM, chromium_path
+
+    exe = chromium_path()
+    if exe is None:
+        raise RtsimError(f"--pages: {NO_CHROMIUM}")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    view = subprocess.Popen([sys.executable, "-m", "rtsim.cli", "view", "--connect", endpoint, "--port", str(port),
+                             "--vehicle-id", "xbw"], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    procs.append(view)
+    line = view.stdout.readline()
+    if "open http" not in line:
+        raise RtsimError(f"--pages: rtsim view did not start: {line.strip()} {view.stdout.read()[-500:]}")
+    browser = subprocess.Popen([sys.executable, "-c", _PAGES, f"http://127.0.0.1:{port}/", str(n), exe,
+                                json.dumps(CHROMIUM_ARGS)], cwd=ROOT, env=env, stdin=subprocess.PIPE,
+                               stdout=subprocess.PIPE, text=True)
+    procs.append(browser)
+    if browser.stdout.readline().strip() != "ready":
+        raise RtsimError("--pages: the browser pages did not come up")
+    return browser
+
+
 def wake_up_floor(n: int = 500, period: float = 0.001) -> dict:
     """Thread CPU (us) charged to a trivial array update right after a sleep of one period: what this
     machine bills a paced thread before it does any work (on a virtual machine the wake-up of a
@@ -92,7 +147,7 @@ def wake_up_floor(n: int = 500, period: float = 0.001) -> dict:
 
 def run_service_bench(duration: float = 60.0, can_interface: str | None = None, can_channel: str | None = None,
                       progress=None, record: bool = True, zenoh: bool = True, ecu: str = "light",
-                      spin: float = 0.0002) -> dict:
+                      spin: float = 0.0002, pages: int = 0) -> dict:
     from bridge.can_bus import LoopbackHub
     from rtsim.jit import cycles_per_second
     from rtsim.service.server import ServeOptions, Service
@@ -123,6 +178,7 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
         ecu_proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                     text=True)
         procs.append(ecu_proc)
+        browser = _open_pages(svc.zenoh.endpoints[0], pages, env, procs) if pages and zenoh else None
         floor = wake_up_floor()             # meanwhile the children import and connect
         time.sleep(max(0.0, 8.0 - 0.6))
         cpu0 = time.process_time()
@@ -147,6 +203,11 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
         if sub is not None:
             sub.stdin.close()
             subs = sub.stdout.read().strip()
+        page_stats = None
+        if browser is not None:
+            import json
+            browser.stdin.close()
+            page_stats = json.loads(browser.stdout.readline() or "null")
         ecu_proc.terminate()
     finally:
         for p in procs:
@@ -182,6 +243,7 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
         "can": summary.get("can"), "recording": summary.get("recording"),
         "zenoh_subscriber_counts": subs,
         "record": record, "zenoh": zenoh, "ecu": ecu, "spin_s": spin, "wake_up_floor": floor,
+        "pages": pages if zenoh else 0, "page_stats": page_stats,
         "budget_us": dict(BUDGET_US),
         "within_budget": all(pct(cpu_steps).get(k, 1e9) <= v for k, v in BUDGET_US.items()),
     }
@@ -213,4 +275,5 @@ def format_report(r: dict) -> str:
         f"steal {r['steal_s'] if r['steal_s'] is None else format(r['steal_s'], '.2f')} s",
         f"  CAN sent {can.get('sent')} received {can.get('received')}; recording {rec.get('written')} messages, "
         f"{rec.get('dropped')} dropped; Zenoh subscriber got {r['zenoh_subscriber_counts']}",
-    ])
+    ] + ([f"  rtsim view pages open all along: {r['pages']}, drawing at "
+          f"{', '.join(format(p['fps'], '.0f') for p in r['page_stats'])} frames/s"] if r.get("page_stats") else []))

@@ -131,11 +131,12 @@ def describe(config: dict) -> dict:
 def _pedal_scales(kind: str, vehicle: dict) -> dict:
     """What a full pedal or a full steering input means for this vehicle (the page's defaults): a car's
     wide-open throttle and the brake actuator's maximum from its config; a two-wheeler's full brakes from
-    its caliper limit, 30 degrees of lean."""
+    its caliper limit, 30 degrees of lean, 40 % throttle (wide open lifts the front wheel of a sport
+    motorcycle in the low gears: a person with a key cannot modulate it)."""
     if kind == "car":
         thr = ((vehicle.get("powertrain") or {}).get("throttle") or {}).get("max", 1.4)
         brk = (((vehicle.get("brakes") or {}).get("actuator")) or {}).get("max", 12000.0)
         return {"throttle_angle_cmd": thr, "brake_pressure_cmd": 0.6 * brk, "steering_wheel_angle_cmd": 3.0}
     pmax = (vehicle.get("brakes") or {}).get("max_pressure_kpa", 12000.0)
-    return {"throttle_cmd": 1.0, "brake_pressure_front_cmd": 0.6 * pmax, "brake_pressure_rear_cmd": 0.3 * pmax,
+    return {"throttle_cmd": 0.4, "brake_pressure_front_cmd": 0.6 * pmax, "brake_pressure_rear_cmd": 0.3 * pmax,
             "roll_angle_demand": math.radians(30.0)}

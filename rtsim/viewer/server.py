@@ -13,7 +13,8 @@ Per page, over its WebSocket (JSON text messages):
   (the service's reply to the page's command, with the page's own stamp and the query's round trip),
   ``pong`` (the server's clock, for the page's clock offset);
 - page -> server: ``pull`` (once per drawn frame: the page sets its own rate), ``drive`` (the user's
-  commands, rtsim.service.user_input channels), ``ping``.
+  commands, rtsim.service.user_input channels), ``reset`` (the service's reset op: the scenario's start
+  again), ``ping``.
 """
 from __future__ import annotations
 
@@ -128,6 +129,10 @@ class ViewServer:
                     self._drive_from[id(msg)] = ws
                     msg["_ws"] = id(msg)
                     self.drive.submit(msg)
+                elif kind == "reset":               # the page's reset button (after a fall, say)
+                    reply = await asyncio.get_running_loop().run_in_executor(
+                        None, lambda: self.relay.client.control("reset", timeout=30.0))
+                    await ws.send(encode({"type": "reset_ack", "reply": reply}))
                 elif kind == "ping":
                     await ws.send(encode({"type": "pong", "client_time": msg.get("client_time"),
                                           "server_time": time.time()}))

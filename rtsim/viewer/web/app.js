@@ -44,7 +44,8 @@ ws.onmessage = (ev) => {
   else if (m.type === 'pong') {
     const now = wall(), rtt = now - m.client_time;
     if (rtt < bestPing) { bestPing = rtt; clockOffset = m.server_time - (m.client_time + now) / 2; }
-  } else if (m.type === 'error') view.errors.push('server: ' + m.error);
+  } else if (m.type === 'reset_ack') { if (!m.reply.ok) view.drive.error = m.reply.error; }
+  else if (m.type === 'error') view.errors.push('server: ' + m.error);
 };
 ws.onclose = () => { $('run').textContent = 'disconnected from the rtsim view server'; };
 function ping() { if (ws.readyState === 1) ws.send(JSON.stringify({ type: 'ping', client_time: wall() })); }
@@ -118,6 +119,7 @@ $('release').onclick = () => {
   ws.send(JSON.stringify({ type: 'drive', seq: ++driveSeq, release: true }));
 };
 $('drive').onchange = () => { view.driveDeclined = !$('drive').checked; if (!$('drive').checked) $('release').onclick(); };
+$('reset').onclick = () => ws.send(JSON.stringify({ type: 'reset' }));
 $('camera').onchange = () => scene.setCamera($('camera').value);
 $('arrows').onchange = () => { scene.showArrows = $('arrows').checked; };
 $('friction').onchange = () => scene.setFriction($('friction').checked);
