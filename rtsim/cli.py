@@ -40,8 +40,10 @@ def _bench(args) -> int:
             raise RtsimError(f"--duration must be a positive number of seconds, got {args.duration}")
         if not 0 <= args.pages <= 16:
             raise RtsimError(f"--pages must be 0..16, got {args.pages}")
+        if not 0 <= args.pages_nice <= 19:
+            raise RtsimError(f"--pages-nice must be 0..19, got {args.pages_nice}")
         res = run_service_bench(args.duration, record=not args.no_record, zenoh=not args.no_zenoh, ecu=args.ecu,
-                                spin=args.spin, pages=args.pages)
+                                spin=args.spin, pages=args.pages, pages_nice=args.pages_nice)
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
     if args.suite == "dispatch":
@@ -248,6 +250,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="service suite: busy-wait before each step, s (>= 0.001: never sleep)")
     b.add_argument("--pages", type=int, default=0, metavar="N",
                    help="service suite: also N pages of `rtsim view` in headless Chromium, drawing the live car")
+    b.add_argument("--pages-nice", type=int, default=19, metavar="N",
+                   help="service suite: CPU priority (nice) of the pages' browser and view server (19: lowest; 0: "
+                        "the loop's)")
     b.add_argument("--ecu", choices=["light", "demo"], default="light",
                    help="service suite: command-only ECU (default) or the demo ECU decoding every frame")
     b.set_defaults(func=_bench)

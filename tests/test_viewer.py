@@ -140,6 +140,42 @@ def test_the_keyboard_drives_the_car_through_the_service(page, service):
     assert latency["key_to_model_ms"] is not None and latency["server_to_screen_ms"] is not None
 
 
+def test_a_recording_replays_with_the_recorded_poses(page, service):
+    """`rtsim view A.mcap B.mcap`: the service's recording (its complete chunks, while it still records)
+    twice side by side; seeking to a time between two samples shows, for both cars, the pose of the last
+    sample at or before it, exactly; play moves on."""
+    from bridge.mcap_recorder import read_recording
+
+    pg, logs, _view = page
+    _, _, rec = service
+    replay = ViewThread(recordings=[rec, rec])
+    pg2 = pg.context.new_page(viewport={"width": 1280, "height": 720})
+    pg2.on("console", lambda m: logs.append((m.type, m.text)))
+    pg2.on("pageerror", lambda e: logs.append(("pageerror", str(e))))
+    try:
+        pg2.goto(replay.url)
+        pg2.wait_for_function("window.rtsimView && rtsimView.replayLoaded === 2", timeout=EVENT * 1000)
+        n = pg2.evaluate("rtsimView.replay.recs[0].state.length")
+        msgs, _ = read_recording(rec)
+        state = [m.data for m in msgs["rtsim/xbw/state"]][:n]     # what the server read (the file grows)
+        k = int(0.8 * n)
+        assert state[k]["speed"] > 1.0                           # the car is moving there
+        t = 0.5 * (state[k]["time"] + state[k + 1]["time"])       # between two samples
+        pg2.evaluate(f"rtsimView.seek({t!r})")
+        pg2.wait_for_function(f"rtsimView.poses.length === 2 && rtsimView.poses.every(p => p.t === {state[k]['time']!r})",
+                              timeout=EVENT * 1000)
+        poses = pg2.evaluate("rtsimView.poses")
+        names = {"x": "pos_x", "y": "pos_y", "z": "pos_z", "roll": "roll_angle", "pitch": "pitch_angle",
+                 "yaw": "yaw_angle", "speed": "speed"}
+        for p in poses:
+            assert {k2: p[k2] for k2 in names} == {k2: state[k][c] for k2, c in names.items()}
+        pg2.click("#play")
+        pg2.wait_for_function(f"rtsimView.poses[0].t > {state[k]['time']!r}", timeout=EVENT * 1000)
+    finally:
+        pg2.close()
+        replay.close()
+
+
 def test_no_console_errors(page):
     pg, logs, _view = page
     errors = [text for kind, text in logs if kind in ("error", "pageerror")]

@@ -34,13 +34,17 @@ def launch(playwright):
 
 
 class ViewThread:
-    """A ViewServer (rtsim.viewer.server) on a free port of 127.0.0.1, in a thread with its own event loop."""
+    """A ViewServer (rtsim.viewer.server) on a free port of 127.0.0.1, in a thread with its own event loop:
+    of a live service (``vehicle_id``, ``connect``) or of recordings (``recordings``: MCAP paths)."""
 
-    def __init__(self, vehicle_id: str, connect: list[str], timeout: float = 60.0):
+    def __init__(self, vehicle_id: str | None = None, connect: list[str] | None = None, timeout: float = 60.0,
+                 recordings=()):
+        from rtsim.viewer.recording import Recording
         from rtsim.viewer.relay import Relay
         from rtsim.viewer.server import ViewServer
 
-        self.server = ViewServer(Relay(vehicle_id, connect), "127.0.0.1", 0)
+        relay = Relay(vehicle_id, connect) if not recordings else None
+        self.server = ViewServer(relay, "127.0.0.1", 0, recordings=[Recording(r) for r in recordings])
         self._started = threading.Event()
         self._loop = None
         self._stop = None

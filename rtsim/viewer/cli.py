@@ -2,7 +2,8 @@
 
 Binds 127.0.0.1 unless ``--bind`` names another address (the page then drives the car from another
 machine: only on a bench network you trust). Joins the service over Zenoh as an observer (peer mode,
-scouting off, tcp on 127.0.0.1 unless ``--allow-remote``).
+scouting off, tcp on 127.0.0.1 unless ``--allow-remote``). Given recordings (``rtsim view A.mcap [B.mcap]``)
+it serves them instead, without Zenoh: the page plays them with a timeline, two side by side.
 """
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ DEFAULT_PORT = 8470
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("recordings", nargs="*", metavar="FILE.mcap",
+                   help="play these recordings of rtsim serve instead (one, or two side by side) with a timeline")
     p.add_argument("--connect", metavar="ENDPOINT", action="append",
                    help=f"Zenoh endpoint of the service (repeatable; default {DEFAULT_ENDPOINT})")
     p.add_argument("--vehicle-id", help="vehicle id of the service (default: the one that answers)")
@@ -38,15 +41,24 @@ def main(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise RtsimError(f"--duration must be a positive number of seconds, got {args.duration}")
     check_libraries()
-    connect = args.connect or [DEFAULT_ENDPOINT]
-    vid = args.vehicle_id or discover_vehicle_id(connect, args.allow_remote)
-    relay = Relay(vid, connect, args.allow_remote)
-    server = ViewServer(relay, args.bind, args.port)
+    if len(args.recordings) > 2:
+        raise RtsimError(f"rtsim view: at most two recordings side by side, got {len(args.recordings)}")
+    if args.recordings:
+        from .recording import Recording
+
+        recs = [Recording(f) for f in args.recordings]
+        server = ViewServer(None, args.bind, args.port, recordings=recs)
+        what = " and ".join(f"{r.path.name} ({r.vehicle_id}, {r.state[-1]['time'] - r.state[0]['time']:.1f} s)"
+                            for r in recs)
+    else:
+        connect = args.connect or [DEFAULT_ENDPOINT]
+        vid = args.vehicle_id or discover_vehicle_id(connect, args.allow_remote)
+        server = ViewServer(Relay(vid, connect, args.allow_remote), args.bind, args.port)
+        what = f"vehicle {vid} at {', '.join(connect)}"
 
     def started(s):
         host = s.bind if ":" not in s.bind else f"[{s.bind}]"
-        print(f"rtsim view: vehicle {vid} at {', '.join(connect)}; open http://{host}:{s.port}/ "
-              f"(stop with Ctrl-C)", flush=True)
+        print(f"rtsim view: {what}; open http://{host}:{s.port}/ (stop with Ctrl-C)", flush=True)
 
     async def run():
         stop = asyncio.Event()

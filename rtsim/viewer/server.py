@@ -6,7 +6,9 @@ WebSocket and the few static files the page needs (``process_request`` answers p
 page's libraries (three.js, uPlot) come from ``web/node_modules``, installed by ``npm ci`` from the
 committed lockfile (tools/setup), and are served from there: nothing loads from the internet.
 
-Per page, over its WebSocket (JSON text messages):
+Per page, over its WebSocket (JSON text messages); a replay (recordings instead of a live service) sends
+``hello`` (``source`` replay, ``info.replays`` one scene per recording) and one ``recording`` message per
+file (rtsim.viewer.recording), then only answers pings: the page plays them with its timeline.
 
 - server -> page: ``hello`` (the scene: rtsim.viewer.scene.describe; ``source`` live), ``data`` (answer to a
   ``pull``: the samples new since the page's last pull, rtsim.viewer.relay.Relay.batch), ``drive_ack``
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import asyncio
 import http
+import itertools
 import json
 import mimetypes
 import time
@@ -66,11 +69,16 @@ def _file_response(path: Path):
 
 
 class ViewServer:
-    """The server (see the module docstring) for one source of samples: a live service (``Relay``)."""
+    """The server (see the module docstring) for one source of samples: a live service (``relay``) or one
+    or two recordings (``recordings``: rtsim.viewer.recording.Recording) the page plays with a timeline."""
 
-    def __init__(self, relay: Relay, bind: str = "127.0.0.1", port: int = 8470, config_timeout: float = 30.0):
+    def __init__(self, relay: Relay | None, bind: str = "127.0.0.1", port: int = 8470, config_timeout: float = 30.0,
+                 recordings=()):
         check_libraries()
         self.relay = relay
+        self.recordings = list(recordings)
+        if (relay is None) == (not self.recordings):
+            raise RtsimError("rtsim view: either a live service or recordings, not both")
         self.bind = bind
         self.port = port
         self.config_timeout = config_timeout
@@ -78,15 +86,20 @@ class ViewServer:
         self.pages = 0
         self.loop: asyncio.AbstractEventLoop | None = None
         self._conns: set = set()
-        self.drive = DriveSender(relay.client, self._drive_done)
-        self._drive_from: dict[int, object] = {}
+        self.drive = DriveSender(relay.client, self._drive_done) if relay is not None else None
+        self._drive_from: dict[int, object] = {}        # drive token -> the page that sent it
+        self._tokens = itertools.count(1)
         self._server = None
 
     # -- scene ------------------------------------------------------------------------------------------
     def info(self) -> dict:
         if self._info is None:
-            cfg = self.relay.config(timeout=self.config_timeout)
-            self._info = describe(cfg)
+            if self.relay is not None:
+                self._info = describe(self.relay.config(timeout=self.config_timeout))
+            else:
+                infos = [describe(r.config) for r in self.recordings]
+                self._info = {**infos[0], "replays": [{**i, "road": None, "file": r.path.name}
+                                                      for i, r in zip(infos, self.recordings)]}
         return self._info
 
     # -- HTTP -------------------------------------------------------------------------------------------
@@ -116,18 +129,27 @@ class ViewServer:
         last: dict[str, int] = {}
         try:
             info = await asyncio.get_running_loop().run_in_executor(None, self.info)
-            await ws.send(encode({"type": "hello", "source": "live", "info": info, "server_time": time.time()}))
+            source = "live" if self.relay is not None else "replay"
+            await ws.send(encode({"type": "hello", "source": source, "info": info, "server_time": time.time()}))
+            for i, rec in enumerate(self.recordings):
+                await ws.send(rec.payload(i))
             async for text in ws:
                 try:
                     msg = json.loads(text)
                 except ValueError:
                     continue
                 kind = msg.get("type") if isinstance(msg, dict) else None
+                if self.relay is None:
+                    if kind == "ping":
+                        await ws.send(encode({"type": "pong", "client_time": msg.get("client_time"),
+                                              "server_time": time.time()}))
+                    continue                        # a recording: the page plays it by itself
                 if kind == "pull":
                     await ws.send(self.relay.batch(last))
                 elif kind == "drive":
-                    self._drive_from[id(msg)] = ws
-                    msg["_ws"] = id(msg)
+                    token = next(self._tokens)
+                    self._drive_from[token] = ws
+                    msg["_ws"] = token
                     self.drive.submit(msg)
                 elif kind == "reset":               # the page's reset button (after a fall, say)
                     reply = await asyncio.get_running_loop().run_in_executor(
@@ -148,10 +170,10 @@ class ViewServer:
 
     def _drive_done(self, req: dict, reply: dict, seconds: float) -> None:
         """(DriveSender's thread) the service's reply, back to the page that sent the command."""
-        ws = self._drive_from.pop(req.get("_ws"), None)
-        for k in [k for k in self._drive_from if k != req.get("_ws")]:
-            if len(self._drive_from) > 64:               # replaced commands never get a reply
-                self._drive_from.pop(k, None)
+        token = req.get("_ws")
+        ws = self._drive_from.pop(token, None)
+        for k in [k for k in self._drive_from if k < token]:   # replaced by later ones: never answered
+            self._drive_from.pop(k, None)
         if ws is None or self.loop is None:
             return
         ack = encode({"type": "drive_ack", "seq": req.get("seq"), "t_page": req.get("t_page"),
@@ -178,5 +200,7 @@ class ViewServer:
             await stop.wait()
 
     def close(self) -> None:
-        self.drive.close()
-        self.relay.close()
+        if self.drive is not None:
+            self.drive.close()
+        if self.relay is not None:
+            self.relay.close()

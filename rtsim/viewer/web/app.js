@@ -1,6 +1,8 @@
-// rtsim view: the page. A source of samples (the live service through the server's WebSocket) feeds the
-// scene, the plots and the panel; the user's inputs go back as the service's `drive` commands.
-// Each drawn frame pulls what is new (the page sets its own rate: nothing queues for a slow page).
+// rtsim view: the page. A source of samples feeds the scene, the plots and the panel: the live service
+// through the server's WebSocket (each drawn frame pulls what is new: the page sets its own rate, nothing
+// queues for a slow page; the user's inputs go back as the service's `drive` commands), or one or two
+// recordings the server sends whole, played here with a timeline (play, pause, scrub, speed); a second
+// recording's car is drawn beside the first and its channels plotted dashed.
 //
 // Measured and shown:
 // - frame rate: frames drawn over the last second;
@@ -27,6 +29,7 @@ const input = new Input();
 let info = null, state = null, sensors = null, status = null, commands = null;
 let pulling = false, clockOffset = 0, bestPing = Infinity, simWall = null;
 const simWallSamples = [];
+let replay = null;          // a replay: {recs: [{state, sensors, status, times}], t, t0, t1, playing}
 let driveSeq = 0, lastSent = null, lastSentAt = 0, newState = false, stateRx = 0;
 const rtts = [], queries = [], screen = [], modelScreen = [];
 
@@ -38,7 +41,8 @@ function fmt(x, d = 1) { return x == null || !Number.isFinite(x) ? '–' : x.toF
 const ws = new WebSocket(`ws://${location.host}/ws`);
 ws.onmessage = (ev) => {
   const m = JSON.parse(ev.data);
-  if (m.type === 'hello') start(m.info);
+  if (m.type === 'hello') start(m.info, m.source);
+  else if (m.type === 'recording') loaded(m);
   else if (m.type === 'data') take(m);
   else if (m.type === 'drive_ack') ack(m);
   else if (m.type === 'pong') {
@@ -50,10 +54,21 @@ ws.onmessage = (ev) => {
 ws.onclose = () => { $('run').textContent = 'disconnected from the rtsim view server'; };
 function ping() { if (ws.readyState === 1) ws.send(JSON.stringify({ type: 'ping', client_time: wall() })); }
 
-function start(i) {
+function start(i, source) {
   info = view.info = i;
   $('vehicle').textContent = `${i.vehicle_id} · ${i.name}`;
   scene.build(i);
+  if (source === 'replay') {
+    replay = view.replay = { recs: [], t: 0, t0: 0, t1: 0, playing: false, speed: 1 };
+    for (const r of i.replays.slice(1)) scene.addVehicle(r, '#1f5fbf');
+    plots.suffixes = i.replays.length > 1 ? ['', ' (B)'] : [''];
+    plots.cap = 1e7;
+    plots.until = 0;
+    plots.refill = refill;
+    $('timeline').hidden = false;
+    $('files').textContent = i.replays.map((r, k) => `${k ? 'B (blue)' : 'A (red)'}: ${r.file}`).join(' · ');
+    for (const id of ['drive', 'takeover', 'release', 'settings-btn', 'reset']) $(id).disabled = true;
+  }
   const defaults = i.kind === 'car' ? ['speed', 'yaw_rate', 'steering_wheel_angle']
     : ['speed', 'roll_angle', 'steer_angle'];
   plots.init(i, defaults);
@@ -62,6 +77,64 @@ function start(i) {
   setInterval(() => { bestPing *= 1.02; ping(); }, 2000);     // (let the best sample age: clocks drift)
   requestAnimationFrame(frame);
 }
+
+// ---- a replay ----------------------------------------------------------------------------------------
+function loaded(m) {
+  const times = Float64Array.from(m.state, (s) => s.time);
+  replay.recs[m.index] = { state: m.state, sensors: m.sensors, status: m.status, times, file: m.file };
+  const all = replay.recs.filter(Boolean);
+  replay.t0 = Math.min(...all.map((r) => r.times[0]));
+  replay.t1 = Math.max(...all.map((r) => r.times[r.times.length - 1]));
+  if (m.index === 0) replay.t = replay.t0;
+  refill();
+  view.replayLoaded = all.length;
+}
+
+function refill() {
+  if (!replay) return;
+  for (const s of plots.series.values()) { s.t.length = 0; s.v.length = 0; }
+  replay.recs.forEach((r, k) => { if (r) { plots.push(r.state, k); plots.push(r.sensors, k); } });
+}
+
+function atOrBefore(times, t) {                 // index of the last sample at or before t (the first if none)
+  let lo = 0, hi = times.length;
+  while (lo < hi) { const m = (lo + hi) >> 1; if (times[m] <= t + 1e-9) lo = m + 1; else hi = m; }
+  return Math.max(0, lo - 1);
+}
+
+function showReplay(dt) {
+  const R = replay;
+  if (R.playing) {
+    R.t += dt * R.speed;
+    if (R.t >= R.t1) { R.t = R.t1; R.playing = false; $('play').textContent = 'play'; }
+  }
+  R.recs.forEach((r, k) => {
+    if (!r) return;
+    const i = atOrBefore(r.times, R.t);
+    scene.update(r.state[i], r.sensors[i], dt, k);
+    if (k === 0) {
+      state = r.state[i];
+      const j = r.status.length ? atOrBefore(Float64Array.from(r.status, (s) => s.time), R.t) : -1;
+      status = j >= 0 ? r.status[j] : null;
+    }
+  });
+  plots.until = R.t;
+  plots.dirty = true;
+  if (!view.scrubbing) $('scrub').value = String(Math.round(1000 * (R.t - R.t0) / Math.max(1e-9, R.t1 - R.t0)));
+  $('ttext').textContent = `${R.t.toFixed(2)} / ${R.t1.toFixed(2)} s`;
+}
+
+// tests and scripts: show time t (s) of the recording(s), paused
+view.seek = (t) => { if (replay) { replay.t = Math.min(replay.t1, Math.max(replay.t0, t)); replay.playing = false; } };
+$('play').onclick = () => {
+  if (!replay) return;
+  if (replay.t >= replay.t1) replay.t = replay.t0;
+  replay.playing = !replay.playing;
+  $('play').textContent = replay.playing ? 'pause' : 'play';
+};
+$('scrub').oninput = () => { view.scrubbing = true; view.seek(replay.t0 + (replay.t1 - replay.t0) * Number($('scrub').value) / 1000); };
+$('scrub').onchange = () => { view.scrubbing = false; };
+$('speed').onchange = () => { if (replay) replay.speed = Number($('speed').value); };
 
 function take(m) {
   pulling = false;
@@ -124,6 +197,7 @@ $('camera').onchange = () => scene.setCamera($('camera').value);
 $('arrows').onchange = () => { scene.showArrows = $('arrows').checked; };
 $('friction').onchange = () => scene.setFriction($('friction').checked);
 window.addEventListener('keydown', (e) => {
+  if (e.key === ' ' && replay) { e.preventDefault(); $('play').onclick(); }
   if (e.key === 'c') { const o = ['chase', 'cockpit', 'free']; $('camera').value = o[(o.indexOf($('camera').value) + 1) % 3]; scene.setCamera($('camera').value); }
   if (e.key === 't') $('takeover').checked = !$('takeover').checked;
 });
@@ -158,10 +232,13 @@ $('settings-reset').onclick = () => { input.resetMap(); settings(); };
 let last = performance.now(), fpsCount = 0, fpsT0 = performance.now(), panelAt = 0;
 function frame(now) {
   const dt = Math.min(0.1, (now - last) / 1000); last = now;
-  if (!pulling && ws.readyState === 1) { ws.send('{"type":"pull"}'); pulling = true; }
   const inp = input.poll(dt);
-  drive(inp, now);
-  if (state) scene.update(state, sensors, dt);
+  if (replay) showReplay(dt);
+  else {
+    if (!pulling && ws.readyState === 1) { ws.send('{"type":"pull"}'); pulling = true; }
+    drive(inp, now);
+    if (state) scene.update(state, sensors, dt);
+  }
   scene.render(dt);
   view.frames++; fpsCount++;
   if (newState && state) {
@@ -176,6 +253,7 @@ function frame(now) {
   plots.draw(now);
   if (now - panelAt > 250) { panelAt = now; panel(inp); }
   view.pose = scene.pose;
+  view.poses = scene.poses;
   view.ready = true;
   requestAnimationFrame(frame);
 }

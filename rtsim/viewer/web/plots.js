@@ -4,16 +4,22 @@
 import uPlot from 'uplot';
 
 const WINDOW = 20;          // s of simulation time shown
-const CAP = 4000;           // samples kept per series
+const CAP = 12000;          // samples kept per series (live; a replay keeps all)
 const PALETTE = ['#c0282d', '#1f5fbf', '#2a9d4a', '#b07a00', '#7a3fb0', '#0a8a8a'];
 
 class Series {
-  constructor() { this.t = []; this.v = []; }
+  constructor(cap) { this.t = []; this.v = []; this.cap = cap; }
   push(t, v) {
     if (this.t.length && t < this.t[this.t.length - 1]) { this.t.length = 0; this.v.length = 0; }   // a reset
     this.t.push(t); this.v.push(v);
-    if (this.t.length > CAP) { this.t.splice(0, this.t.length - CAP); this.v.splice(0, this.v.length - CAP); }
+    if (this.t.length > this.cap) { this.t.splice(0, this.t.length - this.cap); this.v.splice(0, this.v.length - this.cap); }
   }
+}
+
+function firstAtOrAfter(t, x) {      // index of the first t[i] >= x (t ascending)
+  let lo = 0, hi = t.length;
+  while (lo < hi) { const m = (lo + hi) >> 1; if (t[m] < x) lo = m + 1; else hi = m; }
+  return lo;
 }
 
 export class Plots {
@@ -25,6 +31,9 @@ export class Plots {
     this.health = { t: [], lat: [], cpu50: [], cpu99: [] };
     this.dirty = false;
     this.lastDraw = 0;
+    this.suffixes = [''];              // one per source: '' and ' (B)' for a second recording
+    this.until = null;                 // a replay: the time shown last (live: the newest sample)
+    this.cap = CAP;
   }
 
   init(info, defaults) {
@@ -57,19 +66,26 @@ export class Plots {
   pick(names) {
     this.picked = names;
     for (const o of this.picker.options) o.selected = names.includes(o.value);
-    for (const n of names) if (!this.series.has(n)) this.series.set(n, new Series());
+    this.keys = [];
+    for (const n of names) for (const x of this.suffixes) this.keys.push(n + x);
+    for (const k of this.keys) if (!this.series.has(k)) this.series.set(k, new Series(this.cap));
+    if (this.refill) this.refill();           // a replay: the picked channels from its samples
     if (this.chart) this.chart.destroy();
     this.chart = new uPlot({
       width: 500, height: 170, legend: { live: false }, scales: { x: { time: false } },
       axes: [{}, { size: 50 }],
-      series: [{ label: 't [s]' }, ...names.map((n, i) => ({ label: `${n} [${this.units[n]}]`, stroke: PALETTE[i % 6] }))],
+      series: [{ label: 't [s]' }, ...this.keys.map((k, i) => {
+        const n = k.replace(' (B)', '');
+        return { label: `${k} [${this.units[n]}]`, stroke: PALETTE[this.picked.indexOf(n) % 6], dash: k.endsWith('(B)') ? [6, 4] : undefined };
+      })],
     }, this.data(), this.el);
   }
 
-  push(samples) {                        // state or sensor samples (objects with time and channels)
+  push(samples, source = 0) {            // state or sensor samples (objects with time and channels)
+    const x = this.suffixes[source] || '';
     for (const s of samples) {
       for (const n of this.picked) {
-        if (n in s) this.series.get(n).push(s.time, s[n] === null ? NaN : s[n]);
+        if (n in s) this.series.get(n + x).push(s.time, s[n] === null ? NaN : s[n]);
       }
     }
     if (samples.length) this.dirty = true;
@@ -88,16 +104,16 @@ export class Plots {
 
   data() {
     // one time base: the first picked series' (state channels share it; sensors are more frequent)
-    if (!this.picked.length) return [[]];
-    const base = this.series.get(this.picked[0]);
-    const t = base.t, t0 = t.length ? t[t.length - 1] - WINDOW : 0;
-    let i0 = t.findIndex((x) => x >= t0); if (i0 < 0) i0 = t.length;
-    const out = [t.slice(i0)];
-    for (const n of this.picked) {
-      const s = this.series.get(n);
-      if (s === base) { out.push(s.v.slice(i0)); continue; }
-      const vals = []; let j = 0;              // sample-and-hold onto the base's times
-      for (const x of out[0]) { while (j + 1 < s.t.length && s.t[j + 1] <= x) j++; vals.push(s.t.length ? s.v[j] : NaN); }
+    if (!this.keys || !this.keys.length) return [[]];
+    const base = this.series.get(this.keys[0]);
+    const t = base.t, end = this.until ?? (t.length ? t[t.length - 1] : 0);
+    const i0 = firstAtOrAfter(t, end - WINDOW), i1 = firstAtOrAfter(t, end + 1e-9);
+    const out = [t.slice(i0, i1)];
+    for (const k of this.keys) {
+      const s = this.series.get(k);
+      if (s === base) { out.push(s.v.slice(i0, i1)); continue; }
+      const vals = []; let j = Math.max(0, firstAtOrAfter(s.t, out[0][0] ?? 0) - 1);   // sample-and-hold onto the base's times
+      for (const x of out[0]) { while (j + 1 < s.t.length && s.t[j + 1] <= x) j++; vals.push(s.t.length && s.t[j] <= x ? s.v[j] : NaN); }
       out.push(vals);
     }
     return out;

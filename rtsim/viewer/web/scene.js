@@ -62,8 +62,10 @@ export class Scene3D {
     this.controls.enabled = false;
     this.showArrows = false;
     this.showFriction = false;
-    this.vehicle = null;
+    this.vehicle = null;             // the one the cameras follow (a replay's first recording)
+    this.others = [];                // a second recording's vehicle, side by side
     this.pose = null;
+    this.poses = [];
     this._chase = null;
     this._tmp = new THREE.Vector3();
     this._ray = new THREE.Raycaster();
@@ -89,7 +91,7 @@ export class Scene3D {
     this.info = info;
     this.road = info.road;
     this.buildRoad(info.road);
-    this.vehicle = info.kind === 'two_wheeler' ? this.buildTwoWheeler(info.shape) : this.buildCar(info.shape);
+    this.vehicle = this.buildVehicle(info, '#c0282d');
     this.scene.add(this.vehicle.group);
     this.arrows = [];
     for (const w of this.vehicle.wheels) {
@@ -98,6 +100,17 @@ export class Scene3D {
       this.scene.add(a);
       this.arrows.push(a);
     }
+  }
+
+  buildVehicle(info, colour) {
+    return info.kind === 'two_wheeler' ? this.buildTwoWheeler(info.shape, colour) : this.buildCar(info.shape, colour);
+  }
+
+  // a second vehicle (a second recording played beside the first)
+  addVehicle(info, colour) {
+    const v = this.buildVehicle(info, colour);
+    this.others.push(v);
+    this.scene.add(v.group);
   }
 
   buildRoad(road) {
@@ -177,10 +190,10 @@ export class Scene3D {
     return spin;
   }
 
-  buildCar(s) {
+  buildCar(s, colour) {
     const group = new THREE.Group();
     const b = s.body;
-    const paint = new THREE.MeshLambertMaterial({ color: '#c0282d' });
+    const paint = new THREE.MeshLambertMaterial({ color: colour });
     const len = b.x_front - b.x_rear, lowH = 0.5;
     const lower = new THREE.Mesh(new THREE.BoxGeometry(len, b.width, lowH), paint);
     lower.position.set((b.x_front + b.x_rear) / 2, 0, b.z_floor + lowH / 2 + 0.05);
@@ -205,9 +218,9 @@ export class Scene3D {
     return { kind: 'car', group, wheels, eye, shape: s };
   }
 
-  buildTwoWheeler(s) {
+  buildTwoWheeler(s, colour) {
     const group = new THREE.Group();                 // origin: the swingarm pivot, rear frame axes
-    const paint = new THREE.MeshLambertMaterial({ color: '#1f5fbf' });
+    const paint = new THREE.MeshLambertMaterial({ color: colour === '#c0282d' ? '#1f5fbf' : colour });
     const dark = new THREE.MeshLambertMaterial({ color: '#2a2a2e' });
     const head = new THREE.Vector3(...s.steer_head), cg = new THREE.Vector3(...s.cg);
     const frameLen = head.clone().setY(0).length();
@@ -257,23 +270,27 @@ export class Scene3D {
   }
 
   // ---- one sample ---------------------------------------------------------------------------------------
-  update(st, sens, dt) {
-    const v = this.vehicle;
+  // vehicle k (0: the followed one) posed from one state sample
+  update(st, sens, dt, k = 0) {
+    const v = k === 0 ? this.vehicle : this.others[k - 1];
     if (!v || !st) return;
     const g = v.group;
     g.position.set(st.pos_x, st.pos_y, st.pos_z);
     g.rotation.set(st.roll_angle, st.pitch_angle, st.yaw_angle, 'ZYX');
     g.updateMatrixWorld(true);
-    this.pose = { t: st.time, x: st.pos_x, y: st.pos_y, z: st.pos_z, roll: st.roll_angle, pitch: st.pitch_angle,
-                  yaw: st.yaw_angle, speed: st.speed };
-    if (v.kind === 'car') this.updateCar(v, st, sens || {}, dt);
-    else this.updateTwoWheeler(v, st, dt);
+    this.poses[k] = { t: st.time, x: st.pos_x, y: st.pos_y, z: st.pos_z, roll: st.roll_angle, pitch: st.pitch_angle,
+                      yaw: st.yaw_angle, speed: st.speed };
+    const arrows = k === 0;
+    if (v.kind === 'car') this.updateCar(v, st, sens || {}, dt, arrows);
+    else this.updateTwoWheeler(v, st, dt, arrows);
+    if (k !== 0) return;
+    this.pose = this.poses[0];
     // the ground plane follows the vehicle (in whole tiles, so the grid stays put on the road)
     const gx = Math.round(st.pos_x / TILE) * TILE, gy = Math.round(st.pos_y / TILE) * TILE;
     this.ground.position.set(gx, gy, this.road.type === 'mesh' ? this.groundZ : this.roadHeight(gx, gy) - 0.002);
   }
 
-  updateCar(v, st, sens, dt) {
+  updateCar(v, st, sens, dt, arrows) {
     const s = v.shape, inv = new THREE.Matrix4().copy(v.group.matrixWorld).invert();
     for (const w of v.wheels) {
       // the wheel stands on the road: its centre at the road height + the loaded radius, in the body frame
@@ -290,10 +307,10 @@ export class Scene3D {
       else w.angle += (st['wheel_speed_' + w.corner] || 0) * dt;
       w.spin.rotation.y = w.angle;
     }
-    this.updateArrows(v, st, ['fl', 'fr', 'rl', 'rr']);
+    if (arrows) this.updateArrows(v, st, ['fl', 'fr', 'rl', 'rr']);
   }
 
-  updateTwoWheeler(v, st, dt) {
+  updateTwoWheeler(v, st, dt, arrows) {
     v.fork.quaternion.setFromAxisAngle(v.axis, st.steer_angle || 0);
     // fork travel shortens the fork along the steering axis (the wheel moves towards the head)
     v.frontMount.position.copy(v.frontDesign).addScaledVector(v.axis, st.fork_travel || 0);
@@ -302,7 +319,7 @@ export class Scene3D {
     r.angle = Number.isFinite(st.wheel_angle_rear) ? st.wheel_angle_rear : r.angle + (st.wheel_speed_rear || 0) * dt;
     f.spin.rotation.y = f.angle;
     r.spin.rotation.y = r.angle;
-    this.updateArrows(v, st, ['front', 'rear']);
+    if (arrows) this.updateArrows(v, st, ['front', 'rear']);
   }
 
   updateArrows(v, st, corners) {
