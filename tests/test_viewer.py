@@ -149,7 +149,7 @@ def test_a_recording_replays_with_the_recorded_poses(page, service):
     pg, logs, _view = page
     _, _, rec = service
     replay = ViewThread(recordings=[rec, rec])
-    pg2 = pg.context.new_page(viewport={"width": 1280, "height": 720})
+    pg2 = pg.context.browser.new_page(viewport={"width": 1280, "height": 720})
     pg2.on("console", lambda m: logs.append((m.type, m.text)))
     pg2.on("pageerror", lambda e: logs.append(("pageerror", str(e))))
     try:

@@ -174,11 +174,15 @@ class ViewServer:
         ws = self._drive_from.pop(token, None)
         for k in [k for k in self._drive_from if k < token]:   # replaced by later ones: never answered
             self._drive_from.pop(k, None)
-        if ws is None or self.loop is None:
+        loop = self.loop
+        if ws is None or loop is None or loop.is_closed():
             return
         ack = encode({"type": "drive_ack", "seq": req.get("seq"), "t_page": req.get("t_page"),
                       "query_s": seconds, "reply": reply})
-        asyncio.run_coroutine_threadsafe(self._send(ws, ack), self.loop)
+        try:
+            loop.call_soon_threadsafe(lambda: asyncio.ensure_future(self._send(ws, ack)))
+        except RuntimeError:                             # the server stopped meanwhile
+            pass
 
     @staticmethod
     async def _send(ws, text: str) -> None:

@@ -26,6 +26,7 @@ view.setVehicleVisible = (on) => { if (scene.vehicle) scene.vehicle.group.visibl
 const scene = new Scene3D($('view'));
 const plots = new Plots($('plot-channels'), $('plot-health'), $('pick'));
 const input = new Input();
+view.plots = plots;
 let info = null, state = null, sensors = null, status = null, commands = null;
 let pulling = false, clockOffset = 0, bestPing = Infinity, simWall = null;
 const simWallSamples = [];
@@ -93,7 +94,12 @@ function loaded(m) {
 function refill() {
   if (!replay) return;
   for (const s of plots.series.values()) { s.t.length = 0; s.v.length = 0; }
-  replay.recs.forEach((r, k) => { if (r) { plots.push(r.state, k); plots.push(r.sensors, k); } });
+  for (const k in plots.health) plots.health[k].length = 0;
+  replay.recs.forEach((r, k) => {
+    if (!r) return;
+    plots.push(r.state, k, 'state'); plots.push(r.sensors, k, 'sensors');
+    if (k === 0) for (const st of r.status) plots.pushStatus(st);
+  });
 }
 
 function atOrBefore(times, t) {                 // index of the last sample at or before t (the first if none)
@@ -140,9 +146,9 @@ function take(m) {
   pulling = false;
   if (m.state && m.state.length) {
     state = m.state[m.state.length - 1]; newState = true; stateRx = m.state_rx;
-    plots.push(m.state);
+    plots.push(m.state, 0, 'state');
   }
-  if (m.sensors && m.sensors.length) { sensors = m.sensors[m.sensors.length - 1]; plots.push(m.sensors); }
+  if (m.sensors && m.sensors.length) { sensors = m.sensors[m.sensors.length - 1]; plots.push(m.sensors, 0, 'sensors'); }
   if (m.commands && m.commands.length) commands = m.commands[m.commands.length - 1];
   if (m.status && m.status.length) {
     status = m.status[m.status.length - 1];

@@ -27,6 +27,7 @@ export class Plots {
     this.el = el; this.healthEl = healthEl; this.picker = picker;
     this.series = new Map();            // channel -> Series
     this.units = {};
+    this.group = {};                    // channel -> the topic it is plotted from (state, else sensors)
     this.picked = [];
     this.health = { t: [], lat: [], cpu50: [], cpu99: [] };
     this.dirty = false;
@@ -41,8 +42,9 @@ export class Plots {
     const opts = [];
     for (const group of ['state', 'sensors']) {
       for (const [name, unit] of ch[group] || []) {        // (name, unit, meaning)
-        if (this.units[name] !== undefined) continue;
+        if (this.units[name] !== undefined) continue;      // (a sensor of a state channel's name: the state's)
         this.units[name] = unit;
+        this.group[name] = group;
         opts.push(`<option value="${name}">${name} [${unit}]</option>`);
       }
     }
@@ -81,11 +83,12 @@ export class Plots {
     }, this.data(), this.el);
   }
 
-  push(samples, source = 0) {            // state or sensor samples (objects with time and channels)
+  push(samples, source = 0, group = 'state') {   // state or sensor samples (objects with time and channels)
     const x = this.suffixes[source] || '';
+    const names = this.picked.filter((n) => this.group[n] === group);
     for (const s of samples) {
-      for (const n of this.picked) {
-        if (n in s) this.series.get(n + x).push(s.time, s[n] === null ? NaN : s[n]);
+      for (const n of names) {
+        if (n in s) this.series.get(n + x).push(s.time, s[n]);     // (null: a gap)
       }
     }
     if (samples.length) this.dirty = true;
@@ -95,10 +98,11 @@ export class Plots {
     const h = this.health;
     if (h.t.length && st.sim_time < h.t[h.t.length - 1]) for (const k in h) h[k].length = 0;
     h.t.push(st.sim_time);
-    h.lat.push(st.lateness_p99 == null ? NaN : st.lateness_p99 * 1e3);
-    h.cpu50.push(st.cpu_p50 == null ? NaN : st.cpu_p50 * 1e6);
-    h.cpu99.push(st.cpu_p99 == null ? NaN : st.cpu_p99 * 1e6);
-    if (h.t.length > 600) for (const k in h) h[k].splice(0, h[k].length - 600);
+    h.lat.push(st.lateness_p99 == null ? null : st.lateness_p99 * 1e3);
+    h.cpu50.push(st.cpu_p50 == null ? null : st.cpu_p50 * 1e6);
+    h.cpu99.push(st.cpu_p99 == null ? null : st.cpu_p99 * 1e6);
+    const keep = this.cap > CAP ? 1e6 : 600;              // live: the last minute; a replay: all
+    if (h.t.length > keep) for (const k in h) h[k].splice(0, h[k].length - keep);
     this.healthDirty = true;
   }
 
@@ -113,7 +117,7 @@ export class Plots {
       const s = this.series.get(k);
       if (s === base) { out.push(s.v.slice(i0, i1)); continue; }
       const vals = []; let j = Math.max(0, firstAtOrAfter(s.t, out[0][0] ?? 0) - 1);   // sample-and-hold onto the base's times
-      for (const x of out[0]) { while (j + 1 < s.t.length && s.t[j + 1] <= x) j++; vals.push(s.t.length && s.t[j] <= x ? s.v[j] : NaN); }
+      for (const x of out[0]) { while (j + 1 < s.t.length && s.t[j + 1] <= x) j++; vals.push(s.t.length && s.t[j] <= x ? s.v[j] : null); }
       out.push(vals);
     }
     return out;

@@ -83,6 +83,8 @@ export class Scene3D {
     const w = this.canvas.clientWidth, h = this.canvas.clientHeight;
     this.renderer.setSize(Math.round(w * this.scale), Math.round(h * this.scale), false);
     this.camera.aspect = w / Math.max(1, h);
+    // the panels cover the window's right and left edges: the view's centre a little left of the middle
+    this.camera.setViewOffset(w, h, 0.08 * w, 0, w, h);
     this.camera.updateProjectionMatrix();
   }
 
