@@ -24,6 +24,7 @@ STATUS_FIELDS = ["time", "vehicle_id", "mode", "run_state", "sim_time", "steps",
                  "skipped_steps", "catch_up_steps", "stalls", "lateness_p50", "lateness_p99",
                  "lateness_max", "cpu_p50", "cpu_p99", "cpu_max", "steal", "faults", "rejected",
                  "accepted_frames", "bus_errors", "recorder", "zenoh_dropped", "scenario", "message"]
+STATUS_OPTIONAL = ["wall_time", "drivers", "user"]     # the user command source's (absent from older recordings)
 
 
 def strict_loads(b: bytes):
@@ -66,7 +67,7 @@ def test_schema_fields_come_from_the_channel_dictionary():
     assert cmd["required"] == ["time", "source"]
     assert cmd["properties"]["source"]["enum"] == ["can", "zenoh", "safe"]
     status = P.SCHEMAS["status"][1]
-    assert list(status["properties"]) == STATUS_FIELDS and status["required"] == STATUS_FIELDS
+    assert list(status["properties"]) == STATUS_FIELDS + STATUS_OPTIONAL and status["required"] == STATUS_FIELDS
     assert status["properties"]["mode"]["enum"] == ["realtime", "lockstep", "fast"]
     assert status["properties"]["run_state"]["enum"] == ["running", "paused", "stopped"]
     for key in P.TOPIC_KEYS:
@@ -192,6 +193,13 @@ def test_status_and_commands_payloads_validate():
                                                run_state="paused", lateness_p99=None)):
         msg = strict_loads(P.encode_json(s))
         assert P.validation_errors("status", msg) == []
+    user = {"wall_time": 1.7e9, "drivers": {"throttle_angle_cmd": "user", "brake_pressure_cmd": "ecu",
+                                            "steering_wheel_angle_cmd": "safe"},
+            "user": {"channels": {"throttle_angle_cmd": 0.3}, "takeover": False, "seq": 4, "requests": 9,
+                     "accepted": True}}
+    assert P.validation_errors("status", strict_loads(P.encode_json(status_example(**user)))) == []
+    assert any("'driver' is not one of" in e for e in
+               P.validation_errors("status", status_example(**{**user, "drivers": {"x": "driver"}})))
     nan_stats = strict_loads(P.encode_json(status_example(lateness_p50=float("nan"), cpu_max=float("inf"))))
     assert P.validation_errors("status", nan_stats) == []
     for c in ({"time": 0.1, "source": "safe"},
