@@ -14,13 +14,13 @@ import io
 import os
 
 import numpy as np
+import playwright.sync_api as playwright_api      # the test extra (a hard dependency of the suite)
 import pytest
 
 from service_harness import ServiceProcess, free_port
 from viewer_harness import ViewThread, launch, require_page_libraries
 from waits import EVENT
 
-playwright_api = pytest.importorskip("playwright.sync_api", reason="playwright (the test extra) not installed")
 SHOT = os.environ.get("RTSIM_VIEW_SCREENSHOT")     # save the test's screenshot here (the README's)
 
 
