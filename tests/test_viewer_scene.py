@@ -1,0 +1,65 @@
+"""What `rtsim view` draws, described from the configuration (rtsim.viewer.scene), against the files it
+comes from: the car's wheel centres from its hardpoints relative to its centre of mass, its tyre from the
+.tir file; the campus road as the survey mesh the service builds (same vertices, triangles, friction);
+a grade's plane; a road file that cannot be read drawn flat with the reason."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtsim.road.config import read_road_config
+from rtsim.road.survey import read_survey, survey_to_mesh
+from rtsim.vehicle.car.config import load_vehicle
+from rtsim.viewer.scene import car_shape, road_description, two_wheeler_shape
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_car_shape_from_its_config():
+    path = ROOT / "configs" / "vehicles" / "xbw.toml"
+    cfg, _ = load_vehicle(path)
+    d = cfg.model_dump(mode="json")
+    s = car_shape(d, path)
+    cg = np.array(d["chassis"]["cg_m"])
+    wc = np.array(d["front"]["hardpoints"]["wheel_centre"])
+    assert s["wheels"]["fl"] == pytest.approx(list(wc - cg))
+    assert s["wheels"]["fr"] == pytest.approx([wc[0] - cg[0], -wc[1] - cg[1], wc[2] - cg[2]])
+    assert s["wheel_radius"] == 0.289 and s["tyre_kz"] == 165000.0      # michelin_155_80_r13.tir
+    assert s["body"]["x_front"] > s["wheels"]["fl"][0] > s["wheels"]["rl"][0] > s["body"]["x_rear"]
+
+
+def test_two_wheeler_points_from_its_geometry():
+    from rtsim.vehicle.motorcycle.config import load_motorcycle
+
+    cfg, _ = load_motorcycle(ROOT / "configs" / "vehicles" / "motorcycle.toml")
+    d = cfg.model_dump(mode="json")
+    s = two_wheeler_shape(d)
+    px, pz = d["geometry"]["swingarm_pivot_m"]
+    assert s["front_wheel"][0] - s["rear_wheel"][0] == pytest.approx(d["geometry"]["wheelbase_m"])
+    assert s["rear_wheel"] == pytest.approx([-px, 0.0, d["rear_wheel"]["radius_m"] - pz])
+    # the steering axis leans back by the caster angle and meets the ground one trail ahead of the front contact
+    ax = np.array(s["steer_axis"])
+    assert np.degrees(np.arctan2(-ax[0], ax[2])) == pytest.approx(d["geometry"]["caster_deg"])
+    head = np.array(s["steer_head"]) + [px, 0.0, pz]
+    ground_x = head[0] - head[2] * ax[0] / ax[2]
+    assert ground_x == pytest.approx(d["geometry"]["wheelbase_m"] + d["geometry"]["trail_m"])
+
+
+def test_roads_as_drawn(tmp_path):
+    campus = ROOT / "configs" / "roads" / "campus.toml"
+    r = road_description(campus)
+    cfg = read_road_config(campus)
+    mesh = survey_to_mesh(read_survey(campus.parent / cfg.survey), cfg.grid_spacing, cfg.alpha_radius, cfg.mu,
+                          cfg.rolling_resistance)
+    assert r["type"] == "mesh"
+    assert np.array(r["vertices"]).reshape(-1, 3) == pytest.approx(mesh.vertices, abs=1e-4)
+    assert np.array_equal(np.array(r["triangles"]).reshape(-1, 3), mesh.triangles)
+    assert np.array(r["mu"]) == pytest.approx(mesh.tri_mu, abs=1e-4)
+    g = road_description(ROOT / "configs" / "roads" / "grade_5pct.toml")
+    assert (g["type"], g["grade"], g["heading"]) == ("grade", 0.05, 0.0)
+    bad = tmp_path / "bad.toml"
+    bad.write_text('type = "grade"\ngrade = 3.0\n')
+    f = road_description(bad)
+    assert f["type"] == "flat" and "grade" in f["note"] and "drawn flat" in f["note"]
