@@ -214,9 +214,10 @@ export class Scene3D {
       steer.add(spin); mount.add(steer); group.add(mount);
       wheels.push({ corner: c, design: new THREE.Vector3(p[0], p[1], p[2]), mount, steer, spin, angle: 0 });
     }
-    const eye = new THREE.Object3D();
-    eye.position.set(s.wheels.fl[0] * 0.25 + s.wheels.rl[0] * 0.75 * 0.4, s.wheels.fl[1] * 0.45, b.z_floor + 1.0);
+    const eye = new THREE.Object3D();        // the driver's eyes: behind the cabin's front, above the hood
+    eye.position.set(cabin.position.x + len * 0.25 - 0.3, s.wheels.fl[1] * 0.45, b.z_floor + 1.1);
     group.add(eye);
+    cabin.userData.hideInCockpit = true;
     return { kind: 'car', group, wheels, eye, shape: s };
   }
 
@@ -356,6 +357,7 @@ export class Scene3D {
     const v = this.vehicle, p = this.pose;
     if (v && p) {
       const cam = this.camera;
+      for (const o of v.group.children) if (o.userData.hideInCockpit) o.visible = this.cameraMode !== 'cockpit';
       if (this.cameraMode === 'chase') {
         const back = v.kind === 'car' ? 8.5 : 5.5, up = v.kind === 'car' ? 3.0 : 2.0;
         const want = new THREE.Vector3(p.x - back * Math.cos(p.yaw), p.y - back * Math.sin(p.yaw), p.z + up);
