@@ -63,3 +63,22 @@ def test_roads_as_drawn(tmp_path):
     bad.write_text('type = "grade"\ngrade = 3.0\n')
     f = road_description(bad)
     assert f["type"] == "flat" and "grade" in f["note"] and "drawn flat" in f["note"]
+
+
+def test_buildings_beside_the_survey(tmp_path):
+    from rtsim.viewer.scene import read_buildings
+
+    r = road_description(ROOT / "configs" / "roads" / "campus.toml")
+    rows = [line.split(",") for line in (ROOT / "configs" / "roads" / "campus_survey_buildings.csv").read_text()
+            .splitlines() if line and not line.startswith("#")][1:]
+    assert [(b["x"], b["y"], b["height"]) for b in r["buildings"]] == [(float(x), float(y), float(h))
+                                                                       for x, y, _l, _w, h, _a in rows]
+    v = np.array(r["vertices"]).reshape(-1, 3)
+    assert all(v[:, 2].min() <= b["z"] <= v[:, 2].max() for b in r["buildings"])
+    bad = tmp_path / "b.csv"
+    bad.write_text("x,y,length,width,height,yaw_deg\n1,2,3,-4,5,0\n")
+    with pytest.raises(ValueError, match=r"b.csv:2: length, width and height"):
+        read_buildings(bad, v)
+    bad.write_text("x,y,length\n1,2,3\n")
+    with pytest.raises(ValueError, match="header"):
+        read_buildings(bad, v)

@@ -3,6 +3,8 @@ centres, radii, tyre stiffness, body size: from its config file as the service r
 (plane, grade, or the survey mesh with its per-triangle friction) and the user channels with their
 ranges. All in SI units and ISO 8855 axes (x forward, y left, z up), as the state channels.
 
+Buildings: simple blocks from an optional file beside a survey (``<survey stem>_buildings.csv``).
+
 The vehicle: a car's state pose is that of its centre of mass (``pos_*``, ``roll/pitch/yaw_angle``);
 the wheel centres are given relative to it. A two-wheeler's pose is that of its rear frame at the
 swingarm pivot; its points are given relative to the pivot in the frame's (x, z) plane.
@@ -64,6 +66,41 @@ def two_wheeler_shape(vehicle: dict) -> dict:
             "cg": [vehicle["rear_frame"]["cg_m"][0] - px, 0.0, vehicle["rear_frame"]["cg_m"][1] - pz]}
 
 
+BUILDING_COLUMNS = ("x", "y", "length", "width", "height", "yaw_deg")
+
+
+def read_buildings(path: Path, vertices) -> list[dict]:
+    """Building blocks beside a survey (``<survey stem>_buildings.csv``: x, y, length, width, height, yaw_deg
+    per row, ``#`` comments): each with its base height, the survey's nearest vertex height (m). Raises
+    ValueError naming the file, the line and the value."""
+    import numpy as np
+
+    out, header = [], None
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        cells = [c.strip() for c in line.split(",")]
+        if header is None:
+            if tuple(cells) != BUILDING_COLUMNS:
+                raise ValueError(f"{path}:{n}: header {line!r}, expected {','.join(BUILDING_COLUMNS)}")
+            header = cells
+            continue
+        try:
+            vals = [float(c) for c in cells]
+        except ValueError:
+            raise ValueError(f"{path}:{n}: {line!r} is not {len(BUILDING_COLUMNS)} numbers") from None
+        if len(vals) != len(BUILDING_COLUMNS) or not all(math.isfinite(v) for v in vals):
+            raise ValueError(f"{path}:{n}: {line!r}: expected {len(BUILDING_COLUMNS)} finite numbers")
+        b = dict(zip(BUILDING_COLUMNS, vals))
+        if min(b["length"], b["width"], b["height"]) <= 0 or max(b["length"], b["width"], b["height"]) > 1000:
+            raise ValueError(f"{path}:{n}: length, width and height must be in (0, 1000] m")
+        v = np.asarray(vertices).reshape(-1, 3)
+        b["z"] = float(v[np.argmin((v[:, 0] - b["x"]) ** 2 + (v[:, 1] - b["y"]) ** 2), 2])
+        out.append(b)
+    return out
+
+
 def road_description(road_path: Path | None) -> dict:
     """The road as the page draws it: {"type": "flat", "height"}, {"type": "grade", "grade", "heading",
     "origin"}, or {"type": "mesh", "vertices", "triangles", "mu"} (the survey's mesh as the service builds
@@ -81,11 +118,18 @@ def road_description(road_path: Path | None) -> dict:
         if isinstance(cfg, GradeRoadConfig):
             return {"type": "grade", "grade": cfg.grade, "heading": math.radians(cfg.heading_deg),
                     "origin": list(cfg.origin), "mu": cfg.mu}
-        mesh = survey_to_mesh(read_survey(road_path.parent / cfg.survey), cfg.grid_spacing, cfg.alpha_radius,
-                              cfg.mu, cfg.rolling_resistance)
-        return {"type": "mesh", "vertices": [round(float(v), 4) for v in mesh.vertices.ravel()],
-                "triangles": [int(i) for i in mesh.triangles.ravel()],
-                "mu": [round(float(v), 4) for v in mesh.tri_mu], "source": road_path.name}
+        survey = road_path.parent / cfg.survey
+        mesh = survey_to_mesh(read_survey(survey), cfg.grid_spacing, cfg.alpha_radius, cfg.mu, cfg.rolling_resistance)
+        out = {"type": "mesh", "vertices": [round(float(v), 4) for v in mesh.vertices.ravel()],
+               "triangles": [int(i) for i in mesh.triangles.ravel()],
+               "mu": [round(float(v), 4) for v in mesh.tri_mu], "source": road_path.name, "buildings": []}
+        blocks = survey.with_name(survey.stem + "_buildings.csv")
+        if blocks.is_file():
+            try:
+                out["buildings"] = read_buildings(blocks, mesh.vertices)
+            except (OSError, ValueError) as exc:
+                out["note"] = f"buildings not drawn: {exc}"
+        return out
     except (RtsimError, OSError, ValueError) as exc:
         return {"type": "flat", "height": 0.0, "mu": 1.0, "note": f"road {road_path}: {exc}; drawn flat at z = 0"}
 

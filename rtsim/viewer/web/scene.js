@@ -152,6 +152,13 @@ export class Scene3D {
       for (let i = 2; i < v.length; i += 3) zmin = Math.min(zmin, v[i]);
       this.groundZ = zmin - 0.3;                 // the plane under and around the survey
       ground.material.color.set('#8a9a7a');
+      const wallMat = new THREE.MeshLambertMaterial({ color: '#d9d4c7' });
+      for (const b of road.buildings || []) {     // blocks from the file beside the survey
+        const box = new THREE.Mesh(new THREE.BoxGeometry(b.length, b.width, b.height + 0.3), wallMat);
+        box.position.set(b.x, b.y, b.z - 0.3 + (b.height + 0.3) / 2);
+        box.rotation.z = b.yaw_deg * Math.PI / 180;
+        this.scene.add(box);
+      }
     }
   }
 
