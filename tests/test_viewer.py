@@ -176,6 +176,24 @@ def test_a_recording_replays_with_the_recorded_poses(page, service):
         replay.close()
 
 
+def test_only_its_own_pages_may_open_the_websocket(page):
+    """The WebSocket drives the car: a browser page of another origin (any site open in the engineer's
+    browser) is refused; the server's own origin and clients that send none (tools) get the scene."""
+    import json
+
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    _pg, _logs, view = page
+    url = f"ws://127.0.0.1:{view.server.port}/ws"
+    with pytest.raises(InvalidStatus, match="403"):
+        connect(url, origin="http://evil.example:8000", open_timeout=EVENT).close()
+    for origin in (f"http://127.0.0.1:{view.server.port}", None):
+        with connect(url, origin=origin, open_timeout=EVENT) as ws:
+            hello = json.loads(ws.recv(timeout=EVENT))
+            assert hello["type"] == "hello" and hello["info"]["vehicle_id"] == "xbw"
+
+
 def test_no_console_errors(page):
     pg, logs, _view = page
     errors = [text for kind, text in logs if kind in ("error", "pageerror")]

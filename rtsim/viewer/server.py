@@ -26,6 +26,7 @@ import itertools
 import json
 import mimetypes
 import time
+import urllib.parse
 from pathlib import Path
 
 from rtsim.errors import RtsimError
@@ -103,9 +104,15 @@ class ViewServer:
         return self._info
 
     # -- HTTP -------------------------------------------------------------------------------------------
-    def _http(self, connection, request):
+    async def _http(self, connection, request):
         path = request.path.split("?", 1)[0]
         if path == "/ws":
+            # only pages this server served may open the WebSocket (it drives the car): a browser sends the
+            # page's origin, which must be this server's own host and port (no other site the engineer has
+            # open can reach it); a client that is not a browser sends no origin
+            origin = request.headers.get("Origin")
+            if origin is not None and urllib.parse.urlsplit(origin).netloc != request.headers.get("Host"):
+                return connection.respond(http.HTTPStatus.FORBIDDEN, f"origin {origin} refused\n")
             return None                               # the WebSocket handshake goes on
         if path == "/":
             path = "/index.html"
@@ -117,7 +124,8 @@ class ViewServer:
         if path == "/api/info":
             from websockets.datastructures import Headers
             from websockets.http11 import Response
-            body = encode(self.info()).encode()
+            info = await asyncio.get_running_loop().run_in_executor(None, self.info)
+            body = encode(info).encode()
             return Response(200, "OK", Headers([("Content-Type", "application/json"),
                                                 ("Content-Length", str(len(body))), ("Connection", "close")]), body)
         return connection.respond(http.HTTPStatus.NOT_FOUND, f"not found: {path}\n")
