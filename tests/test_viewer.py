@@ -176,6 +176,41 @@ def test_a_recording_replays_with_the_recorded_poses(page, service):
         replay.close()
 
 
+GAMEPAD = """
+localStorage.setItem('rtsim.view.gamepad', JSON.stringify({
+  steer: {axis: 2, invert: true}, throttle: {axis: 1, button: -1, invert: false, pedal: true},
+  brake: {axis: -1, button: 6, invert: false, pedal: false}, deadzone: 0.1}));
+const pad = {index: 0, id: 'test wheel', connected: true, axes: [0.9, 0.0, -0.55, 0.0],
+             buttons: Array.from({length: 8}, () => ({value: 0, pressed: false}))};
+navigator.getGamepads = () => [pad];
+"""
+
+
+def test_a_gamepad_drives_with_the_mapping_the_browser_remembers(page):
+    """A wheel seen through the Gamepad API (a stand-in object here: no device on this machine) with a
+    mapping kept in localStorage (steering on axis 2, inverted; a pedal on axis 1 from -1 released to 1
+    pressed; dead zone 0.1): the service receives what that mapping gives, steering-wheel angle
+    -((0.55 - 0.1) / 0.9) * 3 rad, throttle ((0 + 1) / 2 - 0.1) / 0.9 of the wide-open 1.4 rad, no brake."""
+    pg, logs, view = page
+    pg.click("#release")                                  # the keyboard's page hands the car back
+    pg2 = pg.context.browser.new_page(viewport={"width": 800, "height": 450})
+    pg2.on("console", lambda m: logs.append((m.type, m.text)))
+    pg2.on("pageerror", lambda e: logs.append(("pageerror", str(e))))
+    pg2.add_init_script(GAMEPAD)
+    try:
+        pg2.goto(view.url)
+        pg2.wait_for_function("rtsimView.drive.last && rtsimView.drive.last.ok && "
+                              "'steering_wheel_angle_cmd' in rtsimView.drive.last.user.channels", timeout=EVENT * 1000)
+        ch = pg2.evaluate("rtsimView.drive.last.user.channels")
+        assert ch["steering_wheel_angle_cmd"] == pytest.approx(-(0.45 / 0.9) * 3.0)
+        assert ch["throttle_angle_cmd"] == pytest.approx((0.4 / 0.9) * 1.4)
+        assert ch["brake_pressure_cmd"] == 0.0
+        assert pg2.evaluate("rtsimView.drive.last.drivers.throttle_angle_cmd") == "user"
+    finally:
+        pg2.evaluate("document.getElementById('release').click()")
+        pg2.close()
+
+
 def test_only_its_own_pages_may_open_the_websocket(page):
     """The WebSocket drives the car: a browser page of another origin (any site open in the engineer's
     browser) is refused; the server's own origin and clients that send none (tools) get the scene."""
