@@ -105,12 +105,15 @@ def _stamp(t: float) -> Timestamp:
 @dataclass(frozen=True)
 class Wheel:
     """A wheel in the vehicle's reference frame: centre (m), radius and width (m); `steer` and `spin`
-    name the channels of its steer and spin angles (rad), `source` where they are ("state"/"sensors")."""
+    name the channels of its steer and spin angles (rad); `load` that of its tyre's vertical load (N),
+    which with `stiffness` (N/m) puts a car's wheel on the road (see SceneBuilder)."""
     centre: tuple[float, float, float]
     radius: float
     width: float
     spin: str
     steer: str | None = None
+    load: str | None = None
+    stiffness: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -124,7 +127,7 @@ class Shape:
     design: object = None                       # the two-wheeler's geometry.Design
 
 
-def car_shape(vm, tyre_radius: float) -> Shape:
+def car_shape(vm, tyre_radius: float, tyre_stiffness: float = 0.0) -> Shape:
     """A four-wheel car from its model (rtsim.vehicle.car.build.VehicleModel): wheel centres from the
     design wheel centres relative to the centre of mass; the body spans the wheelbase plus overhangs."""
     cg = [float(v) for v in vm.config.chassis.cg_m]
@@ -140,7 +143,8 @@ def car_shape(vm, tyre_radius: float) -> Shape:
     width_t = max(0.12, 0.55 * tyre_radius)
     names = ("fl", "fr", "rl", "rr")
     wheels = tuple(Wheel(rel[i], tyre_radius, width_t, f"wheel_angle_{w}",
-                         f"steer_angle_{w}" if w in ("fl", "fr") else None) for i, w in enumerate(names))
+                         f"steer_angle_{w}" if w in ("fl", "fr") else None, f"tyre_fz_{w}", tyre_stiffness)
+                   for i, w in enumerate(names))
     return Shape("car", body, (length, width, 0.55), wheels)
 
 
@@ -166,9 +170,9 @@ def shape_of(sim) -> Shape:
     model = getattr(sim.vm, "model", None)
     if model is not None and hasattr(model, "design"):
         return two_wheeler_shape(model)
-    from rtsim.vehicle.kit.tyre.tir import P_UNLOADED_RADIUS
+    from rtsim.vehicle.kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS
 
-    return car_shape(sim.vm, float(sim.tp[P_UNLOADED_RADIUS]))
+    return car_shape(sim.vm, float(sim.tp[P_UNLOADED_RADIUS]), float(sim.tp[P_VERTICAL_STIFFNESS]))
 
 
 # ------------------------------------------------------------------ scene messages
@@ -177,9 +181,12 @@ class SceneBuilder:
     """Encodes a vehicle's scene and frame transform from its state (and, for a car's wheel spin and
     steer, its newest sensor sample), and the road's scene. Pure computation; the callers count errors."""
 
-    def __init__(self, vehicle_id: str, shape: Shape, channels):
+    def __init__(self, vehicle_id: str, shape: Shape, channels, road=None):
+        """`road`: the rtsim.road.model.Road the vehicle drives on (None: the plane z = 0)."""
         self.vehicle_id = vehicle_id
         self.shape = shape
+        self.road = road
+        self._height = _height_fn(road)
         st = channels.state_names
         self._pose_idx = tuple(st.index(n) for n in ("pos_x", "pos_y", "pos_z", "roll_angle", "pitch_angle",
                                                      "yaw_angle"))
@@ -195,6 +202,7 @@ class SceneBuilder:
                 return ("sensors", sens.index(name))
             return None
         self._wheel_src = [(where(w.spin), where(w.steer)) for w in shape.wheels]
+        self._wheel_load = [where(w.load) if w.stiffness > 0 else None for w in shape.wheels]
         self._extra = {n: st.index(n) for n in ("fork_travel", "swingarm_angle", "steer_angle") if n in st}
 
     def pose(self, state) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
@@ -234,9 +242,16 @@ class SceneBuilder:
             centres, steer_axes, fork, arm = self._two_wheeler_parts(state)
             cylinders.append(fork(world, q))
             cubes.append(arm(world, q))
-        for w, c, ax, (spin_src, steer_src) in zip(sh.wheels, centres, steer_axes, self._wheel_src):
+        for w, c, ax, (spin_src, steer_src), load in zip(sh.wheels, centres, steer_axes, self._wheel_src,
+                                                          self._wheel_load):
             qs = q_mul(q, q_axis(*ax, value(steer_src)))
             pos = world(c)
+            if load is not None and value(load) > 0.0:
+                # a loaded tyre is on the road: its centre at the loaded radius above the surface under
+                # its design position (the state has the tyre loads, not the suspension travel)
+                z = self._height(pos[0], pos[1])
+                if math.isfinite(z):
+                    pos = (pos[0], pos[1], z + w.radius - value(load) / w.stiffness)
             cylinders.append(CylinderPrimitive(pose=_pose(pos, q_mul(qs, _CYL_Y)),
                                                size=Vector3(x=2 * w.radius, y=2 * w.radius, z=w.width),
                                                bottom_scale=1.0, top_scale=1.0, color=WHEEL_COLOUR))
@@ -292,6 +307,26 @@ class SceneBuilder:
             return CubePrimitive(pose=_pose(world(arm_mid), q_mul(q, q_arm)),
                                  size=Vector3(x=des.swingarm_length, y=0.08, z=0.06), color=SPOKE_COLOUR)
         return (wr, wf), ((0.0, 0.0, 1.0), h), fork, arm
+
+
+def _height_fn(road):
+    """Surface height (m) at (x, y) of a road (None: the plane z = 0); -inf off a mesh."""
+    if road is None:
+        return lambda x, y: 0.0
+    from rtsim.road.model import FP_GX, FP_GY, FP_X0, FP_Y0, FP_Z0, IP_KIND, ROAD_MESH
+
+    if int(road.ipar[IP_KIND]) != ROAD_MESH:
+        x0, y0, z0, gx, gy = (float(road.fpar[k]) for k in (FP_X0, FP_Y0, FP_Z0, FP_GX, FP_GY))
+        return lambda x, y: z0 + gx * (x - x0) + gy * (y - y0)
+    import numpy as np
+    from rtsim.road.query import NQUERY, Q_Z, road_query
+
+    out = np.zeros(NQUERY)
+
+    def mesh(x, y):
+        road_query(road, float(x), float(y), out)
+        return float(out[Q_Z])
+    return mesh
 
 
 def road_scene(road=None, centre=(0.0, 0.0), t: float = 0.0, half: float = 1000.0, grid: float = 10.0) -> bytes:

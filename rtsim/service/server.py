@@ -204,7 +204,7 @@ class Service:
         from bridge.scene import SceneBuilder, road_scene, shape_of
 
         ini = self.sc.spec.initial
-        scene = SceneBuilder(self.vehicle_id, shape_of(self.sim), self.model.channels)
+        scene = SceneBuilder(self.vehicle_id, shape_of(self.sim), self.model.channels, getattr(self.sim, "road", None))
         road = road_scene(getattr(self.sim, "road", None), centre=(ini.x, ini.y))
         if o.foxglove_port is not None:
             from bridge.foxglove_live import FoxgloveLive
