@@ -175,6 +175,13 @@ def shape_of(sim) -> Shape:
     return car_shape(sim.vm, float(sim.tp[P_UNLOADED_RADIUS]), float(sim.tp[P_VERTICAL_STIFFNESS]))
 
 
+def scene_for(sim, vehicle_id: str, centre=(0.0, 0.0)) -> tuple["SceneBuilder", bytes]:
+    """(SceneBuilder, road scene bytes) of a car's VehicleSim or a two-wheeler's TwoWheelerHil; `centre`
+    (x, y, m) where the road's plane and grid are drawn around (the start)."""
+    road = getattr(sim, "road", None)
+    return SceneBuilder(vehicle_id, shape_of(sim), sim.vm.channels, road), road_scene(road, centre=centre)
+
+
 # ------------------------------------------------------------------ scene messages
 
 class SceneBuilder:

@@ -116,7 +116,7 @@ def _run(args) -> int:
         write_csv(res, out)
     else:
         from bridge.mcap_log import write_run
-        write_run(out, res.columns, res.data, sim.vm.config.id, sim.vm.channels)
+        write_run(out, res.columns, res.data, sim.vm.config.id, sim.vm.channels, sim=sim)   # with the 3D scene
     dist = float(np.sum(np.hypot(np.diff(res.column("pos_x")), np.diff(res.column("pos_y")))))
     print(f"{'' if not sys.stderr.isatty() else chr(13)}{sc.name}: {sc.duration:g} s simulated in {res.wall_s:.2f} s "
           f"({res.wall_s / res.steps * 1e6:.1f} us/step), distance {dist:.1f} m, "

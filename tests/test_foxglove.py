@@ -246,3 +246,26 @@ def test_foxglove_binds_loopback_unless_allowed():
         ServeOptions(foxglove_port=8765, foxglove_host="192.0.2.1").check()
     ServeOptions(foxglove_port=8765, foxglove_host="192.0.2.1", foxglove_allow_remote=True).check()
     ServeOptions(foxglove_port=8765, foxglove_host="::1").check()
+
+
+def test_offline_run_recording_holds_the_scene(tmp_path):
+    """`rtsim run ... --out X.mcap` (bridge.mcap_log.write_run with the run's simulation): the same scene
+    topics, one scene per 10 ms of the run, each with the pose of the state row of its time."""
+    from bridge.mcap_log import write_run
+    from rtsim.service.server import resolve_scenario
+    from rtsim.vehicle.offline import prepare, run
+
+    sim, sc = prepare(None, resolve_scenario("step_steer_80kph"))
+    res = run(sim, sc)
+    path = tmp_path / "run.mcap"
+    write_run(path, res.columns, res.data, sim.vm.config.id, sim.vm.channels, sim=sim)
+    scenes, tfs, states, schemas = recorded_scenes(path, sim.vm.config.id)
+    assert schemas[f"rtsim/{sim.vm.config.id}/road"] == ("foxglove.SceneUpdate", "protobuf", "protobuf")
+    times = sorted(states)
+    assert len(scenes) == len(tfs) == pytest.approx(sc.duration / 0.01, abs=2)
+    yaw = []
+    for t, msg in scenes:
+        (entity,) = msg.entities
+        check_pose("car", entity.arrows[0].pose, states[t])
+        yaw.append(states[t]["yaw_angle"])
+    assert times[0] <= scenes[0][0] and max(yaw) - min(yaw) > 0.5       # the step steer turns the car

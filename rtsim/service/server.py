@@ -201,11 +201,9 @@ class Service:
         o = self.opts
         if o.record is None and o.foxglove_port is None:
             return None, None
-        from bridge.scene import SceneBuilder, road_scene, shape_of
+        from bridge.scene import scene_for
 
-        ini = self.sc.spec.initial
-        scene = SceneBuilder(self.vehicle_id, shape_of(self.sim), self.model.channels, getattr(self.sim, "road", None))
-        road = road_scene(getattr(self.sim, "road", None), centre=(ini.x, ini.y))
+        scene, road = scene_for(self.sim, self.vehicle_id, (self.sc.spec.initial.x, self.sc.spec.initial.y))
         if o.foxglove_port is not None:
             from bridge.foxglove_live import FoxgloveLive
             self.foxglove = FoxgloveLive(self.vehicle_id, self.model.channels, o.foxglove_host, o.foxglove_port,
