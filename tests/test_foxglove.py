@@ -269,3 +269,68 @@ def test_offline_run_recording_holds_the_scene(tmp_path):
         check_pose("car", entity.arrows[0].pose, states[t])
         yaw.append(states[t]["yaw_angle"])
     assert times[0] <= scenes[0][0] and max(yaw) - min(yaw) > 0.5       # the step steer turns the car
+
+
+def test_new_scenario_brings_its_road(tmp_path):
+    """load_scenario (lockstep, in process): the recording gets the new scenario's road when simulation
+    time restarts, and the scenes after it carry the state's pose on that road (a 5 % grade: the road's
+    corners rise 5 cm per metre along x)."""
+    from rtsim.service.server import ROOT
+
+    grade = tmp_path / "grade.toml"
+    grade.write_text((ROOT / "configs" / "scenarios" / "hil_flat.toml").read_text().replace(
+        'road = "../roads/flat.toml"', f'road = "{(ROOT / "configs" / "roads" / "grade_5pct.toml").as_posix()}"'))
+    hub = LoopbackHub(0, start_timeout=HUB_START)
+    path = tmp_path / "two.mcap"
+    svc = Service(ServeOptions(mode="lockstep", can_interface="remote", can_channel=hub.channel, start_hub=False,
+                               zenoh=False, record=path), out=lambda *a: None)
+    th = threading.Thread(target=svc.run, daemon=True)
+    th.start()
+    try:
+        assert svc.control({"op": "step", "n": 50})["ok"]
+        assert svc.control({"op": "load_scenario", "scenario": str(grade)})["ok"]
+        assert svc.control({"op": "step", "n": 50})["ok"]
+    finally:
+        svc.stop()
+        th.join(EVENT)
+        hub.close()
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as fh:
+        roads = [(m.log_time, message_class(s.name, s.data).FromString(m.data))
+                 for s, _c, m in make_reader(fh).iter_messages(topics=["rtsim/xbw/road"], log_time_order=False)]
+    assert len(roads) == 2
+    for (_t, msg), slope in zip(roads, (0.0, 0.05)):
+        (entity,) = msg.entities
+        pts = entity.triangles[0].points
+        dz = pts[1].z - pts[0].z
+        assert dz == pytest.approx(slope * (pts[1].x - pts[0].x), abs=1e-9)
+    with open(path, "rb") as fh:            # in recording order: the log times restart with the scenario
+        got = {"scene": [], "state": []}
+        for s, c, m in make_reader(fh).iter_messages(topics=["rtsim/xbw/scene", "rtsim/xbw/state"],
+                                                     log_time_order=False):
+            key = c.topic.rsplit("/", 1)[1]
+            got[key].append((m.log_time, message_class(s.name, s.data).FromString(m.data) if key == "scene"
+                             else json.loads(m.data)))
+    assert len(got["scene"]) == len(got["state"]) == 10
+    for (t, scene), (ts, state) in zip(got["scene"], got["state"]):
+        assert t == ts
+        check_pose("car", scene.entities[0].arrows[0].pose, state)
+    # the car stands on the new road: nose up the 5 % grade (pitch positive nose down), as the road drawn
+    assert got["state"][0][1]["pitch_angle"] == pytest.approx(0.0, abs=0.01)
+    assert got["state"][-1][1]["pitch_angle"] == pytest.approx(-math.atan(0.05), abs=0.01)
+
+
+def test_survey_mesh_road_scene():
+    """The campus survey road as one triangle list: every vertex and triangle of the road model."""
+    import numpy as np
+    from bridge.scene import road_scene, topic_schemas
+    from rtsim.road.config import load_road
+    from rtsim.service.server import ROOT
+
+    road = load_road(ROOT / "configs" / "roads" / "campus.toml")
+    name, _enc, data = topic_schemas()["road"]
+    (entity,) = message_class(name, data).FromString(road_scene(road)).entities
+    (tri,) = entity.triangles
+    assert np.allclose([[p.x, p.y, p.z] for p in tri.points], road.vert, atol=0, rtol=0)
+    assert list(tri.indices) == [int(i) for i in np.asarray(road.tri).ravel()]

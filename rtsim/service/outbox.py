@@ -11,11 +11,12 @@ items are skipped and counted in ``dropped``.
 Each payload is encoded once and the same bytes go to every sink, so Zenoh, MCAP and Foxglove carry
 identical messages. Log times in the recording are simulation times (ns).
 
-With a scene (bridge.scene.SceneBuilder) the publisher also encodes, for every state sample, the
-vehicle's 3D scene and frame transform (Foxglove messages, topics ``scene`` and ``tf``; at most
-``SCENE_RATE``) from the state and the sensor sample of the same time, for the recorder and the Foxglove server
-(bridge.foxglove_live); the road's scene goes out once at the start and again when a Foxglove client
-subscribes to it. A scene that fails to build is counted (``scene_errors``), never raised.
+With a scene (bridge.scene.SceneBuilder) the publisher also encodes, for every state sample (at most
+``SCENE_RATE``), the vehicle's 3D scene and frame transform (Foxglove messages, topics ``scene`` and
+``tf``) from the state and the sensor sample of the same time, for the recorder and the Foxglove server
+(bridge.foxglove_live). The road's scene goes out at the start, again when simulation time restarts (a
+reset, or a new scenario whose scene ``replace_scene`` gave) and when a Foxglove client subscribes to it.
+A scene that fails to build is counted (``scene_errors``), never raised.
 """
 from __future__ import annotations
 
@@ -153,6 +154,7 @@ class Outbox:
         self._recent_sensors: collections.deque = collections.deque(maxlen=32)   # (t, values)
         self._last_t = 0.0
         self._scene_due = -1.0
+        self._next_scene = None
         self.status_fn = status_fn
         self.status_period = float(status_period)
         self.poll = float(poll)
@@ -188,6 +190,7 @@ class Outbox:
             return
         if t < self._last_t:                    # a reset: simulation time starts again
             self._scene_due = -1.0
+            self._restart(t)
         self._last_t = t
         if t < self._scene_due - 1e-9:          # at most SCENE_RATE Hz, whatever the state rate
             return
@@ -205,6 +208,20 @@ class Outbox:
             return
         self._emit("tf", t, tf)
         self._emit("scene", t, scene)
+
+    def replace_scene(self, scene, road: bytes) -> None:
+        """A new scenario's scene and road (its vehicle may differ), taken when simulation time restarts
+        (the loop installs the new scenario between two steps; the samples before it keep the old one)."""
+        if self.scene is not None:
+            self._next_scene = (scene, road)
+
+    def _restart(self, t: float) -> None:
+        """Simulation time restarted (reset or a new scenario): the new scene, and the road again at t."""
+        nxt, self._next_scene = self._next_scene, None
+        if nxt is not None:
+            self.scene, self.road = nxt
+        if self.road is not None:
+            self._emit("road", t, self.road)
 
     def _send_road(self, start: bool = False) -> None:
         """The road's scene: at the start to every sink (log time 0), later to the Foxglove server when

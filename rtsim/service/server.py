@@ -274,6 +274,9 @@ class Service:
             sim, sc = build_sim(path, self.opts.vehicle, self.opts.dt, self.models, self.opts.rider == "on")
             if op == "load_scenario":
                 self.scenario_path, self.sc, self.model = path, sc, sim.vm
+                if self.outbox is not None and self.outbox.scene is not None:     # its road (and vehicle) in 3D
+                    from bridge.scene import scene_for
+                    self.outbox.replace_scene(*scene_for(sim, self.vehicle_id, (sc.spec.initial.x, sc.spec.initial.y)))
             args = {"_sim": sim, "_name": sc.name, "_driver": sc.driver()}
         req = Request(op, args)
         self.inbox.put(("ctl", req))
