@@ -38,7 +38,7 @@ def _bench(args) -> int:
         if not (args.duration > 0 and math.isfinite(args.duration)):
             raise RtsimError(f"--duration must be a positive number of seconds, got {args.duration}")
         res = run_service_bench(args.duration, record=not args.no_record, zenoh=not args.no_zenoh, ecu=args.ecu,
-                                spin=args.spin)
+                                spin=args.spin, foxglove=args.foxglove)
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
     if args.suite == "dispatch":
@@ -241,6 +241,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--duration", type=float, default=60.0, help="service suite: wall seconds to run (60)")
     b.add_argument("--no-record", action="store_true", help="service suite: without the MCAP recording")
     b.add_argument("--no-zenoh", action="store_true", help="service suite: without Zenoh")
+    b.add_argument("--foxglove", action="store_true",
+                   help="service suite: with the Foxglove server and a client subscribed to every topic")
     b.add_argument("--spin", type=float, default=0.0002,
                    help="service suite: busy-wait before each step, s (>= 0.001: never sleep)")
     b.add_argument("--ecu", choices=["light", "demo"], default="light",
