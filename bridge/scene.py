@@ -4,16 +4,18 @@ and into the MCAP recordings (bridge.mcap_recorder), so Foxglove's 3D panel show
 Topics (``topic key`` -> ``rtsim/<vehicle_id>/<key>``), protobuf messages of the foxglove SDK's own
 schemas (``foxglove.messages.*.get_schema()``: a FileDescriptorSet, schema encoding ``protobuf``):
 
-* ``scene`` (foxglove.SceneUpdate, at the state rate): entity ``<vehicle_id>`` in frame ``world``: the
-  heading arrow whose pose is exactly the state's pose (reference point ``pos_x, pos_y, pos_z``,
-  orientation from ``roll_angle, pitch_angle, yaw_angle``), the body as a box, the wheels as cylinders at
-  their positions with their steer, and a spoke per wheel turned by its spin angle; a two-wheeler also
-  its fork and swingarm.
-* ``tf`` (foxglove.FrameTransforms, at the state rate): ``world`` -> ``<vehicle_id>`` (the same pose),
-  so a 3D panel can follow the vehicle.
-* ``road`` (foxglove.SceneUpdate, at the start and when a live client subscribes): entity ``road`` in
-  frame ``world``: a plane or constant grade as two triangles 2 km across around the start with grid
-  lines every 10 m, or the survey mesh as one triangle list.
+* ``scene`` (foxglove.SceneUpdate, with the state samples, at most 100 Hz): entity ``<vehicle_id>`` in
+  frame ``world``: the heading arrow whose pose is exactly the state's pose (reference point ``pos_x,
+  pos_y, pos_z``, orientation from ``roll_angle, pitch_angle, yaw_angle``), the body as a box, the wheels
+  as cylinders with their steer and a spoke per wheel turned by its spin angle (a car's wheel at its
+  design position in the body, lowered onto the road to its loaded radius from the tyre load; a
+  two-wheeler's from its fork travel, swingarm angle and steer), a two-wheeler's fork and swingarm.
+* ``tf`` (foxglove.FrameTransforms, with the scene): ``world`` -> ``<vehicle_id>`` (the same pose), so a
+  3D panel can follow the vehicle.
+* ``road`` (foxglove.SceneUpdate; the service sends it at the start, when simulation time restarts and
+  when a live client subscribes): entity ``road`` in frame ``world``: a plane or constant grade as two
+  triangles 2 km across around the start with grid lines every 10 m, or the survey mesh as one
+  triangle list.
 
 Orientation: the car's angles are Euler z-y-x (yaw, then pitch, then roll: rtsim.channels.STATE); the
 two-wheeler's state angles are yaw, roll, then the frame's pitch (rtsim.vehicle.motorcycle.geometry
