@@ -69,8 +69,8 @@ def _scene(sim, vehicle_id: str, columns, channels: ChannelDictionary, rows):
     idx = {c: i for i, c in enumerate(columns)}
     first = rows[0]
     builder, road = scene_for(sim, vehicle_id, (float(first[idx["pos_x"]]), float(first[idx["pos_y"]])))
-    st = np.array([idx.get(n, -1) for n in channels.state_names])
-    se = np.array([idx.get(n, -1) for n in channels.sensor_names])
+    st = np.array([idx.get(n, -1) for n in channels.state_names], dtype=np.intp)
+    se = np.array([idx.get(n, -1) for n in channels.sensor_names], dtype=np.intp)   # (none offline: empty)
 
     def picker(cols):
         def take(r):

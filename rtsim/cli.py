@@ -136,7 +136,7 @@ def _run_two_wheeler(args, sc, kind) -> int:
     if kind == ".csv":
         write_csv(res, args.out)
     else:
-        write_mcap(res, args.out, ride.sim.mm.config.id)
+        write_mcap(res, args.out, ride.sim.mm.config.id, mm=ride.sim.mm)   # with the 3D scene
     text = json.dumps(res.summary, indent=2)
     if args.summary:
         from pathlib import Path

@@ -334,3 +334,27 @@ def test_survey_mesh_road_scene():
     (tri,) = entity.triangles
     assert np.allclose([[p.x, p.y, p.z] for p in tri.points], road.vert, atol=0, rtol=0)
     assert list(tri.indices) == [int(i) for i in np.asarray(road.tri).ravel()]
+
+
+def test_offline_two_wheeler_recording_holds_the_scene(tmp_path):
+    """`rtsim run` of a motorcycle scenario to MCAP: the two-wheeler's scene every 10 ms with the pose of
+    its state row, the wheels about a radius above the road, and the counter-steer's turn in the yaw."""
+    from rtsim.service.server import resolve_scenario
+    from rtsim.vehicle.motorcycle.offline import prepare, run, write_mcap
+
+    ride, sc = prepare(None, resolve_scenario("motorcycle_counter_steer"))
+    res = run(ride, sc)
+    vid = ride.sim.mm.config.id
+    path = tmp_path / "moto.mcap"
+    write_mcap(res, path, vid, mm=ride.sim.mm)
+    scenes, tfs, states, schemas = recorded_scenes(path, vid)
+    assert schemas[f"rtsim/{vid}/scene"] == ("foxglove.SceneUpdate", "protobuf", "protobuf")
+    assert len(scenes) == len(tfs) == pytest.approx(sc.duration / 0.01, abs=2)
+    yaw = []
+    for t, msg in scenes:
+        (entity,) = msg.entities
+        check_pose("two_wheeler", entity.arrows[0].pose, states[t])
+        for wheel in entity.cylinders[1:]:
+            assert wheel.pose.position.z == pytest.approx(0.5 * wheel.size.x, abs=0.05)
+        yaw.append(states[t]["yaw_angle"])
+    assert max(yaw) - min(yaw) > 0.1
