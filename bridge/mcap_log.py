@@ -20,16 +20,24 @@ ENERGY_NAMES = frozenset(c.name for c in ENERGY)
 
 
 def write_run(path: str | Path, columns: tuple[str, ...], rows, vehicle_id: str,
-              channels: ChannelDictionary = CAR) -> None:
+              channels: ChannelDictionary = CAR, sim=None) -> None:
     """Write the rows of a run (columns: `time`, then channels of `channels`, as
     rtsim.vehicle.offline.columns_of, and the power audit's rtsim.channels.ENERGY) to an MCAP file: each
-    row as one sensors, one state and one energy message with the columns of that kind it has."""
+    row as one sensors, one state and one energy message with the columns of that kind it has. With
+    the run's vehicle simulation `sim` (and the pose among the columns) also the 3D scene of
+    bridge.scene: the road at the start, the vehicle's scene and frame transform at most every 10 ms,
+    as a service's recording has them (Foxglove shows the vehicle in 3D)."""
     sensors = [c for c in columns if c in channels.sensor_names]
     state = [c for c in columns if c in channels.state_names]
     energy = [c for c in columns if c in ENERGY_NAMES and c not in state]
     idx = {c: i for i, c in enumerate(columns)}
-    rec = Recorder(path, vehicle_id, queue_size=3 * len(rows) + 16, channels=channels)
+    scene = _scene(sim, vehicle_id, columns, channels, rows)
+    rec = Recorder(path, vehicle_id, queue_size=(6 if scene else 3) * len(rows) + 16, channels=channels)
     try:
+        due = -1.0
+        if scene is not None:
+            builder, road, take_state, take_sensors = scene
+            rec.record("road", int(round(float(rows[0][idx["time"]]) * 1e9)), road)
         for r in rows:
             t = float(r[idx["time"]])
             t_ns = int(round(t * 1e9))
@@ -37,8 +45,40 @@ def write_run(path: str | Path, columns: tuple[str, ...], rows, vehicle_id: str,
                 if not fields:
                     continue
                 rec.record(key, t_ns, encode_json({"time": t, **{f: float(r[idx[f]]) for f in fields}}))
+            if scene is not None and t >= due - 1e-9:
+                due = t + SCENE_PERIOD
+                msg, tf = builder.vehicle(t, take_state(r), take_sensors(r))
+                rec.record("tf", t_ns, tf)
+                rec.record("scene", t_ns, msg)
     finally:
         rec.close()
+
+
+#: Shortest interval of an offline run's scene messages, s (the service's scene rate, 100 Hz).
+SCENE_PERIOD = 0.01
+
+
+def _scene(sim, vehicle_id: str, columns, channels: ChannelDictionary, rows):
+    """(SceneBuilder, road scene bytes, state row picker, sensor row picker) for write_run; None without
+    `sim`, rows, or the pose among the columns."""
+    pose = ("pos_x", "pos_y", "pos_z", "roll_angle", "pitch_angle", "yaw_angle")
+    if sim is None or not len(rows) or not all(c in columns for c in pose):
+        return None
+    from bridge.scene import scene_for
+
+    idx = {c: i for i, c in enumerate(columns)}
+    first = rows[0]
+    builder, road = scene_for(sim, vehicle_id, (float(first[idx["pos_x"]]), float(first[idx["pos_y"]])))
+    st = np.array([idx.get(n, -1) for n in channels.state_names], dtype=np.intp)
+    se = np.array([idx.get(n, -1) for n in channels.sensor_names], dtype=np.intp)   # (none offline: empty)
+
+    def picker(cols):
+        def take(r):
+            v = np.asarray(r, dtype=float)[np.maximum(cols, 0)]
+            v[cols < 0] = np.nan
+            return v
+        return take
+    return builder, road, picker(st), picker(se)
 
 
 def read_messages(path: str | Path, topic: str):

@@ -15,6 +15,10 @@ are bridge.payloads.SCHEMAS, names and units from the channel dictionary, rtsim.
 * ``commands`` → ``rtsim/<vehicle_id>/commands`` the actuator commands applied + their ``source``
 * ``can/rx``, ``can/tx`` → ``rtsim/<vehicle_id>/can/rx|tx`` raw frames as
   ``{"id": int, "dlc": int, "data": "hex", "time": s}``
+* ``scene``, ``tf``, ``road`` → ``rtsim/<vehicle_id>/scene|tf|road`` the 3D scene (bridge.scene):
+  protobuf messages (``foxglove.SceneUpdate``, ``foxglove.FrameTransforms``) with the foxglove SDK's own
+  schemas (schema encoding ``protobuf``: a FileDescriptorSet), given as encoded bytes, so Foxglove's 3D
+  panel shows the vehicle on any recording
 
 Payloads: a dict (``time`` is added from ``log_time_ns`` when missing), or ``bytes`` holding an
 already-encoded JSON message. On the CAN topics a frame may also be given as ``(can_id, data)`` or
@@ -56,6 +60,9 @@ CHANNELS_METADATA = "rtsim.channels"
 _FOOTER_OPCODE = 0x02
 
 CAN_KEYS = frozenset(("can/rx", "can/tx"))
+#: The 3D scene's topic keys (bridge.scene.SCENE_KEYS; not imported here, so that a recorder without a
+#: scene does not load the foxglove SDK).
+SCENE_KEYS = ("scene", "tf", "road")
 
 def _can_frame(payload, t_s: float) -> dict:
     if isinstance(payload, dict):
@@ -124,8 +131,8 @@ class Recorder:
     def record(self, topic_key: str, log_time_ns: int, payload) -> bool:
         """Queue one message; never blocks. Returns False (and counts it in ``dropped``) when the
         queue is full or the recorder is closed. Raises ValueError for an unknown topic key."""
-        if topic_key not in self._schema_defs:
-            raise ValueError(f"unknown topic key {topic_key!r}; allowed: {', '.join(TOPIC_KEYS)}")
+        if topic_key not in self._schema_defs and topic_key not in SCENE_KEYS:
+            raise ValueError(f"unknown topic key {topic_key!r}; allowed: {', '.join(TOPIC_KEYS + SCENE_KEYS)}")
         q = self._queue
         if self._closing or len(q) >= self.queue_size:
             self.dropped += 1
@@ -151,6 +158,15 @@ class Recorder:
     # ---------------------------------------------------------------- writer thread
     def _channel(self, key: str) -> int:
         cid = self._channels.get(key)
+        if cid is None and key in SCENE_KEYS:
+            from bridge.scene import topic_schemas     # the foxglove SDK: loaded when a scene is recorded
+            name, encoding, data = topic_schemas()[key]
+            sid = self._schema_ids.get(name)
+            if sid is None:
+                sid = self._schema_ids[name] = self._writer.register_schema(name=name, encoding=encoding, data=data)
+            cid = self._channels[key] = self._writer.register_channel(topic=self.topic(key), message_encoding=encoding,
+                                                                       schema_id=sid)
+            self._seq[key] = 0
         if cid is None:
             name, schema = self._schema_defs[key]
             sid = self._schema_ids.get(name)

@@ -43,7 +43,8 @@ def _bench(args) -> int:
         if not 0 <= args.pages_nice <= 19:
             raise RtsimError(f"--pages-nice must be 0..19, got {args.pages_nice}")
         res = run_service_bench(args.duration, record=not args.no_record, zenoh=not args.no_zenoh, ecu=args.ecu,
-                                spin=args.spin, pages=args.pages, pages_nice=args.pages_nice)
+                                spin=args.spin, foxglove=args.foxglove, pages=args.pages,
+                                pages_nice=args.pages_nice)
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
     if args.suite == "dispatch":
@@ -121,7 +122,7 @@ def _run(args) -> int:
         write_csv(res, out)
     else:
         from bridge.mcap_log import write_run
-        write_run(out, res.columns, res.data, sim.vm.config.id, sim.vm.channels)
+        write_run(out, res.columns, res.data, sim.vm.config.id, sim.vm.channels, sim=sim)   # with the 3D scene
     dist = float(np.sum(np.hypot(np.diff(res.column("pos_x")), np.diff(res.column("pos_y")))))
     print(f"{'' if not sys.stderr.isatty() else chr(13)}{sc.name}: {sc.duration:g} s simulated in {res.wall_s:.2f} s "
           f"({res.wall_s / res.steps * 1e6:.1f} us/step), distance {dist:.1f} m, "
@@ -141,7 +142,7 @@ def _run_two_wheeler(args, sc, kind) -> int:
     if kind == ".csv":
         write_csv(res, args.out)
     else:
-        write_mcap(res, args.out, ride.sim.mm.config.id)
+        write_mcap(res, args.out, ride.sim.mm.config.id, mm=ride.sim.mm)   # with the 3D scene
     text = json.dumps(res.summary, indent=2)
     if args.summary:
         from pathlib import Path
@@ -246,6 +247,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--duration", type=float, default=60.0, help="service suite: wall seconds to run (60)")
     b.add_argument("--no-record", action="store_true", help="service suite: without the MCAP recording")
     b.add_argument("--no-zenoh", action="store_true", help="service suite: without Zenoh")
+    b.add_argument("--foxglove", action="store_true",
+                   help="service suite: with the Foxglove server and a client subscribed to every topic")
     b.add_argument("--spin", type=float, default=0.0002,
                    help="service suite: busy-wait before each step, s (>= 0.001: never sleep)")
     b.add_argument("--pages", type=int, default=0, metavar="N",

@@ -148,7 +148,7 @@ def wake_up_floor(n: int = 500, period: float = 0.001) -> dict:
 
 def run_service_bench(duration: float = 60.0, can_interface: str | None = None, can_channel: str | None = None,
                       progress=None, record: bool = True, zenoh: bool = True, ecu: str = "light",
-                      spin: float = 0.0002, pages: int = 0, pages_nice: int = 19) -> dict:
+                      spin: float = 0.0002, foxglove: bool = False, pages: int = 0, pages_nice: int = 19) -> dict:
     from bridge.can_bus import LoopbackHub
     from rtsim.jit import cycles_per_second
     from rtsim.service.server import ServeOptions, Service
@@ -163,13 +163,18 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
     try:
         svc = Service(ServeOptions(can_interface=can_interface, can_channel=can_channel, start_hub=False,
                                    zenoh=zenoh, zenoh_listen=["tcp/127.0.0.1:0"], record=rec if record else None,
-                                   duration=duration, spin=spin), out=lambda *a: None)
+                                   duration=duration, spin=spin, foxglove_port=0 if foxglove else None),
+                      out=lambda *a: None)
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         sub = None
         if zenoh:
             sub = subprocess.Popen([sys.executable, "-c", _SUBSCRIBER, svc.zenoh.endpoints[0]], cwd=ROOT, env=env,
                                    stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
             procs.append(sub)
+        if foxglove:                # a Foxglove client subscribed to every topic (bridge.foxglove_client)
+            procs.append(subprocess.Popen([sys.executable, "-m", "bridge.foxglove_client", svc.foxglove.url,
+                                           "--duration", str(duration + 30)], cwd=ROOT, env=env,
+                                          stdout=subprocess.DEVNULL))
         if ecu == "demo":
             cmd = [sys.executable, "-m", "drivers.ecu_demo", "--can-interface", can_interface,
                    "--can-channel", can_channel, "--duration", str(duration + 30)]
@@ -243,7 +248,7 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
         "skipped_steps": h["skipped_steps"], "steal_s": h["steal_s"],
         "can": summary.get("can"), "recording": summary.get("recording"),
         "zenoh_subscriber_counts": subs,
-        "record": record, "zenoh": zenoh, "ecu": ecu, "spin_s": spin, "wake_up_floor": floor,
+        "record": record, "zenoh": zenoh, "foxglove": foxglove, "ecu": ecu, "spin_s": spin, "wake_up_floor": floor,
         "pages": pages if zenoh else 0, "page_stats": page_stats, "pages_nice": pages_nice,
         "budget_us": dict(BUDGET_US),
         "within_budget": all(pct(cpu_steps).get(k, 1e9) <= v for k, v in BUDGET_US.items()),
@@ -257,7 +262,8 @@ def format_report(r: dict) -> str:
     can = r["can"] or {}
     return "\n".join([
         f"service under load: {r['duration_s']:g} s wall, {r['steps']} steps, CAN"
-        f"{' + Zenoh' if r['zenoh'] else ''}{' + MCAP' if r['record'] else ''} + "
+        f"{' + Zenoh' if r['zenoh'] else ''}{' + MCAP' if r['record'] else ''}"
+        f"{' + Foxglove client' if r.get('foxglove') else ''} + "
         f"{'demo ECU (decodes every sensor frame)' if r['ecu'] == 'demo' else 'command-only ECU'}",
         f"  loop thread CPU per step  p50 {c['p50_us']:6.1f}  p99 {c['p99_us']:6.1f}  p99.9 {c['p99.9_us']:6.1f}  "
         f"max {c['max_us']:7.1f} us   (budget p50 <= {r['budget_us']['p50_us']:.0f}, "

@@ -79,6 +79,13 @@ class ServeOptions(BaseModel):
                                "has no valid command or the user takes over)", "simulation.user_input",
                                "--no-user-input")
     record: Optional[Path] = setting(None, "record the session to MCAP (FILE.mcap)", "record.path")
+    foxglove_port: Optional[int] = setting(None, "serve a Foxglove WebSocket on this port (ws://HOST:PORT: the "
+                                           "topics, 3D scene and road; 0: a free port; default off)",
+                                           "foxglove.port", ge=0, le=65535)
+    foxglove_host: str = setting("127.0.0.1", "address the Foxglove server binds to (default 127.0.0.1; "
+                                 "another than loopback only with --foxglove-allow-remote)", "foxglove.host")
+    foxglove_allow_remote: bool = setting(False, "let the Foxglove server bind to an address off loopback",
+                                          "foxglove.allow_remote")
     spin: Spin = setting(0.0002, "busy-wait before each step, s (default 0.0002; a value >= "
                                           "the step never sleeps: for a dedicated core)", None)
     duration: Optional[WallTime] = setting(
@@ -90,6 +97,9 @@ class ServeOptions(BaseModel):
         from rtsim.errors import ConfigError
         if self.record is not None and Path(self.record).suffix.lower() != ".mcap":
             raise ConfigError(f"--record {self.record}: the recording must be an .mcap file")
+        if self.foxglove_port is not None:
+            from bridge.foxglove_live import check_host
+            check_host(self.foxglove_host, self.foxglove_allow_remote)
 
 
 def _declared():

@@ -8,11 +8,19 @@ blocks) and to the recorder (a bounded queue: never blocks). So a slow or absent
 disk, never delays the loop: when the publisher falls more than a ring's capacity behind, the oldest
 items are skipped and counted in ``dropped``.
 
-Each payload is encoded once and the same bytes go to both sinks, so Zenoh and MCAP carry identical
-messages. Log times in the recording are simulation times (ns).
+Each payload is encoded once and the same bytes go to every sink, so Zenoh, MCAP and Foxglove carry
+identical messages. Log times in the recording are simulation times (ns).
+
+With a scene (bridge.scene.SceneBuilder) the publisher also encodes, for every state sample (at most
+``SCENE_RATE``), the vehicle's 3D scene and frame transform (Foxglove messages, topics ``scene`` and
+``tf``) from the state and the sensor sample of the same time, for the recorder and the Foxglove server
+(bridge.foxglove_live). The road's scene goes out at the start, again when simulation time restarts (a
+reset, or a new scenario whose scene ``replace_scene`` gave) and when a Foxglove client subscribes to it.
+A scene that fails to build is counted (``scene_errors``), never raised.
 """
 from __future__ import annotations
 
+import collections
 import functools
 import threading
 
@@ -20,6 +28,10 @@ from bridge import payloads
 from rtsim.channels import CAR, ChannelDictionary
 
 from .rings import CMD_ACCEPTED, H_CMD, H_LOG, H_SENSOR, H_STATE, LOG_RX, RingReader, Rings
+
+
+#: Highest rate of the 3D scene messages, Hz (they follow the state samples; the state rate may be higher).
+SCENE_RATE = 100.0
 
 
 def _multiple(t: float, period: float) -> bool:
@@ -129,15 +141,26 @@ class Outbox:
 
     def __init__(self, rings: Rings, frame_ids, zenoh=None, recorder=None, status_fn=None,
                  status_period: float = 0.1, poll: float = 0.005, channels: ChannelDictionary = CAR,
-                 frame_periods=None):
+                 frame_periods=None, scene=None, road: bytes | None = None, foxglove=None):
+        """``scene``: a bridge.scene.SceneBuilder (None: no scene topics); ``road``: the road's scene
+        (bytes); ``foxglove``: a bridge.foxglove_live.FoxgloveLive server."""
         self.zenoh = zenoh
         self.recorder = recorder
+        self.foxglove = foxglove
+        self.scene = scene if (recorder is not None or foxglove is not None) else None
+        self.road = road
+        self.scene_errors = 0
+        self.last_scene_error: str | None = None
+        self._recent_sensors: collections.deque = collections.deque(maxlen=32)   # (t, values)
+        self._last_t = 0.0
+        self._scene_due = -1.0
+        self._next_scene = None
         self.status_fn = status_fn
         self.status_period = float(status_period)
         self.poll = float(poll)
         self.published = 0
         self._rings = RingDrain(rings, frame_ids, emit=self._emit, frames=recorder is not None, channels=channels,
-                                frame_periods=frame_periods)
+                                frame_periods=frame_periods, raw=self._sample if self.scene is not None else None)
         self._stop = threading.Event()
         self._status_due = 0.0
         self._thread = threading.Thread(target=self._run, name="rtsim-publisher", daemon=True)
@@ -148,11 +171,69 @@ class Outbox:
         return self._rings.dropped
 
     def _emit(self, key: str, t: float, data) -> None:
-        if self.zenoh is not None and key in ("sensors", "state", "status", "commands"):
-            self.zenoh.publish(key, data)
+        if key in ("sensors", "state", "status", "commands"):
+            if self.zenoh is not None:
+                self.zenoh.publish(key, data)
+            if self.foxglove is not None:
+                self.foxglove.publish(key, t, data)
+        elif self.foxglove is not None and key in ("scene", "tf", "road"):
+            self.foxglove.publish(key, t, data)
         if self.recorder is not None:
             self.recorder.record(key, int(round(t * 1e9)), data)
         self.published += 1
+
+    def _sample(self, key: str, t: float, values) -> None:
+        """A raw sensor or state sample (RingDrain ``raw``): the scene of each state sample, with the
+        newest sensor sample not later than it (the same time: sensors every 2 ms, state every 10 ms)."""
+        if key == "sensors":
+            self._recent_sensors.append((t, values))
+            return
+        if t < self._last_t:                    # a reset: simulation time starts again
+            self._scene_due = -1.0
+            self._restart(t)
+        self._last_t = t
+        if t < self._scene_due - 1e-9:          # at most SCENE_RATE Hz, whatever the state rate
+            return
+        self._scene_due = t + 1.0 / SCENE_RATE
+        sensors = None
+        for ts, v in reversed(self._recent_sensors):
+            if ts <= t + 1e-9:
+                sensors = v
+                break
+        try:
+            scene, tf = self.scene.vehicle(t, values, sensors)
+        except Exception as exc:  # noqa: BLE001  (a bad sample must not stop the publisher)
+            self.scene_errors += 1
+            self.last_scene_error = f"at {t:.3f} s: {type(exc).__name__}: {exc}"
+            return
+        self._emit("tf", t, tf)
+        self._emit("scene", t, scene)
+
+    def replace_scene(self, scene, road: bytes) -> None:
+        """A new scenario's scene and road (its vehicle may differ), taken when simulation time restarts
+        (the loop installs the new scenario between two steps; the samples before it keep the old one)."""
+        if self.scene is not None:
+            self._next_scene = (scene, road)
+
+    def _restart(self, t: float) -> None:
+        """Simulation time restarted (reset or a new scenario): the new scene, and the road again at t."""
+        nxt, self._next_scene = self._next_scene, None
+        if nxt is not None:
+            self.scene, self.road = nxt
+        if self.road is not None:
+            self._emit("road", t, self.road)
+
+    def _send_road(self, start: bool = False) -> None:
+        """The road's scene: at the start to every sink (log time 0), later to the Foxglove server when
+        one of its clients subscribed to it (at the newest state time)."""
+        fox = self.foxglove
+        if self.road is None or self.scene is None:
+            return
+        if start:
+            self._emit("road", 0.0, self.road)
+        elif fox is not None and fox.road_wanted.is_set():
+            fox.road_wanted.clear()
+            fox.publish("road", self._last_t, self.road)
 
     def _maybe_status(self, now: float) -> None:
         if self.status_fn is None or now < self._status_due:
@@ -170,7 +251,9 @@ class Outbox:
         import time
 
         next_gc = 0.0
+        self._send_road(start=True)
         while not self._stop.is_set():
+            self._send_road()
             self.flush()
             now = time.monotonic()
             self._maybe_status(now)

@@ -143,6 +143,7 @@ class Service:
         self.port = None
         self.zenoh = None
         self.recorder = None
+        self.foxglove = None
         self.outbox = None
         self._closed = False
         self._stopping = threading.Event()
@@ -180,10 +181,12 @@ class Service:
                             hold_pressure=o.hold_pressure, inbox=self.inbox, health=self.health,
                             scenario_name=self.sc.name, driver=self.sc.driver(), user_input=o.user_input)
         self.loop.port = self.port
+        scene, road = self._foxglove()
         from .outbox import Outbox
         self.outbox = Outbox(self.rings, self.loop.lp.sensor_ids, zenoh=self.zenoh, recorder=self.recorder,
                              status_fn=self.loop.status, status_period=1.0 / o.status_rate, channels=ch,
-                             frame_periods=[f.period for f in self.codec.sensor_frames])
+                             frame_periods=[f.period for f in self.codec.sensor_frames],
+                             scene=scene, road=road, foxglove=self.foxglove)
         self.loop.outbox = self.outbox
         self.pacer = Pacer(self.loop.run_steps, self.sim.dt, "fast" if o.mode == "fast" else (
             "lockstep" if o.mode == "lockstep" else "realtime"), max_catch_up=o.max_catch_up,
@@ -191,6 +194,21 @@ class Service:
         if self.zenoh is not None:
             self.zenoh.serve(self.control, self.config)
         self._warm_up()
+
+    def _foxglove(self):
+        """The 3D scene (bridge.scene) for the recording and the Foxglove server, and that server when
+        asked for (``--foxglove-port``): (SceneBuilder, road scene bytes), or (None, None)."""
+        o = self.opts
+        if o.record is None and o.foxglove_port is None:
+            return None, None
+        from bridge.scene import scene_for
+
+        scene, road = scene_for(self.sim, self.vehicle_id, (self.sc.spec.initial.x, self.sc.spec.initial.y))
+        if o.foxglove_port is not None:
+            from bridge.foxglove_live import FoxgloveLive
+            self.foxglove = FoxgloveLive(self.vehicle_id, self.model.channels, o.foxglove_host, o.foxglove_port,
+                                         o.foxglove_allow_remote)
+        return scene, road
 
     def _warm_up(self) -> None:
         """Load every compiled kernel of the loop (numba loads a cached kernel at its first call:
@@ -256,6 +274,9 @@ class Service:
             sim, sc = build_sim(path, self.opts.vehicle, self.opts.dt, self.models, self.opts.rider == "on")
             if op == "load_scenario":
                 self.scenario_path, self.sc, self.model = path, sc, sim.vm
+                if self.outbox is not None and self.outbox.scene is not None:     # its road (and vehicle) in 3D
+                    from bridge.scene import scene_for
+                    self.outbox.replace_scene(*scene_for(sim, self.vehicle_id, (sc.spec.initial.x, sc.spec.initial.y)))
             args = {"_sim": sim, "_name": sc.name, "_driver": sc.driver()}
         req = Request(op, args)
         self.inbox.put(("ctl", req))
@@ -291,6 +312,8 @@ class Service:
                          f"rtsim/{self.vehicle_id}/{{sensors,state,status,commands,control,config}}")
         else:
             lines.append("  Zenoh:  off")
+        if self.foxglove is not None:
+            lines.append(f"  Foxglove: {self.foxglove.url} (open it in the Foxglove app: Open connection)")
         lines.append(f"  record: {self.recorder.path}" if self.recorder is not None else "  record: off")
         lines.append("  stop with Ctrl-C (SIGINT) or SIGTERM")
         return lines
@@ -353,7 +376,7 @@ class Service:
             summary = {"sim_time": self.loop.sim_time, "steps": self.loop.k, "health": self.health.summary(),
                        "run_state": self.loop.run_state, "message": self.loop.message,
                        "rejected": dict(self.loop.rx.counters), "accepted_frames": self.loop.rx.accepted}
-        for part in ("outbox", "zenoh", "recorder", "port", "hub"):
+        for part in ("outbox", "foxglove", "zenoh", "recorder", "port", "hub"):
             obj = getattr(self, part)
             if obj is None:
                 continue
@@ -363,6 +386,11 @@ class Service:
                 print(f"rtsim serve: closing {part}: {type(exc).__name__}: {exc}", file=sys.stderr)
         if self.port is not None:
             summary["can"] = self.port.stats()
+        if self.foxglove is not None:
+            summary["foxglove"] = {"url": self.foxglove.url, "published": self.foxglove.published,
+                                   "errors": self.foxglove.errors}
+        if self.outbox is not None and self.outbox.scene is not None:
+            summary["scene_errors"] = self.outbox.scene_errors
         if self.recorder is not None:
             summary["recording"] = {"path": str(self.recorder.path), "written": self.recorder.written,
                                     "dropped": self.recorder.dropped, "chunks": self.recorder.chunks}
