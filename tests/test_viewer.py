@@ -18,7 +18,7 @@ import playwright.sync_api as playwright_api      # the test extra (a hard depen
 import pytest
 
 from service_harness import ServiceProcess, free_port
-from viewer_harness import ViewThread, launch, require_page_libraries
+from viewer_harness import NO_CHROMIUM, ViewThread, chromium_path, launch, require_page_libraries
 from waits import EVENT
 
 SHOT = os.environ.get("RTSIM_VIEW_SCREENSHOT")     # save the test's screenshot here (the README's)
@@ -27,6 +27,8 @@ SHOT = os.environ.get("RTSIM_VIEW_SCREENSHOT")     # save the test's screenshot 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory):
     require_page_libraries()
+    if chromium_path() is None:
+        pytest.skip(NO_CHROMIUM)
     rec = tmp_path_factory.mktemp("view") / "view.mcap"
     zport = free_port()
     svc = ServiceProcess("virtual", f"rtsim-view-test-{os.getpid()}", "--zenoh-listen", f"tcp/127.0.0.1:{zport}",
