@@ -33,7 +33,7 @@ from .sparse import cholesky, solve
 from .model import (
     ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION,
     FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
-    IS_ERROR_TEST, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
+    IS_ERROR_TEST, IS_PREDICTOR, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
     ST_LAST_RESIDUAL, ST_MAX_PHI, ST_MAX_PHID, ST_MAX_PHIDD, ST_PROJ_ITER, ST_STEPS,
 )
 
@@ -215,19 +215,49 @@ def wants_tangent(m, d):
 
 
 @kernel
+def _can_extrapolate(m, d, h):
+    """True when the last step ended in the current state with the same h, so that the accelerations it
+    started and ended with extrapolate to this step's end (a state set from outside, a failed step or a
+    new h falls back to the Taylor predictor)."""
+    if m.iset[IS_PREDICTOR] == 0 or d.dt[0] != h:
+        return False
+    for i in range(m.nq):
+        if d.qdd_hist[1, i] != d.qdd[i]:
+            return False
+    return True
+
+
+@kernel
 def step_begin(m, d, h):
-    """Stage 1: drivers at t + h, trapezoidal predictor, reset of the Newton bookkeeping."""
+    """Stage 1: drivers at t + h, predictor, reset of the Newton bookkeeping.
+
+    The predictor is the Taylor one, q + h qd + h^2/2 qdd (IS_PREDICTOR = 0), or the trapezoidal rule
+    q + h qd + h^2/4 (qdd + qdd_end) itself with qdd_end = 2 qdd - qdd_prev extrapolated from the last
+    two steps (IS_PREDICTOR = 1): an error O(h^4) instead of O(h^3) in the fourth and third time
+    derivatives of q, which matters for unit vectors of fast-spinning bodies in natural coordinates
+    (a wheel at omega rad/s has d3q/dt3 ~ omega^3). Newton's stopping test is the same either way."""
+    ext = _can_extrapolate(m, d, h)
     if d.dt[0] != h or m.iset[IS_REUSE_STEPS] == 0:
         d.dt[0] = h
         d.flags[NEED_FACTOR] = 1
     eval_drivers(m, d, d.t[0] + h)
     c1 = 2.0 / h
     c2 = 4.0 / (h * h)
+    b = 0.25 * h * h
+    hist = d.qdd_hist
     for i in range(m.nq):
         qn = d.q[i]
         d.qhd[i] = -(c1 * qn + d.qd[i])
         d.qhdd[i] = -(c2 * qn + 4.0 / h * d.qd[i] + d.qdd[i])
-        d.q[i] = qn + h * d.qd[i] + 0.5 * h * h * d.qdd[i]
+        if ext:
+            base = qn + h * d.qd[i] + b * (3.0 * d.qdd[i] - hist[0, i])
+            d.q[i] = base + hist[2, i]
+        else:
+            base = qn + h * d.qd[i] + 2.0 * b * d.qdd[i]
+            d.q[i] = base
+        if m.iset[IS_PREDICTOR] == 1:
+            hist[0, i] = d.qdd[i]
+            hist[2, i] = base
     d.newton[NW_PREV] = np.inf
     d.newton[NW_AGE] = 0.0
     d.newton[NW_NRM] = np.inf
@@ -394,6 +424,10 @@ def finish_project(m, d, h):
         if not (np.isfinite(d.qd[i]) and np.isfinite(d.qdd[i])):
             st[ST_FAIL_INDEX] = i
             return ERR_NONFINITE_STATE
+    if m.iset[IS_PREDICTOR] == 1:
+        for i in range(m.nq):
+            d.qdd_hist[1, i] = d.qdd[i]
+            d.qdd_hist[2, i] = d.q[i] - d.qdd_hist[2, i]
     d.t[0] += h
     st[ST_STEPS] += 1
     st[ST_PROJ_ITER] += k1 + k2

@@ -63,6 +63,9 @@ IS_REUSE_STEPS = 3     # 1: keep the factorization across steps while Newton con
 IS_PROJECTION_FACTOR = 4  # 1: refactor at the converged q for the projections; 0: reuse Newton's factor
 IS_ERROR_TEST = 5      # Newton stops on 0: the last increment and the constraints it started from;
 #                        1: the estimated error of the new iterate and the constraints there
+IS_PREDICTOR = 6       # Newton's first iterate: 0 the Taylor predictor q + h qd + h^2/2 qdd; 1 the trapezoidal
+#                        rule with qdd at the step's end extrapolated linearly from the last two steps
+NISET = 7
 FS_TOL_DQ = 0          # Newton increment tolerance (coordinate units)
 FS_TOL_PHI = 1         # position constraint tolerance
 FS_TOL_VEL = 2         # velocity constraint tolerance
@@ -132,6 +135,7 @@ Data = namedtuple("Data", [
     "flags",          # int64 [have_factor, need_factor]
     "newton",         # float64 (4,) Newton bookkeeping between the stages of a step
     "poly_cache",     # float64 (npoly, 3, 6) polynomial paths and derivatives shared by a poly point's rows
+    "qdd_hist",       # float64 (2, nq): qdd at the start and at the end of the last step (IS_PREDICTOR)
     "stats",          # float64 (NSTATS,)
 ])
 
@@ -154,5 +158,6 @@ def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: f
         flags=np.zeros(2, dtype=np.int64),
         newton=np.zeros(4),
         poly_cache=np.zeros((model.poly_coef.shape[0], 3, 6)),
+        qdd_hist=np.full((3, nq), np.nan),
         stats=np.zeros(NSTATS),
     )

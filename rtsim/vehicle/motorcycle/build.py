@@ -90,7 +90,7 @@ def build_motorcycle(cfg: MotorcycleConfig, base: Path) -> MotorcycleModel:
     # error test stays the plain one: the contraction-rate test (Settings.error_test) stops after 2
     # iterations and saves 10 us a step, but at full throttle the top speed then settles 4 % above the
     # drive = drag + rolling resistance balance (57.4 against 55.0 m/s, tests/test_motorcycle_engine.py)
-    b = MechanismBuilder(dim=3, name=cfg.id, settings=Settings(projection_factor=True, error_test=False,
+    b = MechanismBuilder(dim=3, name=cfg.id, settings=Settings(projection_factor=True, error_test=False, extrapolate=True,
                                                               tol_phi=2e-9))
     refs: dict = {}
     for name in NAMES:
