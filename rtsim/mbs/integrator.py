@@ -33,7 +33,7 @@ from .sparse import cholesky, solve
 from .model import (
     ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION,
     FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
-    IS_ERROR_TEST, IS_PREDICTOR, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
+    IS_ABSOLUTE_DQ, IS_ERROR_TEST, IS_PREDICTOR, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
     ST_LAST_RESIDUAL, ST_MAX_PHI, ST_MAX_PHID, ST_MAX_PHIDD, ST_PROJ_ITER, ST_STEPS,
 )
 
@@ -331,7 +331,7 @@ def newton_update(m, d, h):
         d.stats[ST_LAST_RESIDUAL] = nrm
         return ERR_NONFINITE_STATE
     tol_phi = m.fset[FS_TOL_PHI]
-    tol_dq = m.fset[FS_TOL_DQ] * qmax
+    tol_dq = m.fset[FS_TOL_DQ] * (1.0 if m.iset[IS_ABSOLUTE_DQ] == 1 else qmax)
     if m.iset[IS_ERROR_TEST] == 0:
         # the last increment and the constraints at the iterate it was computed from
         if _max_abs(d.phi, nc) <= tol_phi and nrm <= tol_dq:

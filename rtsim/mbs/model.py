@@ -65,7 +65,8 @@ IS_ERROR_TEST = 5      # Newton stops on 0: the last increment and the constrain
 #                        1: the estimated error of the new iterate and the constraints there
 IS_PREDICTOR = 6       # Newton's first iterate: 0 the Taylor predictor q + h qd + h^2/2 qdd; 1 the trapezoidal
 #                        rule with qdd at the step's end extrapolated linearly from the last two steps
-NISET = 7
+IS_ABSOLUTE_DQ = 7     # 1: Newton's increment tolerance FS_TOL_DQ is absolute (m, rad), not relative to max(1, max|q|)
+NISET = 8
 FS_TOL_DQ = 0          # Newton increment tolerance (coordinate units)
 FS_TOL_PHI = 1         # position constraint tolerance
 FS_TOL_VEL = 2         # velocity constraint tolerance
