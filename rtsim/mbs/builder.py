@@ -110,7 +110,7 @@ class Settings:
     """Integrator settings. Tolerances are in coordinate units (m, rad) and their rates."""
     max_iter: int = 30                # Newton iterations per step before ConvergenceError
     max_proj_iter: int = 100          # CG iterations (Newton multipliers), multiplier iterations (projections)
-    tol_dq: float = 1e-8              # Newton increment, relative to max(1, max|q|)
+    tol_dq: float = 1e-8              # Newton increment, relative to max(1, max|q|) (absolute: absolute_tol_dq)
     tol_phi: float = 1e-10            # max |Phi| for Newton to stop
     tol_vel: float = 1e-10            # target max |Phi_q qd + Phi_t| of the velocity projection
     tol_acc: float = 1e-8             # target max |Phi''| of the acceleration projection
