@@ -30,6 +30,9 @@ def test_factor_and_solve_match_dense(n, density, seed, ordering):
     assert sparse.cholesky(_values(a, s), s["colptr"], s["rowidx"], s["uptr"], s["upos"], s["pcol"], l_val, work) == -1
     dense = np.zeros((n, n))
     dense[s["rowidx"], s["pcol"]] = l_val
+    diag = s["colptr"][:-1]
+    assert np.all(s["rowidx"][diag] == np.arange(n))
+    dense[np.arange(n), np.arange(n)] = 1.0 / l_val[diag]       # stored inverted
     ap = a[np.ix_(s["perm"], s["perm"])]
     scale = np.max(np.abs(a))
     np.testing.assert_allclose(dense, np.linalg.cholesky(ap), rtol=0, atol=1e-12 * np.sqrt(scale))

@@ -27,7 +27,7 @@ from . import envelope, sparse
 from .model import (
     CON_ANGLE2D, CON_ANGLE3D, CON_CRANK_ROD, CON_DISC_CONTACT, CON_DISC_ROLL, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
     FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
-    FS_TOL_VEL_FAIL, IS_ERROR_TEST, IS_MAX_ITER, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
+    FS_TOL_VEL_FAIL, IS_ERROR_TEST, IS_MAX_ITER, IS_PREDICTOR, IS_ABSOLUTE_DQ, NISET, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
 )
 
 
@@ -110,7 +110,7 @@ class Settings:
     """Integrator settings. Tolerances are in coordinate units (m, rad) and their rates."""
     max_iter: int = 30                # Newton iterations per step before ConvergenceError
     max_proj_iter: int = 100          # CG iterations (Newton multipliers), multiplier iterations (projections)
-    tol_dq: float = 1e-8              # Newton increment, relative to max(1, max|q|)
+    tol_dq: float = 1e-8              # Newton increment, relative to max(1, max|q|) (absolute: absolute_tol_dq)
     tol_phi: float = 1e-10            # max |Phi| for Newton to stop
     tol_vel: float = 1e-10            # target max |Phi_q qd + Phi_t| of the velocity projection
     tol_acc: float = 1e-8             # target max |Phi''| of the acceleration projection
@@ -126,6 +126,13 @@ class Settings:
     #                                   confirms; the default keeps it for problems through singular positions)
     projection_factor: bool = True    # refactor at the converged q for the projections (needed at
     #                                   singular positions; a model without them may save it)
+    absolute_tol_dq: bool = False     # tol_dq in coordinate units, not relative to max(1, max|q|): where some
+    #                                   coordinates grow without bound (distance travelled, wheel spin angles)
+    #                                   the relative test loosens as they grow, while the increments that matter
+    #                                   (a wheel's spin, hence its tyre's slip) need the same tolerance all along
+    extrapolate: bool = False         # Newton starts from the trapezoidal rule with the end-of-step qdd
+    #                                   extrapolated from the last two steps (error O(h^4 d4q/dt4) instead of the
+    #                                   Taylor predictor's O(h^3 d3q/dt3)): fewer iterations where bodies spin fast
 
 
 @dataclass
@@ -627,11 +634,13 @@ class MechanismBuilder:
         drv_kind = np.array([k for k, _ in self._drivers], dtype=np.int64)
         drv_par = np.array([p for _, p in self._drivers], dtype=float).reshape(nd, 4)
         s = self.settings
-        iset = np.zeros(6, dtype=np.int64)
+        iset = np.zeros(NISET, dtype=np.int64)
         iset[IS_PROJECTION_FACTOR] = int(s.projection_factor)
         iset[IS_MAX_ITER], iset[IS_MAX_PROJ] = s.max_iter, s.max_proj_iter
         iset[IS_TANGENT_FORCES], iset[IS_REUSE_STEPS] = tangent, int(s.reuse_across_steps)
         iset[IS_ERROR_TEST] = int(s.error_test)
+        iset[IS_PREDICTOR] = int(s.extrapolate)
+        iset[IS_ABSOLUTE_DQ] = int(s.absolute_tol_dq)
         fset = np.zeros(7)
         fset[FS_TOL_DQ], fset[FS_TOL_PHI], fset[FS_TOL_VEL], fset[FS_TOL_ACC] = s.tol_dq, s.tol_phi, s.tol_vel, s.tol_acc
         fset[FS_TOL_VEL_FAIL], fset[FS_TOL_ACC_FAIL] = s.tol_vel_fail, s.tol_acc_fail

@@ -33,7 +33,7 @@ from .sparse import cholesky, solve
 from .model import (
     ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION,
     FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
-    IS_ERROR_TEST, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
+    IS_ABSOLUTE_DQ, IS_ERROR_TEST, IS_PREDICTOR, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
     ST_LAST_RESIDUAL, ST_MAX_PHI, ST_MAX_PHID, ST_MAX_PHIDD, ST_PROJ_ITER, ST_STEPS,
 )
 
@@ -215,19 +215,54 @@ def wants_tangent(m, d):
 
 
 @kernel
+def _can_extrapolate(m, d, h):
+    """True when the last step ended in the current state with the same h, so that the accelerations it
+    started and ended with extrapolate to this step's end (a state set from outside, a failed step or a
+    new h falls back to the Taylor predictor)."""
+    if m.iset[IS_PREDICTOR] == 0 or d.dt[0] != h:
+        return False
+    for i in range(m.nq):
+        if d.pred[m.nq + i] != d.qdd[i]:
+            return False
+    return True
+
+
+@kernel
 def step_begin(m, d, h):
-    """Stage 1: drivers at t + h, trapezoidal predictor, reset of the Newton bookkeeping."""
+    """Stage 1: drivers at t + h, predictor, reset of the Newton bookkeeping.
+
+    The predictor is the Taylor one, q + h qd + h^2/2 qdd (IS_PREDICTOR = 0), or (IS_PREDICTOR = 1) the
+    trapezoidal rule itself, base = q + h qd + h^2/4 (qdd + qdd_end) with qdd_end = 2 qdd - qdd_prev
+    extrapolated from the last two steps, plus the correction Newton made to the last step's base.
+    The correction carries over because it is mostly systematic: the velocity projection puts qd on
+    the tangent of a spinning body's unit vectors, and the trapezoidal chord then falls short of the
+    arc by about (omega h)^3 / 12 a step (8e-5 rad for a wheel at 100 rad/s and h = 1 ms), which
+    Newton would otherwise remove anew every step. With it the first increment of the motorcycle at
+    20 m/s drops from about 2e-4 to 3e-6. Only the start differs: Newton's stopping test and the
+    solution it accepts are the same either way."""
+    ext = _can_extrapolate(m, d, h)
     if d.dt[0] != h or m.iset[IS_REUSE_STEPS] == 0:
         d.dt[0] = h
         d.flags[NEED_FACTOR] = 1
     eval_drivers(m, d, d.t[0] + h)
     c1 = 2.0 / h
     c2 = 4.0 / (h * h)
-    for i in range(m.nq):
+    b = 0.25 * h * h
+    hist = d.pred
+    n = m.nq
+    for i in range(n):
         qn = d.q[i]
         d.qhd[i] = -(c1 * qn + d.qd[i])
         d.qhdd[i] = -(c2 * qn + 4.0 / h * d.qd[i] + d.qdd[i])
-        d.q[i] = qn + h * d.qd[i] + 0.5 * h * h * d.qdd[i]
+        if ext:
+            base = qn + h * d.qd[i] + b * (3.0 * d.qdd[i] - hist[i])
+            d.q[i] = base + hist[2 * n + i]
+        else:
+            base = qn + h * d.qd[i] + 2.0 * b * d.qdd[i]
+            d.q[i] = base
+        if m.iset[IS_PREDICTOR] == 1:
+            hist[i] = d.qdd[i]
+            hist[2 * n + i] = base
     d.newton[NW_PREV] = np.inf
     d.newton[NW_AGE] = 0.0
     d.newton[NW_NRM] = np.inf
@@ -296,7 +331,7 @@ def newton_update(m, d, h):
         d.stats[ST_LAST_RESIDUAL] = nrm
         return ERR_NONFINITE_STATE
     tol_phi = m.fset[FS_TOL_PHI]
-    tol_dq = m.fset[FS_TOL_DQ] * qmax
+    tol_dq = m.fset[FS_TOL_DQ] * (1.0 if m.iset[IS_ABSOLUTE_DQ] == 1 else qmax)
     if m.iset[IS_ERROR_TEST] == 0:
         # the last increment and the constraints at the iterate it was computed from
         if _max_abs(d.phi, nc) <= tol_phi and nrm <= tol_dq:
@@ -394,6 +429,10 @@ def finish_project(m, d, h):
         if not (np.isfinite(d.qd[i]) and np.isfinite(d.qdd[i])):
             st[ST_FAIL_INDEX] = i
             return ERR_NONFINITE_STATE
+    if m.iset[IS_PREDICTOR] == 1:
+        for i in range(m.nq):
+            d.pred[m.nq + i] = d.qdd[i]
+            d.pred[2 * m.nq + i] = d.q[i] - d.pred[2 * m.nq + i]
     d.t[0] += h
     st[ST_STEPS] += 1
     st[ST_PROJ_ITER] += k1 + k2

@@ -63,6 +63,10 @@ IS_REUSE_STEPS = 3     # 1: keep the factorization across steps while Newton con
 IS_PROJECTION_FACTOR = 4  # 1: refactor at the converged q for the projections; 0: reuse Newton's factor
 IS_ERROR_TEST = 5      # Newton stops on 0: the last increment and the constraints it started from;
 #                        1: the estimated error of the new iterate and the constraints there
+IS_PREDICTOR = 6       # Newton's first iterate: 0 the Taylor predictor q + h qd + h^2/2 qdd; 1 the trapezoidal
+#                        rule with qdd at the step's end extrapolated linearly from the last two steps
+IS_ABSOLUTE_DQ = 7     # 1: Newton's increment tolerance FS_TOL_DQ is absolute (m, rad), not relative to max(1, max|q|)
+NISET = 8
 FS_TOL_DQ = 0          # Newton increment tolerance (coordinate units)
 FS_TOL_PHI = 1         # position constraint tolerance
 FS_TOL_VEL = 2         # velocity constraint tolerance
@@ -116,6 +120,9 @@ Model = namedtuple("Model", [
     "iset", "fset",
 ])
 
+# Kernels that are not inlined take Data by value, flattened into scalar arguments: one more array field
+# (a 2-D history of the predictor, tried) made the motorcycle's force kernel about 0.7 us a call slower
+# inside the step. Reuse or widen existing fields before adding one, and time the step when you do.
 Data = namedtuple("Data", [
     "t",              # (1,) time, s
     "dt",             # (1,) step the factorization and alpha were made for, s
@@ -128,7 +135,9 @@ Data = namedtuple("Data", [
     "phi", "jac", "phit", "phitt", "hqd",   # constraint values, Jacobian values, time derivatives, (Phi_q)' qd
     "force", "w_env",  # forces, W = M + dt/2 C + dt^2/4 K (= M without K, C) in envelope storage
     "a_env", "l_env",  # the tangent A = W + bq Phi_q^T alpha Phi_q and its factor, in the factor's pattern
-    "qn", "qhd", "qhdd", "r", "x", "y", "z", "work", "sig", "g", "sp", "mu",
+    "pred",           # (3 nq,) predictor history (IS_PREDICTOR): qdd at the start and at the end of the last
+    #                   step, and its predictor base (during a step) or Newton's correction to it (after)
+    "qhd", "qhdd", "r", "x", "y", "z", "work", "sig", "g", "sp", "mu",
     "flags",          # int64 [have_factor, need_factor]
     "newton",         # float64 (4,) Newton bookkeeping between the stages of a step
     "poly_cache",     # float64 (npoly, 3, 6) polynomial paths and derivatives shared by a poly point's rows
@@ -150,7 +159,7 @@ def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: f
         drv_ext=np.zeros((nd, 3)), drv=np.zeros((nd, 3)),
         phi=z(nc), jac=np.zeros((nc, NSLOT)), phit=z(nc), phitt=z(nc), hqd=z(nc),
         force=z(nq), w_env=model.m_env.copy(), a_env=z(nfac), l_env=z(nfac),
-        qn=z(nq), qhd=z(nq), qhdd=z(nq), r=z(nq), x=z(nq), y=z(nq), z=z(max(nq, nc)), work=z(nq), sig=z(nc), g=z(nc), sp=z(nc), mu=z(nc),
+        pred=np.full(3 * nq, np.nan), qhd=z(nq), qhdd=z(nq), r=z(nq), x=z(nq), y=z(nq), z=z(max(nq, nc)), work=z(nq), sig=z(nc), g=z(nc), sp=z(nc), mu=z(nc),
         flags=np.zeros(2, dtype=np.int64),
         newton=np.zeros(4),
         poly_cache=np.zeros((model.poly_coef.shape[0], 3, 6)),
