@@ -127,6 +127,15 @@ def run_one(spec: dict, job: dict) -> dict:
             **metrics, "wall_s": time.perf_counter() - t0, "worker": f"{socket.gethostname()}:{os.getpid()}"}
 
 
+def lost_row(spec: dict, job: dict, reason: str) -> dict:
+    """The row of a run whose worker never returned (its process died on every attempt)."""
+    return {"run_id": spec["run_id"], "case": spec["case"], "scenario": Path(spec["scenario"]).stem,
+            "vehicle": Path(spec["vehicle"]).stem if spec["vehicle"] else "", "seed": spec["seed"],
+            **{k: spec["params"].get(k) for k in job["param_keys"]}, "status": "error", "verdict": "error",
+            "failed": "", "error": reason, "simulated_s": math.nan, **{m: math.nan for m in job["metrics"]},
+            "wall_s": math.nan, "worker": ""}
+
+
 def warm(spec: dict, job: dict) -> None:
     """Load (or compile) a worker's kernels once: the spec's run cut to 20 ms, its result dropped."""
     short = {**spec, "overrides": {**spec["overrides"], "scenario.duration": 0.02}}
