@@ -1,13 +1,16 @@
 """`rtsim batch` end to end on configs/batch/smoke.toml (both cars and the motorcycle, 12 short runs):
 a bad grid value and a fall are recorded rows and the batch goes on; a batch killed after some rows
-resumes with only the missing runs; a Ray cluster started here on 127.0.0.1 (a head and a worker, one
-of its worker processes killed mid-batch) gives the local pool's table row for row (wall time and
-worker excluded), and every Ray process listens on loopback only."""
+resumes with only the missing runs; a Ray cluster started here with `ray start` on 127.0.0.1 (one node,
+two worker slots; a worker process killed while it runs a task) gives the local pool's table row for
+row (wall time and worker excluded), and every process of that cluster listens on loopback only. The
+cluster is stopped by killing its own processes (found by its temp folder and port), not `ray stop`,
+which would stop every Ray process of the user."""
 from __future__ import annotations
 
 import csv
 import math
 import os
+import secrets
 import shutil
 import signal
 import subprocess
@@ -21,7 +24,17 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PLAN = ROOT / "configs" / "batch" / "smoke.toml"
 VOLATILE = ("wall_s", "worker")
-ENV = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", "PYTHONPATH": str(ROOT)}
+# token authentication on, the token in the environment of this cluster's processes only (nothing
+# written to ~/.ray)
+ENV = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", "PYTHONPATH": str(ROOT), "RAY_AUTH_MODE": "token",
+       "RAY_AUTH_TOKEN": secrets.token_hex(16)}
+# `ray start` replaces a node address of 127.0.0.1 by the machine's routable one unless
+# RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0 (Ray's single-machine mode); its servers bind only the loopback
+# address when the node's address is 127.0.0.1 and every interface otherwise (measured with Ray 2.60:
+# with a second node on 127.0.0.2 the GCS and the raylets listened on "::"). That mode refuses a second
+# node, so the cluster here is one head node with two worker slots.
+NODE_IP = "127.0.0.1"
+ENV["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
 
 
 def _batch(*args, **kw):
@@ -94,13 +107,22 @@ def test_resume_runs_only_what_was_missing(local):
     assert len(journal) == 12 and len(set(journal)) == 12 and journal[:len(before)] == before
 
 
-def _ray_processes(temp_dir: str):
+def _loopback(ip: str) -> bool:
+    import ipaddress
+
+    a = ipaddress.ip_address(ip)
+    return (getattr(a, "ipv4_mapped", None) or a).is_loopback
+
+
+def _ray_processes(temp_dir: str, port: int):
+    """The processes of the cluster this test started: those naming its temp folder or its GCS port, and
+    their children."""
     import psutil
 
     roots = []
     for p in psutil.process_iter(["cmdline"]):
         try:
-            if any(temp_dir in a for a in (p.info["cmdline"] or ())):
+            if any(temp_dir in a or a.endswith(f"{NODE_IP}:{port}") for a in (p.info["cmdline"] or ())):
                 roots.append(p)
         except psutil.Error:
             pass
@@ -122,18 +144,18 @@ def test_ray_cluster_gives_the_same_table_and_loses_no_run(local, tmp_path):
 
     temp_dir = tempfile.mkdtemp(prefix="rtray", dir="/tmp")       # short: Ray's socket paths must fit
     port = free_port()
-    common = ["--node-ip-address=127.0.0.1", "--num-cpus=1", f"--temp-dir={temp_dir}", "--disable-usage-stats"]
+    common = [f"--node-ip-address={NODE_IP}", "--num-cpus=2", f"--temp-dir={temp_dir}", "--disable-usage-stats"]
     try:
-        subprocess.run([ray_bin, "start", "--head", f"--port={port}", "--include-dashboard=false", *common],
-                       env=ENV, cwd=ROOT, check=True, capture_output=True, timeout=120)
-        subprocess.run([ray_bin, "start", f"--address=127.0.0.1:{port}", *common], env=ENV, cwd=ROOT, check=True,
-                       capture_output=True, timeout=120)
+        for args in (["--head", f"--port={port}", "--include-dashboard=false", f"--ray-client-server-port={free_port()}"],):
+            r = subprocess.run([ray_bin, "start", *args, *common], env=ENV, cwd=ROOT, capture_output=True, text=True,
+                               timeout=120)
+            assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
         out = tmp_path / "ray"
-        p = _batch("--out", str(out), "--no-report", "--ray", f"127.0.0.1:{port}")
+        p = _batch("--out", str(out), "--no-report", "--ray", f"{NODE_IP}:{port}")
         killed = None
         deadline = time.monotonic() + 300
         while killed is None and p.poll() is None and time.monotonic() < deadline:
-            for proc in _ray_processes(temp_dir):
+            for proc in _ray_processes(temp_dir, port):
                 try:
                     if proc.name().startswith("ray::run_one") or "ray::run_one" in " ".join(proc.cmdline()):
                         proc.kill()
@@ -143,7 +165,7 @@ def test_ray_cluster_gives_the_same_table_and_loses_no_run(local, tmp_path):
                     pass
             time.sleep(0.02)
         listening = []
-        for proc in _ray_processes(temp_dir):
+        for proc in _ray_processes(temp_dir, port):
             try:
                 listening += [(proc.name(), c.laddr) for c in proc.net_connections("inet") if c.status == "LISTEN"]
             except psutil.Error:
@@ -151,12 +173,12 @@ def test_ray_cluster_gives_the_same_table_and_loses_no_run(local, tmp_path):
         text, _ = p.communicate(timeout=300)
         assert p.returncode == 1, text
         assert killed is not None, "no Ray worker was seen running a task to kill:\n" + text
-        assert listening and all(a.ip in ("127.0.0.1", "::1") for _, a in listening), listening
+        assert listening and all(_loopback(a.ip) for _, a in listening), listening
         rows = _rows(out / "results.csv")
         assert _identity(rows) == _identity(_rows(local[0] / "results.csv"))
         assert all(r["status"] != "error" for r in rows), [r["error"] for r in rows if r["status"] == "error"]
     finally:
-        for proc in _ray_processes(temp_dir):          # this cluster's processes only (not `ray stop`)
+        for proc in _ray_processes(temp_dir, port):          # this cluster's processes only (not `ray stop`)
             try:
                 proc.kill()
             except psutil.Error:

@@ -79,6 +79,16 @@ def ray_init(address: str):
     """Connect Ray: "auto" starts a local instance on 127.0.0.1 (no dashboard, usage statistics off);
     anything else is a cluster address (host:port, ray://...)."""
     os.environ["RAY_USAGE_STATS_ENABLED"] = "0"
+    if address == "auto":
+        # without this Ray replaces 127.0.0.1 by the machine's routable address (its node address for a
+        # cluster across machines) and binds its servers there; read when ray is imported
+        os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
+        if "RAY_AUTH_MODE" not in os.environ:
+            # token authentication with a token of this batch's own, held in the environment its Ray
+            # processes inherit (Ray's default would write one into ~/.ray)
+            import secrets
+            os.environ["RAY_AUTH_MODE"] = "token"
+            os.environ.setdefault("RAY_AUTH_TOKEN", secrets.token_hex(16))
     import ray
 
     env = {"env_vars": {"PYTHONPATH": os.pathsep.join([_code_path(), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
