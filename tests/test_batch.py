@@ -184,3 +184,34 @@ def test_ray_cluster_gives_the_same_table_and_loses_no_run(local, tmp_path):
             except psutil.Error:
                 pass
         shutil.rmtree(temp_dir, ignore_errors=True)
+
+
+def test_ray_auto_is_local_on_loopback_and_gives_the_same_table(local, tmp_path):
+    """`--ray auto`: a Ray instance of the batch's own, every process listening on loopback only, the
+    local pool's table, and no token or state left in ~/.ray."""
+    import psutil
+
+    out = tmp_path / "auto"
+    home_ray = Path.home() / ".ray" / "auth_token"
+    had_token = home_ray.exists()
+    p = _batch("--out", str(out), "--no-report", "--ray", "auto")
+    listening, seen = [], set()
+    while p.poll() is None:
+        try:
+            procs = [psutil.Process(p.pid), *psutil.Process(p.pid).children(recursive=True)]
+        except psutil.Error:
+            break
+        for proc in procs:
+            try:
+                for c in proc.net_connections("inet"):
+                    if c.status == "LISTEN" and (proc.pid, c.laddr) not in seen:
+                        seen.add((proc.pid, c.laddr))
+                        listening.append((proc.name(), c.laddr))
+            except psutil.Error:
+                pass
+        time.sleep(0.1)
+    text, _ = p.communicate(timeout=300)
+    assert p.returncode == 1, text
+    assert listening and all(_loopback(a.ip) for _, a in listening), listening
+    assert _identity(_rows(out / "results.csv")) == _identity(_rows(local[0] / "results.csv"))
+    assert home_ray.exists() == had_token

@@ -75,21 +75,28 @@ def _code_path() -> str:
     return str(Path(__file__).resolve().parents[2])
 
 
-def ray_init(address: str):
-    """Connect Ray: "auto" starts a local instance on 127.0.0.1 (no dashboard, usage statistics off);
-    anything else is a cluster address (host:port, ray://...)."""
+def ray_environment(address: str) -> None:
+    """The environment Ray reads when it is imported (so: before `import ray`), inherited by the
+    processes it starts: usage statistics off; for "auto" Ray's single-machine mode, in which it keeps
+    the node address 127.0.0.1 and binds its servers there (otherwise it replaces 127.0.0.1 by the
+    machine's routable address and listens on every interface), and token authentication with a
+    token of this batch's own, held in that environment (Ray's default would write one into ~/.ray)."""
     os.environ["RAY_USAGE_STATS_ENABLED"] = "0"
     if address == "auto":
-        # without this Ray replaces 127.0.0.1 by the machine's routable address (its node address for a
-        # cluster across machines) and binds its servers there; read when ray is imported
         os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
         if "RAY_AUTH_MODE" not in os.environ:
-            # token authentication with a token of this batch's own, held in the environment its Ray
-            # processes inherit (Ray's default would write one into ~/.ray)
             import secrets
             os.environ["RAY_AUTH_MODE"] = "token"
             os.environ.setdefault("RAY_AUTH_TOKEN", secrets.token_hex(16))
+
+
+def ray_init(address: str):
+    """Connect Ray: "auto" starts a local instance on 127.0.0.1 (no dashboard, usage statistics off);
+    anything else is a cluster address (host:port, ray://...)."""
+    ray_environment(address)
     import ray
+    if address == "auto" and ray._private.ray_constants.ENABLE_RAY_CLUSTER:
+        raise RuntimeError("ray was imported before its environment was set: it would not bind to 127.0.0.1")
 
     env = {"env_vars": {"PYTHONPATH": os.pathsep.join([_code_path(), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
                         "RAY_USAGE_STATS_ENABLED": "0"}}
@@ -101,11 +108,11 @@ def ray_init(address: str):
 
 def ray_cluster(specs: list[dict], job: dict, on_row: Callable[[dict], None], address: str = "auto",
                 retries: int = 3) -> None:
-    import ray
-
-    started = not ray.is_initialized()
+    started = "ray" not in sys.modules or not sys.modules["ray"].is_initialized()
     if started:
         ray_init(address)
+    import ray
+
     try:
         task = ray.remote(num_cpus=1, max_retries=retries)(run_one)
         refs = {task.remote(s, job): s["run_id"] for s in specs}
