@@ -117,11 +117,11 @@ class Plan(Strict):
         _check_paths("grid", self.grid)
         for k, v in self.grid.items():
             if not v:
-                raise bad(f"grid.{k}", v, "must list at least one value")
+                raise bad("grid", k, "must list at least one value for this key")
         if self.random is not None:
             both = sorted(set(self.grid) & set(self.random.params))
             if both:
-                raise bad(f"random.params.{both[0]}", "...", "also in [grid]: sample or grid a key, not both")
+                raise bad("random.params", both[0], "also in [grid]: sample or grid a key, not both")
         return self
 
 
@@ -130,7 +130,7 @@ def _check_paths(section: str, table: dict) -> None:
 
     for k in table:
         if not re.match(PATH_PATTERN, k):
-            raise bad(f"{section}.{k}", table[k], "key must be a dotted path starting with vehicle. or scenario.")
+            raise bad(section, k, "keys must be dotted paths starting with vehicle. or scenario.")
 
 
 def load_plan(path: str | Path) -> tuple[Plan, Path]:
