@@ -215,3 +215,30 @@ def test_ray_auto_is_local_on_loopback_and_gives_the_same_table(local, tmp_path)
     assert listening and all(_loopback(a.ip) for _, a in listening), listening
     assert _identity(_rows(out / "results.csv")) == _identity(_rows(local[0] / "results.csv"))
     assert home_ray.exists() == had_token
+
+
+def test_a_killed_pool_worker_loses_no_run(local, tmp_path):
+    """A local pool worker killed mid-batch breaks the pool; the runs not yet back go to a fresh pool and
+    the table is the same, no run lost."""
+    import psutil
+
+    out = tmp_path / "pool"
+    journal = out / "journal.csv"
+    p = _batch("--out", str(out), "--no-report")
+    killed = None
+    while killed is None and p.poll() is None:
+        done = len(journal.read_text().splitlines()) - 1 if journal.exists() else 0
+        if 1 <= done < 12:
+            try:
+                workers = [c for c in psutil.Process(p.pid).children(recursive=True)
+                           if "spawn_main" in " ".join(c.cmdline())]
+                if workers:
+                    workers[0].kill()
+                    killed = workers[0].pid
+            except psutil.Error:
+                pass
+        time.sleep(0.01)
+    text, _ = p.communicate(timeout=300)
+    assert p.returncode == 1, text
+    assert killed is not None, "the batch ended before a worker could be killed:\n" + text
+    assert _identity(_rows(out / "results.csv")) == _identity(_rows(local[0] / "results.csv"))
