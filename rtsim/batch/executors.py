@@ -21,9 +21,6 @@ from typing import Callable
 
 from .run import lost_row, run_one, warm
 
-_WARM: list = []
-
-
 def _init(warm_specs: list[dict], job: dict) -> None:
     for spec in warm_specs:
         warm(spec, job)
