@@ -126,3 +126,38 @@ def ray_cluster(specs: list[dict], job: dict, on_row: Callable[[dict], None], ad
         if started:
             ray.shutdown()
         sys.stdout.flush()
+
+
+# ---- an ordered map with a per-worker context (for re-simulation workflows) -------------------------
+_CONTEXTS: dict = {}
+
+
+def _with_context(key: str, setup: Callable, setup_args: tuple, fn: Callable, task):
+    ctx = _CONTEXTS.get(key)
+    if ctx is None:
+        ctx = _CONTEXTS[key] = setup(*setup_args)       # once per worker process and setup
+    return fn(ctx, task)
+
+
+def ray_map(fn: Callable, tasks: list, setup: Callable, setup_args: tuple = (), address: str = "auto",
+            retries: int = 3) -> list:
+    """[fn(ctx, task) for task in tasks] computed by Ray tasks, in task order, where ctx = setup(*setup_args)
+    is built once in each worker process (a model, a replayer: what is costly to build and to ship with
+    every task), the setup's arguments shipped once through Ray's object store. A task lost with its
+    worker runs again (`retries`); an exception raised by `fn` comes back as Ray's error for that task.
+    Connects as `ray_cluster` does when Ray is not yet initialised (and shuts it down after)."""
+    import hashlib
+    import pickle
+
+    started = "ray" not in sys.modules or not sys.modules["ray"].is_initialized()
+    if started:
+        ray_init(address)
+    import ray
+    try:
+        key = hashlib.sha256(pickle.dumps((getattr(setup, "__qualname__", repr(setup)), setup_args))).hexdigest()
+        args_ref = ray.put(setup_args)
+        task_fn = ray.remote(num_cpus=1, max_retries=retries)(_with_context)
+        return ray.get([task_fn.remote(key, setup, args_ref, fn, t) for t in tasks])
+    finally:
+        if started:
+            ray.shutdown()
