@@ -10,6 +10,7 @@
     rtsim energy   the power audit of a run                rtsim feel     steering feel of a run (EPS car)
     rtsim eigen    a two-wheeler's modes against speed     rtsim statics  a two-wheeler at rest, rider on
     rtsim inverse  a motorcycle's steering and drive torques for a path and speed
+    rtsim batch    a plan of runs (scenarios x vehicles x parameters x seeds), local pool or Ray
 """
 from __future__ import annotations
 
@@ -317,6 +318,8 @@ _DELEGATED = (
     ("resim", "rtsim.service.resim", "re-run a recording (or a CAN log of commands) and compare the state"),
     ("validate", "rtsim.validate.cli", "compare the model with repeated field runs, name and add the missing effect"),
     ("eigen", "rtsim.analyses.eigen_cli", "a two-wheeler's modes against speed in straight running (root locus, JSON)"),
+    ("batch", "rtsim.batch.cli", "run a plan of scenarios x vehicles x parameters (grid or random) x seeds on a "
+     "local pool or Ray: results table, metrics, pass/fail, HTML summary; resumable"),
     ("inverse", "rtsim.vehicle.motorcycle.inverse", "a motorcycle's inverse dynamics: the steering and drive "
      "torques that follow a path at a speed"),
 )

@@ -1,0 +1,163 @@
+"""Where runs execute. Both executors take run specs and call `on_row` in the submitting process with each
+result row as it arrives (any order); results do not depend on the executor or the worker (each run is
+seeded by its spec).
+
+- `local_pool`: concurrent.futures.ProcessPoolExecutor, one worker per core by default; each worker's
+  initializer loads the numba kernels once (a 20 ms run of each kind of vehicle in the plan), not per
+  run. A worker that dies (BrokenProcessPool) takes the pool with it: the runs not yet back are
+  submitted again to a fresh pool, up to `retries` times.
+- `ray_cluster`: Ray tasks (`max_retries`: a lost worker's run is run again elsewhere); `address="auto"`
+  starts a Ray instance on this machine bound to 127.0.0.1 with usage statistics off, else connects to
+  the cluster at `address`.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import Callable
+
+from .run import lost_row, run_one, warm
+
+def _init(warm_specs: list[dict], job: dict) -> None:
+    for spec in warm_specs:
+        warm(spec, job)
+
+
+def warm_specs(specs: list[dict]) -> list[dict]:
+    """One spec per kind of vehicle (car, two-wheeler: by scenario file) to load the kernels with."""
+    seen, out = set(), []
+    for s in specs:
+        if s["scenario"] not in seen:
+            seen.add(s["scenario"])
+            out.append(s)
+    return out[:4]
+
+
+def local_pool(specs: list[dict], job: dict, on_row: Callable[[dict], None], workers: int | None = None,
+               retries: int = 2) -> None:
+    import multiprocessing as mp
+
+    workers = workers or os.cpu_count() or 1
+    pending = {s["run_id"]: s for s in specs}
+    for _ in range(retries + 1):
+        if not pending:
+            return
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=mp.get_context("spawn"),
+                                   initializer=_init, initargs=(warm_specs(list(pending.values())), job))
+        try:
+            futures = {pool.submit(run_one, s, job): rid for rid, s in pending.items()}
+            while futures:
+                done, _ = wait(futures, return_when=FIRST_COMPLETED)
+                for f in done:
+                    rid = futures.pop(f)
+                    try:
+                        row = f.result()
+                    except BrokenProcessPool:
+                        continue
+                    pending.pop(rid, None)
+                    on_row(row)
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown(wait=True)
+    for s in list(pending.values()):     # a run that kills its worker every time: recorded as such
+        on_row(lost_row(s, job, f"its worker process died on each of {retries + 1} attempts"))
+
+
+def _code_path() -> str:
+    """The folder holding the rtsim package this process runs (workers put it first on their path)."""
+    return str(Path(__file__).resolve().parents[2])
+
+
+def ray_environment(address: str) -> None:
+    """The environment Ray reads when it is imported (so: before `import ray`), inherited by the
+    processes it starts: usage statistics off; for "auto" Ray's single-machine mode, in which it keeps
+    the node address 127.0.0.1 and binds its servers there (otherwise it replaces 127.0.0.1 by the
+    machine's routable address and listens on every interface), and token authentication with a
+    token of this batch's own, held in that environment (Ray's default would write one into ~/.ray)."""
+    os.environ["RAY_USAGE_STATS_ENABLED"] = "0"
+    if address == "auto":
+        os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
+        if "RAY_AUTH_MODE" not in os.environ:
+            import secrets
+            os.environ["RAY_AUTH_MODE"] = "token"
+            os.environ.setdefault("RAY_AUTH_TOKEN", secrets.token_hex(16))
+
+
+def ray_init(address: str):
+    """Connect Ray: "auto" starts a local instance on 127.0.0.1 (no dashboard, usage statistics off);
+    anything else is a cluster address (host:port, ray://...)."""
+    ray_environment(address)
+    import ray
+    if address == "auto" and ray._private.ray_constants.ENABLE_RAY_CLUSTER:
+        raise RuntimeError("ray was imported before its environment was set: it would not bind to 127.0.0.1")
+
+    env = {"env_vars": {"PYTHONPATH": os.pathsep.join([_code_path(), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
+                        "RAY_USAGE_STATS_ENABLED": "0"}}
+    if address == "auto":
+        return ray.init(address="local", _node_ip_address="127.0.0.1", include_dashboard=False,
+                        runtime_env=env, log_to_driver=False, configure_logging=False)
+    return ray.init(address=address, runtime_env=env, log_to_driver=False, configure_logging=False)
+
+
+def ray_cluster(specs: list[dict], job: dict, on_row: Callable[[dict], None], address: str = "auto",
+                retries: int = 3) -> None:
+    started = "ray" not in sys.modules or not sys.modules["ray"].is_initialized()
+    if started:
+        ray_init(address)
+    import ray
+
+    try:
+        task = ray.remote(num_cpus=1, max_retries=retries)(run_one)
+        refs = {task.remote(s, job): s["run_id"] for s in specs}
+        while refs:
+            done, _ = ray.wait(list(refs), num_returns=1)
+            for ref in done:
+                rid = refs.pop(ref)
+                try:
+                    on_row(ray.get(ref))
+                except ray.exceptions.RayError as exc:      # retries exhausted: recorded, the batch goes on
+                    spec = next(s for s in specs if s["run_id"] == rid)
+                    on_row(lost_row(spec, job, f"lost after {retries} retries: {type(exc).__name__}: {exc}"))
+    finally:
+        if started:
+            ray.shutdown()
+        sys.stdout.flush()
+
+
+# ---- an ordered map with a per-worker context (for re-simulation workflows) -------------------------
+_CONTEXTS: dict = {}
+
+
+def _with_context(key: str, setup: Callable, setup_args: tuple, fn: Callable, task):
+    ctx = _CONTEXTS.get(key)
+    if ctx is None:
+        ctx = _CONTEXTS[key] = setup(*setup_args)       # once per worker process and setup
+    return fn(ctx, task)
+
+
+def ray_map(fn: Callable, tasks: list, setup: Callable, setup_args: tuple = (), address: str = "auto",
+            retries: int = 3) -> list:
+    """[fn(ctx, task) for task in tasks] computed by Ray tasks, in task order, where ctx = setup(*setup_args)
+    is built once in each worker process (a model, a replayer: what is costly to build and to ship with
+    every task), the setup's arguments shipped once through Ray's object store. A task lost with its
+    worker runs again (`retries`); an exception raised by `fn` comes back as Ray's error for that task.
+    Connects as `ray_cluster` does when Ray is not yet initialised (and shuts it down after)."""
+    import hashlib
+    import pickle
+
+    started = "ray" not in sys.modules or not sys.modules["ray"].is_initialized()
+    if started:
+        ray_init(address)
+    import ray
+    try:
+        key = hashlib.sha256(pickle.dumps((getattr(setup, "__qualname__", repr(setup)), setup_args))).hexdigest()
+        args_ref = ray.put(setup_args)
+        task_fn = ray.remote(num_cpus=1, max_retries=retries)(_with_context)
+        return ray.get([task_fn.remote(key, setup, args_ref, fn, t) for t in tasks])
+    finally:
+        if started:
+            ray.shutdown()

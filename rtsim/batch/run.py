@@ -1,0 +1,142 @@
+"""One run spec (rtsim.batch.expand) -> one result row. Never raises: a config error (a bad value at one
+grid point), a Newton failure, a fall or any other exception is the row's status and error text, and
+the batch goes on.
+
+The spec's dotted-path overrides are applied to the vehicle's and the scenario's TOML tables as they are
+read, before validation, so the one loader of each (rtsim.configfile: file, key, value, allowed range)
+checks them like any value in the file; the loaders' module-level `load_toml` is swapped for the
+duration of the load (a worker runs one spec at a time)."""
+from __future__ import annotations
+
+import math
+import os
+import socket
+import time
+import traceback
+from contextlib import contextmanager
+from pathlib import Path
+
+from rtsim.errors import ConfigError, SimulationError
+
+from .expand import set_path, split_overrides
+from .metrics import compute
+
+#: modules whose `load_toml` reads the vehicle and scenario files (rtsim.configfile.load serves the scenario)
+_LOADERS = ("rtsim.configfile", "rtsim.vehicle.car.config", "rtsim.vehicle.motorcycle.config")
+
+
+@contextmanager
+def overridden(files: dict[Path, dict]):
+    """While active, reading any of `files` (resolved path -> {dotted key: value}) returns its TOML
+    table with those keys set."""
+    import importlib
+
+    mods = [importlib.import_module(m) for m in _LOADERS]
+    original = mods[0].load_toml
+
+    def load_toml(path):
+        data = original(path)
+        for key, value in files.get(Path(path).resolve(), {}).items():
+            try:
+                set_path(data, key, value)
+            except KeyError as exc:
+                raise ConfigError(f"{path}: {exc.args[0]}") from None
+        return data
+    saved = [m.load_toml for m in mods]
+    try:
+        for m in mods:
+            m.load_toml = load_toml
+        yield
+    finally:
+        for m, f in zip(mods, saved):
+            m.load_toml = f
+
+
+def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object]:
+    """(status, message, columns, data, writer) of the spec's run."""
+    from drivers.scenario import load_scenario
+
+    scen = Path(spec["scenario"])
+    veh_over, scen_over = split_overrides(spec["overrides"])
+    files = {scen.resolve(): scen_over}
+    with overridden(files):
+        sc = load_scenario(scen, check_files=True)
+        vpath = Path(spec["vehicle"]) if spec["vehicle"] else sc.vehicle_path
+        if vpath is None and not sc.two_wheeler:
+            from rtsim.vehicle.offline import default_vehicle_path
+            vpath = default_vehicle_path()
+        if vpath is not None:
+            files[vpath.resolve()] = veh_over
+        if sc.two_wheeler:
+            from rtsim.vehicle.motorcycle import offline as moto
+            ride, sc = moto.prepare(vpath, sc)
+        else:
+            from rtsim.vehicle import offline as car
+            sim, sc = car.prepare(vpath, sc)
+    if sc.two_wheeler:
+        res = moto.run(ride, sc)
+        write = {"csv": lambda p: moto.write_csv(res, p),
+                 "mcap": lambda p: moto.write_mcap(res, p, ride.sim.mm.config.id, mm=ride.sim.mm)}
+        return res.status, res.message, res.columns, res.data, write
+    res = car.run(sim, sc, seed=spec["seed"])
+    from bridge.mcap_log import write_run
+    write = {"csv": lambda p: car.write_csv(res, p),
+             "mcap": lambda p: write_run(p, res.columns, res.data, sim.vm.config.id, sim.vm.channels, sim=sim)}
+    return "ok", "", res.columns, res.data, write
+
+
+def verdict(status: str, metrics: dict, criteria: list) -> tuple[str, str]:
+    """("pass" | "fail" | "error", the failed criteria or the reason)."""
+    if status in ("config_error", "error"):
+        return "error", ""
+    failed = [] if status == "ok" else [status]
+    for metric, lo, hi in criteria:
+        v = metrics.get(metric, math.nan)
+        if not math.isfinite(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
+            failed.append(f"{metric}={v:.6g} not in [{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]")
+    return ("fail" if failed else "pass"), "; ".join(failed)
+
+
+def run_one(spec: dict, job: dict) -> dict:
+    """The result row of one run: run id, case, scenario, vehicle, seed, the swept parameters, status
+    (ok, fall, failed, config_error, error), verdict, failed criteria, error text, simulated time (s),
+    the metrics, wall time (s) and the worker (host:pid)."""
+    t0 = time.perf_counter()
+    status, error, columns, data = "ok", "", (), None
+    try:
+        status, error, columns, data, write = _simulate(spec, job)
+        if job.get("per_run", "none") != "none" and job.get("out_dir"):
+            folder = Path(job["out_dir"]) / "runs"
+            folder.mkdir(parents=True, exist_ok=True)
+            write[job["per_run"]](folder / f"{spec['run_id']}.{job['per_run']}")
+    except ConfigError as exc:
+        status, error = "config_error", str(exc)
+    except SimulationError as exc:
+        status, error = "failed", str(exc)
+    except Exception as exc:  # noqa: BLE001  (one run's bug must not end the batch: recorded with its place)
+        tb = traceback.extract_tb(exc.__traceback__)[-1]
+        status, error = "error", f"{type(exc).__name__}: {exc} ({Path(tb.filename).name}:{tb.lineno})"
+    metrics = compute(job["metrics"], columns, data) if data is not None and len(data) else \
+        {m: math.nan for m in job["metrics"]}
+    ver, failed = verdict(status, metrics, job.get("criteria", []))
+    simulated = float(data[-1, 0]) if data is not None and len(data) else math.nan
+    return {"run_id": spec["run_id"], "case": spec["case"], "scenario": Path(spec["scenario"]).stem,
+            "vehicle": Path(spec["vehicle"]).stem if spec["vehicle"] else "", "seed": spec["seed"],
+            **{k: spec["params"].get(k) for k in job["param_keys"]},
+            "status": status, "verdict": ver, "failed": failed, "error": error, "simulated_s": simulated,
+            **metrics, "wall_s": time.perf_counter() - t0, "worker": f"{socket.gethostname()}:{os.getpid()}"}
+
+
+def lost_row(spec: dict, job: dict, reason: str) -> dict:
+    """The row of a run whose worker never returned (its process died on every attempt)."""
+    return {"run_id": spec["run_id"], "case": spec["case"], "scenario": Path(spec["scenario"]).stem,
+            "vehicle": Path(spec["vehicle"]).stem if spec["vehicle"] else "", "seed": spec["seed"],
+            **{k: spec["params"].get(k) for k in job["param_keys"]}, "status": "error", "verdict": "error",
+            "failed": "", "error": reason, "simulated_s": math.nan, **{m: math.nan for m in job["metrics"]},
+            "wall_s": math.nan, "worker": ""}
+
+
+def warm(spec: dict, job: dict) -> None:
+    """Load (or compile) a worker's kernels once: the spec's run cut to 20 ms, its result dropped."""
+    short = {**spec, "overrides": {**spec["overrides"], "scenario.duration": 0.02}}
+    run_one(short, {**job, "per_run": "none", "criteria": []})

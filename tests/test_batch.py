@@ -1,0 +1,266 @@
+"""`rtsim batch` end to end on configs/batch/smoke.toml (both cars and the motorcycle, 12 short runs):
+a bad grid value and a fall are recorded rows and the batch goes on; a batch killed after some rows
+resumes with only the missing runs; a Ray cluster started here with `ray start` on 127.0.0.1 (one node,
+two worker slots; a worker process killed while it runs a task) gives the local pool's table row for
+row (wall time and worker excluded), and every process of that cluster listens on loopback only. The
+cluster is stopped by killing its own processes (found by its temp folder and port), not `ray stop`,
+which would stop every Ray process of the user."""
+from __future__ import annotations
+
+import csv
+import math
+import os
+import secrets
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PLAN = ROOT / "configs" / "batch" / "smoke.toml"
+VOLATILE = ("wall_s", "worker")
+# token authentication on, the token in the environment of this cluster's processes only (nothing
+# written to ~/.ray)
+ENV = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", "PYTHONPATH": str(ROOT), "RAY_AUTH_MODE": "token",
+       "RAY_AUTH_TOKEN": secrets.token_hex(16)}
+# `ray start` replaces a node address of 127.0.0.1 by the machine's routable one unless
+# RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0 (Ray's single-machine mode); its servers bind only the loopback
+# address when the node's address is 127.0.0.1 and every interface otherwise (measured with Ray 2.60:
+# with a second node on 127.0.0.2 the GCS and the raylets listened on "::"). That mode refuses a second
+# node, so the cluster here is one head node with two worker slots.
+NODE_IP = "127.0.0.1"
+ENV["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
+
+
+def _batch(*args, **kw):
+    return subprocess.Popen([sys.executable, "-m", "rtsim.cli", "batch", str(PLAN), *args], cwd=ROOT, env=ENV,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
+
+
+def _rows(path: Path) -> list[dict]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _identity(rows: list[dict]) -> list[dict]:
+    return [{k: v for k, v in r.items() if k not in VOLATILE} for r in rows]
+
+
+@pytest.fixture(scope="module")
+def local(tmp_path_factory):
+    """The plan on the local pool, killed (SIGKILL to its process group) after 4 journalled rows, then
+    resumed: (output folder, rows before the kill, the resumed run's output)."""
+    out = tmp_path_factory.mktemp("batch_local")
+    journal = out / "journal.csv"
+    p = _batch("--out", str(out), "--no-report", start_new_session=True)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and p.poll() is None:
+        if journal.exists() and len(journal.read_text().splitlines()) >= 1 + 4:
+            break
+        time.sleep(0.02)
+    assert p.poll() is None, "the batch ended before it could be interrupted:\n" + p.stdout.read()
+    os.killpg(p.pid, signal.SIGKILL)
+    p.wait()
+    before = [r["run_id"] for r in _rows(journal)]
+    r = _batch("--out", str(out))
+    text, _ = r.communicate(timeout=300)
+    assert r.returncode == 1, text            # some runs fail or error by design
+    return out, before, text
+
+
+def test_errors_and_falls_are_rows_and_the_batch_goes_on(local):
+    out, _, _ = local
+    rows = _rows(out / "results.csv")
+    assert len(rows) == 12 and len({r["run_id"] for r in rows}) == 12
+    assert [r["run_id"] for r in rows] == sorted(r["run_id"] for r in rows)
+    bad = [r for r in rows if r["scenario.duration"] == "-1.0"]
+    assert len(bad) == 4 and all(r["status"] == "config_error" and r["verdict"] == "error" for r in bad)
+    assert all("duration = -1.0: out of range" in r["error"] and "smoke" not in r["error"] for r in bad)
+    fell = [r for r in rows if r["status"] == "fall"]
+    assert len(fell) == 1 and fell[0]["scenario"] == "motorcycle_counter_steer" and fell[0]["verdict"] == "fail"
+    ok = [r for r in rows if r["status"] == "ok"]
+    assert len(ok) == 7 and all(r["verdict"] == "pass" for r in ok)
+    for r in ok + fell:      # the run ended where it should: its duration, or the fall
+        assert float(r["simulated_s"]) == pytest.approx(float(r["scenario.duration"]), abs=1e-9) or r is fell[0]
+        assert float(r["max_constraint_violation"]) < 1e-6
+    # the cars' power audit: the integrator's energy error is small against the kinetic energy
+    cars = [r for r in ok if r["vehicle"] in ("xbw", "eps_car")]
+    assert len(cars) == 4 and all(float(r["energy_residual_max"]) < 50.0 for r in cars)
+    assert all(math.isnan(float(r["energy_residual_max"])) for r in ok if r["vehicle"] == "")
+    import pyarrow.parquet as pq
+    table = pq.read_table(out / "results.parquet").to_pylist()
+    assert [t["run_id"] for t in table] == [r["run_id"] for r in rows]
+    html = (out / "report.html").read_text()
+    assert "Failures and errors (5)" in html and "data:image/png;base64" in html
+
+
+def test_resume_runs_only_what_was_missing(local):
+    out, before, text = local
+    assert 4 <= len(before) < 12
+    assert f"{len(before)} already in" in text and f"{12 - len(before)} to run" in text
+    journal = [r["run_id"] for r in _rows(out / "journal.csv")]
+    assert len(journal) == 12 and len(set(journal)) == 12 and journal[:len(before)] == before
+
+
+def _loopback(ip: str) -> bool:
+    import ipaddress
+
+    a = ipaddress.ip_address(ip)
+    return (getattr(a, "ipv4_mapped", None) or a).is_loopback
+
+
+def _ray_processes(temp_dir: str, port: int):
+    """The processes of the cluster this test started: those naming its temp folder or its GCS port, and
+    their children."""
+    import psutil
+
+    roots = []
+    for p in psutil.process_iter(["cmdline"]):
+        try:
+            if any(temp_dir in a or a.endswith(f"{NODE_IP}:{port}") for a in (p.info["cmdline"] or ())):
+                roots.append(p)
+        except psutil.Error:
+            pass
+    procs = {p.pid: p for p in roots}
+    for p in roots:
+        try:
+            procs.update({c.pid: c for c in p.children(recursive=True)})
+        except psutil.Error:
+            pass
+    return list(procs.values())
+
+
+def test_ray_cluster_gives_the_same_table_and_loses_no_run(local, tmp_path):
+    ray_bin = shutil.which("ray", path=str(Path(sys.executable).parent))
+    if ray_bin is None:
+        pytest.fail("ray is a dependency (pyproject.toml) but its `ray` command is not installed")
+    import psutil
+    from tests.service_harness import free_port
+
+    temp_dir = tempfile.mkdtemp(prefix="rtray", dir="/tmp")       # short: Ray's socket paths must fit
+    port = free_port()
+    common = [f"--node-ip-address={NODE_IP}", "--num-cpus=2", f"--temp-dir={temp_dir}", "--disable-usage-stats"]
+    try:
+        for args in (["--head", f"--port={port}", "--include-dashboard=false", f"--ray-client-server-port={free_port()}"],):
+            r = subprocess.run([ray_bin, "start", *args, *common], env=ENV, cwd=ROOT, capture_output=True, text=True,
+                               timeout=120)
+            assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+        out = tmp_path / "ray"
+        p = _batch("--out", str(out), "--no-report", "--ray", f"{NODE_IP}:{port}")
+        killed = None
+        deadline = time.monotonic() + 300
+        while killed is None and p.poll() is None and time.monotonic() < deadline:
+            for proc in _ray_processes(temp_dir, port):
+                try:
+                    if proc.name().startswith("ray::run_one") or "ray::run_one" in " ".join(proc.cmdline()):
+                        proc.kill()
+                        killed = proc.pid
+                        break
+                except psutil.Error:
+                    pass
+            time.sleep(0.02)
+        listening = []
+        for proc in _ray_processes(temp_dir, port):
+            try:
+                listening += [(proc.name(), c.laddr) for c in proc.net_connections("inet") if c.status == "LISTEN"]
+            except psutil.Error:
+                pass
+        text, _ = p.communicate(timeout=300)
+        assert p.returncode == 1, text
+        assert killed is not None, "no Ray worker was seen running a task to kill:\n" + text
+        assert listening and all(_loopback(a.ip) for _, a in listening), listening
+        rows = _rows(out / "results.csv")
+        assert _identity(rows) == _identity(_rows(local[0] / "results.csv"))
+        assert all(r["status"] != "error" for r in rows), [r["error"] for r in rows if r["status"] == "error"]
+    finally:
+        for proc in _ray_processes(temp_dir, port):          # this cluster's processes only (not `ray stop`)
+            try:
+                proc.kill()
+            except psutil.Error:
+                pass
+        shutil.rmtree(temp_dir, ignore_errors=True)
+
+
+def test_ray_auto_is_local_on_loopback_and_gives_the_same_table(local, tmp_path):
+    """`--ray auto`: a Ray instance of the batch's own, every process listening on loopback only, the
+    local pool's table, and no token or state left in ~/.ray."""
+    import psutil
+
+    out = tmp_path / "auto"
+    home_ray = Path.home() / ".ray" / "auth_token"
+    had_token = home_ray.exists()
+    p = _batch("--out", str(out), "--no-report", "--ray", "auto")
+    listening, seen = [], set()
+    while p.poll() is None:
+        try:
+            procs = [psutil.Process(p.pid), *psutil.Process(p.pid).children(recursive=True)]
+        except psutil.Error:
+            break
+        for proc in procs:
+            try:
+                for c in proc.net_connections("inet"):
+                    if c.status == "LISTEN" and (proc.pid, c.laddr) not in seen:
+                        seen.add((proc.pid, c.laddr))
+                        listening.append((proc.name(), c.laddr))
+            except psutil.Error:
+                pass
+        time.sleep(0.1)
+    text, _ = p.communicate(timeout=300)
+    assert p.returncode == 1, text
+    assert listening and all(_loopback(a.ip) for _, a in listening), listening
+    assert _identity(_rows(out / "results.csv")) == _identity(_rows(local[0] / "results.csv"))
+    assert home_ray.exists() == had_token
+
+
+def test_a_killed_pool_worker_loses_no_run(local, tmp_path):
+    """A local pool worker killed mid-batch breaks the pool; the runs not yet back go to a fresh pool and
+    the table is the same, no run lost."""
+    import psutil
+
+    out = tmp_path / "pool"
+    journal = out / "journal.csv"
+    p = _batch("--out", str(out), "--no-report")
+    killed = None
+    while killed is None and p.poll() is None:
+        done = len(journal.read_text().splitlines()) - 1 if journal.exists() else 0
+        if 1 <= done < 12:
+            try:
+                workers = [c for c in psutil.Process(p.pid).children(recursive=True)
+                           if "spawn_main" in " ".join(c.cmdline())]
+                if workers:
+                    workers[0].kill()
+                    killed = workers[0].pid
+            except psutil.Error:
+                pass
+        time.sleep(0.01)
+    text, _ = p.communicate(timeout=300)
+    assert p.returncode == 1, text
+    assert killed is not None, "the batch ended before a worker could be killed:\n" + text
+    assert _identity(_rows(out / "results.csv")) == _identity(_rows(local[0] / "results.csv"))
+
+
+def test_ray_map_keeps_order_and_builds_the_context_once_per_worker():
+    """The hook for re-simulation workflows (rtsim.batch.executors.ray_map), on a Ray instance of its own
+    on 127.0.0.1 in a child process: results in task order, one context per worker process."""
+    import json
+
+    code = (
+        "import json, os\n"
+        "from rtsim.batch.executors import ray_map\n"
+        "def setup(scale):\n    return {'pid': os.getpid(), 'scale': scale, 'token': os.urandom(8).hex()}\n"
+        "def fn(ctx, x):\n    return [ctx['pid'], ctx['token'], ctx['scale'] * x]\n"
+        "print(json.dumps(ray_map(fn, list(range(24)), setup, (3,), address='auto')))\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "RAY_USAGE_STATS_ENABLED": "0"}
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert [v for _, _, v in out] == [3 * x for x in range(24)]
+    tokens = {}
+    for pid, token, _ in out:
+        tokens.setdefault(pid, set()).add(token)
+    assert all(len(t) == 1 for t in tokens.values()), tokens
