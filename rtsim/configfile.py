@@ -9,15 +9,19 @@ list items as [i]), the offending value and what is allowed:
 Ranges are declared with `Range(lo, hi, unit)` (an annotated float: finite, within the bounds, the unit
 in the message); checks across keys raise `bad(key, value, reason)` inside a model validator; checks
 after validation (files that must exist, sampled profiles) raise `problem(source, key, value, reason)`.
-Vehicles, roads, scenarios, drivers and the service's settings all load through here.
+Vehicles, roads, scenarios, drivers and the service's settings all load through here, so `overrides`
+(a batch's grid point: dotted keys set in a file's table as it is read) is checked like the file itself.
 """
 from __future__ import annotations
 
+import contextvars
+import copy
 import math
 import re
 import tomllib
 import types
 import typing
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any, TypeVar, Union
 
@@ -225,8 +229,50 @@ def problem(source: str | Path, key: str, value: Any, reason: str) -> ConfigErro
 
 
 # ---- loading and validation --------------------------------------------------------------------------
+#: resolved path -> {dotted key: value} that load_toml sets in that file's table (see `overrides`)
+_OVERRIDES: contextvars.ContextVar[dict] = contextvars.ContextVar("rtsim_config_overrides", default={})
+
+
+@contextmanager
+def overrides(files: dict[Path, dict[str, Any]]):
+    """While active, `load_toml` of any of `files` (resolved path -> {dotted key: value}) returns the
+    file's table with those keys set, before validation: a parameter sweep's values get the same checks
+    and error lines as the file's own. The mapping is read at each load (entries may be added inside)."""
+    token = _OVERRIDES.set(files)
+    try:
+        yield
+    finally:
+        _OVERRIDES.reset(token)
+
+
+def set_dotted(data: dict, dotted: str, value: Any) -> None:
+    """data[a][b][c] = value for "a.b.c" (tables created on the way); a key below a non-table is a
+    KeyError naming the key."""
+    keys = dotted.split(".")
+    here = data
+    for i, k in enumerate(keys[:-1]):
+        nxt = here.get(k)
+        if nxt is None:
+            nxt = here[k] = {}
+        elif not isinstance(nxt, dict):
+            raise KeyError(f"{'.'.join(keys[:i + 1])} = {nxt!r} is not a table, cannot set {dotted}")
+        here = nxt
+    here[keys[-1]] = copy.deepcopy(value)
+
+
 def load_toml(path: str | Path) -> dict:
+    """A TOML file's table (with the active `overrides` for it); ConfigError naming the file otherwise."""
     path = Path(path)
+    data = _read_toml(path)
+    for key, value in _OVERRIDES.get().get(path.resolve(), {}).items():
+        try:
+            set_dotted(data, key, value)
+        except KeyError as exc:
+            raise ConfigError(f"{path}: {exc.args[0]}") from None
+    return data
+
+
+def _read_toml(path: Path) -> dict:
     try:
         with path.open("rb") as fh:
             return tomllib.load(fh)

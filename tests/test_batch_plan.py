@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtsim.batch.expand import expand, set_path
+from rtsim.batch.expand import expand
+from rtsim.configfile import set_dotted as set_path
 from rtsim.batch.metrics import compute
 from rtsim.batch.plan import load_plan
 from rtsim.errors import ConfigError

@@ -4,7 +4,6 @@ run id: a hash of what determines the run's result (the files' contents, the ove
 resumed batch recognises the runs it already has and a changed config file makes new ones."""
 from __future__ import annotations
 
-import copy
 import hashlib
 import itertools
 import json
@@ -57,21 +56,6 @@ def expand(plan: Plan, base: Path) -> list[dict]:
                               "vehicle": None if veh is None else str(veh), "overrides": overrides,
                               "params": dict(p), "seed": seed})
     return specs
-
-
-def set_path(data: dict, dotted: str, value) -> None:
-    """data[a][b][c] = value for "a.b.c" (tables created on the way); a key below a non-table is an
-    error naming the key."""
-    keys = dotted.split(".")
-    here = data
-    for i, k in enumerate(keys[:-1]):
-        nxt = here.get(k)
-        if nxt is None:
-            nxt = here[k] = {}
-        elif not isinstance(nxt, dict):
-            raise KeyError(f"{'.'.join(keys[:i + 1])} = {nxt!r} is not a table, cannot set {dotted}")
-        here = nxt
-    here[keys[-1]] = copy.deepcopy(value)
 
 
 def split_overrides(overrides: dict) -> tuple[dict, dict]:

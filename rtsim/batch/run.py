@@ -3,9 +3,8 @@ grid point), a Newton failure, a fall or any other exception is the row's status
 the batch goes on.
 
 The spec's dotted-path overrides are applied to the vehicle's and the scenario's TOML tables as they are
-read, before validation, so the one loader of each (rtsim.configfile: file, key, value, allowed range)
-checks them like any value in the file; the loaders' module-level `load_toml` is swapped for the
-duration of the load (a worker runs one spec at a time)."""
+read, before validation (rtsim.configfile.overrides), so the one loader checks them like any value in
+the file (file, key, value, allowed range)."""
 from __future__ import annotations
 
 import math
@@ -13,44 +12,14 @@ import os
 import socket
 import time
 import traceback
-from contextlib import contextmanager
 from pathlib import Path
 
 from rtsim.errors import ConfigError, SimulationError
 
-from .expand import set_path, split_overrides
+from rtsim.configfile import overrides
+
+from .expand import split_overrides
 from .metrics import compute
-
-#: modules whose `load_toml` reads the vehicle and scenario files (rtsim.configfile.load serves the scenario)
-_LOADERS = ("rtsim.configfile", "rtsim.vehicle.car.config", "rtsim.vehicle.motorcycle.config")
-
-
-@contextmanager
-def overridden(files: dict[Path, dict]):
-    """While active, reading any of `files` (resolved path -> {dotted key: value}) returns its TOML
-    table with those keys set."""
-    import importlib
-
-    mods = [importlib.import_module(m) for m in _LOADERS]
-    original = mods[0].load_toml
-
-    def load_toml(path):
-        data = original(path)
-        for key, value in files.get(Path(path).resolve(), {}).items():
-            try:
-                set_path(data, key, value)
-            except KeyError as exc:
-                raise ConfigError(f"{path}: {exc.args[0]}") from None
-        return data
-    saved = [m.load_toml for m in mods]
-    try:
-        for m in mods:
-            m.load_toml = load_toml
-        yield
-    finally:
-        for m, f in zip(mods, saved):
-            m.load_toml = f
-
 
 def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object]:
     """(status, message, columns, data, writer) of the spec's run."""
@@ -59,7 +28,7 @@ def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object]:
     scen = Path(spec["scenario"])
     veh_over, scen_over = split_overrides(spec["overrides"])
     files = {scen.resolve(): scen_over}
-    with overridden(files):
+    with overrides(files):
         sc = load_scenario(scen, check_files=True)
         vpath = Path(spec["vehicle"]) if spec["vehicle"] else sc.vehicle_path
         if vpath is None and not sc.two_wheeler:
