@@ -58,6 +58,7 @@ def _bench(args) -> int:
         res = run_service_bench(args.duration, record=not args.no_record, zenoh=not args.no_zenoh, ecu=args.ecu,
                                 spin=args.spin, foxglove=args.foxglove, pages=args.pages,
                                 pages_nice=args.pages_nice, ws_clients=args.ws_clients, loop_cpu=args.loop_cpu,
+                                loop_priority=args.loop_priority,
                                 pages_cpus=_cpu_list(args.pages_cpus) if args.pages_cpus else None)
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
@@ -275,6 +276,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "does, without drawing (the view server's own cost)")
     b.add_argument("--loop-cpu", type=int, metavar="CPU",
                    help="service suite: pin the loop thread alone to this CPU, everything else of the bench off it")
+    b.add_argument("--loop-priority", type=int, metavar="P",
+                   help="service suite: the loop thread under SCHED_FIFO at priority P (1-99; needs the privilege)")
     b.add_argument("--pages-cpus", metavar="LIST",
                    help="service suite: CPUs of the pages' browser, the view server and the WebSocket clients "
                         "(e.g. 1 or 1,2)")

@@ -26,7 +26,7 @@ frame rates too. Run it with and without pages to see what they cost the loop (s
 ``ws_clients=N`` adds N WebSocket clients of that view server instead of (or beside) pages: each pulls and
 decodes the samples 60 times a second as a page does, but draws nothing, so the view server's own cost (its
 Zenoh subscribers and relay) shows without the browsers'. ``loop_cpu`` pins the loop thread alone to that
-CPU (``rtsim serve --loop-cpu``) and keeps everything else of the bench (its other threads and child
+CPU (``rtsim serve --loop-cpu``; ``loop_priority``: under SCHED_FIFO, ``--loop-priority``) and keeps everything else of the bench (its other threads and child
 processes) off it; ``pages_cpus`` puts the view server, the browser (with every process it starts) and the
 WebSocket clients on those CPUs: a bench engineer's set-up, the loop with a core of its own.
 """
@@ -217,7 +217,8 @@ def wake_up_floor(n: int = 500, period: float = 0.001) -> dict:
 def run_service_bench(duration: float = 60.0, can_interface: str | None = None, can_channel: str | None = None,
                       progress=None, record: bool = True, zenoh: bool = True, ecu: str = "light",
                       spin: float = 0.0002, foxglove: bool = False, pages: int = 0, pages_nice: int = 19,
-                      ws_clients: int = 0, loop_cpu: int | None = None, pages_cpus=None) -> dict:
+                      ws_clients: int = 0, loop_cpu: int | None = None, pages_cpus=None,
+                      loop_priority: int | None = None) -> dict:
     from bridge.can_bus import LoopbackHub
     from rtsim.jit import cycles_per_second
     from rtsim.service.server import ServeOptions, Service
@@ -242,7 +243,7 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
         svc = Service(ServeOptions(can_interface=can_interface, can_channel=can_channel, start_hub=False,
                                    zenoh=zenoh, zenoh_listen=["tcp/127.0.0.1:0"], record=rec if record else None,
                                    duration=duration, spin=spin, foxglove_port=0 if foxglove else None,
-                                   loop_cpu=loop_cpu),
+                                   loop_cpu=loop_cpu, loop_priority=loop_priority),
                       out=lambda *a: None)
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         sub = None
@@ -341,7 +342,7 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
         "record": record, "zenoh": zenoh, "foxglove": foxglove, "ecu": ecu, "spin_s": spin, "wake_up_floor": floor,
         "pages": pages if zenoh else 0, "page_stats": page_stats, "pages_nice": pages_nice,
         "ws_clients": ws_clients if zenoh else 0, "ws_client_stats": ws_stats,
-        "loop_cpu": loop_cpu, "pages_cpus": sorted(pages_cpus) if pages_cpus else None,
+        "loop_cpu": loop_cpu, "loop_priority": loop_priority, "pages_cpus": sorted(pages_cpus) if pages_cpus else None,
         "budget_us": dict(BUDGET_US),
         "within_budget": all(pct(cpu_steps).get(k, 1e9) <= v for k, v in BUDGET_US.items()),
     }
@@ -380,5 +381,6 @@ def format_report(r: dict) -> str:
            f"{', '.join(str(c['pulls']) for c in r['ws_client_stats'])} pulls, "
            f"{sum(c['bytes'] for c in r['ws_client_stats']) / 1e6:.1f} MB in all"] if r.get("ws_client_stats") else [])
        + ([f"  pinned: loop thread on CPU {r['loop_cpu']} (everything else off it)"
+           + (f", SCHED_FIFO priority {r['loop_priority']}" if r.get("loop_priority") else "")
            + (f", pages and view server on CPUs {r['pages_cpus']}" if r.get("pages_cpus") else "")]
           if r.get("loop_cpu") is not None else []))

@@ -55,6 +55,10 @@ class ServeOptions(BaseModel):
     loop_cpu: Optional[int] = setting(
         None, "pin the loop thread (only it) to this CPU, Linux (default: not pinned); give it a core nothing "
         "else runs on, e.g. pages and other work on the others", "simulation.loop_cpu", ge=0, le=4095)
+    loop_priority: Optional[int] = setting(
+        None, "run the loop thread (only it) under SCHED_FIFO at this real-time priority, Linux, needs the "
+        "privilege (default: the normal scheduler); with --loop-cpu other processes on its CPU wait for it",
+        "simulation.loop_priority", ge=1, le=99)
     hold_pressure: Optional[Pressure] = setting(
         None, "brake pressure applied when the brake command times out, kPa (default 3000)",
         "simulation.hold_pressure")
@@ -103,6 +107,8 @@ class ServeOptions(BaseModel):
         if self.foxglove_port is not None:
             from bridge.foxglove_live import check_host
             check_host(self.foxglove_host, self.foxglove_allow_remote)
+        if self.loop_priority is not None and not hasattr(__import__("os"), "SCHED_FIFO"):
+            raise ConfigError("--loop-priority: this system has no SCHED_FIFO (Linux only)")
         if self.loop_cpu is not None:
             import os
             if not hasattr(os, "sched_setaffinity"):

@@ -349,20 +349,34 @@ class Service:
 
     def _pin_loop_thread(self):
         """``--loop-cpu N``: this thread (the loop's; the others were started before and keep their CPUs)
-        on CPU N alone. On Linux ``sched_setaffinity(0, ...)`` sets the calling thread's affinity only.
-        Returns what restores the previous set."""
+        on CPU N alone; ``--loop-priority P``: this thread under SCHED_FIFO at priority P. On Linux
+        ``sched_setaffinity(0, ...)`` and ``sched_setscheduler(0, ...)`` act on the calling thread only.
+        Returns what restores the previous settings."""
         import os
 
-        cpu = self.opts.loop_cpu
-        if cpu is None:
-            return lambda: None
-        before = os.sched_getaffinity(0)
+        cpu, prio = self.opts.loop_cpu, self.opts.loop_priority
+        undo = []
         try:
-            os.sched_setaffinity(0, {cpu})
+            if cpu is not None:
+                before = os.sched_getaffinity(0)
+                os.sched_setaffinity(0, {cpu})
+                undo.append(lambda: os.sched_setaffinity(0, before))
+                self.out(f"rtsim serve: loop thread pinned to CPU {cpu}")
+            if prio is not None:
+                policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+                undo.append(lambda: os.sched_setscheduler(0, policy, param))
+                self.out(f"rtsim serve: loop thread under SCHED_FIFO, priority {prio}")
         except OSError as exc:
-            raise ConfigError(f"--loop-cpu {cpu}: cannot pin the loop thread there: {exc.strerror or exc}") from exc
-        self.out(f"rtsim serve: loop thread pinned to CPU {cpu}")
-        return lambda: os.sched_setaffinity(0, before)
+            for u in reversed(undo):
+                u()
+            what = f"--loop-cpu {cpu}" if len(undo) == 0 and cpu is not None else f"--loop-priority {prio}"
+            raise ConfigError(f"{what}: {exc.strerror or exc}") from exc
+
+        def restore():
+            for u in reversed(undo):
+                u()
+        return restore
 
     def stop(self) -> None:
         """Thread-safe: makes ``run()`` return within one period (and close everything)."""
