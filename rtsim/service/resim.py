@@ -77,9 +77,15 @@ class UserChanges:
     applied them at (a change logged at step k acts on steps k+1 on, as in the service)."""
 
     def __init__(self, loop: HilLoop, messages):
+        """``messages``: the ``user`` topic in recorded order (the order the loop applied them); those after
+        a restart of simulation time (a reset: the step count falls) are left out, as the frames after it."""
         self.loop = loop
-        self.events = sorted(((int(m.data["step"]), i, m.data) for i, m in enumerate(messages)),
-                             key=lambda e: e[:2])
+        self.events = []
+        for m in messages:
+            step = int(m.data["step"])
+            if self.events and step < self.events[-1][0]:
+                break
+            self.events.append((step, m.data))
         self.i = 0
         self.applied = 0
 
@@ -87,7 +93,7 @@ class UserChanges:
         """Every change logged at the loop's current step or before."""
         ev, loop = self.events, self.loop
         while self.i < len(ev) and ev[self.i][0] <= loop.k:
-            data = ev[self.i][2]
+            data = ev[self.i][1]
             loop.apply_user(data.get("channels") or {}, bool(data.get("takeover")))
             self.i += 1
             self.applied += 1
