@@ -445,3 +445,151 @@ def _read_stream(path: Path, fh, size: int):
     info = RecordingInfo(path, complete, n, chunks, {t: len(v) for t, v in out.items()},
                          truncated_bytes=discarded, note=note, metadata=meta)
     return out, info
+
+
+# -------------------------------------------------------------------- reading a few topics fast
+
+_OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_METADATA = 0x04, 0x05, 0x06, 0x0C
+_U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
+_RECORD = struct.Struct("<BQ")
+_MESSAGE = struct.Struct("<HIQ")          # channel id, sequence, log time (publish time follows)
+
+
+def _string(buf, pos: int) -> tuple[str, int]:
+    n = _U32.unpack_from(buf, pos)[0]
+    return bytes(buf[pos + 4:pos + 4 + n]).decode(), pos + 4 + n
+
+
+def _string_map(buf, pos: int) -> dict[str, str]:
+    end = pos + 4 + _U32.unpack_from(buf, pos)[0]
+    pos += 4
+    out = {}
+    while pos < end:
+        k, pos = _string(buf, pos)
+        v, pos = _string(buf, pos)
+        out[k] = v
+    return out
+
+
+class TopicData(NamedTuple):
+    log_time_ns: Any        # numpy int64 array, one per message, in file order
+    data: list              # the messages' bytes as recorded (JSON text for the service's JSON topics)
+
+
+def read_topics(path: str | Path, topics) -> tuple[dict[str, TopicData], RecordingInfo]:
+    """The messages of a few ``topics`` of a recording (names, or a function of a name saying whether it is
+    wanted), undecoded: ``{topic: TopicData}`` and the recording's :class:`RecordingInfo` (metadata and
+    channel dictionary included).
+
+    What `read_recording` gives for those topics, about 20x faster on a session's recording (a 45 MB file
+    with every CAN frame, three topics of it: 8.3-8.8 s -> 0.35 s here): the file's records are walked with ``struct`` and each
+    chunk decompressed once; only the wanted channels' messages are cut out, and nothing is decoded
+    (a page that parses JSON itself gets the bytes as recorded). A file cut off by a kill gives its
+    complete chunks (chunk by chunk, all or nothing, CRC checked), as `read_recording` does. Raises
+    ConfigError when the file is not MCAP; a chunk compression other than zstd or none also raises it."""
+    import zlib
+
+    import numpy as np
+    import zstandard
+
+    path = Path(path)
+    try:
+        buf = memoryview(path.read_bytes())
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot open recording: {e.strerror or e}") from e
+    size = len(buf)
+    if not MCAP_MAGIC.startswith(bytes(buf[:len(MCAP_MAGIC)])) or size == 0:
+        raise ConfigError(f"{path}: not an MCAP file (magic {bytes(buf[:8])!r}, expected {MCAP_MAGIC!r})")
+    want = topics if callable(topics) else set(topics).__contains__
+    channels: dict[int, str] = {}
+    wanted: dict[int, tuple[list, list]] = {}
+    counts: dict[str, int] = {}
+    meta: dict[str, dict[str, str]] = {}
+    n = chunks = 0
+    note = ""
+    complete = False
+    dctx = zstandard.ZstdDecompressor()
+
+    def channel(rec, pos):
+        cid = _U16.unpack_from(rec, pos)[0]
+        topic, _ = _string(rec, pos + 4)
+        channels[cid] = topic
+        counts.setdefault(topic, 0)
+        if want(topic) and cid not in wanted:
+            wanted[cid] = ([], [])
+
+    def records(rec, start, end) -> int:
+        """The records of [start, end) of ``rec`` (a chunk's or the file's); returns messages seen."""
+        got = 0
+        pos = start
+        unpack_rec, unpack_msg = _RECORD.unpack_from, _MESSAGE.unpack_from
+        while pos + 9 <= end:
+            op, length = unpack_rec(rec, pos)
+            body = pos + 9
+            pos = body + length
+            if op == _OP_MESSAGE:
+                got += 1
+                cid, _seq, t = unpack_msg(rec, body)
+                w = wanted.get(cid)
+                if w is not None:
+                    w[0].append(t)
+                    w[1].append(bytes(rec[body + 22:pos]))
+                else:
+                    counts[channels[cid]] += 1
+            elif op == _OP_CHANNEL:
+                channel(rec, body)
+        return got
+
+    pos = len(MCAP_MAGIC)
+    while pos + 9 <= size:
+        op, length = _RECORD.unpack_from(buf, pos)
+        body, end = pos + 9, pos + 9 + length
+        if end > size:
+            break                                   # cut off by a kill: the record is incomplete
+        if op == _OP_CHUNK:
+            raw_size = _U64.unpack_from(buf, body + 16)[0]
+            crc = _U32.unpack_from(buf, body + 24)[0]
+            compression, p = _string(buf, body + 28)
+            nrec = _U64.unpack_from(buf, p)[0]
+            data = buf[p + 8:p + 8 + nrec]
+            try:
+                if compression == "zstd":
+                    data = dctx.decompress(data, max_output_size=raw_size)
+                elif compression != "":
+                    raise ConfigError(f"{path}: chunk compression {compression!r} (rtsim records zstd)")
+                if crc and zlib.crc32(data) != crc:
+                    raise ValueError("chunk CRC mismatch")
+                before = {cid: len(w[0]) for cid, w in wanted.items()}
+                try:
+                    n += records(data, 0, len(data))
+                except KeyError as e:
+                    raise ValueError(f"message on unknown channel {e}") from None
+            except (zstandard.ZstdError, ValueError, struct.error) as e:
+                note = f"stopped at a damaged chunk: {type(e).__name__}: {e}"
+                for cid, w in wanted.items():           # all or nothing per chunk
+                    del w[0][before.get(cid, 0):], w[1][before.get(cid, 0):]
+                break
+            chunks += 1
+        elif op == _OP_CHANNEL:
+            channel(buf, body)
+        elif op == _OP_MESSAGE:
+            n += records(buf, pos, end)
+        elif op == _OP_METADATA:
+            name, p = _string(buf, body)
+            meta[name] = _string_map(buf, p)
+        elif op == 0x02:                               # footer
+            complete = end + len(MCAP_MAGIC) == size and bytes(buf[end:]) == MCAP_MAGIC
+            pos = end
+            break
+        pos = end
+    out = {}
+    for cid, (times, data) in wanted.items():
+        topic = channels[cid]
+        out[topic] = TopicData(np.array(times, dtype=np.int64), data)
+        counts[topic] += len(data)
+    discarded = size - pos - (len(MCAP_MAGIC) if complete else 0)
+    if not note and discarded > 0:
+        note = f"last record truncated ({discarded} bytes discarded)"
+    info = RecordingInfo(path, complete, n, chunks, counts, truncated_bytes=max(0, discarded), note=note,
+                         metadata=meta)
+    return out, info

@@ -24,12 +24,14 @@ from rtsim.channels import CAR, ENERGY, SENSOR_NAMES, STATE_NAMES, ChannelDictio
 from rtsim.errors import RtsimError
 
 TOPIC_KEYS = ("sensors", "state", "status", "commands", "can/rx", "can/tx")
+EVENT_TOPIC_KEYS = ("user",)        # recorded by the service only (not published on Zenoh)
 OFFLINE_TOPIC_KEYS = ("energy",)    # recorded by offline runs only (rtsim.vehicle.car.energy)
 MODES = ("realtime", "lockstep", "fast")
 RUN_STATES = ("running", "paused", "stopped")
 COMMAND_SOURCES = ("can", "zenoh", "safe")
 FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error")
 REJECTIONS = ("dlc", "crc", "counter", "range", "unknown_id")
+USER_CAUSES = ("drive", "release", "lapse")
 DRIVER_SOURCES = ("user", "ecu", "scenario", "rider", "safe", "none", "user+ecu", "rider+ecu", "none+ecu")
 STATUS_OPTIONAL = ("wall_time", "drivers", "user")
 
@@ -142,6 +144,20 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
         "time": _TIME,
     }
     energy = {"time": _TIME, **{c.name: _signal(c.unit, c.description) for c in ENERGY}}
+    user = {
+        "time": {"type": "number", "description": "simulation time at which the loop applied the change; it acts "
+                                                  "on the steps after it [s]"},
+        "step": {"type": "integer", "minimum": 0, "description": "the loop's step count when it applied the change "
+                                                               "(time = step * dt)"},
+        "cause": {"type": "string", "enum": list(USER_CAUSES),
+                  "description": "drive (a request's values or takeover), release (the page handed the vehicle "
+                                 "back), lapse (no request for the hold time)"},
+        "channels": {"type": "object", "description": "every user channel of the vehicle (rtsim.service.user_input): "
+                                                     "its value in SI units, null where the user does not drive it",
+                     "additionalProperties": {"type": _NUM_OR_NULL}},
+        "takeover": {"type": "boolean", "description": "the user has taken over from the bus ECU"},
+        "seq": {"type": ["integer", "null"], "description": "sequence number of the page's last request"},
+    }
     return {
         "sensors": ("rtsim.sensors", _obj("rtsim sensors", sensors, sensors)),
         "state": ("rtsim.state", _obj("rtsim state", state, state)),
@@ -152,6 +168,8 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
         # one schema (one name) for both directions: MCAP registers a schema name once
         "can/rx": ("rtsim.can_frame", _obj("rtsim CAN frame", can, ["id", "dlc", "data", "time"])),
         "can/tx": ("rtsim.can_frame", _obj("rtsim CAN frame", can, ["id", "dlc", "data", "time"])),
+        "user": ("rtsim.user", _obj("rtsim user command source changes (rtsim view, control op drive)", user,
+                                    list(user))),
         "energy": ("rtsim.energy", _obj("rtsim power audit (offline runs)", energy, ["time"])),
     }
 
@@ -328,7 +346,7 @@ def schema_files(channels: ChannelDictionary = CAR) -> dict[str, str]:
     """Relative file name (``<key>.json``) -> file text for every topic's schema of a vehicle with the
     channel dictionary `channels` (default the rear-drive car's: the committed schemas/ files)."""
     schemas = schemas_for(channels)
-    return {f"{key}.json": json.dumps(schemas[key][1], indent=2) + "\n" for key in TOPIC_KEYS}
+    return {f"{key}.json": json.dumps(schemas[key][1], indent=2) + "\n" for key in TOPIC_KEYS + EVENT_TOPIC_KEYS}
 
 
 def write_schemas(directory: str | Path, channels: ChannelDictionary = CAR) -> list[Path]:

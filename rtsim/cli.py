@@ -31,6 +31,17 @@ def _fmt(v, spec):
     return format("-" if v is None else v, spec if v is not None else ">" + spec.lstrip("<>^").split(".")[0].rstrip("ef"))
 
 
+def _cpu_list(text: str) -> set[int]:
+    """A CPU list as given on the command line ("1" or "1,3")."""
+    try:
+        cpus = {int(x) for x in text.split(",") if x.strip()}
+    except ValueError:
+        raise RtsimError(f"--pages-cpus {text!r}: not a comma-separated list of CPU numbers") from None
+    if not cpus or min(cpus) < 0:
+        raise RtsimError(f"--pages-cpus {text!r}: not a list of CPU numbers")
+    return cpus
+
+
 def _bench(args) -> int:
     from rtsim.benchmarks import PROBLEMS
     from rtsim.benchmarks.runner import run_problem, scaling, startup_seconds
@@ -41,11 +52,15 @@ def _bench(args) -> int:
             raise RtsimError(f"--duration must be a positive number of seconds, got {args.duration}")
         if not 0 <= args.pages <= 16:
             raise RtsimError(f"--pages must be 0..16, got {args.pages}")
+        if not 0 <= args.ws_clients <= 16:
+            raise RtsimError(f"--ws-clients must be 0..16, got {args.ws_clients}")
         if not 0 <= args.pages_nice <= 19:
             raise RtsimError(f"--pages-nice must be 0..19, got {args.pages_nice}")
         res = run_service_bench(args.duration, record=not args.no_record, zenoh=not args.no_zenoh, ecu=args.ecu,
                                 spin=args.spin, foxglove=args.foxglove, pages=args.pages,
-                                pages_nice=args.pages_nice)
+                                pages_nice=args.pages_nice, ws_clients=args.ws_clients, loop_cpu=args.loop_cpu,
+                                loop_priority=args.loop_priority,
+                                pages_cpus=_cpu_list(args.pages_cpus) if args.pages_cpus else None)
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
     if args.suite == "dispatch":
@@ -257,6 +272,16 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--pages-nice", type=int, default=19, metavar="N",
                    help="service suite: CPU priority (nice) of the pages' browser and view server (19: lowest; 0: "
                         "the loop's)")
+    b.add_argument("--ws-clients", type=int, default=0, metavar="N",
+                   help="service suite: also N WebSocket clients of `rtsim view` pulling the samples as a page "
+                        "does, without drawing (the view server's own cost)")
+    b.add_argument("--loop-cpu", type=int, metavar="CPU",
+                   help="service suite: pin the loop thread alone to this CPU, everything else of the bench off it")
+    b.add_argument("--loop-priority", type=int, metavar="P",
+                   help="service suite: the loop thread under SCHED_FIFO at priority P (1-99; needs the privilege)")
+    b.add_argument("--pages-cpus", metavar="LIST",
+                   help="service suite: CPUs of the pages' browser, the view server and the WebSocket clients "
+                        "(e.g. 1 or 1,2)")
     b.add_argument("--ecu", choices=["light", "demo"], default="light",
                    help="service suite: command-only ECU (default) or the demo ECU decoding every frame")
     b.set_defaults(func=_bench)

@@ -52,7 +52,7 @@ def status_example(**over):
 # ----------------------------------------------------------------------------------------- schemas
 
 def test_schema_fields_come_from_the_channel_dictionary():
-    assert tuple(P.SCHEMAS) == P.TOPIC_KEYS + P.OFFLINE_TOPIC_KEYS
+    assert tuple(P.SCHEMAS) == P.TOPIC_KEYS + P.EVENT_TOPIC_KEYS + P.OFFLINE_TOPIC_KEYS
     for key, channels in (("sensors", SENSORS), ("state", STATE)):
         name, schema = P.SCHEMAS[key]
         assert name == f"rtsim.{key}" and schema["type"] == "object"
@@ -91,7 +91,7 @@ def test_write_schemas_command(tmp_path):
                for p in tmp_path.rglob("*") if p.is_file()}
     assert written == P.schema_files()
     assert set(written) == {"sensors.json", "state.json", "status.json", "commands.json",
-                            "can/rx.json", "can/tx.json"}
+                            "can/rx.json", "can/tx.json", "user.json"}
 
 
 def test_recorder_registers_the_same_schemas(tmp_path):

@@ -23,6 +23,12 @@ After ``duration`` s of wall time it reports:
 ``pages=N`` adds `rtsim view` in its own process and N pages of it in headless Chromium (Playwright with
 Debian's chromium, rtsim.viewer.browser), drawing the live car all along; the report then has the pages'
 frame rates too. Run it with and without pages to see what they cost the loop (same machine, same minute).
+``ws_clients=N`` adds N WebSocket clients of that view server instead of (or beside) pages: each pulls and
+decodes the samples 60 times a second as a page does, but draws nothing, so the view server's own cost (its
+Zenoh subscribers and relay) shows without the browsers'. ``loop_cpu`` pins the loop thread alone to that
+CPU (``rtsim serve --loop-cpu``; ``loop_priority``: under SCHED_FIFO, ``--loop-priority``) and keeps everything else of the bench (its other threads and child
+processes) off it; ``pages_cpus`` puts the view server, the browser (with every process it starts) and the
+WebSocket clients on those CPUs: a bench engineer's set-up, the loop with a core of its own.
 """
 from __future__ import annotations
 
@@ -100,12 +106,70 @@ with sync_playwright() as p:
 """
 
 
-def _open_pages(endpoint: str, n: int, env: dict, procs: list, nice: int = 19) -> tuple:
-    """`rtsim view` in a child process and a headless Chromium with n pages of it (children appended to
-    procs), both at CPU priority ``nice`` (19: the lowest, as a viewer beside a loop on the same cores
-    should run); returns the browser's process once every page is up (they draw the car once the loop runs)."""
-    import json
+_WS_CLIENTS = r"""
+import asyncio, json, sys, threading
+from websockets.asyncio.client import connect
+url, n, rate = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+stop = threading.Event()
+stats = [{"pulls": 0, "bytes": 0, "samples": 0} for _ in range(n)]
+
+async def client(st):
+    async with connect(url, max_size=None, compression=None) as ws:
+        json.loads(await ws.recv())                       # hello: the scene
+        while not stop.is_set():
+            await ws.send('{"type":"pull"}')
+            text = await ws.recv()
+            m = json.loads(text)                          # decoded as a page does, not drawn
+            st["pulls"] += 1
+            st["bytes"] += len(text)
+            st["samples"] += len(m.get("state") or ())
+            await asyncio.sleep(1.0 / rate)
+
+async def main():
+    tasks = [asyncio.create_task(client(st)) for st in stats]
+    print("ready", flush=True)
+    await asyncio.gather(*tasks)
+
+threading.Thread(target=lambda: (sys.stdin.read(), stop.set()), daemon=True).start()
+asyncio.run(main())
+print(json.dumps(stats), flush=True)
+"""
+
+
+def _affinity(cpus, nice: int):
+    """A child's set-up before exec: CPU priority ``nice`` and, given ``cpus``, the CPUs it (and every process
+    it starts: Chromium's renderers, GPU and utility processes inherit it) may run on."""
+    def pre():
+        os.nice(nice)
+        if cpus:
+            os.sched_setaffinity(0, set(cpus))
+    return pre
+
+
+def _open_view(endpoint: str, env: dict, procs: list, nice: int = 19, cpus=None) -> int:
+    """`rtsim view` in a child process (appended to procs) at CPU priority ``nice`` on ``cpus``; its port."""
     import socket
+
+    from rtsim.errors import RtsimError
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    view = subprocess.Popen([sys.executable, "-m", "rtsim.cli", "view", "--connect", endpoint, "--port", str(port),
+                             "--vehicle-id", "xbw"], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, preexec_fn=_affinity(cpus, nice))
+    procs.append(view)
+    line = view.stdout.readline()
+    if "open http" not in line:
+        raise RtsimError(f"rtsim view did not start: {line.strip()} {view.stdout.read()[-500:]}")
+    return port
+
+
+def _open_pages(port: int, n: int, env: dict, procs: list, nice: int = 19, cpus=None):
+    """A headless Chromium with n pages of the view server on ``port`` (appended to procs) at CPU priority
+    ``nice`` (19: the lowest, as a viewer beside a loop on the same cores should run) on ``cpus``; returns
+    the browser's process once every page is up (they draw the car once the loop runs)."""
+    import json
 
     from rtsim.errors import RtsimError
     from rtsim.viewer.browser import CHROMIUM_ARGS, NO_CHROMIUM, chromium_path
@@ -113,23 +177,27 @@ def _open_pages(endpoint: str, n: int, env: dict, procs: list, nice: int = 19) -
     exe = chromium_path()
     if exe is None:
         raise RtsimError(f"--pages: {NO_CHROMIUM}")
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    view = subprocess.Popen([sys.executable, "-m", "rtsim.cli", "view", "--connect", endpoint, "--port", str(port),
-                             "--vehicle-id", "xbw"], cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, preexec_fn=lambda: os.nice(nice))
-    procs.append(view)
-    line = view.stdout.readline()
-    if "open http" not in line:
-        raise RtsimError(f"--pages: rtsim view did not start: {line.strip()} {view.stdout.read()[-500:]}")
     browser = subprocess.Popen([sys.executable, "-c", _PAGES, f"http://127.0.0.1:{port}/", str(n), exe,
                                 json.dumps(CHROMIUM_ARGS)], cwd=ROOT, env=env, stdin=subprocess.PIPE,
-                               stdout=subprocess.PIPE, text=True, preexec_fn=lambda: os.nice(nice))
+                               stdout=subprocess.PIPE, text=True, preexec_fn=_affinity(cpus, nice))
     procs.append(browser)
     if browser.stdout.readline().strip() != "ready":
         raise RtsimError("--pages: the browser pages did not come up")
     return browser
+
+
+def _open_ws_clients(port: int, n: int, env: dict, procs: list, nice: int = 19, cpus=None, rate: float = 60.0):
+    """n WebSocket clients of the view server in one child process, each pulling and decoding the samples
+    ``rate`` times a second as a page does once per frame, drawing nothing: the server side of n pages."""
+    from rtsim.errors import RtsimError
+
+    proc = subprocess.Popen([sys.executable, "-c", _WS_CLIENTS, f"ws://127.0.0.1:{port}/ws", str(n), str(rate)],
+                            cwd=ROOT, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                            preexec_fn=_affinity(cpus, nice))
+    procs.append(proc)
+    if proc.stdout.readline().strip() != "ready":
+        raise RtsimError("--ws-clients: the WebSocket clients did not start")
+    return proc
 
 
 def wake_up_floor(n: int = 500, period: float = 0.001) -> dict:
@@ -148,7 +216,9 @@ def wake_up_floor(n: int = 500, period: float = 0.001) -> dict:
 
 def run_service_bench(duration: float = 60.0, can_interface: str | None = None, can_channel: str | None = None,
                       progress=None, record: bool = True, zenoh: bool = True, ecu: str = "light",
-                      spin: float = 0.0002, foxglove: bool = False, pages: int = 0, pages_nice: int = 19) -> dict:
+                      spin: float = 0.0002, foxglove: bool = False, pages: int = 0, pages_nice: int = 19,
+                      ws_clients: int = 0, loop_cpu: int | None = None, pages_cpus=None,
+                      loop_priority: int | None = None) -> dict:
     from bridge.can_bus import LoopbackHub
     from rtsim.jit import cycles_per_second
     from rtsim.service.server import ServeOptions, Service
@@ -160,10 +230,20 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
     tmp = tempfile.TemporaryDirectory()
     rec = Path(tmp.name) / "bench.mcap"
     procs = []
+    affinity = os.sched_getaffinity(0) if loop_cpu is not None else None
     try:
+        if loop_cpu is not None:
+            # the loop's core for the loop alone: this process's other threads (CAN, publisher, recorder,
+            # Zenoh) and every child (ECU, subscriber, pages) on the others; Service.run pins the loop thread
+            others = affinity - {loop_cpu}
+            if not others:
+                from rtsim.errors import RtsimError
+                raise RtsimError(f"--loop-cpu {loop_cpu}: no other CPU left for the rest")
+            os.sched_setaffinity(0, others)
         svc = Service(ServeOptions(can_interface=can_interface, can_channel=can_channel, start_hub=False,
                                    zenoh=zenoh, zenoh_listen=["tcp/127.0.0.1:0"], record=rec if record else None,
-                                   duration=duration, spin=spin, foxglove_port=0 if foxglove else None),
+                                   duration=duration, spin=spin, foxglove_port=0 if foxglove else None,
+                                   loop_cpu=loop_cpu, loop_priority=loop_priority),
                       out=lambda *a: None)
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         sub = None
@@ -184,7 +264,11 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
         ecu_proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                                     text=True)
         procs.append(ecu_proc)
-        browser = _open_pages(svc.zenoh.endpoints[0], pages, env, procs, pages_nice) if pages and zenoh else None
+        browser = wsc = None
+        if (pages or ws_clients) and zenoh:
+            port = _open_view(svc.zenoh.endpoints[0], env, procs, pages_nice, pages_cpus)
+            browser = _open_pages(port, pages, env, procs, pages_nice, pages_cpus) if pages else None
+            wsc = _open_ws_clients(port, ws_clients, env, procs, pages_nice, pages_cpus) if ws_clients else None
         floor = wake_up_floor()             # meanwhile the children import and connect
         time.sleep(max(0.0, 8.0 - 0.6))
         cpu0 = time.process_time()
@@ -214,8 +298,15 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
             import json
             browser.stdin.close()
             page_stats = json.loads(browser.stdout.readline() or "null")
+        ws_stats = None
+        if wsc is not None:
+            import json
+            wsc.stdin.close()
+            ws_stats = json.loads(wsc.stdout.readline() or "null")
         ecu_proc.terminate()
     finally:
+        if affinity is not None:
+            os.sched_setaffinity(0, affinity)
         for p in procs:
             if p.poll() is None:
                 p.kill()
@@ -250,6 +341,8 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
         "zenoh_subscriber_counts": subs,
         "record": record, "zenoh": zenoh, "foxglove": foxglove, "ecu": ecu, "spin_s": spin, "wake_up_floor": floor,
         "pages": pages if zenoh else 0, "page_stats": page_stats, "pages_nice": pages_nice,
+        "ws_clients": ws_clients if zenoh else 0, "ws_client_stats": ws_stats,
+        "loop_cpu": loop_cpu, "loop_priority": loop_priority, "pages_cpus": sorted(pages_cpus) if pages_cpus else None,
         "budget_us": dict(BUDGET_US),
         "within_budget": all(pct(cpu_steps).get(k, 1e9) <= v for k, v in BUDGET_US.items()),
     }
@@ -283,4 +376,11 @@ def format_report(r: dict) -> str:
         f"  CAN sent {can.get('sent')} received {can.get('received')}; recording {rec.get('written')} messages, "
         f"{rec.get('dropped')} dropped; Zenoh subscriber got {r['zenoh_subscriber_counts']}",
     ] + ([f"  rtsim view pages open all along (nice {r['pages_nice']}): {r['pages']}, drawing at "
-          f"{', '.join(format(p['fps'], '.0f') for p in r['page_stats'])} frames/s"] if r.get("page_stats") else []))
+          f"{', '.join(format(p['fps'], '.0f') for p in r['page_stats'])} frames/s"] if r.get("page_stats") else [])
+       + ([f"  WebSocket clients of rtsim view (pulling as a page does, not drawing): {r['ws_clients']}, "
+           f"{', '.join(str(c['pulls']) for c in r['ws_client_stats'])} pulls, "
+           f"{sum(c['bytes'] for c in r['ws_client_stats']) / 1e6:.1f} MB in all"] if r.get("ws_client_stats") else [])
+       + ([f"  pinned: loop thread on CPU {r['loop_cpu']} (everything else off it)"
+           + (f", SCHED_FIFO priority {r['loop_priority']}" if r.get("loop_priority") else "")
+           + (f", pages and view server on CPUs {r['pages_cpus']}" if r.get("pages_cpus") else "")]
+          if r.get("loop_cpu") is not None else []))

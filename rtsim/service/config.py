@@ -52,6 +52,13 @@ class ServeOptions(BaseModel):
         "SIM_STEP_REQ or Zenoh control op=step); fast: as fast as possible", "simulation.mode")
     max_catch_up: int = setting(20, "after a stall, steps run back to back before the rest are skipped "
                                 "(default 20)", "simulation.max_catch_up", ge=0, le=10000)
+    loop_cpu: Optional[int] = setting(
+        None, "pin the loop thread (only it) to this CPU, Linux (default: not pinned); give it a core nothing "
+        "else runs on, e.g. pages and other work on the others", "simulation.loop_cpu", ge=0, le=4095)
+    loop_priority: Optional[int] = setting(
+        None, "run the loop thread (only it) under SCHED_FIFO at this real-time priority, Linux, needs the "
+        "privilege (default: the normal scheduler); with --loop-cpu other processes on its CPU wait for it",
+        "simulation.loop_priority", ge=1, le=99)
     hold_pressure: Optional[Pressure] = setting(
         None, "brake pressure applied when the brake command times out, kPa (default 3000)",
         "simulation.hold_pressure")
@@ -100,6 +107,14 @@ class ServeOptions(BaseModel):
         if self.foxglove_port is not None:
             from bridge.foxglove_live import check_host
             check_host(self.foxglove_host, self.foxglove_allow_remote)
+        if self.loop_priority is not None and not hasattr(__import__("os"), "SCHED_FIFO"):
+            raise ConfigError("--loop-priority: this system has no SCHED_FIFO (Linux only)")
+        if self.loop_cpu is not None:
+            import os
+            if not hasattr(os, "sched_setaffinity"):
+                raise ConfigError("--loop-cpu: this system cannot pin a thread to a CPU (Linux only)")
+            if self.loop_cpu >= (os.cpu_count() or 1):
+                raise ConfigError(f"--loop-cpu {self.loop_cpu}: this machine has CPUs 0..{(os.cpu_count() or 1) - 1}")
 
 
 def _declared():

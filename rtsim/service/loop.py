@@ -18,6 +18,7 @@ Failures: a model failure (SimulationError) stops stepping (``run_state = "stopp
 """
 from __future__ import annotations
 
+import collections
 import queue
 import threading
 import time
@@ -44,6 +45,7 @@ from .user_input import NUSR, NWORK, TWO_WHEELER_BUS, USER_HOLD, check_value, us
 RUN_STATES = ("running", "paused", "stopped")
 CYCLE_WINDOW = 65536   # steps of compiled-call durations kept (as LoopHealth's window)
 CHUNK = 256            # steps per compiled call when many run back to back (lockstep, re-simulation)
+USER_LOG = 4096        # user-source changes waiting for the publisher (it takes them every few ms)
 
 
 @dataclass
@@ -79,6 +81,11 @@ class HilLoop:
         self._usr_deadline = None          # monotonic time the user's commands lapse at
         self._usr_seq = None
         self._usr_requests = 0
+        # every change of the user source (values, takeover) with the step it was applied at, for the
+        # recording (topic ``user``, bridge.payloads) and re-simulation; the publisher thread takes them
+        self.user_log: collections.deque = collections.deque()
+        self.user_log_dropped = 0
+        self._usr_last = None
         ch = codec.channels               # the served vehicle's interface: ring widths, payload names
         if (len(ch.sensors), len(ch.state)) != (sim.nsensor, sim.nstate):
             raise RtsimError(f"{codec.path}: the vehicle declares {len(ch.sensors)} sensor and "
@@ -154,6 +161,7 @@ class HilLoop:
                             self.cycles, np.zeros(NSTATE), np.zeros(NINPUT), np.full(NINPUT, np.nan),
                             np.full(NUSR, np.nan), np.zeros(1, dtype=np.int64), np.zeros(NWORK))
         self._usr_deadline = None
+        self._usr_last = None
         li = self.li
         li[LI_K] = 0
         li[LI_MASK] = -1
@@ -284,6 +292,7 @@ class HilLoop:
         self.li[LI_BUS_ERROR] = self._bus_error()
         if self._usr_deadline is not None and time.monotonic() > self._usr_deadline:
             self._user_release()
+            self._user_changed("lapse")
         self._bus_errors_at_status = self.port.errors if self.port is not None else 0
 
     def _bus_error(self) -> bool:
@@ -393,8 +402,34 @@ class HilLoop:
             self._usr_deadline = time.monotonic() + USER_HOLD if not np.all(np.isnan(usr)) else None
         self._usr_requests += 1
         self._usr_seq = args.get("seq") if isinstance(args.get("seq"), int) else self._usr_seq
+        self._user_changed("release" if args.get("release") else "drive")
         return {"ok": True, "seq": self._usr_seq, "sim_time": self.sim_time, "wall_time": time.time(),
                 "drivers": self.drivers(), "user": self.user_status()}
+
+    def _user_changed(self, cause: str) -> None:
+        """Log the user source's values and takeover if they changed: they act from step ``k + 1`` on
+        (the loop thread only appends to a deque; the publisher encodes and records it)."""
+        usr = self.ls.usr
+        now = (tuple(None if np.isnan(v) else float(v) for v in usr), bool(self.ls.usr_mode[0]))
+        if now == self._usr_last:
+            return
+        self._usr_last = now
+        if len(self.user_log) >= USER_LOG:
+            self.user_log_dropped += 1
+            return
+        names = user_channels(self.sim.kind)
+        self.user_log.append({"time": self.sim_time, "step": self.k, "cause": cause,
+                              "channels": {n: now[0][u] for u, n in enumerate(names)},
+                              "takeover": now[1], "seq": self._usr_seq})
+
+    def apply_user(self, channels: dict, takeover: bool) -> None:
+        """Set the user source as a recorded change says (re-simulation; see ``_user_changed``): every
+        user channel's value (None or absent: not driven) and the takeover."""
+        usr = self.ls.usr
+        for u, n in enumerate(user_channels(self.sim.kind)):
+            v = channels.get(n)
+            usr[u] = np.nan if v is None else float(v)
+        self.ls.usr_mode[0] = int(bool(takeover))
 
     def _user_release(self) -> None:
         self.ls.usr[:] = np.nan

@@ -8,8 +8,11 @@ frames among them run the steps); in realtime/fast mode each frame at the step a
 processed it (its recorded simulation time), stepping in between, up to the last recorded sample. The
 loop, the E2E checks, the watchdog and the compiled step are the service's own, so with an unchanged
 model and configuration the sensors and state come out bit for bit identical. A changed model shows
-as per-channel differences. Control requests of the live session (pause, reset) are not recorded and
-not replayed; sessions that used them replay only up to the first one.
+as per-channel differences. The user command source's changes (``rtsim view`` driving: the ``user``
+topic, each with the step the loop applied it at) are applied at the same steps, so a session someone
+drove from the browser re-simulates too (``user=False``: without them, a what-if). Other control requests
+of the live session (pause, reset, the ``driver`` op, lockstep ``step`` requests over Zenoh) are not
+recorded and not replayed; sessions that used them replay only up to the first one.
 
 Also accepts python-can logs (.asc, .blf, candump .log) of ECU command frames with ``--scenario``: the
 model is driven by them and the run is reported without a comparison.
@@ -69,8 +72,48 @@ def _file_for(meta: dict, key: str, override: Path | None, tmp: Path) -> tuple[P
     return out, f"{key} as recorded ({path} {'changed since' if path.exists() else 'missing'})"
 
 
-def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None = None) -> dict:
-    """Re-run a recording; returns the comparison report (see the module docstring)."""
+class UserChanges:
+    """The recorded changes of the user command source, applied to a re-run loop at the steps the service
+    applied them at (a change logged at step k acts on steps k+1 on, as in the service)."""
+
+    def __init__(self, loop: HilLoop, messages):
+        """``messages``: the ``user`` topic in recorded order (the order the loop applied them); those after
+        a restart of simulation time (a reset: the step count falls) are left out, as the frames after it."""
+        self.loop = loop
+        self.events = []
+        for m in messages:
+            step = int(m.data["step"])
+            if self.events and step < self.events[-1][0]:
+                break
+            self.events.append((step, m.data))
+        self.i = 0
+        self.applied = 0
+
+    def apply_due(self) -> None:
+        """Every change logged at the loop's current step or before."""
+        ev, loop = self.events, self.loop
+        while self.i < len(ev) and ev[self.i][0] <= loop.k:
+            data = ev[self.i][1]
+            loop.apply_user(data.get("channels") or {}, bool(data.get("takeover")))
+            self.i += 1
+            self.applied += 1
+
+    def advance(self, n: int) -> None:
+        """``n`` steps, the changes applied at their steps on the way."""
+        loop, target = self.loop, self.loop.k + int(n)
+        while loop.k < target and loop.run_state == "running":
+            self.apply_due()
+            nxt = self.events[self.i][0] if self.i < len(self.events) else target
+            k0 = loop.k
+            loop.advance(min(target, nxt) - k0)
+            if loop.k == k0:
+                break
+        self.apply_due()
+
+
+def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None = None, user: bool = True) -> dict:
+    """Re-run a recording; returns the comparison report (see the module docstring); ``user`` False leaves
+    out the user command source's recorded changes."""
     from bridge.mcap_recorder import read_recording
 
     path = Path(path)
@@ -103,17 +146,20 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
     rx = messages.get(f"rtsim/{vid}/can/rx", [])
     rec_sensors = messages.get(f"rtsim/{vid}/sensors", [])
     rec_state = messages.get(f"rtsim/{vid}/state", [])
+    changes = UserChanges(loop, messages.get(f"rtsim/{vid}/user", []) if user else [])
     dt = sim.dt
     for m in rx:
         if mode != "lockstep":
-            loop.advance(int(round(m.data["time"] / dt)) - loop.k)
+            changes.advance(int(round(m.data["time"] / dt)) - loop.k)
+        changes.apply_due()
         loop.rx_writer.put(int(m.data["id"]), bytes.fromhex(m.data["data"]))
         loop.take_frames()
         if loop.run_state == "stopped":
             break
     if mode != "lockstep" and rec_sensors:
-        loop.advance(int(round(rec_sensors[-1].data["time"] / dt)) - loop.k)
+        changes.advance(int(round(rec_sensors[-1].data["time"] / dt)) - loop.k)
     report = {"recording": str(path), "mode": mode, "dt": dt, "files": notes, "frames_replayed": len(rx),
+              "user_changes": len(changes.events), "user_changes_applied": changes.applied,
               "sim_time": loop.sim_time, "run_state": loop.run_state, "message": loop.message,
               "sensors": _compare(rec_sensors, col.sensors, sim.vm.channels.sensor_names),
               "state": _compare(rec_state, col.state, sim.vm.channels.state_names)}
@@ -194,6 +240,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                      "(.asc, .blf, candump .log) of ECU command frames")
     p.add_argument("--vehicle", help="vehicle TOML to use instead of the recorded one (what-if runs)")
     p.add_argument("--scenario", help="scenario TOML or name to use instead of the recorded one")
+    p.add_argument("--without-user", action="store_true",
+                   help="leave out the recorded commands of the user (rtsim view): what the session would have been")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--strict", action="store_true", help="exit 1 unless the rerun is bit-identical")
 
@@ -211,11 +259,12 @@ def main(args) -> int:
                   f"{rep['peak_speed'] * 3.6:.1f} km/h, {rep['run_state']}")
         return 0
     rep = resim(args.recording, Path(args.vehicle) if args.vehicle else None,
-                resolve_scenario(args.scenario) if args.scenario else None)
+                resolve_scenario(args.scenario) if args.scenario else None, user=not args.without_user)
     if args.json:
         print(json.dumps(rep, indent=2, default=float))
     else:
-        print(f"rtsim resim: {rep['recording']}: {rep['frames_replayed']} received frames replayed in "
+        print(f"rtsim resim: {rep['recording']}: {rep['frames_replayed']} received frames and "
+              f"{rep['user_changes_applied']} of {rep['user_changes']} user-command changes replayed in "
               f"{rep['mode']} mode, {rep['sim_time']:.3f} s simulated ({'; '.join(rep['files'])})")
         for part in ("sensors", "state"):
             c = rep[part]

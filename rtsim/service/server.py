@@ -186,7 +186,7 @@ class Service:
         self.outbox = Outbox(self.rings, self.loop.lp.sensor_ids, zenoh=self.zenoh, recorder=self.recorder,
                              status_fn=self.loop.status, status_period=1.0 / o.status_rate, channels=ch,
                              frame_periods=[f.period for f in self.codec.sensor_frames],
-                             scene=scene, road=road, foxglove=self.foxglove)
+                             scene=scene, road=road, foxglove=self.foxglove, user_log=self.loop.user_log)
         self.loop.outbox = self.outbox
         self.pacer = Pacer(self.loop.run_steps, self.sim.dt, "fast" if o.mode == "fast" else (
             "lockstep" if o.mode == "lockstep" else "realtime"), max_catch_up=o.max_catch_up,
@@ -329,6 +329,7 @@ class Service:
         gc.collect()
         gc.freeze()
         gc.disable()
+        unpin = self._pin_loop_thread()
         t0 = time.monotonic()
         try:
             if self.opts.mode == "lockstep":
@@ -338,12 +339,44 @@ class Service:
             else:
                 self.pacer.run(duration=self.opts.duration)
         finally:
+            unpin()
             gc.enable()
             restore()
             wall = time.monotonic() - t0
             summary = self.close()
             summary["wall_s"] = wall
         return summary
+
+    def _pin_loop_thread(self):
+        """``--loop-cpu N``: this thread (the loop's; the others were started before and keep their CPUs)
+        on CPU N alone; ``--loop-priority P``: this thread under SCHED_FIFO at priority P. On Linux
+        ``sched_setaffinity(0, ...)`` and ``sched_setscheduler(0, ...)`` act on the calling thread only.
+        Returns what restores the previous settings."""
+        import os
+
+        cpu, prio = self.opts.loop_cpu, self.opts.loop_priority
+        undo = []
+        try:
+            if cpu is not None:
+                before = os.sched_getaffinity(0)
+                os.sched_setaffinity(0, {cpu})
+                undo.append(lambda: os.sched_setaffinity(0, before))
+                self.out(f"rtsim serve: loop thread pinned to CPU {cpu}")
+            if prio is not None:
+                policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+                undo.append(lambda: os.sched_setscheduler(0, policy, param))
+                self.out(f"rtsim serve: loop thread under SCHED_FIFO, priority {prio}")
+        except OSError as exc:
+            for u in reversed(undo):
+                u()
+            what = f"--loop-cpu {cpu}" if len(undo) == 0 and cpu is not None else f"--loop-priority {prio}"
+            raise ConfigError(f"{what}: {exc.strerror or exc}") from exc
+
+        def restore():
+            for u in reversed(undo):
+                u()
+        return restore
 
     def stop(self) -> None:
         """Thread-safe: makes ``run()`` return within one period (and close everything)."""

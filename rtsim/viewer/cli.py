@@ -48,7 +48,7 @@ def main(args: argparse.Namespace) -> int:
 
         recs = [Recording(f) for f in args.recordings]
         server = ViewServer(None, args.bind, args.port, recordings=recs)
-        what = " and ".join(f"{r.path.name} ({r.vehicle_id}, {r.state[-1]['time'] - r.state[0]['time']:.1f} s)"
+        what = " and ".join(f"{r.path.name} ({r.vehicle_id}, {r.duration:.1f} s)"
                             for r in recs)
     else:
         connect = args.connect or [DEFAULT_ENDPOINT]

@@ -1,0 +1,125 @@
+"""A session someone drove from `rtsim view` re-simulates bit for bit: the service records every change of
+the user command source (the ``drive`` op: values, takeover, release, lapse) on the ``user`` topic with the
+step it applied it at, and `rtsim resim` applies them at the same steps.
+
+A lockstep service in this process (CAN on a loopback hub started here, Zenoh off, recording on); the test
+is the lockstep ECU on the bus (commands, then SIM_STEP_REQ, then the acknowledgement) and the user (the
+``drive`` op through the service's control path, as the view server sends it): the user drives a car no ECU
+drives, an ECU's commands keep priority over the user's throttle, the user takes over, hands the steering
+back (null), the page goes away (the commands lapse), the user drives again and releases."""
+from __future__ import annotations
+
+import threading
+import time
+
+import can
+import pytest
+
+from bridge import payloads
+from bridge.can_bus import LoopbackHub
+from bridge.mcap_recorder import read_recording
+from rtsim.service import loop as loop_module
+from rtsim.service.resim import resim
+from rtsim.service.server import ServeOptions, Service
+from waits import EVENT, HUB_START
+
+
+class _Ecu:
+    """The test as a lockstep ECU: optional commands, then SIM_STEP_REQ, then wait for its SIM_STEP_ACK."""
+
+    def __init__(self, bus, codec):
+        self.bus, self.codec = bus, codec
+        self.ctr = [0, 0, 0, 0]
+
+    def cycle(self, cmd=None, steps=10) -> float:
+        names = ("throttle_angle_cmd", "brake_pressure_cmd", "steering_wheel_angle_cmd")
+        if cmd is not None:
+            for i, name in enumerate(names):
+                self.ctr[i] = (self.ctr[i] + 1) & 0xF
+                fid, data = self.codec.encode_command(name, cmd[i], self.ctr[i])
+                self.bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+        self.ctr[3] = (self.ctr[3] + 1) & 0xF
+        fid, data = self.codec.encode_step_request(steps, self.ctr[3])
+        self.bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+        deadline = time.monotonic() + EVENT
+        while time.monotonic() < deadline:
+            msg = self.bus.recv(1.0)
+            if msg is not None and msg.arbitration_id == self.codec.step_ack.frame_id:
+                t, c = self.codec.decode_step_ack(msg.data)
+                if c == self.ctr[3]:
+                    return t
+        raise AssertionError(f"no SIM_STEP_ACK within {EVENT:g} s")
+
+
+def test_a_session_driven_by_the_user_resimulates_bit_for_bit(tmp_path, monkeypatch):
+    monkeypatch.setattr(loop_module, "USER_HOLD", 0.3)      # wall seconds until the commands lapse
+    rec = tmp_path / "driven.mcap"
+    hub = LoopbackHub(0, start_timeout=HUB_START)
+    svc = Service(ServeOptions(mode="lockstep", can_interface="remote", can_channel=hub.channel, start_hub=False,
+                               zenoh=False, record=rec), out=lambda *a: None)
+    th = threading.Thread(target=svc.run, daemon=True)
+    th.start()
+    ecu_cmd = (0.05, 0.0, -0.4)                              # a light throttle, steering right
+    try:
+        bus = hub.open_bus()
+        ecu = _Ecu(bus, svc.codec)
+
+        def drive(**kw):
+            r = svc.control({"op": "drive", **kw})
+            assert r["ok"], r
+            return r
+
+        for k in range(60):                                  # the user alone: throttle, steering left
+            if k % 10 == 0:
+                drive(throttle_angle_cmd=0.6, brake_pressure_cmd=0.0, steering_wheel_angle_cmd=1.0, seq=k)
+            ecu.cycle()
+        assert set(svc.loop.drivers().values()) == {"user"}
+        for k in range(40):                                  # an ECU on the bus keeps priority
+            if k % 10 == 0:
+                drive(throttle_angle_cmd=0.3, seq=100 + k)
+            ecu.cycle(ecu_cmd)
+        assert set(svc.loop.drivers().values()) == {"ecu"}
+        r = drive(throttle_angle_cmd=0.8, takeover=True, seq=200)   # the user takes the throttle and brake over
+        for _ in range(30):
+            ecu.cycle(ecu_cmd)
+        r = drive(steering_wheel_angle_cmd=None, seq=201)    # hands the steering back (the ECU's anyway)
+        assert r["drivers"]["throttle_angle_cmd"] == "user" and r["drivers"]["steering_wheel_angle_cmd"] == "ecu"
+        time.sleep(0.4)                                      # the page goes away: the user's commands lapse
+        for _ in range(30):
+            ecu.cycle(ecu_cmd)
+        assert svc.loop.user_status()["channels"] == {} and set(svc.loop.drivers().values()) == {"ecu"}
+        for _ in range(20):                                  # the ECU stops: its commands time out
+            ecu.cycle()
+        drive(brake_pressure_cmd=500.0, steering_wheel_angle_cmd=-2.0, seq=300)
+        for _ in range(20):
+            ecu.cycle()
+        drive(release=True, seq=301)
+        for _ in range(10):
+            ecu.cycle()
+        bus.shutdown()
+    finally:
+        svc.stop()
+        th.join(EVENT)
+        hub.close()
+    assert not th.is_alive()
+
+    msgs, info = read_recording(rec)
+    changes = [m.data for m in msgs[f"rtsim/{svc.vehicle_id}/user"]]
+    for c in changes:
+        assert payloads.validation_errors("user", c) == [], c
+        assert c["time"] == pytest.approx(c["step"] * 0.001, abs=1e-12)
+    assert [c["cause"] for c in changes] == ["drive", "drive", "drive", "drive", "lapse", "drive", "release"]
+    assert changes[0]["channels"] == {"throttle_angle_cmd": 0.6, "brake_pressure_cmd": 0.0,
+                                      "steering_wheel_angle_cmd": 1.0} and changes[0]["step"] == 0
+    assert changes[2]["takeover"] and changes[3]["channels"]["steering_wheel_angle_cmd"] is None
+    assert changes[4]["channels"] == dict.fromkeys(changes[0]["channels"]) and not changes[4]["takeover"]
+    assert [c["seq"] for c in changes] == [0, 100, 200, 201, 201, 300, 301]
+    status = [m.data for m in msgs[f"rtsim/{svc.vehicle_id}/status"]]
+    assert any(s["drivers"]["throttle_angle_cmd"] == "user" for s in status)      # the replay's "who drives"
+
+    rep = resim(rec)
+    assert rep["user_changes"] == rep["user_changes_applied"] == len(changes)
+    assert rep["sensors"]["matched"] > 500 and rep["state"]["matched"] > 100
+    assert rep["identical"], (rep["sensors"]["max_abs_diff"], rep["state"]["max_abs_diff"])
+    without = resim(rec, user=False)                         # the user's commands made the session
+    assert not without["identical"] and without["state"]["max_abs_diff"].get("speed", 0.0) > 0.5
