@@ -277,7 +277,7 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
     raw = rp.simulate(inp, base, fit=True)           # the fits' starting point, at the fitting step
     out = rp.reported(raw, bench.t, base)
     tm["first_simulation"] = (time.perf_counter() - t2) / 2
-    obj = Objective.from_benchmark(bench)
+    obj = Objective.from_benchmark(bench, rp.wheel_radius)
     reg = regimes(bench, rp.wheel_radius)
     cat = catalogue()
     effects: list[Effect] = []
