@@ -55,7 +55,7 @@ CHANNELS = tuple(NOISE)
 
 # parameter vector layout (one float array for the compiled kernel)
 (P_M, P_IZZ, P_A, P_B, P_H, P_TF, P_TR, P_RE, P_JF, P_JR, P_CYF, P_CYR, P_CX, P_FZF, P_FZR, P_MU, P_RR, P_CDA,
- P_RHO, P_RATIO, P_KP, P_KI, NPAR) = range(23)
+ P_RHO, P_RATIO, P_KP, P_KI, P_REFF, P_REFR, NPAR) = range(25)
 
 
 def car_parameters(desc: dict, vehicle: Path) -> dict:
@@ -91,6 +91,7 @@ def _pack(car: dict, stiffness_scale: float, added_mass: float) -> np.ndarray:
                                    car["cx"] * stiffness_scale)
     # static loads of the heavier car: the point mass at the centre of mass keeps the split
     p[P_FZF], p[P_FZR] = car["fz_front"] * m / m0, car["fz_rear"] * m / m0
+    p[P_REFF], p[P_REFR] = car["fz_front"], car["fz_rear"]     # loads at which the stiffnesses are given
     p[P_MU], p[P_RR], p[P_CDA], p[P_RHO] = car["mu"], car["rolling_resistance"], car["drag_area"], car["air_density"]
     p[P_RATIO] = car["steering_ratio"]
     p[P_KP], p[P_KI] = 400.0, 400.0          # N m per (m/s), N m per m: the driver's speed controller
@@ -109,8 +110,9 @@ def _simulate(p, steer, v0, dt, every, nsettle):
     ys = np.array([p[P_TF] / 2, -p[P_TF] / 2, p[P_TR] / 2, -p[P_TR] / 2])
     jw = np.array([p[P_JF], p[P_JF], p[P_JR], p[P_JR]])
     fz0 = np.array([p[P_FZF], p[P_FZF], p[P_FZR], p[P_FZR]])
+    fref = np.array([p[P_REFF], p[P_REFF], p[P_REFR], p[P_REFR]])
     cy0 = np.array([p[P_CYF], p[P_CYF], p[P_CYR], p[P_CYR]])
-    cx0 = p[P_CX] / p[P_FZF]                 # slip stiffness per newton of load
+    cx0 = p[P_CX] / p[P_REFF]                # slip stiffness per newton of load
     mu = p[P_MU]
     nsteps = steer.size
     nout = (nsteps - nsettle - 1) // every + 1
@@ -152,7 +154,7 @@ def _simulate(p, steer, v0, dt, every, nsettle):
             den = max(abs(vxt), 0.5)
             kap = (om[i] * re - vxt) / den
             tana = vyt / den
-            load = fz[i] / fz0[i]
+            load = fz[i] / fref[i]
             cy = cy0[i] * load * (1.0 - LOAD_DEGRESSION * (load - 1.0))
             cx = cx0 * fz[i]
             flx = cx * kap

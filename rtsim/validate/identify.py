@@ -68,6 +68,7 @@ SIGNATURE_SHARE = 0.2        # a channel is in a candidate's signature when it m
 WORSE = 1.5                  # a candidate that multiplies a channel's cost by more than this (and leaves it
 WORSE_FLOOR = 4.0            # above this normalised cost) makes that channel worse: not eligible
 SENSOR_EXPLAINS = 0.75       # a sensor effect removes at least this share of its own channel's cost
+SENSOR_LEFT = 1.25           # and leaves its channel within this RMS of standard errors (the data's own noise)
 NEUTRAL = {"scale": 1.0, "stiffness": math.inf}
 SENSOR_FOR = {s: a for s, a in DERIVED.items()}      # wheel_speed_x -> wheel_angle_x
 
@@ -103,13 +104,17 @@ class Candidate:
     worse: list = field(default_factory=list)          # channels it makes significantly worse
     left: float = 0.0                   # RMS normalised residual left on its signature channels
     moved: float = 0.0                  # RMS normalised change on its signature channels
+    joint: tuple | None = None          # (model effect, correlation) when judged jointly with a model effect
 
     @property
     def outweighs_structure(self) -> bool:
         """A model effect changes its channels by more than the mismatch it leaves there; a sensor
-        effect removes most of its own channel's disagreement."""
+        effect (the last stage between the car and the reading) removes most of its own channel's
+        disagreement and leaves it within the data's own uncertainty: a gain, lag or offset that a sensor
+        effect explains only in part (a gain on accel_y that is the model's roll, not the sensor's) is
+        structural."""
         if self.kind == "sensor":
-            return self.local_reduction >= SENSOR_EXPLAINS
+            return self.local_reduction >= SENSOR_EXPLAINS and self.left <= SENSOR_LEFT
         return self.moved >= self.left
 
     @property
@@ -275,8 +280,9 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         notes.append("makes " + ", ".join(cand.worse) + " worse")
     if sig and not cand.outweighs_structure:
         if cand.kind == "sensor":
-            notes.append(f"explains only {100 * cand.local_reduction:.0f} % of its channel (a sensor effect explains "
-                         f"at least {100 * SENSOR_EXPLAINS:.0f} %): the rest is structural")
+            notes.append(f"explains {100 * cand.local_reduction:.0f} % of its channel and leaves {cand.left:.2g} standard "
+                         f"errors RMS (a sensor effect explains at least {100 * SENSOR_EXPLAINS:.0f} % and leaves at "
+                         f"most {SENSOR_LEFT:g}): the rest is structural")
         else:
             notes.append(f"changes its channels ({', '.join(sig)}) by {cand.moved:.2g} standard errors, less than "
                          f"the mismatch it leaves there ({cand.left:.2g}): cannot be told apart from the model's "

@@ -25,6 +25,7 @@ from .benchmark import Benchmark
 RADIUS_RANGE = 0.015          # relative change of an axle's effective rolling radius
 RESISTANCE_RANGE = 0.03       # m/s^2 of constant deceleration (about 0.003 g)
 MOVING = 0.5                  # m/s: the resistance offset acts above this speed
+PRIOR = 10.0                  # standard errors (see Nuisance.build)
 
 
 @dataclass
@@ -83,7 +84,12 @@ class Nuisance:
         lo.append(-RESISTANCE_RANGE)
         hi.append(RESISTANCE_RANGE)
         D = np.column_stack(cols)
-        solve = -np.linalg.solve(D.T @ D, D.T)
+        # a prior towards no adjustment: at its range an adjustment costs as much as one channel
+        # `PRIOR` standard errors off everywhere, small against a real structural gap (the wheel speeds
+        # drifting apart by tens of standard errors), but where an effect and an adjustment would explain
+        # the same thing (a hidden mass against the rolling radii) the effect takes it
+        ridge = np.diag(PRIOR ** 2 * n / np.array(hi) ** 2)
+        solve = -np.linalg.solve(D.T @ D + ridge, D.T)
         return cls(names, units, D, solve, np.array(lo), np.array(hi))
 
 
