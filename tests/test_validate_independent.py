@@ -46,7 +46,9 @@ LATERAL = {
     "stiffness_0.7": ({"stiffness_scale": 0.7}, [("tyre_slip_stiffness", "scale", 0.7, None)], "held-out"),
     "gyro_z_scale": ({"sensor": {"gyro_z": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "gyro_z")], "held-out"),
     "gyro_z_delay": ({"sensor": {"gyro_z": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "gyro_z")], "held-out"),
-    "mass": ({"added_mass": 200.0}, "", "held-out"),
+    # 200 kg on a manoeuvre at constant speed: the speed controller's extra torque is a resistance
+    # offset (a nuisance) and the yaw response barely moves; no named effect is the right answer
+    "mass": ({"added_mass": 200.0}, ("no catalogue effect", "cannot be told apart"), "held-out"),
     "two_at_once": ({"stiffness_scale": 0.5, "sensor": {"gyro_z": {"bias": 0.03}}},
                     [("tyre_slip_stiffness", "scale", 0.5, None), ("sensor_bias", "bias", 0.03, "gyro_z")],
                     "held-out"),
@@ -56,7 +58,7 @@ LATERAL = {
 #: longitudinal (pitch-plane peer) case -> (hidden, expected, "held-out")
 LONGITUDINAL = {
     "grade": ({"grade": 0.04}, [("road_grade", "grade", 0.04, None)], "held-out"),
-    "none": ({}, "no catalogue effect", "held-out"),
+    "none": ({}, ("no catalogue effect", "no missing effect"), "held-out"),
     "two_at_once": ({"brake_scale": 0.75, "accel_bias": 0.25},
                     [("brake_friction", "scale", 0.75, None), ("sensor_bias", "bias", 0.25, "accel_x")], "held-out"),
 }
@@ -86,9 +88,10 @@ def _tol(name: str) -> float:
 
 
 def _check(res, expected):
-    if isinstance(expected, str):
+    if isinstance(expected, (str, tuple)):
+        words = (expected,) if isinstance(expected, str) else expected
         assert res.effects == [], (res.verdict, [e.label() for e in res.effects])
-        assert expected in res.verdict, res.verdict
+        assert any(w in res.verdict for w in words), res.verdict
         return
     found = {(e.name, e.channel): e for e in res.effects}
     for name, param, true, channel in expected:

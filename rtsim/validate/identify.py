@@ -68,7 +68,11 @@ SIGNATURE_SHARE = 0.2        # a channel is in a candidate's signature when it m
 WORSE = 1.5                  # a candidate that multiplies a channel's cost by more than this (and leaves it
 WORSE_FLOOR = 4.0            # above this normalised cost) makes that channel worse: not eligible
 SENSOR_EXPLAINS = 0.75       # a sensor effect removes at least this share of its own channel's cost
-SENSOR_LEFT = 1.25           # and leaves its channel within this RMS of standard errors (the data's own noise)
+#: a lateral accelerometer on the body reads gravity's component g sin(roll), about proportional to the
+#: lateral acceleration and lagging it with the roll dynamics: without the roll angle compared, a gain or a
+#: lag of accel_y cannot be told from the model's roll (its roll stiffness, not in the catalogue)
+TILT = {"accel_y": "roll"}
+TILT_CONFOUNDED = ("sensor_scale", "sensor_delay")
 NEUTRAL = {"scale": 1.0, "stiffness": math.inf}
 SENSOR_FOR = {s: a for s, a in DERIVED.items()}      # wheel_speed_x -> wheel_angle_x
 
@@ -105,22 +109,21 @@ class Candidate:
     left: float = 0.0                   # RMS normalised residual left on its signature channels
     moved: float = 0.0                  # RMS normalised change on its signature channels
     joint: tuple | None = None          # (model effect, correlation) when judged jointly with a model effect
+    confounded: str = ""                # why the data cannot tell it from the model's structure
 
     @property
     def outweighs_structure(self) -> bool:
         """A model effect changes its channels by more than the mismatch it leaves there; a sensor
         effect (the last stage between the car and the reading) removes most of its own channel's
-        disagreement and leaves it within the data's own uncertainty: a gain, lag or offset that a sensor
-        effect explains only in part (a gain on accel_y that is the model's roll, not the sensor's) is
-        structural."""
+        disagreement: what a sensor effect explains only in part is structural."""
         if self.kind == "sensor":
-            return self.local_reduction >= SENSOR_EXPLAINS and self.left <= SENSOR_LEFT
+            return self.local_reduction >= SENSOR_EXPLAINS
         return self.moved >= self.left
 
     @property
     def eligible(self) -> bool:
         return (self.plausible and self.delta_ic <= -MIN_DELTA_IC and self.local_reduction >= MIN_REDUCTION
-                and self.size >= MIN_SIZE and not self.worse and self.outweighs_structure)
+                and self.size >= MIN_SIZE and not self.worse and self.outweighs_structure and not self.confounded)
 
     def summary(self) -> dict:
         return {"name": self.effect.name, "parameters": dict(self.effect.params),
@@ -273,16 +276,28 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         cand.left = math.sqrt(after / len(sig))
         cand.moved = math.sqrt(sum(by[c][2] ** 2 for c in sig) / len(sig))
     cand.worse = [c for c, v in by.items() if v[1] > WORSE * v[0] and v[1] > WORSE_FLOOR]
+    if sig:
+        # the evidence is judged on the signature channels (a channel it barely moves, with its own
+        # structural misfit, neither vetoes nor carries it; one it makes worse is caught above)
+        ntot = sum(obj.n_eff.values())
+        local = sum(obj.n_eff[c] * math.log(max(by[c][1], 1e-300) / max(by[c][0], 1e-300)) for c in sig)
+        cand.delta_ic = local + cand.k * math.log(ntot)
+        cand.ic = obj.ic(ctx.outputs, 0) + cand.delta_ic
+    ch = cand.effect.channel
+    if cand.kind == "sensor" and cand.effect.name in TILT_CONFOUNDED and ch in TILT and TILT[ch] not in obj.channels:
+        cand.confounded = (f"a {cand.effect.name.split('_')[1]} of {ch} cannot be told from the model's body {TILT[ch]} "
+                           f"(the accelerometer reads g sin({TILT[ch]})): record {TILT[ch]} to tell them apart")
     if not cand.plausible:
         return
     notes = [cand.note] if cand.note else []
+    if cand.confounded:
+        notes.append(cand.confounded)
     if cand.worse:
         notes.append("makes " + ", ".join(cand.worse) + " worse")
     if sig and not cand.outweighs_structure:
         if cand.kind == "sensor":
-            notes.append(f"explains {100 * cand.local_reduction:.0f} % of its channel and leaves {cand.left:.2g} standard "
-                         f"errors RMS (a sensor effect explains at least {100 * SENSOR_EXPLAINS:.0f} % and leaves at "
-                         f"most {SENSOR_LEFT:g}): the rest is structural")
+            notes.append(f"explains only {100 * cand.local_reduction:.0f} % of its channel (a sensor effect explains "
+                         f"at least {100 * SENSOR_EXPLAINS:.0f} %): the rest is structural")
         else:
             notes.append(f"changes its channels ({', '.join(sig)}) by {cand.moved:.2g} standard errors, less than "
                          f"the mismatch it leaves there ({cand.left:.2g}): cannot be told apart from the model's "
