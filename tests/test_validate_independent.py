@@ -16,10 +16,13 @@ mismatch is named within 20 %; no hidden effect gives "no catalogue effect" with
 structural report and never a named effect; an effect smaller than the structural mismatch gives
 "cannot be told apart".
 
-Tuning vs held-out: the method's rules and thresholds (nuisance ranges, signature channels, the
-75 % share a sensor effect must explain of its channel, "changes more than it leaves") were decided on
-the TUNING cases only (lateral none, gyro_z bias 0.03, tyre stiffness 0.5, seed 5); every other case is
-HELD-OUT: it was written and run after the method was fixed and nothing was tuned on it.
+Tuning vs held-out (marked per case below). TUNING: the cases the method's rules were decided or changed
+on: every lateral case except gyro_z scale and delay (the nuisance prior, the signature-channel
+information criterion and the accel_y/roll confounding were added after they failed), and the
+longitudinal none and two-at-once cases (a first rule on what a sensor effect may leave on its channel
+was dropped after two-at-once failed). HELD-OUT: gyro_z scale, gyro_z delay and the longitudinal grade
+passed the first time they ran, and stiffness 0.6 (seed 99) and the longitudinal mass-and-grade pair
+were written and run once after the rules were final.
 """
 from __future__ import annotations
 
@@ -43,24 +46,27 @@ LATERAL = {
     "none": ({}, "no catalogue effect", "tuning"),
     "gyro_z_bias": ({"sensor": {"gyro_z": {"bias": 0.03}}}, [("sensor_bias", "bias", 0.03, "gyro_z")], "tuning"),
     "stiffness_0.5": ({"stiffness_scale": 0.5}, [("tyre_slip_stiffness", "scale", 0.5, None)], "tuning"),
-    "stiffness_0.7": ({"stiffness_scale": 0.7}, [("tyre_slip_stiffness", "scale", 0.7, None)], "held-out"),
+    "stiffness_0.7": ({"stiffness_scale": 0.7}, [("tyre_slip_stiffness", "scale", 0.7, None)], "tuning"),
     "gyro_z_scale": ({"sensor": {"gyro_z": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "gyro_z")], "held-out"),
     "gyro_z_delay": ({"sensor": {"gyro_z": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "gyro_z")], "held-out"),
     # 200 kg on a manoeuvre at constant speed: the speed controller's extra torque is a resistance
     # offset (a nuisance) and the yaw response barely moves; no named effect is the right answer
-    "mass": ({"added_mass": 200.0}, ("no catalogue effect", "cannot be told apart"), "held-out"),
+    "mass": ({"added_mass": 200.0}, ("no catalogue effect", "cannot be told apart"), "tuning"),
     "two_at_once": ({"stiffness_scale": 0.5, "sensor": {"gyro_z": {"bias": 0.03}}},
                     [("tyre_slip_stiffness", "scale", 0.5, None), ("sensor_bias", "bias", 0.03, "gyro_z")],
-                    "held-out"),
-    "smaller_than_structural": ({"stiffness_scale": 0.92}, "cannot be told apart", "held-out"),
+                    "tuning"),
+    "smaller_than_structural": ({"stiffness_scale": 0.92}, "cannot be told apart", "tuning"),
+    "stiffness_0.6": ({"stiffness_scale": 0.6}, [("tyre_slip_stiffness", "scale", 0.6, None)], "held-out"),
 }
 
 #: longitudinal (pitch-plane peer) case -> (hidden, expected, "held-out")
 LONGITUDINAL = {
     "grade": ({"grade": 0.04}, [("road_grade", "grade", 0.04, None)], "held-out"),
-    "none": ({}, ("no catalogue effect", "no missing effect"), "held-out"),
+    "none": ({}, ("no catalogue effect", "no missing effect"), "tuning"),
     "two_at_once": ({"brake_scale": 0.75, "accel_bias": 0.25},
-                    [("brake_friction", "scale", 0.75, None), ("sensor_bias", "bias", 0.25, "accel_x")], "held-out"),
+                    [("brake_friction", "scale", 0.75, None), ("sensor_bias", "bias", 0.25, "accel_x")], "tuning"),
+    "mass_and_grade": ({"added_mass": 150.0, "grade": 0.03},
+                       [("mass", "added_mass", 150.0, None), ("road_grade", "grade", 0.03, None)], "held-out"),
 }
 
 
@@ -87,6 +93,15 @@ def _tol(name: str) -> float:
     return 0.1 if kind(name) == "sensor" else 0.2
 
 
+def _show(case, res):
+    """What was found (shown with pytest -s): effects, per-channel RMS before -> after, verdict."""
+    b, a = res.metrics(res.before), res.metrics(res.after)
+    print(f"\n[{case}] effects: {[e.label() for e in res.effects]} +- {[e.uncertainty for e in res.effects]}")
+    print("  RMS before -> after: " + ", ".join(f"{c} {b[c]['rms']:.4g} -> {a[c]['rms']:.4g}" for c in b))
+    print("  channels: " + "; ".join(f"{c}: {v['text']}" for c, v in res.channels.items()))
+    print(f"  nuisance: {res.nuisance}\n  verdict: {res.verdict}")
+
+
 def _check(res, expected):
     if isinstance(expected, (str, tuple)):
         words = (expected,) if isinstance(expected, str) else expected
@@ -109,9 +124,11 @@ def _check(res, expected):
 @pytest.mark.parametrize("case", list(LATERAL))
 def test_lateral_peer(replayer, car, folder, case):
     hidden, expected, _ = LATERAL[case]
-    seed = 5 if LATERAL[case][2] == "tuning" else 17 + list(LATERAL).index(case)
+    seed = 99 if case == "stiffness_0.6" else 5 if case in ("none", "gyro_z_bias", "stiffness_0.5") else \
+        17 + list(LATERAL).index(case)
     paths = lateral.write_runs(folder / case, car, n=7, seed=seed, **hidden)
     res = run(Options(VEHICLE, paths, folder / f"{case}_report"), replayer=replayer)
+    _show(case, res)
     assert res.bench.lateral
     _check(res, expected)
     # the structural report: every compared channel has a status; accel_y's roll-induced gain is
@@ -138,4 +155,5 @@ def test_longitudinal_peer(replayer, folder, case):
     paths = peer_sim.write_runs(folder / f"long_{case}", car, n=7, seed=31 + list(LONGITUDINAL).index(case),
                                 **hidden)
     res = run(Options(VEHICLE, paths, folder / f"long_{case}_report"), replayer=replayer)
+    _show(f"long_{case}", res)
     _check(res, expected)

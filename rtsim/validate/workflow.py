@@ -455,6 +455,9 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
     structural = [f"{c}: {v['text']}" for c, v in chans.items() if v["status"] == "structural"]
     if structural:
         verdict += "; structural mismatch (not in the catalogue) remains on " + "; ".join(structural)
+        if not effects and "cannot be told apart" not in verdict:
+            verdict += ("; a catalogue effect that changes these channels less than this mismatch cannot be told "
+                        "apart from it")
     if confounded:
         verdict += "; confounded (the data cannot separate them): " + "; ".join(
             f"{a} and {b} (correlation {r:+.2f})" for a, b, r in confounded)
