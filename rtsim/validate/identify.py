@@ -277,10 +277,12 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         cand.moved = math.sqrt(sum(by[c][2] ** 2 for c in sig) / len(sig))
     cand.worse = [c for c, v in by.items() if v[1] > WORSE * v[0] and v[1] > WORSE_FLOOR]
     if sig:
-        # the evidence is judged on the signature channels (a channel it barely moves, with its own
-        # structural misfit, neither vetoes nor carries it; one it makes worse is caught above)
+        # the evidence is judged on the signature channels; another channel counts only where it gets
+        # better (a channel it barely moves, with its own structural misfit, does not veto it; one it
+        # makes clearly worse is caught above)
         ntot = sum(obj.n_eff.values())
-        local = sum(obj.n_eff[c] * math.log(max(by[c][1], 1e-300) / max(by[c][0], 1e-300)) for c in sig)
+        local = sum(obj.n_eff[c] * (lr if c in sig else min(lr, 0.0)) for c in obj.channels
+                    for lr in [math.log(max(by[c][1], 1e-300) / max(by[c][0], 1e-300))])
         cand.delta_ic = local + cand.k * math.log(ntot)
         cand.ic = obj.ic(ctx.outputs, 0) + cand.delta_ic
     ch = cand.effect.channel
