@@ -32,6 +32,19 @@ value; it is eligible to be added when it is plausible, removes at least `MIN_RE
 lowers the information criterion by at least `MIN_DELTA_IC` and changes the outputs by at least
 `MIN_SIZE` standard errors of the mean (RMS over the channels and samples): smaller changes fit noise
 and the artefacts of averaging runs (e.g. the pitch oscillation after the stop, smeared in the mean).
+
+Evidence per channel (channel_evidence; data from elsewhere always carry structural mismatch beside
+the effect looked for). Residuals are the objective's: normalised by each channel's standard error,
+with the nuisance adjustments (objective.Nuisance) fitted at every candidate value. A candidate's
+signature channels are its own channel for a sensor effect, and for a model effect those it moves by
+at least MIN_SIZE standard errors and SIGNATURE_SHARE of its largest move. Its information criterion
+counts the signature channels and, elsewhere, only where it improves; `reduction` for eligibility is
+the share of the signature channels' cost it removes. It is not eligible when it makes another channel
+clearly worse (WORSE), when a model effect changes its channels by less than the residual it leaves
+there (cannot be told apart from the structural mismatch), when a sensor effect removes less than
+SENSOR_EXPLAINS of its channel's cost, or when a gain or lag of accel_y is asked for without the roll
+angle compared (TILT). The uncertainty of the winner combines the runs' scatter with the linearised
+interval whose noise is the residual left at the optimum: it widens with the unexplained residual.
 """
 from __future__ import annotations
 

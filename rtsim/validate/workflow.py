@@ -16,6 +16,14 @@
 5. the new vehicle config with the identified effects and its diff (configwrite), the report
    (report.html, plots, summary.json).
 
+Structural mismatch (issue 15): every residual carries the nuisance adjustments (objective.Nuisance:
+axle rolling radii, a small resistance offset; reported, never named); candidates are judged per
+channel (identify.channel_evidence); when nothing is eligible alone, the sensor effects are fitted again
+on top of the best model candidate (_joint_sensor); at the end every channel is reported as explained,
+inside the band or structural with its shape (structural.channel_report), the identified effects'
+sensitivities are correlated (|r| >= CONFOUNDED: confounded), and the verdict says "no catalogue effect"
+or "cannot be told apart" when no effect stands out from the structural mismatch.
+
 The loop also stops when every channel's normalised cost (objective) is at most 1, i.e. the model is
 within the data's own uncertainty: a candidate fitted there would fit noise and averaging artefacts.
 
