@@ -300,8 +300,9 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         cand.ic = obj.ic(ctx.outputs, 0) + cand.delta_ic
     ch = cand.effect.channel
     if cand.kind == "sensor" and cand.effect.name in TILT_CONFOUNDED and ch in TILT and TILT[ch] not in obj.channels:
-        cand.confounded = (f"a {cand.effect.name.split('_')[1]} of {ch} cannot be told from the model's body {TILT[ch]} "
-                           f"(the accelerometer reads g sin({TILT[ch]})): record {TILT[ch]} to tell them apart")
+        what = cand.effect.name.split("_")[1]
+        cand.confounded = (f"a {what} of {ch} cannot be told from the model's body {TILT[ch]} (the accelerometer "
+                           f"reads g sin({TILT[ch]})): record {TILT[ch]} to tell them apart")
     if not cand.plausible:
         return
     notes = [cand.note] if cand.note else []

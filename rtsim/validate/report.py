@@ -74,7 +74,9 @@ def _plot_channel(res: Result, c: str, path: Path) -> None:
     if res.effects:
         a1.plot(t, res.after[c], color="tab:green", lw=0.9, ls="--", label="model after")
     adj = res.objective.adjusted(res.after)[c] if res.nuisance else None
-    if adj is not None and not np.allclose(adj, res.after[c], rtol=0.0, atol=1e-9 * (1.0 + float(np.max(np.abs(adj))))):
+    if adj is not None and np.allclose(adj, res.after[c], rtol=0.0, atol=1e-9 * (1.0 + float(np.max(np.abs(adj))))):
+        adj = None                    # a channel the nuisance adjustments do not touch
+    if adj is not None:
         a1.plot(t, adj, color="tab:purple", lw=0.8, ls=":", label="after, nuisance adjusted")
     a1.set_ylabel(f"{c} [{unit(c)}]")
     a1.legend(loc="best", fontsize=8)
@@ -83,7 +85,7 @@ def _plot_channel(res: Result, c: str, path: Path) -> None:
     a2.plot(t, res.before[c] - b.mean, color="tab:red", lw=0.7, label="residual before")
     if res.effects:
         a2.plot(t, res.after[c] - b.mean, color="tab:green", lw=0.7, label="residual after")
-    if adj is not None and not np.allclose(adj, res.after[c], rtol=0.0, atol=1e-9 * (1.0 + float(np.max(np.abs(adj))))):
+    if adj is not None:
         a2.plot(t, adj - b.mean, color="tab:purple", lw=0.7, ls=":", label="after, nuisance adjusted")
     a2.axhline(0.0, color="k", lw=0.5)
     a2.set_ylabel(f"model - mean [{unit(c)}]")
@@ -253,7 +255,8 @@ def write(res: Result, folder: Path) -> dict:
                      f"<pre>{e(res.diff)}</pre>")
     # plots
     parts.append("<h2>Channels</h2><p>grey: runs; blue: mean and 95 % band; red: model before; green dashed: "
-                 "after; purple dotted: after with the nuisance adjustments. Lower panels: residual (model - mean) and the band's half-width; dotted lines: phase "
+                 "after; purple dotted: after with the nuisance adjustments."
+                 " Lower panels: residual (model - mean) and the band's half-width; dotted lines: phase "
                  "boundaries" + ("; orange: the manoeuvre steers" if res.regimes.steering.any() else "") + ".</p>")
     parts.extend(f'<h3>{e(c)}</h3><img src="{e(n)}" alt="{e(c)}">' for c, n in plots)
     # data
