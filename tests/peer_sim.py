@@ -29,7 +29,8 @@ Model (SI units, x forward, pitch theta positive nose down):
 - accelerometer at the sprung centre of mass: a_x cos(theta) - g sin(theta).
 Integration: semi-implicit Euler at 0.5 ms. Hidden effects of its own: added mass at the centre of
 mass, a brake friction scale, an added rolling-resistance coefficient (a force c Fz at each contact
-patch, the catalogue's definition), an accelerometer bias.
+patch, the catalogue's definition), a road grade (gravity's component m g sin(atan(grade)) against the
+motion, and the accelerometer tilted with the road), an accelerometer bias.
 """
 from __future__ import annotations
 
@@ -180,7 +181,7 @@ class Car:
 
 
 def simulate(car: Car, brake_cmd, torque_cmd, duration: float, rate: float = 500.0, dt: float = 5e-4,
-             added_mass: float = 0.0, brake_scale: float = 1.0, rr_added: float = 0.0,
+             added_mass: float = 0.0, brake_scale: float = 1.0, rr_added: float = 0.0, grade: float = 0.0,
              settle: float = 1.0) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Run the manoeuvre (commands: functions of time, kPa and N m per rear wheel); samples at `rate`
     after `settle` s standing on the first commands. Returns (time, channels)."""
@@ -190,6 +191,7 @@ def simulate(car: Car, brake_cmd, torque_cmd, duration: float, rate: float = 500
     # static axle loads (both wheels) of the car as built: its springs' preload carries them at zero
     # deflection; an added mass's weight (at the sprung CG) deflects the springs: the car sags and,
     # its front being softer, pitches nose down
+    gam = math.atan(grade)          # road slope, uphill positive: the body pitches nose up with the road
     fz0_f = G * (car.m_s * car.b / L + 2 * car.m_u)
     fz0_r = G * (car.m_s * car.a / L + 2 * car.m_u)
     dw = added_mass * G
@@ -222,7 +224,7 @@ def simulate(car: Car, brake_cmd, torque_cmd, duration: float, rate: float = 500
         t = max(n, 0) * dt
         if n >= 0 and n % every == 0:
             fx_tot = ax_prev
-            rows.append((t, fx_tot * math.cos(th) - G * math.sin(th), phi[0], phi[1], p_line,
+            rows.append((t, fx_tot * math.cos(th - gam) - G * math.sin(th - gam), phi[0], phi[1], p_line,
                          torque_cmd(t), th))
         # actuator: first-order lag with rate limit
         target = p_line + (brake_cmd(t) - p_line) * (1.0 - math.exp(-dt / car.act_tau))
@@ -278,7 +280,7 @@ def simulate(car: Car, brake_cmd, torque_cmd, duration: float, rate: float = 500
             phi[i] += dt * om[i]
         # body
         f_aero = 0.5 * car.rho * car.cda * v * abs(v)
-        ax = (fx[0] + fx[1] - f_aero) / m
+        ax = (fx[0] + fx[1] - f_aero) / m - G * math.sin(gam)
         v += dt * ax
         ax_prev = ax
         # heave and pitch of the sprung mass: springs, dampers, and its inertia force at the CG against

@@ -33,7 +33,8 @@ def test_cli_writes_report_summary_and_new_config(runs, tmp_path, capsys):
     assert _standalone(["--vehicle", str(VEHICLE), "--runs", *map(str, runs), "--report", str(out)]) == 0
     assert hashlib.sha256(VEHICLE.read_bytes()).hexdigest() == digest          # original untouched
     summ = json.loads((out / "summary.json").read_text())
-    assert set(summ) == {"effects", "before", "after", "iterations"}
+    assert set(summ) == {"effects", "before", "after", "iterations", "verdict", "channels", "nuisance",
+                         "correlations", "confounded"}
     eff = summ["effects"][0]
     assert eff["name"] == "sensor_bias" and eff["parameters"]["channel"] == "accel_x"
     assert abs(eff["parameters"]["bias"] - 0.15) < 0.015 and eff["uncertainty"]["bias"] > 0

@@ -32,6 +32,19 @@ value; it is eligible to be added when it is plausible, removes at least `MIN_RE
 lowers the information criterion by at least `MIN_DELTA_IC` and changes the outputs by at least
 `MIN_SIZE` standard errors of the mean (RMS over the channels and samples): smaller changes fit noise
 and the artefacts of averaging runs (e.g. the pitch oscillation after the stop, smeared in the mean).
+
+Evidence per channel (channel_evidence; data from elsewhere always carry structural mismatch beside
+the effect looked for). Residuals are the objective's: normalised by each channel's standard error,
+with the nuisance adjustments (objective.Nuisance) fitted at every candidate value. A candidate's
+signature channels are its own channel for a sensor effect, and for a model effect those it moves by
+at least MIN_SIZE standard errors and SIGNATURE_SHARE of its largest move. Its information criterion
+counts the signature channels and, elsewhere, only where it improves; `reduction` for eligibility is
+the share of the signature channels' cost it removes. It is not eligible when it makes another channel
+clearly worse (WORSE), when a model effect changes its channels by less than the residual it leaves
+there (cannot be told apart from the structural mismatch), when a sensor effect removes less than
+SENSOR_EXPLAINS of its channel's cost, or when a gain or lag of accel_y is asked for without the roll
+angle compared (TILT). The uncertainty of the winner combines the runs' scatter with the linearised
+interval whose noise is the residual left at the optimum: it widens with the unexplained residual.
 """
 from __future__ import annotations
 
@@ -63,6 +76,16 @@ class _Budget(Exception):
 MIN_DELTA_IC = 10.0          # "very strong" evidence on the Kass-Raftery scale of 2 ln(Bayes factor)
 MIN_REDUCTION = 0.10         # a winner removes at least this share of the disagreement
 MIN_SIZE = 1.0               # and moves the outputs by at least this many standard errors (RMS)
+SIGNATURE_SHARE = 0.2        # a channel is in a candidate's signature when it moves it by >= this share of
+                             # its largest move (and by >= MIN_SIZE standard errors)
+WORSE = 1.5                  # a candidate that multiplies a channel's cost by more than this (and leaves it
+WORSE_FLOOR = 4.0            # above this normalised cost) makes that channel worse: not eligible
+SENSOR_EXPLAINS = 0.75       # a sensor effect removes at least this share of its own channel's cost
+#: a lateral accelerometer on the body reads gravity's component g sin(roll), about proportional to the
+#: lateral acceleration and lagging it with the roll dynamics: without the roll angle compared, a gain or a
+#: lag of accel_y cannot be told from the model's roll (its roll stiffness, not in the catalogue)
+TILT = {"accel_y": "roll"}
+TILT_CONFOUNDED = ("sensor_scale", "sensor_delay")
 NEUTRAL = {"scale": 1.0, "stiffness": math.inf}
 SENSOR_FOR = {s: a for s, a in DERIVED.items()}      # wheel_speed_x -> wheel_angle_x
 
@@ -92,17 +115,38 @@ class Candidate:
     coord: object = field(default=None, repr=False)
     per_run: list = field(default_factory=list)                # theta_i -> values from the per-run replays
     size: float = 0.0                   # how far it moves the model's outputs, RMS in standard errors
+    by_channel: dict = field(default_factory=dict)     # channel -> (cost before, cost with it, moved by)
+    signature: list = field(default_factory=list)      # the channels it moves (its own one for a sensor)
+    local_reduction: float = 0.0        # share of the cost on its signature channels it removes
+    worse: list = field(default_factory=list)          # channels it makes significantly worse
+    left: float = 0.0                   # RMS normalised residual left on its signature channels
+    moved: float = 0.0                  # RMS normalised change on its signature channels
+    joint: tuple | None = None          # (model effect, correlation) when judged jointly with a model effect
+    confounded: str = ""                # why the data cannot tell it from the model's structure
+
+    @property
+    def outweighs_structure(self) -> bool:
+        """A model effect changes its channels by more than the mismatch it leaves there; a sensor
+        effect (the last stage between the car and the reading) removes most of its own channel's
+        disagreement: what a sensor effect explains only in part is structural."""
+        if self.kind == "sensor":
+            return self.local_reduction >= SENSOR_EXPLAINS
+        return self.moved >= self.left
 
     @property
     def eligible(self) -> bool:
-        return (self.plausible and self.delta_ic <= -MIN_DELTA_IC and self.reduction >= MIN_REDUCTION
-                and self.size >= MIN_SIZE)
+        return (self.plausible and self.delta_ic <= -MIN_DELTA_IC and self.local_reduction >= MIN_REDUCTION
+                and self.size >= MIN_SIZE and not self.worse and self.outweighs_structure and not self.confounded)
 
     def summary(self) -> dict:
         return {"name": self.effect.name, "parameters": dict(self.effect.params),
                 "uncertainty": dict(self.effect.uncertainty), "cost": self.cost, "ic": self.ic,
                 "delta_ic": self.delta_ic, "reduction": self.reduction, "plausible": self.plausible,
                 "significant": self.significant, "signature_match": self.match, "simulations": self.sims,
+                "signature_channels": self.signature, "local_reduction": self.local_reduction,
+                "worse_channels": self.worse, "moved": self.moved, "left": self.left,
+                "by_channel": {c: {"cost_before": v[0], "cost_with": v[1], "moved": v[2]}
+                               for c, v in self.by_channel.items()},
                 "note": self.note, **({"requested": self.requested} if self.requested is not None else {})}
 
 
@@ -210,9 +254,71 @@ def _finish(ctx: Context, effect: Effect, kind: str, k: int, out: dict, J: np.nd
     size = distance(obj, out, ctx.outputs)
     if plausible and size < MIN_SIZE:
         notes.append(f"too small to matter: it moves the outputs by {size:.2f} standard errors (RMS)")
-    return Candidate(effect, kind, k, cost, ic, 1.0 - cost / ctx.cost, ic - obj.ic(ctx.outputs, 0), plausible,
+    cand = Candidate(effect, kind, k, cost, ic, 1.0 - cost / ctx.cost, ic - obj.ic(ctx.outputs, 0), plausible,
                      significant, match, by, sims, "; ".join(notes), requested, out, theta=th, u_theta=uth, J=J,
                      coord=coord, size=size)
+    channel_evidence(ctx, cand)
+    return cand
+
+
+def channel_evidence(ctx: Context, cand: Candidate) -> None:
+    """Per channel: the cost before and with the candidate and how far it moves the channel; its
+    signature channels (a sensor effect: its own channel; a model effect: the channels it moves by at
+    least MIN_SIZE standard errors and SIGNATURE_SHARE of its largest move), the share of their cost it
+    removes, the channels it makes worse, and the residual left on its signature channels."""
+    obj = ctx.objective
+    if not cand.outputs:
+        return
+    ra, rb = obj.channel_residual(cand.outputs), obj.channel_residual(ctx.outputs)
+    by = {}
+    for c in obj.channels:
+        d = ra[c] - rb[c]
+        by[c] = (float(np.mean(rb[c] ** 2)), float(np.mean(ra[c] ** 2)), float(np.sqrt(np.mean(d * d))))
+    cand.by_channel = by
+    if cand.kind == "sensor":
+        own = cand.effect.channel
+        sig = [c for c in obj.channels if c == own or SENSOR_FOR.get(c) == own]
+    else:
+        top = max(v[2] for v in by.values())
+        sig = [c for c, v in by.items() if v[2] >= max(MIN_SIZE, SIGNATURE_SHARE * top)]
+    cand.signature = sig
+    if sig:
+        before = sum(by[c][0] for c in sig)
+        after = sum(by[c][1] for c in sig)
+        cand.local_reduction = 1.0 - after / before if before > 0 else 0.0
+        cand.left = math.sqrt(after / len(sig))
+        cand.moved = math.sqrt(sum(by[c][2] ** 2 for c in sig) / len(sig))
+    cand.worse = [c for c, v in by.items() if v[1] > WORSE * v[0] and v[1] > WORSE_FLOOR]
+    if sig:
+        # the evidence is judged on the signature channels; another channel counts only where it gets
+        # better (a channel it barely moves, with its own structural misfit, does not veto it; one it
+        # makes clearly worse is caught above)
+        ntot = sum(obj.n_eff.values())
+        local = sum(obj.n_eff[c] * (lr if c in sig else min(lr, 0.0)) for c in obj.channels
+                    for lr in [math.log(max(by[c][1], 1e-300) / max(by[c][0], 1e-300))])
+        cand.delta_ic = local + cand.k * math.log(ntot)
+        cand.ic = obj.ic(ctx.outputs, 0) + cand.delta_ic
+    ch = cand.effect.channel
+    if cand.kind == "sensor" and cand.effect.name in TILT_CONFOUNDED and ch in TILT and TILT[ch] not in obj.channels:
+        what = cand.effect.name.split("_")[1]
+        cand.confounded = (f"a {what} of {ch} cannot be told from the model's body {TILT[ch]} (the accelerometer "
+                           f"reads g sin({TILT[ch]})): record {TILT[ch]} to tell them apart")
+    if not cand.plausible:
+        return
+    notes = [cand.note] if cand.note else []
+    if cand.confounded:
+        notes.append(cand.confounded)
+    if cand.worse:
+        notes.append("makes " + ", ".join(cand.worse) + " worse")
+    if sig and not cand.outweighs_structure:
+        if cand.kind == "sensor":
+            notes.append(f"explains only {100 * cand.local_reduction:.0f} % of its channel (a sensor effect explains "
+                         f"at least {100 * SENSOR_EXPLAINS:.0f} %): the rest is structural")
+        else:
+            notes.append(f"changes its channels ({', '.join(sig)}) by {cand.moved:.2g} standard errors, less than "
+                         f"the mismatch it leaves there ({cand.left:.2g}): cannot be told apart from the model's "
+                         f"structural mismatch")
+    cand.note = "; ".join(notes)
 
 
 # --------------------------------------------------------------------------------- model effects
@@ -432,7 +538,8 @@ def run_estimate(ctx: Context, cand: Candidate, i: int) -> float:
 def combine_runs(cand: Candidate, thetas: list[float]) -> None:
     """Replace the winner's value by the mean of the per-run estimates and its uncertainty by the
     Student-t interval of that mean, t_(0.975, n-1) S / sqrt(n) (eq. 6 applied to the parameter),
-    when the mean stays in the plausible range."""
+    combined in quadrature with the linearised interval of the mean-input fit (the model error: the
+    residual left at the optimum as noise), when the mean stays in the plausible range."""
     th = np.array(thetas)
     n = th.size
     c = cand.coord
@@ -447,6 +554,10 @@ def combine_runs(cand: Candidate, thetas: list[float]) -> None:
         return
     first = c.value(cand.theta)
     cand.theta = mean
+    # the runs' scatter and the model error (the linearised interval from the residual left at the
+    # optimum, which grows with the unexplained, structural part) together
+    model_error = cand.u_theta if math.isfinite(cand.u_theta) else 0.0
+    half = math.sqrt(half * half + model_error * model_error)
     cand.u_theta = half
     cand.effect.params[c.name] = c.value(mean)
     cand.effect.uncertainty = {c.name: c.value_uncertainty(mean, half)}

@@ -22,6 +22,77 @@ import numpy as np
 from .benchmark import Benchmark
 
 
+RADIUS_RANGE = 0.015          # relative change of an axle's effective rolling radius
+RESISTANCE_RANGE = 0.03       # m/s^2 of constant deceleration (about 0.003 g)
+MOVING = 0.5                  # m/s: the resistance offset acts above this speed
+PRIOR = 10.0                  # standard errors (see Nuisance.build)
+
+
+@dataclass
+class Nuisance:
+    """The linear nuisance adjustments (module docstring): D (n_total, k) the normalised change of the
+    concatenated residual per unit of each adjustment applied to the model, the least-squares solve
+    (p = -(D'D)^-1 D' r minimises |r + D p|) and the clip ranges."""
+    names: list[str]
+    units: list[str]
+    D: np.ndarray
+    solve: np.ndarray          # (k, n_total): unconstrained least-squares values = solve @ r
+    lo: np.ndarray
+    hi: np.ndarray
+
+    def values(self, r: np.ndarray) -> np.ndarray:
+        return np.clip(self.solve @ r, self.lo, self.hi)
+
+    def project(self, r: np.ndarray) -> np.ndarray:
+        """The residual with the adjustments applied to the model: r + D p."""
+        return r + self.D @ self.values(r)
+
+    @classmethod
+    def build(cls, channels: list[str], scale: dict, mean: dict, t: np.ndarray, wheel_radius: float):
+        n = t.size
+        idx = {c: i for i, c in enumerate(channels)}
+        wheels = {"front": [c for c in ("wheel_speed_fl", "wheel_speed_fr") if c in idx],
+                  "rear": [c for c in ("wheel_speed_rl", "wheel_speed_rr") if c in idx]}
+        cols, names, units, lo, hi = [], [], [], [], []
+        speeds = [mean[c] for c in (*wheels["front"], *wheels["rear"])]
+        if not speeds:
+            return None
+        v = np.mean(speeds, axis=0) * wheel_radius
+        moving = np.abs(v) > MOVING
+        if moving.mean() < 0.2:
+            return None
+        for axle, cs in wheels.items():
+            if not cs:
+                continue
+            d = np.zeros(n * len(channels))
+            for c in cs:      # a radius larger by e: the model's wheel turns slower by the factor 1 / (1 + e)
+                d[idx[c] * n:(idx[c] + 1) * n] = -mean[c] / scale[c]
+            cols.append(d)
+            names.append(f"effective rolling radius, {axle} axle")
+            units.append("relative")
+            lo.append(-RADIUS_RANGE)
+            hi.append(RADIUS_RANGE)
+        d = np.zeros(n * len(channels))
+        drift = np.concatenate([[0.0], np.cumsum(moving[1:] * np.diff(t))])
+        for c in (*wheels["front"], *wheels["rear"]):
+            d[idx[c] * n:(idx[c] + 1) * n] = -drift / wheel_radius / scale[c]     # more resistance: slower
+        if "accel_x" in idx:
+            d[idx["accel_x"] * n:(idx["accel_x"] + 1) * n] = -moving.astype(float) / scale["accel_x"]
+        cols.append(d)
+        names.append("resistance offset (positive: the car has more resistance than the model)")
+        units.append("m/s^2")
+        lo.append(-RESISTANCE_RANGE)
+        hi.append(RESISTANCE_RANGE)
+        D = np.column_stack(cols)
+        # a prior towards no adjustment: at its range an adjustment costs as much as one channel
+        # `PRIOR` standard errors off everywhere, small against a real structural gap (the wheel speeds
+        # drifting apart by tens of standard errors), but where an effect and an adjustment would explain
+        # the same thing (a hidden mass against the rolling radii) the effect takes it
+        ridge = np.diag(PRIOR ** 2 * n / np.array(hi) ** 2)
+        solve = -np.linalg.solve(D.T @ D + ridge, D.T)
+        return cls(names, units, D, solve, np.array(lo), np.array(hi))
+
+
 @dataclass
 class Objective:
     channels: list[str]
@@ -30,9 +101,11 @@ class Objective:
     runs: dict[str, np.ndarray]    # (k, n_t) run values
     n_eff: dict[str, float]        # N_c
     tau: float                     # mean tau_c (samples)
+    nuisance: Nuisance | None = None
 
     @classmethod
-    def from_benchmark(cls, bench: Benchmark) -> "Objective":
+    def from_benchmark(cls, bench: Benchmark, wheel_radius: float | None = None) -> "Objective":
+        """The objective of `bench`; with the model's rolling radius, the nuisance adjustments too."""
         scale, taus = {}, {}
         for c in bench.compared:
             b = bench.bands[c]
@@ -46,19 +119,50 @@ class Objective:
             taus[c] = float(np.mean([_tau(row - b.mean) for row in bench.values[c]])) if b.has_band else 10.0
         n_eff = {c: max(bench.t.size / taus[c], 2.0) for c in taus}
         tau = float(np.mean(list(taus.values())))
-        return cls(list(bench.compared), scale, {c: bench.bands[c].mean for c in bench.compared},
-                   {c: bench.values[c] for c in bench.compared}, n_eff, tau)
+        mean = {c: bench.bands[c].mean for c in bench.compared}
+        nuis = (Nuisance.build(list(bench.compared), scale, mean, bench.t, wheel_radius)
+                if wheel_radius and bench.n >= 2 else None)
+        return cls(list(bench.compared), scale, mean, {c: bench.values[c] for c in bench.compared}, n_eff, tau,
+                   nuis)
+
+    def raw_residual(self, out: dict[str, np.ndarray]) -> np.ndarray:
+        """Normalised residuals of all channels, concatenated, before the nuisance adjustments."""
+        return np.concatenate([(out[c] - self.mean[c]) / self.scale[c] for c in self.channels])
 
     def residual(self, out: dict[str, np.ndarray]) -> np.ndarray:
-        """Normalised residuals of all channels, concatenated."""
-        return np.concatenate([(out[c] - self.mean[c]) / self.scale[c] for c in self.channels])
+        """Normalised residuals of all channels, concatenated, with the nuisance adjustments fitted."""
+        r = self.raw_residual(out)
+        return self.nuisance.project(r) if self.nuisance is not None else r
+
+    def nuisance_values(self, out: dict[str, np.ndarray]) -> dict[str, tuple[float, str]]:
+        """The nuisance adjustments fitted to `out`: name -> (value, unit)."""
+        if self.nuisance is None:
+            return {}
+        p = self.nuisance.values(self.raw_residual(out))
+        return {n: (float(v), u) for n, v, u in zip(self.nuisance.names, p, self.nuisance.units)}
+
+    def adjusted(self, out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """`out` with the nuisance adjustments applied (what the residual measures)."""
+        if self.nuisance is None:
+            return out
+        r = self.residual(out)
+        n = self.mean[self.channels[0]].size
+        res = dict(out)
+        for i, c in enumerate(self.channels):
+            res[c] = self.mean[c] + r[i * n:(i + 1) * n] * self.scale[c]
+        return res
+
+    def channel_residual(self, out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        r = self.residual(out)
+        n = self.mean[self.channels[0]].size
+        return {c: r[i * n:(i + 1) * n] for i, c in enumerate(self.channels)}
 
     def cost(self, out: dict[str, np.ndarray]) -> float:
         r = self.residual(out)
         return float(np.mean(r * r))
 
     def channel_cost(self, out: dict[str, np.ndarray]) -> dict[str, float]:
-        return {c: float(np.mean(((out[c] - self.mean[c]) / self.scale[c]) ** 2)) for c in self.channels}
+        return {c: float(np.mean(r * r)) for c, r in self.channel_residual(out).items()}
 
     def ic(self, out: dict[str, np.ndarray], k: int) -> float:
         cc = self.channel_cost(out)
@@ -66,9 +170,11 @@ class Objective:
         return float(sum(self.n_eff[c] * np.log(max(cc[c], 1e-300)) for c in self.channels) + k * np.log(ntot))
 
     def residual_to_run(self, out: dict[str, np.ndarray], i: int) -> np.ndarray:
-        """Normalised residuals against run i alone (the mean where the run lacks a channel)."""
-        return np.concatenate([(out[c] - (self.runs[c][i] if i < self.runs[c].shape[0] else self.mean[c]))
-                               / self.scale[c] for c in self.channels])
+        """Normalised residuals against run i alone (the mean where the run lacks a channel), with the
+        nuisance adjustments fitted."""
+        r = np.concatenate([(out[c] - (self.runs[c][i] if i < self.runs[c].shape[0] else self.mean[c]))
+                            / self.scale[c] for c in self.channels])
+        return self.nuisance.project(r) if self.nuisance is not None else r
 
 
 def _tau(d: np.ndarray) -> float:

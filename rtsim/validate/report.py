@@ -4,7 +4,9 @@ backend) and `DIR/summary.json`:
     {"effects": [{"name", "parameters": {...}, "uncertainty": {...}}, ...],   # in the order added
      "before": {channel: {"rms", "max", "inside_band"}}, "after": {...},
      "iterations": [{"iteration", "model_effects", "cost", "metrics", "where", "verdict", "winner",
-                     "runner_up", "candidates", "seconds"}, ...]}
+                     "runner_up", "candidates", "seconds"}, ...],
+     "verdict": text, "channels": {channel: {"status", "text", "signature", "inside_band", "rms",
+     "explained_by"}}, "nuisance": {name: {"value", "unit"}}, "correlations": [...], "confounded": [...]}
 
 rms and max are in the channel's SI unit; inside_band is the share of samples (0..1) inside the 95 %
 band, null when there is no band (one run). Uncertainties are 95 % half-widths in the parameter's unit.
@@ -51,6 +53,11 @@ def summary(res: Result) -> dict:
         "before": res.metrics(res.before),
         "after": res.metrics(res.after),
         "iterations": [it.summary() for it in res.iterations],
+        "verdict": res.verdict,
+        "channels": {c: {k: v for k, v in d.items()} for c, d in res.channels.items()},
+        "nuisance": {n: {"value": v, "unit": u} for n, (v, u) in res.nuisance.items()},
+        "correlations": [{"effects": [a, b], "correlation": r} for a, b, r in res.correlations],
+        "confounded": [[a, b] for a, b, _ in res.confounded],
     })
 
 
@@ -66,6 +73,11 @@ def _plot_channel(res: Result, c: str, path: Path) -> None:
     a1.plot(t, res.before[c], color="tab:red", lw=0.9, label="model before")
     if res.effects:
         a1.plot(t, res.after[c], color="tab:green", lw=0.9, ls="--", label="model after")
+    adj = res.objective.adjusted(res.after)[c] if res.nuisance else None
+    if adj is not None and np.allclose(adj, res.after[c], rtol=0.0, atol=1e-9 * (1.0 + float(np.max(np.abs(adj))))):
+        adj = None                    # a channel the nuisance adjustments do not touch
+    if adj is not None:
+        a1.plot(t, adj, color="tab:purple", lw=0.8, ls=":", label="after, nuisance adjusted")
     a1.set_ylabel(f"{c} [{unit(c)}]")
     a1.legend(loc="best", fontsize=8)
     if b.has_band:
@@ -73,6 +85,8 @@ def _plot_channel(res: Result, c: str, path: Path) -> None:
     a2.plot(t, res.before[c] - b.mean, color="tab:red", lw=0.7, label="residual before")
     if res.effects:
         a2.plot(t, res.after[c] - b.mean, color="tab:green", lw=0.7, label="residual after")
+    if adj is not None:
+        a2.plot(t, adj - b.mean, color="tab:purple", lw=0.7, ls=":", label="after, nuisance adjusted")
     a2.axhline(0.0, color="k", lw=0.5)
     a2.set_ylabel(f"model - mean [{unit(c)}]")
     a2.set_xlabel("time [s]")
@@ -182,6 +196,21 @@ def write(res: Result, folder: Path) -> dict:
                                                                  "inside band before", "inside band after"]))
     if res.comparison:
         parts.append(f"<p>Model outputs: {e(res.comparison)}.</p>")
+    if res.channels:
+        rows = [[c, d["text"], _fmt(d["rms"]), _pct(d["inside_band"])] for c, d in res.channels.items()]
+        parts.append("<h2>Per channel: explained, structural or inside the band</h2><p>After the effects added "
+                     "and the nuisance adjustments; structural: what no catalogue effect explains, with the "
+                     "shape of what is left (offset, gain, lag or drift).</p>" +
+                     _table(rows, ["channel", "what the model lacks there", "RMS (nuisance adjusted)",
+                                   "inside band (nuisance adjusted)"]))
+    if res.nuisance:
+        rows = [[n, f"{v:.4g}", u] for n, (v, u) in res.nuisance.items()]
+        parts.append("<h3>Nuisance adjustments (fitted alongside, never named as an effect)</h3>" +
+                     _table(rows, ["adjustment", "value", "unit"]))
+    if res.correlations:
+        rows = [[a, b, f"{r:+.2f}", "yes" if abs(r) >= 0.9 else "no"] for a, b, r in res.correlations]
+        parts.append("<h3>Correlation of the identified effects</h3>" +
+                     _table(rows, ["effect", "effect", "correlation of sensitivities", "confounded"]))
     if res.mean_input and res.mean_input.get("before") is not res.before:
         mi = {k: res.metrics(v) for k, v in res.mean_input.items()}
         rows = [[c, unit(c), _fmt(mi["before"][c]["rms"]), _fmt(mi["after"][c]["rms"]), _pct(mi["before"][c]["inside_band"]),
@@ -226,7 +255,8 @@ def write(res: Result, folder: Path) -> dict:
                      f"<pre>{e(res.diff)}</pre>")
     # plots
     parts.append("<h2>Channels</h2><p>grey: runs; blue: mean and 95 % band; red: model before; green dashed: "
-                 "after. Lower panels: residual (model - mean) and the band's half-width; dotted lines: phase "
+                 "after; purple dotted: after with the nuisance adjustments."
+                 " Lower panels: residual (model - mean) and the band's half-width; dotted lines: phase "
                  "boundaries" + ("; orange: the manoeuvre steers" if res.regimes.steering.any() else "") + ".</p>")
     parts.extend(f'<h3>{e(c)}</h3><img src="{e(n)}" alt="{e(c)}">' for c, n in plots)
     # data

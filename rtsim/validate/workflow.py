@@ -16,6 +16,14 @@
 5. the new vehicle config with the identified effects and its diff (configwrite), the report
    (report.html, plots, summary.json).
 
+Structural mismatch (issue 15): every residual carries the nuisance adjustments (objective.Nuisance:
+axle rolling radii, a small resistance offset; reported, never named); candidates are judged per
+channel (identify.channel_evidence); when nothing is eligible alone, the sensor effects are fitted again
+on top of the best model candidate (_joint_sensor); at the end every channel is reported as explained,
+inside the band or structural with its shape (structural.channel_report), the identified effects'
+sensitivities are correlated (|r| >= CONFOUNDED: confounded), and the verdict says "no catalogue effect"
+or "cannot be told apart" when no effect stands out from the structural mismatch.
+
 The loop also stops when every channel's normalised cost (objective) is at most 1, i.e. the model is
 within the data's own uncertainty: a candidate fitted there would fit noise and averaging artefacts.
 
@@ -44,17 +52,19 @@ from rtsim.errors import RtsimError
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import load_runs
 from .effectset import Effect, catalogue, from_mapping
-from .identify import (MAX_SIMS, Candidate, Context, combine_runs, equivalents, evidence_strength,
-                       fit_model_effect, fit_sensor_effects, rank, run_estimate)
+from .identify import (MAX_SIMS, MIN_DELTA_IC, MIN_REDUCTION, MIN_SIZE, Candidate, Context, combine_runs,
+                       equivalents, evidence_strength, fit_model_effect, fit_sensor_effects, rank, run_estimate)
 from .objective import Objective
 from .replay import Replayer, ReplayInputs
 from .residuals import Regimes, describe, locate, regimes
 from .stats import error_metrics
+from .structural import channel_report, correlations
 
 INSIDE_ENOUGH = 0.95
 INSIDE_MOSTLY = 0.90
 TRY_WINNERS = 2              # eligible candidates checked run by run before giving up
 CLEAR = 2.0                  # a winner's value must lie this many 95 % half-widths from the off value
+CONFOUNDED = 0.9             # |correlation| of two identified effects' sensitivities above which they are confounded
 SCREEN_SIMS = 3              # trial, one Gauss-Newton step (and that step halved if it overshoots)
 REFINE_TOP = 3               # model effects refined to convergence per iteration
 
@@ -117,6 +127,10 @@ class Result:
     comparison: str = ""              # how `before` and `after` were made
     config_path: Path | None = None
     diff: str = ""
+    nuisance: dict = field(default_factory=dict)     # name -> (value, unit) fitted to `after`, never named
+    channels: dict = field(default_factory=dict)     # structural.channel_report of `after`
+    correlations: list = field(default_factory=list)  # (effect, effect, correlation of their sensitivities)
+    confounded: list = field(default_factory=list)    # pairs the data cannot separate
 
     def metrics(self, outputs: dict) -> dict:
         return {c: error_metrics(outputs[c], self.bench.bands[c]) for c in self.bench.compared}
@@ -210,6 +224,41 @@ def _fit_model_candidates(ctx: Context, names: list[str], workers: int, progress
     return out
 
 
+def _joint_sensor(ctx: Context, ranked: list[Candidate]) -> list[Candidate]:
+    """Several effects at once: when no candidate is eligible on its own, the sensor effects are fitted
+    again on top of the best model candidate (a sensor bias and a model effect on one channel hide each
+    other). A sensor effect eligible there (it explains its own channel with the model effect in place)
+    is returned as this iteration's winner, at its jointly fitted value and judged on the current model
+    (the model effect is refitted in the next iteration with it in place); the correlation of the two
+    sensitivities is in its note."""
+    models = [c for c in ranked if c.kind == "model" and c.plausible and c.raw is not None and not c.worse
+              and c.local_reduction >= MIN_REDUCTION and c.delta_ic <= -MIN_DELTA_IC]
+    if not models:
+        return []
+    m = models[0]
+    rp = ctx.replayer
+    both = Context(ctx.bench, ctx.objective, rp, ctx.inputs, [*ctx.effects, m.effect], m.outputs, m.raw, m.cost,
+                   ctx.n_runs)
+    joint = sorted((c for c in fit_sensor_effects(both) if c.eligible), key=lambda c: c.ic)
+    out = []
+    for j in joint[:TRY_WINNERS]:
+        same = next((c for c in ranked if c.kind == "sensor" and c.effect.key == j.effect.key), None)
+        if same is None:
+            continue
+        same.effect.params.update(j.effect.params)
+        same.effect.uncertainty = dict(j.effect.uncertainty)
+        same.theta, same.u_theta = j.theta, j.u_theta
+        same.outputs = rp.reported(ctx.raw, ctx.inputs.t, [*ctx.effects, same.effect])
+        corr = float(m.J @ j.J) / (float(np.linalg.norm(m.J) * np.linalg.norm(j.J)) or 1.0) if m.J is not None \
+            else float("nan")
+        same.note = (same.note + "; " if same.note else "") + (
+            f"judged jointly with {m.effect.label()}: with it in place it explains "
+            f"{100 * j.local_reduction:.0f} % of its channel (correlation of the two sensitivities {corr:+.2f})")
+        same.joint = (m.effect.label(), corr)
+        out.append(same)
+    return out
+
+
 # ------------------------------------------------------------------------------------ the loop
 def _metrics(bench: Benchmark, outputs: dict) -> dict:
     return {c: error_metrics(outputs[c], bench.bands[c]) for c in bench.compared}
@@ -277,7 +326,7 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
     raw = rp.simulate(inp, base, fit=True)           # the fits' starting point, at the fitting step
     out = rp.reported(raw, bench.t, base)
     tm["first_simulation"] = (time.perf_counter() - t2) / 2
-    obj = Objective.from_benchmark(bench)
+    obj = Objective.from_benchmark(bench, rp.wheel_radius)
     reg = regimes(bench, rp.wheel_radius)
     cat = catalogue()
     effects: list[Effect] = []
@@ -310,7 +359,10 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
         prog.advance()
         ranked = rank(cands)
         win = None
-        for cand in [c for c in ranked if c.eligible][:TRY_WINNERS]:
+        trials = [c for c in ranked if c.eligible][:TRY_WINNERS]
+        if not trials:
+            trials = _joint_sensor(ctx, ranked)
+        for cand in trials:
             if bench.n >= 2:
                 _prepare_runs(ctx, workers)                 # the value and its interval from the runs one by one
                 ests = _map(ctx, [("run", cand, i) for i in range(bench.n)], workers, prog)
@@ -331,13 +383,24 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
             best = ranked[0] if ranked else None
             why = (f"; the best candidate, {best.effect.label()}, removes {100 * best.reduction:.0f} % "
                    f"({best.note or 'evidence too weak'})") if best else ""
+            close = [c for c in ranked if c.plausible and c.kind == "model" and not c.outweighs_structure
+                     and c.local_reduction >= MIN_REDUCTION and c.delta_ic <= -MIN_DELTA_IC and c.size >= MIN_SIZE
+                     and not c.worse]
+            if close:
+                c = close[0]
+                why = (f"; {c.effect.label()} would change {', '.join(c.signature)} by {c.moved:.2g} standard "
+                       f"errors, less than the structural mismatch left there ({c.left:.2g}): the data cannot tell "
+                       f"it apart from the structural mismatch")
             if not effects and _inside(metrics, INSIDE_MOSTLY):
                 verdict = ("no missing effect found: the model agrees with the benchmark (at least "
                            f"{100 * INSIDE_MOSTLY:.0f} % of every channel inside the band) and no candidate removes a "
                            f"significant share of what is left{why}")
+            elif not effects and close:
+                verdict = ("cannot be told apart: no catalogue effect stands out from the structural mismatch"
+                           f"{why}")
             elif not effects:
-                verdict = ("no single effect explains this: no candidate of the catalogue removes a significant, "
-                           f"plausible share of the disagreement{why}")
+                verdict = ("no catalogue effect explains this: no candidate removes a significant, plausible "
+                           f"share of the disagreement on its own channels{why}")
             else:
                 verdict = (f"after adding {' and '.join(label)}, no further candidate helps{why}")
             runner = next((c for c in ranked if c.plausible), None)
@@ -388,8 +451,27 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
     else:
         comparison = f"the mean inputs replayed ({why or 'a per-run replay failed'})"
     tm["final_simulation"] = time.perf_counter() - t3
+    winners = [it.winner for it in iterations if it.winner is not None]
+    explained: dict[str, list[str]] = {}
+    for w in winners:
+        for c in w.signature:
+            explained.setdefault(c, []).append(w.effect.label())
+    from .data import unit
+    chans = channel_report(bench, obj, after, explained, {c: unit(c) for c in bench.compared})
+    corr = correlations(winners)
+    confounded = [(a, b, r) for a, b, r in corr if abs(r) >= CONFOUNDED]
+    structural = [f"{c}: {v['text']}" for c, v in chans.items() if v["status"] == "structural"]
+    if structural:
+        verdict += "; structural mismatch (not in the catalogue) remains on " + "; ".join(structural)
+        if not effects and "cannot be told apart" not in verdict:
+            verdict += ("; a catalogue effect that changes these channels less than this mismatch cannot be told "
+                        "apart from it")
+    if confounded:
+        verdict += "; confounded (the data cannot separate them): " + "; ".join(
+            f"{a} and {b} (correlation {r:+.2f})" for a, b, r in confounded)
     tm["identification"] = sum(it.seconds for it in iterations)
     tm["simulations"] = rp.simulations
     tm["total"] = time.perf_counter() - t0
     return Result(opts, bench, inp, rp, obj, reg, base, effects, before, after, iterations, verdict, tm,
-                  mean_input=replayed, comparison=comparison)
+                  mean_input=replayed, comparison=comparison, nuisance=obj.nuisance_values(after),
+                  channels=chans, correlations=corr, confounded=confounded)

@@ -1,0 +1,168 @@
+"""The validation workflow on data the model did not make, with the structural mismatch left in.
+
+Lateral: tests/peer_sim_lateral.py, a planar two-track car with its own tyre law (linear stiffnesses on
+a tanh friction circle), quasi-static load transfer, no roll, no steering compliance, its own integrator,
+sharing only the car's `rtsim describe` numbers: 15 m/s, steering-wheel ramps to +-0.6 rad held 3 s,
+rear wheel torques that hold the speed recorded, seven repetitions. Against rtsim it differs, with no
+hidden effect, by a resistance offset (the wheel speeds drift apart by 0.8 rad/s over 12 s), the axles'
+rolling radii, and accel_y 6-7 % higher in the model in steady cornering (rtsim's accelerometer rolls
+with the body and senses gravity's component; the peer has no roll): structural mismatch the catalogue
+does not have. Longitudinal: tests/peer_sim.py, the pitch-plane peer (tests/test_validate_peer.py has
+its single-effect cases), here with a grade, no effect, and two effects at once.
+
+The bar (issue 15): a sensor bias, scale or delay on one channel is named with its value within 10 %
+and that channel's RMS falls >= 5x; a model effect that changes the outputs by more than the structural
+mismatch is named within 20 %; no hidden effect gives "no catalogue effect" with the per-channel
+structural report and never a named effect; an effect smaller than the structural mismatch gives
+"cannot be told apart".
+
+Tuning vs held-out (marked per case below). TUNING: the cases the method's rules were decided or changed
+on: every lateral case except gyro_z scale and delay (the nuisance prior, the signature-channel
+information criterion and the accel_y/roll confounding were added after they failed), and the
+longitudinal none and two-at-once cases (a first rule on what a sensor effect may leave on its channel
+was dropped after two-at-once failed). HELD-OUT: gyro_z scale, gyro_z delay and the longitudinal grade
+passed the first time they ran, and stiffness 0.6 (seed 99) and the longitudinal mass-and-grade pair
+were written and run once after the rules were final.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import peer_sim
+import peer_sim_lateral as lateral
+
+from rtsim.validate import report
+from rtsim.validate.replay import Replayer
+from rtsim.validate.workflow import Options, run
+
+VEHICLE = Path(__file__).resolve().parents[1] / "configs" / "vehicles" / "xbw.toml"
+WHEELS = ["wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr"]
+
+#: lateral case -> (hidden in the peer, expected (effect, parameter, value, channel) or a verdict word,
+#: "tuning"/"held-out")
+LATERAL = {
+    "none": ({}, "no catalogue effect", "tuning"),
+    "gyro_z_bias": ({"sensor": {"gyro_z": {"bias": 0.03}}}, [("sensor_bias", "bias", 0.03, "gyro_z")], "tuning"),
+    "stiffness_0.5": ({"stiffness_scale": 0.5}, [("tyre_slip_stiffness", "scale", 0.5, None)], "tuning"),
+    "stiffness_0.7": ({"stiffness_scale": 0.7}, [("tyre_slip_stiffness", "scale", 0.7, None)], "tuning"),
+    "gyro_z_scale": ({"sensor": {"gyro_z": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "gyro_z")], "held-out"),
+    "gyro_z_delay": ({"sensor": {"gyro_z": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "gyro_z")], "held-out"),
+    # 200 kg on a manoeuvre at constant speed: the speed controller's extra torque is a resistance
+    # offset (a nuisance) and the yaw response barely moves; no named effect is the right answer
+    "mass": ({"added_mass": 200.0}, ("no catalogue effect", "cannot be told apart"), "tuning"),
+    "two_at_once": ({"stiffness_scale": 0.5, "sensor": {"gyro_z": {"bias": 0.03}}},
+                    [("tyre_slip_stiffness", "scale", 0.5, None), ("sensor_bias", "bias", 0.03, "gyro_z")],
+                    "tuning"),
+    "smaller_than_structural": ({"stiffness_scale": 0.92}, "cannot be told apart", "tuning"),
+    "stiffness_0.6": ({"stiffness_scale": 0.6}, [("tyre_slip_stiffness", "scale", 0.6, None)], "held-out"),
+}
+
+#: longitudinal (pitch-plane peer) case -> (hidden, expected, "held-out")
+LONGITUDINAL = {
+    "grade": ({"grade": 0.04}, [("road_grade", "grade", 0.04, None)], "held-out"),
+    "none": ({}, ("no catalogue effect", "no missing effect"), "tuning"),
+    "two_at_once": ({"brake_scale": 0.75, "accel_bias": 0.25},
+                    [("brake_friction", "scale", 0.75, None), ("sensor_bias", "bias", 0.25, "accel_x")], "tuning"),
+    "mass_and_grade": ({"added_mass": 150.0, "grade": 0.03},
+                       [("mass", "added_mass", 150.0, None), ("road_grade", "grade", 0.03, None)], "held-out"),
+}
+
+
+@pytest.fixture(scope="module")
+def replayer():
+    return Replayer(VEHICLE)
+
+
+@pytest.fixture(scope="module")
+def car(replayer):
+    from rtsim.vehicle.car.describe import describe
+    from rtsim.vehicle.car.sim import VehicleSim
+    desc = describe(replayer.model, VehicleSim(replayer.model, replayer.road, 1e-3))
+    return lateral.car_parameters(desc, VEHICLE)
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    return tmp_path_factory.mktemp("validate_independent")
+
+
+def _tol(name: str) -> float:
+    from rtsim.validate.effectset import kind
+    return 0.1 if kind(name) == "sensor" else 0.2
+
+
+def _show(case, res):
+    """What was found (shown with pytest -s): effects, per-channel RMS before -> after, verdict."""
+    b, a = res.metrics(res.before), res.metrics(res.after)
+    print(f"\n[{case}] effects: {[e.label() for e in res.effects]} +- {[e.uncertainty for e in res.effects]}")
+    print("  RMS before -> after: " + ", ".join(f"{c} {b[c]['rms']:.4g} -> {a[c]['rms']:.4g}" for c in b))
+    print("  channels: " + "; ".join(f"{c}: {v['text']}" for c, v in res.channels.items()))
+    print(f"  nuisance: {res.nuisance}\n  verdict: {res.verdict}")
+
+
+def _check(res, expected):
+    if isinstance(expected, (str, tuple)):
+        words = (expected,) if isinstance(expected, str) else expected
+        assert res.effects == [], (res.verdict, [e.label() for e in res.effects])
+        assert any(w in res.verdict for w in words), res.verdict
+        return
+    found = {(e.name, e.channel): e for e in res.effects}
+    for name, param, true, channel in expected:
+        assert (name, channel) in found, (name, channel, res.verdict)
+        e = found[(name, channel)]
+        assert abs(e.params[param] - true) <= _tol(name) * abs(true), (e.label(), true, res.verdict)
+        assert e.uncertainty[param] > 0.0
+        if channel is not None:          # a sensor effect: its own channel's RMS falls >= 5x
+            before, after = res.metrics(res.before), res.metrics(res.after)
+            c = channel if channel in before else next(s for s in before if channel in s)
+            assert before[c]["rms"] >= 5.0 * after[c]["rms"], (c, before[c], after[c])
+    assert len(res.effects) == len(expected), [e.label() for e in res.effects]
+
+
+@pytest.mark.parametrize("case", list(LATERAL))
+def test_lateral_peer(replayer, car, folder, case):
+    hidden, expected, _ = LATERAL[case]
+    seed = 99 if case == "stiffness_0.6" else 5 if case in ("none", "gyro_z_bias", "stiffness_0.5") else \
+        17 + list(LATERAL).index(case)
+    paths = lateral.write_runs(folder / case, car, n=7, seed=seed, **hidden)
+    res = run(Options(VEHICLE, paths, folder / f"{case}_report"), replayer=replayer)
+    _show(case, res)
+    assert res.bench.lateral
+    _check(res, expected)
+    # the structural report: every compared channel has a status; accel_y's roll-induced gain is
+    # structural whenever no tyre effect was added to explain it
+    assert set(res.channels) == set(res.bench.compared)
+    if case == "none":
+        assert res.channels["accel_y"]["status"] == "structural", res.channels["accel_y"]
+        assert res.channels["accel_y"]["signature"]["kind"] == "gain"
+        for c in [*WHEELS, "gyro_z"]:
+            assert res.channels[c]["status"] == "inside the band", (c, res.channels[c])
+        assert res.nuisance and all(abs(v) > 0 for v, _ in res.nuisance.values())
+        report.write(res, folder / "html")
+        html = (folder / "html" / "report.html").read_text()
+        assert "Per channel: explained, structural or inside the band" in html
+        assert "structural, not in the catalogue; gain" in html and "Nuisance adjustments" in html
+    if case == "two_at_once":
+        assert res.correlations and all(abs(r) < 0.9 for _, _, r in res.correlations), res.correlations
+
+
+#: held-out cases that fail: the method's known limits, kept so that a fix shows (strict: a pass fails)
+KNOWN_FAILURES = {
+    "mass_and_grade": "two model effects at once are added one by one: the grade is added first at 0.045 "
+                      "(true 0.03) carrying part of the mass, then brake_lag and an accel_x bias; a joint fit of "
+                      "two model effects is not implemented",
+}
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=KNOWN_FAILURES[c]))
+                                  if c in KNOWN_FAILURES else c for c in LONGITUDINAL])
+def test_longitudinal_peer(replayer, folder, case):
+    hidden, expected, _ = LONGITUDINAL[case]
+    car = peer_sim.Car.from_config(VEHICLE)
+    paths = peer_sim.write_runs(folder / f"long_{case}", car, n=7, seed=31 + list(LONGITUDINAL).index(case),
+                                **hidden)
+    res = run(Options(VEHICLE, paths, folder / f"long_{case}_report"), replayer=replayer)
+    _show(f"long_{case}", res)
+    _check(res, expected)
