@@ -242,25 +242,3 @@ def test_a_killed_pool_worker_loses_no_run(local, tmp_path):
     assert p.returncode == 1, text
     assert killed is not None, "the batch ended before a worker could be killed:\n" + text
     assert _identity(_rows(out / "results.csv")) == _identity(_rows(local[0] / "results.csv"))
-
-
-def test_ray_map_keeps_order_and_builds_the_context_once_per_worker():
-    """The hook for re-simulation workflows (rtsim.batch.executors.ray_map), on a Ray instance of its own
-    on 127.0.0.1 in a child process: results in task order, one context per worker process."""
-    import json
-
-    code = (
-        "import json, os\n"
-        "from rtsim.batch.executors import ray_map\n"
-        "def setup(scale):\n    return {'pid': os.getpid(), 'scale': scale, 'token': os.urandom(8).hex()}\n"
-        "def fn(ctx, x):\n    return [ctx['pid'], ctx['token'], ctx['scale'] * x]\n"
-        "print(json.dumps(ray_map(fn, list(range(24)), setup, (3,), address='auto')))\n")
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "RAY_USAGE_STATS_ENABLED": "0"}
-    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0, r.stderr[-3000:]
-    out = json.loads(r.stdout.strip().splitlines()[-1])
-    assert [v for _, _, v in out] == [3 * x for x in range(24)]
-    tokens = {}
-    for pid, token, _ in out:
-        tokens.setdefault(pid, set()).add(token)
-    assert all(len(t) == 1 for t in tokens.values()), tokens

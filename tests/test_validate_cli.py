@@ -1,11 +1,17 @@
 """`rtsim validate` end to end (rtsim/validate/cli.py, report.py, configwrite.py): runs with a hidden
 accelerometer bias in, report.html with its plots, summary.json in the issue's schema, a new vehicle
 config with the effect that the config loader accepts (the original untouched) and its diff; one run
-compares without a band; a missing file is a one-line error."""
+compares without a band; a missing file is a one-line error; `--ray auto` (a Ray instance of its own on
+127.0.0.1, in a child process) gives the same summary."""
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -27,10 +33,19 @@ def runs(tmp_path_factory):
                       seed=7)
 
 
-def test_cli_writes_report_summary_and_new_config(runs, tmp_path, capsys):
+@pytest.fixture(scope="module")
+def report(runs, tmp_path_factory):
+    """(report folder, printed text) of `rtsim validate` on the runs, the vehicle file's digest before."""
     digest = hashlib.sha256(VEHICLE.read_bytes()).hexdigest()
-    out = tmp_path / "report"
-    assert _standalone(["--vehicle", str(VEHICLE), "--runs", *map(str, runs), "--report", str(out)]) == 0
+    out = tmp_path_factory.mktemp("cli_report") / "report"
+    text = io.StringIO()
+    with contextlib.redirect_stdout(text):
+        assert _standalone(["--vehicle", str(VEHICLE), "--runs", *map(str, runs), "--report", str(out)]) == 0
+    return out, text.getvalue(), digest
+
+
+def test_cli_writes_report_summary_and_new_config(report):
+    out, text, digest = report
     assert hashlib.sha256(VEHICLE.read_bytes()).hexdigest() == digest          # original untouched
     summ = json.loads((out / "summary.json").read_text())
     assert set(summ) == {"effects", "before", "after", "iterations", "verdict", "channels", "nuisance",
@@ -51,8 +66,29 @@ def test_cli_writes_report_summary_and_new_config(runs, tmp_path, capsys):
     cfg, _ = load_vehicle(new)
     assert cfg.effects["sensor_bias"][0]["channel"] == "accel_x"
     assert cfg.tyres.property_file.endswith("michelin_155_80_r13.tir")
-    text = capsys.readouterr().out
     assert "+[[effects.sensor_bias]]" in text and "verdict:" in text
+
+
+def _without_times(d):
+    if isinstance(d, dict):
+        return {k: _without_times(v) for k, v in d.items() if k != "seconds"}
+    return [_without_times(v) for v in d] if isinstance(d, list) else d
+
+
+def test_cli_on_ray_gives_the_same_summary(runs, report, tmp_path):
+    """The re-simulations as Ray tasks (rtsim.batch.executors.ray_map: the iteration's context shipped once
+    to each worker): the same summary as the forked workers' (every number; the iterations' durations
+    aside)."""
+    out = tmp_path / "ray"
+    root = VEHICLE.parents[2]
+    env = {**os.environ, "PYTHONPATH": str(root), "RAY_USAGE_STATS_ENABLED": "0"}
+    r = subprocess.run([sys.executable, "-m", "rtsim.cli", "validate", "--vehicle", str(VEHICLE), "--runs",
+                        *map(str, runs), "--report", str(out), "--no-progress", "--ray", "auto"],
+                       cwd=root, env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    ray_summary = json.loads((out / "summary.json").read_text())
+    plain = json.loads((report[0] / "summary.json").read_text())
+    assert ray_summary["effects"] and _without_times(ray_summary) == _without_times(plain)
 
 
 def test_cli_one_run_compares_without_a_band(runs, tmp_path):

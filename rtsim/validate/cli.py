@@ -23,6 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                                 "accel_x; + accel_y, gyro_z, roll when steering)")
     p.add_argument("--max-iterations", type=int, default=4, help="effects added at most (default 4)")
     p.add_argument("--workers", type=int, default=2, help="processes fitting candidates in parallel (default 2)")
+    p.add_argument("--ray", metavar="auto|ADDRESS", help="re-simulate on Ray: 'auto' starts a local instance on "
+                                                        "127.0.0.1, else a cluster's address (same results)")
     p.add_argument("--no-progress", action="store_true", help="no progress display")
 
 
@@ -62,7 +64,8 @@ def main(args: argparse.Namespace) -> int:
     from .workflow import Options, run
 
     opts = Options(vehicle=args.vehicle, runs=list(args.runs), report=args.report, road=args.road, rate=args.rate,
-                   align=args.align, max_iterations=args.max_iterations, workers=args.workers, compare=args.compare)
+                   align=args.align, max_iterations=args.max_iterations, workers=args.workers, ray=args.ray,
+                   compare=args.compare)
     prog = nullcontext(None) if args.no_progress else RichProgress()
     with prog as pr:
         opts.progress = pr

@@ -30,7 +30,9 @@ within the data's own uncertainty: a candidate fitted there would fit noise and 
 Cost per iteration: every model effect is screened with two or three simulations (a trial value, one
 Gauss-Newton step, halved once when it overshoots), the `REFINE_TOP` best are refined to convergence
 (identify.MAX_SIMS simulations at most), sensor effects need none; candidates are fitted in parallel by
-`workers` processes forked after the model is built (the compiled model is shared, never rebuilt). Each
+`workers` processes forked after the model is built (the compiled model is shared, never rebuilt), or
+with `ray` (an address, "auto": a local instance on 127.0.0.1) by Ray tasks (rtsim.batch.executors.ray_map:
+the iteration's context shipped once to each worker; the same results, in the same order). Each
 run's replay inputs (its steering command matched to its measured angle, see replay) are prepared once,
 in parallel, before the first per-run replay. A simulation error in a worker comes back as text
 (_Failed): a per-run replay that fails leaves the mean-input fit and its linearised interval, said so in
@@ -81,6 +83,7 @@ class Options:
     fit_dt: float = 2e-3
     max_iterations: int = 4
     workers: int = 2
+    ray: str | None = None            # re-simulations on Ray: "auto" (local, 127.0.0.1) or a cluster address
     compare: list[str] | None = None
     progress: object = None           # a Progress-like object with .stage(text, total) / .advance()
 
@@ -156,30 +159,53 @@ class _Failed:
     message: str
 
 
-def _task(task: tuple):
+def _run_task(ctx: Context, task: tuple):
     """One unit of parallel work on the iteration's context: ("fit", name, budget, seed),
     ("run", candidate, run index), ("inputs", run index): that run's replay inputs with the steering
     command matched at the model's step, or ("replay", effects, run index): the model's outputs under
     that run's inputs. An RtsimError comes back as _Failed."""
     try:
         if task[0] == "fit":
-            return fit_model_effect(_CTX, *task[1:])
+            return fit_model_effect(ctx, *task[1:])
         if task[0] == "inputs":
-            inp = _CTX.replayer.inputs(_CTX.bench, run=task[1])
-            _CTX.replayer.steering_command(inp, _CTX.replayer.dt)
+            inp = ctx.replayer.inputs(ctx.bench, run=task[1])
+            ctx.replayer.steering_command(inp, ctx.replayer.dt)
             return inp
         if task[0] == "replay":
             effects, i = task[1], task[2]
-            inp = _CTX.replayer.inputs(_CTX.bench, run=i)
-            return _CTX.replayer.reported(_CTX.replayer.simulate(inp, effects), inp.t, effects)
-        return run_estimate(_CTX, task[1], task[2])
+            inp = ctx.replayer.inputs(ctx.bench, run=i)
+            return ctx.replayer.reported(ctx.replayer.simulate(inp, effects), inp.t, effects)
+        return run_estimate(ctx, task[1], task[2])
     except RtsimError as exc:
         return _Failed(f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
 
 
-def _map(ctx: Context, tasks: list[tuple], workers: int, progress) -> list:
-    """The tasks' results, in order, computed by `workers` forked processes."""
+def _task(task: tuple):
+    """_run_task on the context a forked worker inherited."""
+    return _run_task(_CTX, task)
+
+
+def _same(ctx: Context) -> Context:
+    """A Ray worker's context: the one shipped (built once per worker by ray_map)."""
+    return ctx
+
+
+@dataclass(frozen=True)
+class RayWorkers:
+    """Where `_map` runs its tasks when the workflow runs on Ray: the cluster `address` (connected once
+    by `run`)."""
+    address: str
+
+
+def _map(ctx: Context, tasks: list[tuple], workers: int | RayWorkers, progress) -> list:
+    """The tasks' results, in order, computed by `workers` forked processes or by Ray tasks."""
     global _CTX
+    if isinstance(workers, RayWorkers):
+        from rtsim.batch.executors import ray_map
+
+        out = ray_map(_run_task, tasks, _same, (ctx,), address=workers.address)
+        progress.advance(len(out))
+        return out
     _CTX = ctx
     out = []
     try:
@@ -305,7 +331,25 @@ def _sensor_names(opts: Options, replayer: Replayer | None) -> tuple[str, ...]:
 
 
 def run(opts: Options, replayer: Replayer | None = None) -> Result:
-    """The whole workflow; `replayer`: a model already built from opts.vehicle (and opts.road), reused."""
+    """The whole workflow; `replayer`: a model already built from opts.vehicle (and opts.road), reused.
+    With opts.ray, Ray is connected for the run's duration (and shut down after, when this started it)."""
+    if not opts.ray:
+        return _run(opts, replayer)
+    import sys
+
+    from rtsim.batch.executors import ray_init
+
+    started = "ray" not in sys.modules or not sys.modules["ray"].is_initialized()
+    if started:
+        ray_init(opts.ray)
+    try:
+        return _run(opts, replayer)
+    finally:
+        if started:
+            sys.modules["ray"].shutdown()
+
+
+def _run(opts: Options, replayer: Replayer | None) -> Result:
     prog = opts.progress or _Quiet()
     tm = {}
     t0 = time.perf_counter()
@@ -332,7 +376,7 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
     effects: list[Effect] = []
     iterations: list[Iteration] = []
     verdict = ""
-    workers = max(1, min(opts.workers, os.cpu_count() or 1))
+    workers = RayWorkers(opts.ray) if opts.ray else max(1, min(opts.workers, os.cpu_count() or 1))
     for k in range(1, opts.max_iterations + 1):
         ti = time.perf_counter()
         current = [*base, *effects]
