@@ -324,14 +324,20 @@ def write_runs(folder: Path, car: Car, n: int = 7, seed: int = 0, duration: floa
         t, ch = simulate(car, lambda s: float(np.interp(s, bt, bp)), lambda s: float(np.interp(s, tt, tv)),
                          duration, **hidden)
         ch["accel_x"] = ch["accel_x"] + accel_bias
-        names = list(NOISE)
-        x = np.column_stack([ch[c] + rng.normal(0.0, NOISE[c], t.size) for c in names])
-        k0 = int(rng.integers(0, 125))
-        k1 = t.size - int(rng.integers(0, 125))
-        clock = 50.0 * (k + 1) + rng.uniform(0.0, 1.0)
-        path = folder / f"peer{k + 1}.csv"
-        with path.open("w") as fh:
-            fh.write(",".join(("time", *names)) + "\n")
-            np.savetxt(fh, np.column_stack([t[k0:k1] + clock, x[k0:k1]]), delimiter=",", fmt="%.9g")
-        paths.append(path)
+        paths.append(log_run(folder / f"peer{k + 1}.csv", t, ch, NOISE, rng, 50.0 * (k + 1)))
     return paths
+
+
+def log_run(path: Path, t: np.ndarray, ch: dict, noise: dict, rng, clock: float) -> Path:
+    """A field logger's CSV of one run: `time` on the logger's own clock (t + clock + up to 1 s, s), then
+    the channels of `noise` with their white noise (standard deviation in the channel's unit) added,
+    started and stopped up to 125 samples late and early (draws from `rng` in that order)."""
+    names = list(noise)
+    x = np.column_stack([ch[c] + rng.normal(0.0, noise[c], t.size) for c in names])
+    k0 = int(rng.integers(0, 125))
+    k1 = t.size - int(rng.integers(0, 125))
+    clock = clock + rng.uniform(0.0, 1.0)
+    with path.open("w") as fh:
+        fh.write(",".join(("time", *names)) + "\n")
+        np.savetxt(fh, np.column_stack([t[k0:k1] + clock, x[k0:k1]]), delimiter=",", fmt="%.9g")
+    return path

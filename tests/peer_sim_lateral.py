@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from peer_sim import read_tir
+from peer_sim import log_run, read_tir
 
 DT = 5e-4                    # s, integrator step
 RATE = 500.0                 # Hz, logger rate
@@ -237,13 +237,5 @@ def write_runs(folder: Path, car: dict, n: int = 7, seed: int = 0, stiffness_sca
                          stiffness_scale, added_mass)
         for c, eff in (sensor or {}).items():
             ch[c] = _sensor(t, ch[c], **eff)
-        x = np.column_stack([ch[c] + rng.normal(0.0, NOISE[c], t.size) for c in CHANNELS])
-        k0 = int(rng.integers(0, 125))
-        k1 = t.size - int(rng.integers(0, 125))
-        clock = 80.0 * (k + 1) + rng.uniform(0.0, 1.0)
-        path = folder / f"lat{k + 1}.csv"
-        with path.open("w") as fh:
-            fh.write(",".join(("time", *CHANNELS)) + "\n")
-            np.savetxt(fh, np.column_stack([t[k0:k1] + clock, x[k0:k1]]), delimiter=",", fmt="%.9g")
-        paths.append(path)
+        paths.append(log_run(folder / f"lat{k + 1}.csv", t, ch, {c: NOISE[c] for c in CHANNELS}, rng, 80.0 * (k + 1)))
     return paths

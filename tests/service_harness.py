@@ -124,3 +124,24 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+#: the car's three command frames, in the order a lockstep test's command tuple gives them
+CAR_COMMANDS = ("throttle_angle_cmd", "brake_pressure_cmd", "steering_wheel_angle_cmd")
+
+
+def send_lockstep_cycle(bus, codec, ctr: list, cmd, steps: int) -> None:
+    """One lockstep cycle's frames on `bus`: the car's commands `cmd` (values in CAR_COMMANDS order; None:
+    none sent) and a SIM_STEP_REQ of `steps`; `ctr` the four alive counters (commands, step request),
+    advanced in place. The caller waits for the SIM_STEP_ACK carrying ctr[3]."""
+    import can
+
+    if cmd is not None:
+        for i, name in enumerate(CAR_COMMANDS):
+            ctr[i] = (ctr[i] + 1) & 0xF
+            fid, data = codec.encode_command(name, cmd[i], ctr[i])
+            bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+    ctr[3] = (ctr[3] + 1) & 0xF
+    fid, data = codec.encode_step_request(steps, ctr[3])
+    bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+

@@ -33,7 +33,7 @@ from bridge.can_bus import LoopbackHub, open_bus
 from bridge.can_codec import DEFAULT_DBC, Codec
 from bridge.mcap_recorder import read_recording
 from rtsim.channels import COMMAND_NAMES
-from service_harness import ROOT, Listener, ServiceProcess, segment_from_env
+from service_harness import ROOT, Listener, ServiceProcess, segment_from_env, send_lockstep_cycle
 from waits import EVENT, HUB_START, PROCESS
 
 # can_e2e: also run over vcan0 inside the qemu VM (tests/test_vcan.py), where the emulated CPU is far too
@@ -509,15 +509,7 @@ class _LockstepEcu:
         self.status_id = db.get_message_by_name("SIM_STATUS").frame_id
 
     def cycle(self, cmd, steps=10):
-        names = ("throttle_angle_cmd", "brake_pressure_cmd", "steering_wheel_angle_cmd")
-        if cmd is not None:
-            for i, name in enumerate(names):
-                self.ctr[i] = (self.ctr[i] + 1) & 0xF
-                fid, data = self.codec.encode_command(name, cmd[i], self.ctr[i])
-                self.bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
-        self.ctr[3] = (self.ctr[3] + 1) & 0xF
-        fid, data = self.codec.encode_step_request(steps, self.ctr[3])
-        self.bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+        send_lockstep_cycle(self.bus, self.codec, self.ctr, cmd, steps)
         deadline = time.monotonic() + EVENT
         while time.monotonic() < deadline:
             msg = self.bus.recv(1.0)

@@ -12,7 +12,6 @@ from __future__ import annotations
 import threading
 import time
 
-import can
 import pytest
 
 from bridge import payloads
@@ -21,6 +20,7 @@ from bridge.mcap_recorder import read_recording
 from rtsim.service import loop as loop_module
 from rtsim.service.resim import resim
 from rtsim.service.server import ServeOptions, Service
+from service_harness import send_lockstep_cycle
 from waits import EVENT, HUB_START
 
 
@@ -32,15 +32,7 @@ class _Ecu:
         self.ctr = [0, 0, 0, 0]
 
     def cycle(self, cmd=None, steps=10) -> float:
-        names = ("throttle_angle_cmd", "brake_pressure_cmd", "steering_wheel_angle_cmd")
-        if cmd is not None:
-            for i, name in enumerate(names):
-                self.ctr[i] = (self.ctr[i] + 1) & 0xF
-                fid, data = self.codec.encode_command(name, cmd[i], self.ctr[i])
-                self.bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
-        self.ctr[3] = (self.ctr[3] + 1) & 0xF
-        fid, data = self.codec.encode_step_request(steps, self.ctr[3])
-        self.bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
+        send_lockstep_cycle(self.bus, self.codec, self.ctr, cmd, steps)
         deadline = time.monotonic() + EVENT
         while time.monotonic() < deadline:
             msg = self.bus.recv(1.0)
