@@ -4,8 +4,11 @@ manoeuvre with run-to-run pedal variation, sensor noise and logger offsets; only
 the workflow, which starts from the nominal model. For every case: the right effect is named, its
 parameter is within 10 % (or within its stated 95 % uncertainty), the RMS error of the affected
 channels falls at least 5 times and at least 90 % of their samples end inside the 95 % band.
-Plus data without a missing effect (nothing is added) and two effects at once (found in two
-iterations). The model is built once for the module (workflow.run(..., replayer=...)).
+Plus data without a missing effect (nothing is added). The model is built once for the module
+(workflow.run(..., replayer=...)). Hidden rolling resistance, brake friction and mass, and two effects at
+once (brake friction with an accelerometer bias), are tested on data the model did not make instead
+(tests/test_validate_peer.py, test_validate_independent.py: the stronger check); their cases here are
+kept in CASES (the others' seeds are their positions) and run with RTSIM_VALIDATE_ALL=1.
 
 The effects are large enough that the gap they make dominates the floor the method itself leaves on
 accel_x (0.05-0.07 m/s^2 RMS here: the mean's noise and the pitch oscillation after the stop, which
@@ -13,6 +16,7 @@ the average of runs stopping at slightly different times smears while the model 
 inputs shows it crisp); the 5x criterion cannot be met by effects smaller than five times that."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -76,7 +80,11 @@ def _check_gap(res, channels):
         assert after[c]["inside_band"] >= 0.9, (c, after[c]["inside_band"])
 
 
-@pytest.mark.parametrize("case", list(CASES))
+#: the cases the independent peers cover (run here only with RTSIM_VALIDATE_ALL=1: the suite's time budget)
+ON_PEER_DATA = frozenset(() if os.environ.get("RTSIM_VALIDATE_ALL") else ("rolling_resistance", "brake_friction", "mass"))
+
+
+@pytest.mark.parametrize("case", [c for c in CASES if c not in ON_PEER_DATA])
 def test_hidden_effect_is_named_fitted_and_closes_the_gap(replayer, runs_dir, case):
     hidden, expected, channels = CASES[case]
     res = _workflow(replayer, runs_dir, case, hidden, seed=list(CASES).index(case) + 11)
@@ -95,6 +103,8 @@ def test_no_missing_effect_adds_nothing(replayer, runs_dir):
         assert m["inside_band"] >= 0.9, (c, m)
 
 
+@pytest.mark.skipif(not os.environ.get("RTSIM_VALIDATE_ALL"), reason="two effects at once are tested on the "
+                    "independent peers' data (test_validate_independent.py); RTSIM_VALIDATE_ALL=1 runs it here too")
 def test_two_effects_are_found_in_two_iterations(replayer, runs_dir):
     hidden = {"mass": {"added_mass": 200.0}, "sensor_bias": [{"channel": "accel_x", "bias": 0.2}]}
     res = _workflow(replayer, runs_dir, "two", hidden, seed=5)

@@ -26,6 +26,8 @@ were written and run once after the rules were final.
 """
 from __future__ import annotations
 
+import os
+
 from pathlib import Path
 
 import pytest
@@ -121,7 +123,13 @@ def _check(res, expected):
     assert len(res.effects) == len(expected), [e.label() for e in res.effects]
 
 
-@pytest.mark.parametrize("case", list(LATERAL))
+#: RTSIM_VALIDATE_ALL=1 also runs the cases the suite's 20-minute budget leaves out: the third tyre-stiffness
+#: value (0.5 and 0.6 stay) and the known failures (as strict expected failures)
+ALL = bool(os.environ.get("RTSIM_VALIDATE_ALL"))
+EXTRA = () if ALL else ("stiffness_0.7",)
+
+
+@pytest.mark.parametrize("case", [c for c in LATERAL if c not in EXTRA])
 def test_lateral_peer(replayer, car, folder, case):
     hidden, expected, _ = LATERAL[case]
     seed = 99 if case == "stiffness_0.6" else 5 if case in ("none", "gyro_z_bias", "stiffness_0.5") else \
@@ -156,8 +164,15 @@ KNOWN_FAILURES = {
 }
 
 
-@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=KNOWN_FAILURES[c]))
-                                  if c in KNOWN_FAILURES else c for c in LONGITUDINAL])
+def _known(case: str):
+    why = KNOWN_FAILURES[case]
+    if ALL:
+        return pytest.param(case, marks=pytest.mark.xfail(strict=True, reason=why))
+    return pytest.param(case, marks=pytest.mark.skip(reason=f"known failure ({why}); RTSIM_VALIDATE_ALL=1 runs it "
+                                                             "as a strict expected failure"))
+
+
+@pytest.mark.parametrize("case", [_known(c) if c in KNOWN_FAILURES else c for c in LONGITUDINAL])
 def test_longitudinal_peer(replayer, folder, case):
     hidden, expected, _ = LONGITUDINAL[case]
     car = peer_sim.Car.from_config(VEHICLE)
