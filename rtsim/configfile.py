@@ -96,9 +96,30 @@ def _fmt_value(v: Any) -> str:
     return s if len(s) <= 60 else s[:57] + "..."
 
 
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def _part(key: str) -> str:
+    """A key as TOML writes it in a dotted path: bare when it may be, else quoted (a batch plan's
+    `overrides."scenario.duration"` stays one key, not two)."""
+    return key if _BARE_KEY.fullmatch(key) else '"' + key.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _leaf(loc: tuple) -> str:
+    """The last key of an error location with any list indices after it (its name in an "allowed
+    lo <= name <= hi" message)."""
+    idx = ""
+    for part in reversed(loc):
+        if not isinstance(part, int):
+            return _part(str(part)) + idx
+        idx = f"[{part}]" + idx
+    return "value" + idx
+
+
 def _key(loc: tuple, data: Any) -> str:
-    """Dotted key of an error location, list items as [i]. Parts pydantic inserts that are not keys of
-    the data (a union's tag or member name) are left out, found by walking the data along the path."""
+    """Dotted key of an error location as TOML writes it, list items as [i]. Parts pydantic inserts that
+    are not keys of the data (a union's tag or member name) are left out, found by walking the data along
+    the path."""
     out = ""
     here = data
     for n, part in enumerate(loc):
@@ -110,7 +131,7 @@ def _key(loc: tuple, data: Any) -> str:
             out += f"[{part}]"
             here = here[part] if isinstance(here, (list, tuple)) and -len(here) <= part < len(here) else None
         else:
-            out += ("." if out else "") + str(part)
+            out += ("." if out else "") + _part(str(part))
             here = here.get(part) if isinstance(here, dict) else None
     return out
 
@@ -188,12 +209,12 @@ def _message(err: dict, data: Any, root) -> str:
         value = ctx["value"]
         reason = err["msg"]
     elif kind == "out_of_range":
-        leaf = _key(loc, data).rsplit(".", 1)[-1]
+        leaf = _leaf(loc)
         unit = f" {ctx['unit']}" if ctx["unit"] else ""
         reason = (f"out of range (allowed {ctx['lo']:g} {'<' if ctx['lo_open'] else '<='} {leaf} "
                   f"{'<' if ctx['hi_open'] else '<='} {ctx['hi']:g}{unit})")
     elif kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-        reason = f"out of range (allowed {_allowed(root, loc, _key(loc, data).rsplit('.', 1)[-1], ctx)})"
+        reason = f"out of range (allowed {_allowed(root, loc, _leaf(loc), ctx)})"
     elif kind == "missing":
         info = _field_at(root, loc) if root is not None else None
         desc = f"; {info.description}" if info is not None and info.description else ""

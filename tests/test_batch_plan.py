@@ -32,7 +32,7 @@ def _plan(tmp_path, body: str) -> Path:
     ('[[criteria]]\nmetric = "speediness"\nmax = 1.0\n', "criteria[0].metric = 'speediness': unknown metric"),
     ('repetitions = 0\n', "repetitions = 0: out of range (allowed 1 <= repetitions <= 10000)"),
     ('[random]\nsamples = 3\n[random.params]\n"vehicle.a" = { uniform = [2.0, 1.0] }\n',
-     "random.params.vehicle.a.uniform = [2.0, 1.0]: must be [lo, hi], finite, lo <= hi"),
+     'random.params."vehicle.a".uniform = [2.0, 1.0]: must be [lo, hi], finite, lo <= hi'),
 ])
 def test_plan_errors_name_file_key_value_and_range(tmp_path, body, expected):
     p = _plan(tmp_path, body)
