@@ -24,7 +24,7 @@ from rtsim.channels import CAR, ENERGY, SENSOR_NAMES, STATE_NAMES, ChannelDictio
 from rtsim.errors import RtsimError
 
 TOPIC_KEYS = ("sensors", "state", "status", "commands", "can/rx", "can/tx")
-EVENT_TOPIC_KEYS = ("user",)        # recorded by the service only (not published on Zenoh)
+EVENT_TOPIC_KEYS = ("user", "control")   # recorded by the service only (not published on Zenoh)
 OFFLINE_TOPIC_KEYS = ("energy",)    # recorded by offline runs only (rtsim.vehicle.car.energy)
 MODES = ("realtime", "lockstep", "fast")
 RUN_STATES = ("running", "paused", "stopped")
@@ -32,6 +32,7 @@ COMMAND_SOURCES = ("can", "zenoh", "safe")
 FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error")
 REJECTIONS = ("dlc", "crc", "counter", "range", "unknown_id")
 USER_CAUSES = ("drive", "release", "lapse")
+CONTROL_OPS = ("pause", "resume", "step", "driver", "reset", "load_scenario")   # recorded (rtsim.service.loop)
 DRIVER_SOURCES = ("user", "ecu", "scenario", "rider", "safe", "none", "user+ecu", "rider+ecu", "none+ecu")
 STATUS_OPTIONAL = ("wall_time", "drivers", "user")
 
@@ -144,6 +145,8 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
         "time": _TIME,
     }
     energy = {"time": _TIME, **{c.name: _signal(c.unit, c.description) for c in ENERGY}}
+    order = {"type": "integer", "minimum": 0, "description": "the service's count of recorded events (user and "
+                                                            "control) before this one: their order across both topics"}
     user = {
         "time": {"type": "number", "description": "simulation time at which the loop applied the change; it acts "
                                                   "on the steps after it [s]"},
@@ -157,6 +160,16 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
                      "additionalProperties": {"type": _NUM_OR_NULL}},
         "takeover": {"type": "boolean", "description": "the user has taken over from the bus ECU"},
         "seq": {"type": ["integer", "null"], "description": "sequence number of the page's last request"},
+        "order": order,
+    }
+    control = {
+        "time": {"type": "number", "description": "simulation time when the loop took the request (before a step "
+                                                  "ran, before a reset restarted time) [s]"},
+        "step": {"type": "integer", "minimum": 0, "description": "the loop's step count when it took the request"},
+        "op": {"type": "string", "enum": list(CONTROL_OPS), "description": "the control op (rtsim serve's control key)"},
+        "args": {"type": "object", "description": "the request's arguments: step {n}; driver {channel: value | null} "
+                                                  "(SI units); reset and load_scenario {scenario: name}"},
+        "order": order,
     }
     return {
         "sensors": ("rtsim.sensors", _obj("rtsim sensors", sensors, sensors)),
@@ -169,7 +182,9 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
         "can/rx": ("rtsim.can_frame", _obj("rtsim CAN frame", can, ["id", "dlc", "data", "time"])),
         "can/tx": ("rtsim.can_frame", _obj("rtsim CAN frame", can, ["id", "dlc", "data", "time"])),
         "user": ("rtsim.user", _obj("rtsim user command source changes (rtsim view, control op drive)", user,
-                                    list(user))),
+                                    [k for k in user if k != "order"])),
+        "control": ("rtsim.control", _obj("rtsim control requests that changed the run (pause, resume, step, driver, "
+                                          "reset, load_scenario)", control, list(control))),
         "energy": ("rtsim.energy", _obj("rtsim power audit (offline runs)", energy, ["time"])),
     }
 

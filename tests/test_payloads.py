@@ -91,7 +91,7 @@ def test_write_schemas_command(tmp_path):
                for p in tmp_path.rglob("*") if p.is_file()}
     assert written == P.schema_files()
     assert set(written) == {"sensors.json", "state.json", "status.json", "commands.json",
-                            "can/rx.json", "can/tx.json", "user.json"}
+                            "can/rx.json", "can/tx.json", "user.json", "control.json"}
 
 
 def test_recorder_registers_the_same_schemas(tmp_path):

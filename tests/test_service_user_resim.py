@@ -1,4 +1,4 @@
-"""A session someone drove from `rtsim view` re-simulates bit for bit: the service records every change of
+"""A session someone drove from `rtsim view`, or stepped and steered through control requests, re-simulates bit for bit: the service records every change of
 the user command source (the ``drive`` op: values, takeover, release, lapse) on the ``user`` topic with the
 step it applied it at, and `rtsim resim` applies them at the same steps.
 
@@ -115,3 +115,92 @@ def test_a_session_driven_by_the_user_resimulates_bit_for_bit(tmp_path, monkeypa
     assert rep["identical"], (rep["sensors"]["max_abs_diff"], rep["state"]["max_abs_diff"])
     without = resim(rec, user=False)                         # the user's commands made the session
     assert not without["identical"] and without["state"]["max_abs_diff"].get("speed", 0.0) > 0.5
+
+
+def _serve(tmp_path, hub, name, **kw):
+    rec = tmp_path / f"{name}.mcap"
+    svc = Service(ServeOptions(mode="lockstep", can_interface="remote", can_channel=hub.channel, start_hub=False,
+                               zenoh=False, record=rec, **kw), out=lambda *a: None)
+    th = threading.Thread(target=svc.run, daemon=True)
+    th.start()
+    return svc, th, rec
+
+
+def _ok(svc, op, **kw):
+    r = svc.control({"op": op, **kw})
+    assert r["ok"], r
+    return r
+
+
+def test_control_requests_are_recorded_and_resimulated(tmp_path):
+    """The control requests that change a run are recorded (``control`` topic, with the step they acted at and
+    the order among the user's changes) and `rtsim resim` repeats them: a lockstep session stepped both by the
+    ECU's SIM_STEP_REQ frames and by Zenoh ``step`` requests, paused and resumed, the user driving between
+    them, re-runs bit for bit, up to the reset that restarts simulation time (the frames and samples after it
+    are a new session); the EPS car whose in-loop driver was given a live steering-wheel angle (the ``driver``
+    op: turning right while the scenario's driver holds the wheel straight) re-runs bit for bit."""
+    hub = LoopbackHub(0, start_timeout=HUB_START)
+    try:
+        svc, th, rec = _serve(tmp_path, hub, "stepped")
+        try:
+            bus = hub.open_bus()
+            ecu = _Ecu(bus, svc.codec)
+            ecu_cmd = (0.2, 0.0, 0.3)
+            for k in range(8):
+                ecu.cycle(ecu_cmd)
+                _ok(svc, "step", n=7 + k)                    # Zenoh steps between the ECU's
+            _ok(svc, "pause")
+            _ok(svc, "resume")
+            _ok(svc, "drive", throttle_angle_cmd=0.7, takeover=True, seq=1)
+            _ok(svc, "step", n=40)
+            ecu.cycle(ecu_cmd, steps=25)
+            _ok(svc, "drive", release=True, seq=2)
+            _ok(svc, "step", n=30)
+            stepped = svc.loop.k
+            _ok(svc, "reset")
+            for _ in range(3):                               # a new session after the reset
+                ecu.cycle(ecu_cmd)
+            bus.shutdown()
+        finally:
+            svc.stop()
+            th.join(EVENT)
+        assert not th.is_alive()
+        msgs, _ = read_recording(rec)
+        control = [m.data for m in msgs[f"rtsim/{svc.vehicle_id}/control"]]
+        for c in control:
+            assert payloads.validation_errors("control", c) == [], c
+        assert [c["op"] for c in control] == ["step"] * 8 + ["pause", "resume", "step", "step", "reset"]
+        assert control[0]["args"] == {"n": 7} and control[0]["step"] == 10     # after the ECU's first 10 steps
+        user = [m.data for m in msgs[f"rtsim/{svc.vehicle_id}/user"]]
+        assert control[9]["order"] < user[0]["order"] < control[10]["order"]
+        assert control[-1]["args"] == {"scenario": svc.loop.scenario_name} and control[-1]["step"] == stepped
+        rep = resim(rec)
+        assert rep["control_ops"] == rep["control_ops_applied"] == 12 and rep["user_changes_applied"] == 2
+        assert rep["ended_by"].startswith("reset") and rep["sim_time"] == pytest.approx(stepped * 1e-3)
+        assert rep["sensors"]["matched"] > 100 and rep["sensors"]["missing"] == 0
+        assert rep["identical"], (rep["sensors"]["max_abs_diff"], rep["state"]["max_abs_diff"])
+
+        from pathlib import Path
+        root = Path(__file__).resolve().parents[1]
+        svc, th, rec = _serve(tmp_path, hub, "driver", vehicle=root / "configs" / "vehicles" / "eps_car.toml",
+                              scenario=root / "configs" / "scenarios" / "step_steer_80kph.toml")
+        try:
+            _ok(svc, "step", n=200)
+            _ok(svc, "driver", steering_wheel_angle_cmd=-0.3)
+            _ok(svc, "step", n=300)
+            _ok(svc, "driver", steering_wheel_angle_cmd=None)
+            _ok(svc, "step", n=100)
+        finally:
+            svc.stop()
+            th.join(EVENT)
+        rep = resim(rec)
+        assert rep["control_ops"] == rep["control_ops_applied"] == 5 and rep["sim_time"] == pytest.approx(0.6)
+        assert rep["identical"], (rep["sensors"]["max_abs_diff"], rep["state"]["max_abs_diff"])
+        msgs, _ = read_recording(rec)
+        control = [m.data for m in msgs[f"rtsim/{svc.vehicle_id}/control"]]
+        assert control[1] == {"time": 0.2, "step": 200, "op": "driver", "args": {"steering_wheel_angle_cmd": -0.3},
+                              "order": 1}
+        yaw = [m.data["yaw_rate"] for m in msgs[f"rtsim/{svc.vehicle_id}/state"]]
+        assert min(yaw) < -0.02          # the live wheel turned the car right: the op made this session
+    finally:
+        hub.close()

@@ -28,6 +28,7 @@ import numpy as np
 
 from bridge.can_codec import Codec, CommandReceiver
 from bridge.can_e2e import C_STEP_IGNORED, C_STEP_REJECTED, IV_HAS_VALUE, IV_TIMED_OUT
+from bridge.payloads import CONTROL_OPS
 from drivers.base import INPUT_NAMES, INPUT_UNITS, LIMITS, NINPUT, NSTATE
 from drivers.driver import Driver
 from rtsim.boundcall import bind
@@ -45,7 +46,9 @@ from .user_input import NUSR, NWORK, TWO_WHEELER_BUS, USER_HOLD, check_value, us
 RUN_STATES = ("running", "paused", "stopped")
 CYCLE_WINDOW = 65536   # steps of compiled-call durations kept (as LoopHealth's window)
 CHUNK = 256            # steps per compiled call when many run back to back (lockstep, re-simulation)
-USER_LOG = 4096        # user-source changes waiting for the publisher (it takes them every few ms)
+EVENT_LOG = 4096       # recorded events waiting for the publisher (it takes them every few ms)
+#: the control ops that change what the simulation does (bridge.payloads.CONTROL_OPS) are recorded on the
+#: ``control`` topic with the step they acted at, so that `rtsim resim` repeats them; ``drive`` has ``user``
 
 
 @dataclass
@@ -81,10 +84,12 @@ class HilLoop:
         self._usr_deadline = None          # monotonic time the user's commands lapse at
         self._usr_seq = None
         self._usr_requests = 0
-        # every change of the user source (values, takeover) with the step it was applied at, for the
-        # recording (topic ``user``, bridge.payloads) and re-simulation; the publisher thread takes them
-        self.user_log: collections.deque = collections.deque()
-        self.user_log_dropped = 0
+        # (topic, event) for the recording and re-simulation, each with the step it acted at: every change
+        # of the user source (values, takeover; topic ``user``) and every control op of CONTROL_OPS
+        # (topic ``control``; bridge.payloads has both schemas); the publisher thread takes them
+        self.event_log: collections.deque = collections.deque()
+        self.event_log_dropped = 0
+        self.events_logged = 0
         self._usr_last = None
         ch = codec.channels               # the served vehicle's interface: ring widths, payload names
         if (len(ch.sensors), len(ch.state)) != (sim.nsensor, sim.nstate):
@@ -324,10 +329,31 @@ class HilLoop:
     # -- control requests (from Zenoh) --------------------------------------------------------------
     def on_request(self, req: Request) -> None:
         try:
-            req.reply = self._control(req.op, req.args)
+            req.reply = self.apply_control(req.op, req.args)
         except Exception as exc:  # noqa: BLE001  (a bad request must never stop the loop)
             req.reply = {"ok": False, "error": f"{req.op}: {exc}"}
         req.done.set()
+
+    def apply_control(self, op: str, args: dict) -> dict:
+        """A control request's reply; an accepted op of CONTROL_OPS is logged for the recording with the
+        step it acted at (before a ``step`` runs, before a reset restarts time)."""
+        k, t = self.k, self.sim_time
+        reply = self._control(op, args)
+        if op in CONTROL_OPS and reply.get("ok"):
+            public = {a: v for a, v in args.items() if not a.startswith("_")}
+            if op in ("reset", "load_scenario"):
+                public["scenario"] = reply.get("scenario")
+            self._log_event("control", {"time": t, "step": k, "op": op, "args": public})
+        return reply
+
+    def _log_event(self, topic: str, event: dict) -> None:
+        """Queue an event for the recording, numbered (``order``) across both topics."""
+        event["order"] = self.events_logged
+        self.events_logged += 1
+        if len(self.event_log) >= EVENT_LOG:
+            self.event_log_dropped += 1
+            return
+        self.event_log.append((topic, event))
 
     def _control(self, op: str, args: dict) -> dict:
         if op == "pause":
@@ -414,13 +440,10 @@ class HilLoop:
         if now == self._usr_last:
             return
         self._usr_last = now
-        if len(self.user_log) >= USER_LOG:
-            self.user_log_dropped += 1
-            return
         names = user_channels(self.sim.kind)
-        self.user_log.append({"time": self.sim_time, "step": self.k, "cause": cause,
-                              "channels": {n: now[0][u] for u, n in enumerate(names)},
-                              "takeover": now[1], "seq": self._usr_seq})
+        self._log_event("user", {"time": self.sim_time, "step": self.k, "cause": cause,
+                                 "channels": {n: now[0][u] for u, n in enumerate(names)},
+                                 "takeover": now[1], "seq": self._usr_seq})
 
     def apply_user(self, channels: dict, takeover: bool) -> None:
         """Set the user source as a recorded change says (re-simulation; see ``_user_changed``): every
@@ -542,7 +565,8 @@ class HilLoop:
             "accepted_frames": self.rx.accepted,
             "bus_errors": self.port.errors if self.port is not None else 0,
             "recorder": None if rec is None else {"path": str(rec.path), "written": rec.written,
-                                                  "dropped": rec.dropped, "chunks": rec.chunks},
+                                                  "dropped": rec.dropped + self.event_log_dropped,
+                                                  "chunks": rec.chunks},
             "zenoh_dropped": getattr(zen, "dropped", 0) if zen is not None else 0,
             "scenario": self.scenario_name,
             "message": self.message,

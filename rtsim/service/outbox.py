@@ -18,9 +18,10 @@ With a scene (bridge.scene.SceneBuilder) the publisher also encodes, for every s
 reset, or a new scenario whose scene ``replace_scene`` gave) and when a Foxglove client subscribes to it.
 A scene that fails to build is counted (``scene_errors``), never raised.
 
-The user command source's changes (``rtsim view``'s ``drive`` op: values, takeover, release, lapse), which
-the loop thread logs into a deque with the step it applied them at, go to the recording's ``user`` topic,
-so that `rtsim resim` applies them at the same steps.
+The events the loop thread logs into a deque with the step they acted at go to the recording only, so that
+`rtsim resim` repeats them at the same steps: the user command source's changes (``rtsim view``'s ``drive``
+op: values, takeover, release, lapse) on ``user``, the control ops that change the run (pause, resume,
+lockstep ``step``, ``driver``, reset, load_scenario) on ``control``.
 """
 from __future__ import annotations
 
@@ -145,11 +146,11 @@ class Outbox:
 
     def __init__(self, rings: Rings, frame_ids, zenoh=None, recorder=None, status_fn=None,
                  status_period: float = 0.1, poll: float = 0.005, channels: ChannelDictionary = CAR,
-                 frame_periods=None, scene=None, road: bytes | None = None, foxglove=None, user_log=None):
+                 frame_periods=None, scene=None, road: bytes | None = None, foxglove=None, event_log=None):
         """``scene``: a bridge.scene.SceneBuilder (None: no scene topics); ``road``: the road's scene
-        (bytes); ``foxglove``: a bridge.foxglove_live.FoxgloveLive server; ``user_log``: the loop's deque of
-        user-source changes (HilLoop.user_log), recorded on the ``user`` topic."""
-        self.user_log = user_log
+        (bytes); ``foxglove``: a bridge.foxglove_live.FoxgloveLive server; ``event_log``: the loop's deque of
+        (topic, event) (HilLoop.event_log), recorded on those topics."""
+        self.event_log = event_log
         self.zenoh = zenoh
         self.recorder = recorder
         self.foxglove = foxglove
@@ -250,16 +251,16 @@ class Outbox:
 
     def flush(self) -> None:
         """Publish everything pending now (publisher thread, or after it stopped)."""
-        self._user_changes()
+        self._events()
         self._rings.drain()
 
-    def _user_changes(self) -> None:
-        """The user source's changes the loop logged (recorded only: a re-simulation applies them)."""
-        log = self.user_log
+    def _events(self) -> None:
+        """The events the loop logged (recorded only: a re-simulation repeats them)."""
+        log = self.event_log
         while log:
-            ev = log.popleft()
+            topic, ev = log.popleft()
             if self.recorder is not None:
-                self.recorder.record("user", int(round(ev["time"] * 1e9)), payloads.encode_json(ev))
+                self.recorder.record(topic, int(round(ev["time"] * 1e9)), payloads.encode_json(ev))
             self.published += 1
 
     def _run(self) -> None:

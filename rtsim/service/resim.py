@@ -10,9 +10,10 @@ loop, the E2E checks, the watchdog and the compiled step are the service's own, 
 model and configuration the sensors and state come out bit for bit identical. A changed model shows
 as per-channel differences. The user command source's changes (``rtsim view`` driving: the ``user``
 topic, each with the step the loop applied it at) are applied at the same steps, so a session someone
-drove from the browser re-simulates too (``user=False``: without them, a what-if). Other control requests
-of the live session (pause, reset, the ``driver`` op, lockstep ``step`` requests over Zenoh) are not
-recorded and not replayed; sessions that used them replay only up to the first one.
+drove from the browser re-simulates too (``user=False``: without them, a what-if). The control requests
+that changed the run (the ``control`` topic: lockstep ``step`` requests over Zenoh, the ``driver`` op's live
+inputs, pause and resume) are repeated at their steps as well; a reset or a new scenario restarts
+simulation time, and the re-run stops there.
 
 Also accepts python-can logs (.asc, .blf, candump .log) of ECU command frames with ``--scenario``: the
 model is driven by them and the run is reported without a comparison.
@@ -72,43 +73,82 @@ def _file_for(meta: dict, key: str, override: Path | None, tmp: Path) -> tuple[P
     return out, f"{key} as recorded ({path} {'changed since' if path.exists() else 'missing'})"
 
 
-class UserChanges:
-    """The recorded changes of the user command source, applied to a re-run loop at the steps the service
-    applied them at (a change logged at step k acts on steps k+1 on, as in the service)."""
+class SessionEvents:
+    """A recording's events repeated on a re-run loop at the steps the service took them at: the user command
+    source's changes (``user`` topic; one logged at step k acts on steps k+1 on, as in the service) and the
+    control ops that changed the run (``control`` topic: a lockstep ``step`` runs its steps, ``driver`` sets
+    the in-loop driver's live inputs, pause and resume change nothing simulated time sees). A reset or a new
+    scenario restarts simulation time: the re-run ends there (``ended_by``)."""
 
-    def __init__(self, loop: HilLoop, messages):
-        """``messages``: the ``user`` topic in recorded order (the order the loop applied them); those after
-        a restart of simulation time (a reset: the step count falls) are left out, as the frames after it."""
+    def __init__(self, loop: HilLoop, user=(), control=()):
+        """``user``, ``control``: the topics' messages in recorded order, merged by the service's event count
+        (``order``). (Recordings made before the control topic have only ``user``, in order; their events
+        after a restart of time, where the step count falls, are left out.)"""
         self.loop = loop
+        self.ended_by = None
+        merged = [(m.data.get("order", n), "user", m.data) for n, m in enumerate(user)]
+        merged += [(m.data["order"], m.data["op"], m.data) for m in control]
+        merged.sort(key=lambda e: e[0])
         self.events = []
-        for m in messages:
-            step = int(m.data["step"])
+        for _, op, data in merged:
+            step = int(data["step"])
             if self.events and step < self.events[-1][0]:
                 break
-            self.events.append((step, m.data))
+            if op in ("reset", "load_scenario"):
+                self.ended_by = f"{op} at t = {data['time']:.3f} s"
+                break
+            self.events.append((step, op, data))
         self.i = 0
-        self.applied = 0
+        self.applied = {"user": 0, "control": 0}
+        self.users = sum(1 for e in self.events if e[1] == "user")
 
-    def apply_due(self) -> None:
-        """Every change logged at the loop's current step or before."""
-        ev, loop = self.events, self.loop
-        while self.i < len(ev) and ev[self.i][0] <= loop.k:
-            data = ev[self.i][1]
+    def _apply(self, op: str, data: dict) -> None:
+        loop = self.loop
+        if op == "user":
             loop.apply_user(data.get("channels") or {}, bool(data.get("takeover")))
+            self.applied["user"] += 1
+            return
+        self.applied["control"] += 1
+        if op == "step":                  # the steps, with what was logged on the way
             self.i += 1
-            self.applied += 1
+            self.advance(int(data["args"].get("n", 1)))
+            self.i -= 1
+            return
+        reply = loop.apply_control(op, dict(data.get("args") or {}))
+        if not reply.get("ok"):
+            raise ConfigError(f"re-simulation: the recorded {op} request at step {loop.k} was refused: "
+                              f"{reply.get('error')}")
+
+    def apply_due(self, frame_step: int | None = None) -> None:
+        """Every event logged at the loop's current step or before; ``frame_step`` (lockstep: the recorded step
+        of the next frame) also runs the ``step`` ops logged before it."""
+        ev, loop = self.events, self.loop
+        while self.i < len(ev):
+            step, op, data = ev[self.i]
+            if op == "step":
+                if frame_step is None or step >= frame_step or step != loop.k:
+                    break
+            elif step > loop.k:
+                break
+            self._apply(op, data)
+            self.i += 1
 
     def advance(self, n: int) -> None:
-        """``n`` steps, the changes applied at their steps on the way."""
+        """``n`` steps, the events applied at their steps on the way."""
         loop, target = self.loop, self.loop.k + int(n)
         while loop.k < target and loop.run_state == "running":
             self.apply_due()
-            nxt = self.events[self.i][0] if self.i < len(self.events) else target
+            ev = self.events[self.i] if self.i < len(self.events) else None
+            nxt = ev[0] if ev is not None and ev[1] != "step" else target
             k0 = loop.k
             loop.advance(min(target, nxt) - k0)
             if loop.k == k0:
                 break
         self.apply_due()
+
+    def finish(self) -> None:
+        """The lockstep ``step`` ops logged after the last frame."""
+        self.apply_due(frame_step=1 << 62)
 
 
 def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None = None, user: bool = True) -> dict:
@@ -146,25 +186,45 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
     rx = messages.get(f"rtsim/{vid}/can/rx", [])
     rec_sensors = messages.get(f"rtsim/{vid}/sensors", [])
     rec_state = messages.get(f"rtsim/{vid}/state", [])
-    changes = UserChanges(loop, messages.get(f"rtsim/{vid}/user", []) if user else [])
+    events = SessionEvents(loop, messages.get(f"rtsim/{vid}/user", []) if user else [],
+                           messages.get(f"rtsim/{vid}/control", []))
     dt = sim.dt
+    if events.ended_by is not None:
+        notes.append(f"replayed up to the {events.ended_by} (simulation time restarts there)")
+    rx, rec_sensors, rec_state = (_before_restart(x) for x in (rx, rec_sensors, rec_state))
+    replayed = 0
     for m in rx:
+        kf = int(round(m.data["time"] / dt))
         if mode != "lockstep":
-            changes.advance(int(round(m.data["time"] / dt)) - loop.k)
-        changes.apply_due()
+            events.advance(kf - loop.k)
+        events.apply_due(kf if mode == "lockstep" else None)
         loop.rx_writer.put(int(m.data["id"]), bytes.fromhex(m.data["data"]))
         loop.take_frames()
+        replayed += 1
         if loop.run_state == "stopped":
             break
-    if mode != "lockstep" and rec_sensors:
-        changes.advance(int(round(rec_sensors[-1].data["time"] / dt)) - loop.k)
-    report = {"recording": str(path), "mode": mode, "dt": dt, "files": notes, "frames_replayed": len(rx),
-              "user_changes": len(changes.events), "user_changes_applied": changes.applied,
+    if mode == "lockstep":
+        events.finish()
+    elif rec_sensors:
+        events.advance(int(round(rec_sensors[-1].data["time"] / dt)) - loop.k)
+    report = {"recording": str(path), "mode": mode, "dt": dt, "files": notes, "frames_replayed": replayed,
+              "user_changes": events.users, "user_changes_applied": events.applied["user"],
+              "control_ops": len(events.events) - events.users, "control_ops_applied": events.applied["control"],
+              "ended_by": events.ended_by,
               "sim_time": loop.sim_time, "run_state": loop.run_state, "message": loop.message,
               "sensors": _compare(rec_sensors, col.sensors, sim.vm.channels.sensor_names),
               "state": _compare(rec_state, col.state, sim.vm.channels.state_names)}
     report["identical"] = bool(report["sensors"]["identical"] and report["state"]["identical"])
     return report
+
+
+def _before_restart(messages: list) -> list:
+    """A topic's messages up to the first whose time falls (a reset or a new scenario restarted simulation
+    time there)."""
+    for n in range(1, len(messages)):
+        if messages[n].data["time"] < messages[n - 1].data["time"]:
+            return messages[:n]
+    return messages
 
 
 def _channel_difference(recorded, vehicle) -> str:

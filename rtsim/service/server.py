@@ -186,7 +186,7 @@ class Service:
         self.outbox = Outbox(self.rings, self.loop.lp.sensor_ids, zenoh=self.zenoh, recorder=self.recorder,
                              status_fn=self.loop.status, status_period=1.0 / o.status_rate, channels=ch,
                              frame_periods=[f.period for f in self.codec.sensor_frames],
-                             scene=scene, road=road, foxglove=self.foxglove, user_log=self.loop.user_log)
+                             scene=scene, road=road, foxglove=self.foxglove, event_log=self.loop.event_log)
         self.loop.outbox = self.outbox
         self.pacer = Pacer(self.loop.run_steps, self.sim.dt, "fast" if o.mode == "fast" else (
             "lockstep" if o.mode == "lockstep" else "realtime"), max_catch_up=o.max_catch_up,
