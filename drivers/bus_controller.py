@@ -1,9 +1,10 @@
-"""A controller on the service's bus, sample by sample: the loop of the demo controllers (drivers.eps_demo,
-drivers.rider_assist_demo). ``ctl`` has a ``decoder`` (bridge.can_pack.SensorDecoder: ``receive``
-returns True when a frame completes a sample; ``time`` and ``values``), ``on_sample(t, values)``,
-``command_frames()`` (the frames to send after a sample), ``summary()`` and ``t`` (the last sample's
-simulated time, s). In lockstep the controller also drives simulated time: one SIM_STEP_REQ of one
-step after each acknowledgement."""
+"""A controller on the service's bus, sample by sample: the loop of the demo controllers (drivers.ecu_demo,
+drivers.eps_demo, drivers.rider_assist_demo). ``ctl`` has a ``decoder`` (bridge.can_pack.SensorDecoder:
+``receive`` returns True when a frame completes a sample; ``time`` and ``values``), ``on_sample(t, values)``
+(returning False when no commands are due after this sample), ``command_frames()`` (the frames to send
+after a sample), ``summary()``, ``t`` (the last sample's simulated time, s) and optionally ``done`` (True
+when its manoeuvre is over). In lockstep the controller also drives simulated time: a SIM_STEP_REQ of
+``steps`` steps after each acknowledgement."""
 from __future__ import annotations
 
 import argparse
@@ -18,9 +19,14 @@ from rtsim.errors import RtsimError
 
 def run(bus, ctl, duration: float | None = None, lockstep: bool = False,
         silent_after: float | None = None, linger: float = 0.25, timeout: float = 5.0,
-        first_frame_timeout: float = 60.0, waiting: Waiting | None = None) -> dict:
-    """Command every sample until ``duration`` s of simulated time (or ``silent_after`` + ``linger``),
-    or no frame for ``timeout`` s of wall time once frames flowed. Returns the summary plus counters."""
+        first_frame_timeout: float = 60.0, waiting: Waiting | None = None, steps: int = 1,
+        command_first: bool = False) -> dict:
+    """Command after every sample until ``duration`` s of simulated time (or ``silent_after`` +
+    ``linger``), until ``ctl.done``, or until no frame came for ``timeout`` s of wall time once frames
+    flowed (``first_frame_timeout`` s before the first: the service may still be warming up; ``waiting``
+    reports that wait). In lockstep, ``command_first`` sends the controller's commands before the first
+    step request. Returns the summary plus counters. A bus that fails under the controller (the service's
+    hub gone) raises RtsimError."""
     import can
 
     sent = received = commands = 0
@@ -32,26 +38,30 @@ def run(bus, ctl, duration: float | None = None, lockstep: bool = False,
         try:
             bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
         except Exception as exc:  # noqa: BLE001  (backends raise many types)
-            raise RtsimError(f"lost the CAN bus ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+            raise _lost(exc) from None
         sent += 1
 
     def request_step():
         nonlocal step_counter
         step_counter = (step_counter + 1) & 0xF
-        send(*ctl.codec.encode_step_request(1, step_counter))
+        send(*ctl.codec.encode_step_request(steps, step_counter))
 
     end = math.inf if duration is None else duration
     if silent_after is not None:
         end = min(end, silent_after + linger)
     if lockstep:
+        if command_first:
+            for frame in ctl.command_frames():
+                send(*frame)
+                commands += 1
         request_step()
     ack_id = ctl.codec.step_ack.frame_id
     last_rx = time.monotonic()
-    while ctl.t < end - 1e-9:
+    while ctl.t < end - 1e-9 and not getattr(ctl, "done", False):
         try:
             msg = bus.recv(0.1)
         except Exception as exc:  # noqa: BLE001
-            raise RtsimError(f"lost the CAN bus ({type(exc).__name__})") from None
+            raise _lost(exc) from None
         if msg is None:
             if time.monotonic() - last_rx > (timeout if received else first_frame_timeout):
                 break
@@ -68,8 +78,8 @@ def run(bus, ctl, duration: float | None = None, lockstep: bool = False,
                 request_step()
             continue
         if ctl.decoder.receive(msg.arbitration_id, msg.data):
-            ctl.on_sample(ctl.decoder.time, ctl.decoder.values)
-            if silent_after is None or ctl.t < silent_after - 1e-9:
+            due = ctl.on_sample(ctl.decoder.time, ctl.decoder.values) is not False
+            if due and (silent_after is None or ctl.t < silent_after - 1e-9):
                 for frame in ctl.command_frames():
                     send(*frame)
                     commands += 1
@@ -78,6 +88,11 @@ def run(bus, ctl, duration: float | None = None, lockstep: bool = False,
     out.update({"frames_sent": sent, "frames_received": received, "commands_sent": commands,
                 "last_command_sample_t": last_command_t})
     return out
+
+
+def _lost(exc: Exception) -> RtsimError:
+    return RtsimError(f"lost the CAN bus ({type(exc).__name__}: {' '.join(str(exc).split())}); "
+                      f"the service stopped or its hub went away")
 
 
 def main(name: str, doc: str, make_ctl, argv: list[str] | None = None) -> int:

@@ -41,6 +41,7 @@ from bridge.can_codec import Codec
 from bridge.can_pack import SensorDecoder
 from rtsim.errors import RtsimError
 
+from . import bus_controller
 from .base import I_BRAKE, I_STEER, I_THROTTLE, NSTATE, S_SPEED, S_X, S_Y, S_YAW
 from .driver import Driver
 from .path_follower import path_follower
@@ -180,67 +181,10 @@ class DemoEcu:
 def run(bus, ecu: DemoEcu, duration: float | None = None, lockstep: bool = False,
         timeout: float = 5.0, first_frame_timeout: float = 60.0, waiting: Waiting | None = None) -> dict:
     """Drive until the manoeuvre is done, ``duration`` s of ECU (simulation) time, or no sensor frame
-    for ``timeout`` s of wall time once frames flowed (``first_frame_timeout`` s before the first: the
-    service may still be warming up; ``waiting`` reports that wait). Returns the ECU summary plus bus
-    counters. A bus that fails under the ECU (the service's hub gone) raises RtsimError."""
-    import can
-
-    sent = received = 0
-    step_counter = 0
-    waiting_ack = False
-
-    def send(fid, data):
-        nonlocal sent
-        try:
-            bus.send(can.Message(arbitration_id=fid, data=data, is_extended_id=False))
-        except Exception as exc:  # noqa: BLE001  (backends raise many types)
-            raise _lost(exc) from None
-        sent += 1
-
-    def request_steps():
-        nonlocal step_counter, waiting_ack
-        step_counter = (step_counter + 1) & 0xF
-        send(*ecu.codec.encode_step_request(COMMAND_EVERY * 2, step_counter))   # 10 ms of 1 ms steps
-        waiting_ack = True
-
-    if lockstep:
-        for fid, data in ecu.command_frames():
-            send(fid, data)
-        request_steps()
-    ack_id = ecu.codec.step_ack.frame_id
-    last_rx = time.monotonic()
-    while not ecu.done and (duration is None or ecu.t < duration):
-        try:
-            msg = bus.recv(0.1)
-        except Exception as exc:  # noqa: BLE001
-            raise _lost(exc) from None
-        if msg is None:
-            if time.monotonic() - last_rx > (timeout if received else first_frame_timeout):
-                break
-            if not received and waiting is not None:
-                waiting.tick("the service's first sensor frames")
-            continue
-        last_rx = time.monotonic()
-        if not received and waiting is not None:
-            waiting.done("first frames from the service")
-        received += 1
-        if msg.arbitration_id == ack_id and lockstep:
-            _, ctr = ecu.codec.decode_step_ack(msg.data)
-            if ctr == step_counter:
-                request_steps()
-            continue
-        if ecu.decoder.receive(msg.arbitration_id, msg.data):
-            if ecu.on_sample(ecu.decoder.time, ecu.decoder.values):
-                for fid, data in ecu.command_frames():
-                    send(fid, data)
-    out = ecu.summary()
-    out.update({"frames_sent": sent, "frames_received": received})
-    return out
-
-
-def _lost(exc: Exception) -> RtsimError:
-    return RtsimError(f"lost the CAN bus ({type(exc).__name__}: {' '.join(str(exc).split())}); "
-                      f"the service stopped or its hub went away")
+    for ``timeout`` s of wall time once frames flowed (drivers.bus_controller.run: in lockstep, commands
+    first, then 10 ms of 1 ms steps per request). Returns the ECU summary plus bus counters."""
+    return bus_controller.run(bus, ecu, duration, lockstep, timeout=timeout, first_frame_timeout=first_frame_timeout,
+                              waiting=waiting, steps=COMMAND_EVERY * 2, command_first=True)
 
 
 def _say(line: str) -> None:
