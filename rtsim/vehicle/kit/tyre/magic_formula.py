@@ -418,13 +418,21 @@ def steady_slip(p, vx, vsy, omega, re):
 
 
 @inline_kernel
+def low_speed_damping(residual, low, vxlow, vx):
+    """Damping time d [s] of the contact deflections: ``residual`` + ``low`` 0.5 (1 + cos(pi |Vx|/vxlow))
+    below ``vxlow`` [m/s] (the relaxation lengths' damping that keeps a slow or standing tyre from
+    ringing), ``residual`` above."""
+    avx = abs(vx)
+    d = residual
+    if avx < vxlow:
+        d += low * 0.5 * (1.0 + cos(pi * avx / vxlow))
+    return d
+
+
+@inline_kernel
 def _damping_time(p, vx):
     """d [s] = DAMP_RESIDUAL + DAMP_VLOW 0.5 (1 + cos(pi |Vx|/VXLOW)) below VXLOW."""
-    avx = abs(vx)
-    d = p[P_DAMP_RESIDUAL]
-    if avx < p[P_VXLOW]:
-        d += p[P_DAMP_VLOW] * 0.5 * (1.0 + cos(pi * avx / p[P_VXLOW]))
-    return d
+    return low_speed_damping(p[P_DAMP_RESIDUAL], p[P_DAMP_VLOW], p[P_VXLOW], vx)
 
 
 @kernel

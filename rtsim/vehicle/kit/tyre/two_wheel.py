@@ -100,7 +100,7 @@ from rtsim.configfile import Range, Strict, bad
 from rtsim.jit import inline_kernel, kernel
 from rtsim.vehicle.kit.layout import offsets
 
-from .magic_formula import _relax_step, wind_up_limit
+from .magic_formula import _relax_step, low_speed_damping, wind_up_limit
 
 # ---- packed parameters ----------------------------------------------------------------------------
 (TW_MODEL,          # 0: magic_formula, 1: linear
@@ -483,11 +483,7 @@ def two_wheel_tyre_forces(p, fz, kappa, alpha, gamma, vx, mu):
 # ---- relaxation -----------------------------------------------------------------------------------
 @inline_kernel
 def _damping_time(p, vx):
-    avx = abs(vx)
-    d = p[TW_DAMP]
-    if avx < p[TW_VXLOW]:
-        d += p[TW_DAMP_LOW] * 0.5 * (1.0 + cos(pi * avx / p[TW_VXLOW]))
-    return d
+    return low_speed_damping(p[TW_DAMP], p[TW_DAMP_LOW], p[TW_VXLOW], vx)
 
 
 @kernel
