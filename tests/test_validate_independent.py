@@ -59,6 +59,13 @@ LATERAL = {
                     "tuning"),
     "smaller_than_structural": ({"stiffness_scale": 0.92}, "cannot be told apart", "tuning"),
     "stiffness_0.6": ({"stiffness_scale": 0.6}, [("tyre_slip_stiffness", "scale", 0.6, None)], "held-out"),
+    # accel_y, compared in the level frame the peer declares (no roll): written and run once after the
+    # frame option was built, the method unchanged
+    "accel_y_bias": ({"sensor": {"accel_y": {"bias": 0.3}}}, [("sensor_bias", "bias", 0.3, "accel_y")], "held-out"),
+    "accel_y_scale": ({"sensor": {"accel_y": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "accel_y")],
+                      "held-out"),
+    "accel_y_delay": ({"sensor": {"accel_y": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "accel_y")],
+                      "held-out"),
 }
 
 #: longitudinal (pitch-plane peer) case -> (hidden, expected, "held-out")
@@ -135,9 +142,9 @@ def test_lateral_peer(replayer, car, folder, case):
     seed = 99 if case == "stiffness_0.6" else 5 if case in ("none", "gyro_z_bias", "stiffness_0.5") else \
         17 + list(LATERAL).index(case)
     paths = lateral.write_runs(folder / case, car, n=7, seed=seed, **hidden)
-    res = run(Options(VEHICLE, paths, folder / f"{case}_report"), replayer=replayer)
+    res = run(Options(VEHICLE, paths, folder / f"{case}_report", accel_frame=lateral.ACCEL_FRAME), replayer=replayer)
     _show(case, res)
-    assert res.bench.lateral
+    assert res.bench.lateral and res.accel_frame == "level"
     _check(res, expected)
     # the structural report: every compared channel has a status; accel_y's roll-induced gain is
     # structural whenever no tyre effect was added to explain it

@@ -43,7 +43,7 @@ the share of the signature channels' cost it removes. It is not eligible when it
 clearly worse (WORSE), when a model effect changes its channels by less than the residual it leaves
 there (cannot be told apart from the structural mismatch), when a sensor effect removes less than
 SENSOR_EXPLAINS of its channel's cost, or when a gain or lag of accel_y is asked for without the roll
-angle compared (TILT). The uncertainty of the winner combines the runs' scatter with the linearised
+angle compared (TILT; body-frame accelerometers only: a level-frame one senses no tilt). The uncertainty of the winner combines the runs' scatter with the linearised
 interval whose noise is the residual left at the optimum: it widens with the unexplained residual.
 """
 from __future__ import annotations
@@ -299,7 +299,8 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         cand.delta_ic = local + cand.k * math.log(ntot)
         cand.ic = obj.ic(ctx.outputs, 0) + cand.delta_ic
     ch = cand.effect.channel
-    if cand.kind == "sensor" and cand.effect.name in TILT_CONFOUNDED and ch in TILT and TILT[ch] not in obj.channels:
+    if (cand.kind == "sensor" and cand.effect.name in TILT_CONFOUNDED and ch in TILT and TILT[ch] not in obj.channels
+            and ctx.replayer.accel_frame == "body"):          # a level-frame accelerometer senses no tilt
         what = cand.effect.name.split("_")[1]
         cand.confounded = (f"a {what} of {ch} cannot be told from the model's body {TILT[ch]} (the accelerometer "
                            f"reads g sin({TILT[ch]})): record {TILT[ch]} to tell them apart")
