@@ -87,3 +87,14 @@ def test_declared_frame(tmp_path):
         accel_frame([*level, none])
     with pytest.raises(DataError, match="'tilted' is not an accelerometer frame"):
         load_run(_csv(tmp_path / "x.csv", "tilted"))
+
+
+def test_structural_lag_sign():
+    """A model whose signal comes 20 ms after the car's is said to lag it (residual = model - car)."""
+    from rtsim.validate.structural import describe_signature, signature
+    t = np.arange(0.0, 10.0, 0.01)
+    car = np.sin(2.0 * t)
+    model = np.sin(2.0 * (t - 0.02))
+    sig = signature(t, model, model - car)
+    assert sig["kind"] == "lag" and sig["value"] == pytest.approx(0.02, rel=0.05)
+    assert describe_signature(sig, "m/s^2").startswith("lag: the model lags the car's signal by 20 ms")

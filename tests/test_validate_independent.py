@@ -26,10 +26,12 @@ were written and run once after the rules were final.
 """
 from __future__ import annotations
 
+import json
 import os
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import peer_sim
@@ -41,6 +43,7 @@ from rtsim.validate.workflow import Options, run
 
 VEHICLE = Path(__file__).resolve().parents[1] / "configs" / "vehicles" / "xbw.toml"
 WHEELS = ["wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr"]
+RELAXATION_M = 0.30     # m, the xbw tyres' lateral relaxation length at the nominal load (their .tir file)
 
 #: lateral case -> (hidden in the peer, expected (effect, parameter, value, channel) or a verdict word,
 #: "tuning"/"held-out")
@@ -57,7 +60,9 @@ LATERAL = {
     "two_at_once": ({"stiffness_scale": 0.5, "sensor": {"gyro_z": {"bias": 0.03}}},
                     [("tyre_slip_stiffness", "scale", 0.5, None), ("sensor_bias", "bias", 0.03, "gyro_z")],
                     "tuning"),
-    "smaller_than_structural": ({"stiffness_scale": 0.92}, "cannot be told apart", "tuning"),
+    # in the level frame the structural mismatch left is smaller, and an 8 % softer tyre moves the outputs by
+    # less than a standard error: no effect stands out, and none may be named
+    "smaller_than_structural": ({"stiffness_scale": 0.92}, ("cannot be told apart", "no catalogue effect"), "tuning"),
     "stiffness_0.6": ({"stiffness_scale": 0.6}, [("tyre_slip_stiffness", "scale", 0.6, None)], "held-out"),
     # accel_y, compared in the level frame the peer declares (no roll): written and run once after the
     # frame option was built, the method unchanged
@@ -150,15 +155,26 @@ def test_lateral_peer(replayer, car, folder, case):
     # structural whenever no tyre effect was added to explain it
     assert set(res.channels) == set(res.bench.compared)
     if case == "none":
-        assert res.channels["accel_y"]["status"] == "structural", res.channels["accel_y"]
-        assert res.channels["accel_y"]["signature"]["kind"] == "gain"
+        # compared in the level frame the peer declares, the body's roll gain is gone: in steady cornering
+        # the model's accel_y matches the peer's within 2 % (6-7 % in the body frame); what is left is a
+        # lag of the model's lateral response, about the time its tyres' relaxation length takes (the
+        # peer's tyre forces have none): structural, reported as such
+        m, d = res.after["accel_y"], res.bench.bands["accel_y"].mean
+        hold = np.abs(d) > 2.0
+        assert abs(float(m[hold] @ d[hold] / (d[hold] @ d[hold])) - 1.0) < 0.02
+        ay = res.channels["accel_y"]
+        assert ay["status"] == "structural" and ay["signature"]["kind"] == "lag", ay
+        lag = RELAXATION_M / lateral.SPEED
+        assert 0.5 * lag < ay["signature"]["value"] < 2.0 * lag, (ay, lag)
         for c in [*WHEELS, "gyro_z"]:
             assert res.channels[c]["status"] == "inside the band", (c, res.channels[c])
         assert res.nuisance and all(abs(v) > 0 for v, _ in res.nuisance.values())
         report.write(res, folder / "html")
         html = (folder / "html" / "report.html").read_text()
         assert "Per channel: explained, structural or inside the band" in html
-        assert "structural, not in the catalogue; gain" in html and "Nuisance adjustments" in html
+        assert "structural, not in the catalogue; lag: the model lags" in html and "Nuisance adjustments" in html
+        assert "Accelerations compared in the level frame" in html
+        assert json.loads((folder / "html" / "summary.json").read_text())["accel_frame"] == "level"
     if case == "two_at_once":
         assert res.correlations and all(abs(r) < 0.9 for _, _, r in res.correlations), res.correlations
 
