@@ -98,3 +98,13 @@ def test_structural_lag_sign():
     sig = signature(t, model, model - car)
     assert sig["kind"] == "lag" and sig["value"] == pytest.approx(0.02, rel=0.05)
     assert describe_signature(sig, "m/s^2").startswith("lag: the model lags the car's signal by 20 ms")
+
+
+def test_cli_frame_mismatch_is_an_error(tmp_path, capsys):
+    """`rtsim validate --accel-frame body` on runs that declare the level frame stops with the reason."""
+    from rtsim.validate.cli import _standalone
+    runs = [_csv(tmp_path / f"l{i}.csv", "level") for i in range(2)]
+    rc = _standalone(["--vehicle", str(VEHICLE), "--runs", *map(str, runs), "--report", str(tmp_path / "r"),
+                      "--accel-frame", "body", "--no-progress"])
+    assert rc == 2
+    assert "declare accel_frame level (l0.csv, l1.csv) but the body frame was asked" in capsys.readouterr().err

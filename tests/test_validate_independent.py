@@ -5,9 +5,11 @@ a tanh friction circle), quasi-static load transfer, no roll, no steering compli
 sharing only the car's `rtsim describe` numbers: 15 m/s, steering-wheel ramps to +-0.6 rad held 3 s,
 rear wheel torques that hold the speed recorded, seven repetitions. Against rtsim it differs, with no
 hidden effect, by a resistance offset (the wheel speeds drift apart by 0.8 rad/s over 12 s), the axles'
-rolling radii, and accel_y 6-7 % higher in the model in steady cornering (rtsim's accelerometer rolls
-with the body and senses gravity's component; the peer has no roll): structural mismatch the catalogue
-does not have. Longitudinal: tests/peer_sim.py, the pitch-plane peer (tests/test_validate_peer.py has
+rolling radii, and a lag of about 25 ms of the model's lateral response (its tyres' relaxation
+length; the peer's tyre forces follow the slip at once): structural mismatch the catalogue does not
+have. The peer declares its accelerations level-frame (`# accel_frame: level`: it has no roll), and the
+cases compare them so (Options.accel_frame): in rtsim's body frame the accelerometer rolls with the body
+and reads gravity's component, accel_y 6-7 % higher in steady cornering, which hid any accel_y scale. Longitudinal: tests/peer_sim.py, the pitch-plane peer (tests/test_validate_peer.py has
 its single-effect cases), here with a grade, no effect, and two effects at once.
 
 The bar (issue 15): a sensor bias, scale or delay on one channel is named with its value within 10 %
@@ -17,12 +19,16 @@ structural report and never a named effect; an effect smaller than the structura
 "cannot be told apart".
 
 Tuning vs held-out (marked per case below). TUNING: the cases the method's rules were decided or changed
-on: every lateral case except gyro_z scale and delay (the nuisance prior, the signature-channel
-information criterion and the accel_y/roll confounding were added after they failed), and the
-longitudinal none and two-at-once cases (a first rule on what a sensor effect may leave on its channel
-was dropped after two-at-once failed). HELD-OUT: gyro_z scale, gyro_z delay and the longitudinal grade
-passed the first time they ran, and stiffness 0.6 (seed 99) and the longitudinal mass-and-grade pair
-were written and run once after the rules were final.
+on: every lateral case except stiffness 0.6 and the accel_y cases (the nuisance prior, the
+signature-channel information criterion and the accel_y/roll confounding were added after they failed;
+gyro_z scale and delay, held out in the body frame where they passed the first time, failed in the level
+frame with road_grade added beside the right effect, and the rule that a grade is not named from
+level-frame data that never stand still was added on them), and the longitudinal none and two-at-once
+cases (a first rule on what a sensor effect may leave on its channel was dropped after two-at-once
+failed). HELD-OUT: the longitudinal grade passed the first time it ran; stiffness 0.6 (seed 99), the
+longitudinal mass-and-grade pair and the accel_y bias, scale and delay (level frame) were written and run
+once after the rules were final (accel_y delay ran again after the grade rule: road_grade had been
+added beside it).
 """
 from __future__ import annotations
 
@@ -52,8 +58,8 @@ LATERAL = {
     "gyro_z_bias": ({"sensor": {"gyro_z": {"bias": 0.03}}}, [("sensor_bias", "bias", 0.03, "gyro_z")], "tuning"),
     "stiffness_0.5": ({"stiffness_scale": 0.5}, [("tyre_slip_stiffness", "scale", 0.5, None)], "tuning"),
     "stiffness_0.7": ({"stiffness_scale": 0.7}, [("tyre_slip_stiffness", "scale", 0.7, None)], "tuning"),
-    "gyro_z_scale": ({"sensor": {"gyro_z": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "gyro_z")], "held-out"),
-    "gyro_z_delay": ({"sensor": {"gyro_z": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "gyro_z")], "held-out"),
+    "gyro_z_scale": ({"sensor": {"gyro_z": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "gyro_z")], "tuning"),
+    "gyro_z_delay": ({"sensor": {"gyro_z": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "gyro_z")], "tuning"),
     # 200 kg on a manoeuvre at constant speed: the speed controller's extra torque is a resistance
     # offset (a nuisance) and the yaw response barely moves; no named effect is the right answer
     "mass": ({"added_mass": 200.0}, ("no catalogue effect", "cannot be told apart"), "tuning"),
@@ -64,8 +70,8 @@ LATERAL = {
     # less than a standard error: no effect stands out, and none may be named
     "smaller_than_structural": ({"stiffness_scale": 0.92}, ("cannot be told apart", "no catalogue effect"), "tuning"),
     "stiffness_0.6": ({"stiffness_scale": 0.6}, [("tyre_slip_stiffness", "scale", 0.6, None)], "held-out"),
-    # accel_y, compared in the level frame the peer declares (no roll): written and run once after the
-    # frame option was built, the method unchanged
+    # accel_y, compared in the level frame the peer declares (no roll): written before the first run,
+    # never changed; scale and delay fail (KNOWN_FAILURES)
     "accel_y_bias": ({"sensor": {"accel_y": {"bias": 0.3}}}, [("sensor_bias", "bias", 0.3, "accel_y")], "held-out"),
     "accel_y_scale": ({"sensor": {"accel_y": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "accel_y")],
                       "held-out"),
@@ -141,7 +147,30 @@ ALL = bool(os.environ.get("RTSIM_VALIDATE_ALL"))
 EXTRA = () if ALL else ("stiffness_0.7",)
 
 
-@pytest.mark.parametrize("case", [c for c in LATERAL if c not in EXTRA])
+#: held-out cases that fail: the method's known limits, kept so that a fix shows (strict: a pass fails)
+KNOWN_FAILURES = {
+    "accel_y_scale": "named 1.111 (true 1.1), but accel_y's RMS falls 0.245 -> 0.058 m/s^2, 4.2 times, not 5: "
+                     "the structural mismatch left on accel_y (the model's lateral response lags the peer's by "
+                     "about 25 ms: its tyres' relaxation length, which the peer's tyres lack) is a floor of about "
+                     "0.056 m/s^2, a quarter of what the scale changes",
+    "accel_y_delay": "named about 0.071 s (true 0.1): the model's own accel_y lags the peer's by about 25 ms (its "
+                     "tyres' relaxation length; the catalogue's tyre_relaxation only adds length), and a delay fitted "
+                     "on accel_y alone cannot tell the sensor's delay from that structural lag",
+    "mass_and_grade": "two model effects at once are added one by one: the grade is added first at 0.045 "
+                      "(true 0.03) carrying part of the mass, then brake_lag and an accel_x bias; a joint fit of "
+                      "two model effects is not implemented",
+}
+
+
+def _known(case: str):
+    why = KNOWN_FAILURES[case]
+    if ALL:
+        return pytest.param(case, marks=pytest.mark.xfail(strict=True, reason=why))
+    return pytest.param(case, marks=pytest.mark.skip(reason=f"known failure ({why}); RTSIM_VALIDATE_ALL=1 runs it "
+                                                             "as a strict expected failure"))
+
+
+@pytest.mark.parametrize("case", [_known(c) if c in KNOWN_FAILURES else c for c in LATERAL if c not in EXTRA])
 def test_lateral_peer(replayer, car, folder, case):
     hidden, expected, _ = LATERAL[case]
     seed = 99 if case == "stiffness_0.6" else 5 if case in ("none", "gyro_z_bias", "stiffness_0.5") else \
@@ -177,22 +206,6 @@ def test_lateral_peer(replayer, car, folder, case):
         assert json.loads((folder / "html" / "summary.json").read_text())["accel_frame"] == "level"
     if case == "two_at_once":
         assert res.correlations and all(abs(r) < 0.9 for _, _, r in res.correlations), res.correlations
-
-
-#: held-out cases that fail: the method's known limits, kept so that a fix shows (strict: a pass fails)
-KNOWN_FAILURES = {
-    "mass_and_grade": "two model effects at once are added one by one: the grade is added first at 0.045 "
-                      "(true 0.03) carrying part of the mass, then brake_lag and an accel_x bias; a joint fit of "
-                      "two model effects is not implemented",
-}
-
-
-def _known(case: str):
-    why = KNOWN_FAILURES[case]
-    if ALL:
-        return pytest.param(case, marks=pytest.mark.xfail(strict=True, reason=why))
-    return pytest.param(case, marks=pytest.mark.skip(reason=f"known failure ({why}); RTSIM_VALIDATE_ALL=1 runs it "
-                                                             "as a strict expected failure"))
 
 
 @pytest.mark.parametrize("case", [_known(c) if c in KNOWN_FAILURES else c for c in LONGITUDINAL])
