@@ -1,5 +1,6 @@
 """The accelerometer frame of rtsim validate: the level-frame conversion against kinematics, and the
-frame a set of runs declares (CSV comment, --accel-frame) with its mismatches as clear errors.
+frame a set of runs declares (CSV comment, MCAP metadata, --accel-frame) with its mismatches as clear
+errors; the structural report's lag sign.
 
 Reference for the conversion: in a steady turn the centre of mass's acceleration in the yaw-aligned
 horizontal frame is v_x r (v_y' = 0), whatever the body's roll; a body-fixed accelerometer on the rolled
@@ -108,3 +109,14 @@ def test_cli_frame_mismatch_is_an_error(tmp_path, capsys):
                       "--accel-frame", "body", "--no-progress"])
     assert rc == 2
     assert "declare accel_frame level (l0.csv, l1.csv) but the body frame was asked" in capsys.readouterr().err
+
+
+def test_mcap_metadata_declares_the_frame(tmp_path):
+    """A recording's metadata record with the key accel_frame declares it, as a CSV comment does."""
+    from bridge.mcap_recorder import Recorder
+    from bridge.payloads import encode_json
+    with Recorder(tmp_path / "run.mcap", "xbw", metadata={"logger": {"accel_frame": "level"}}) as rec:
+        for k in range(20):
+            rec.record("sensors", k * 10_000_000, encode_json({"time": k * 0.01, "accel_y": 0.1 * k}))
+    run = load_run(tmp_path / "run.mcap")
+    assert run.accel_frame == "level" and run.channels["accel_y"].size == 20
