@@ -5,8 +5,8 @@ backend) and `DIR/summary.json`:
      "before": {channel: {"rms", "max", "inside_band"}}, "after": {...},
      "iterations": [{"iteration", "model_effects", "cost", "metrics", "where", "verdict", "winner",
                      "runner_up", "candidates", "seconds"}, ...],
-     "verdict": text, "accel_frame": "body" | "level", "channels": {channel: {"status", "text", "signature", "inside_band", "rms",
-     "explained_by"}}, "nuisance": {name: {"value", "unit"}}, "correlations": [...], "confounded": [...]}
+     "verdict": text, "accel_frame": "body" | "level", "channels": {channel: {"status", "text", "signature",
+     "inside_band", "rms", "explained_by"}}, "nuisance": {name: {"value", "unit"}}, "correlations": [...], "confounded": [...]}
 
 rms and max are in the channel's SI unit; inside_band is the share of samples (0..1) inside the 95 %
 band, null when there is no band (one run). Uncertainties are 95 % half-widths in the parameter's unit.
