@@ -328,16 +328,19 @@ def write_runs(folder: Path, car: Car, n: int = 7, seed: int = 0, duration: floa
     return paths
 
 
-def log_run(path: Path, t: np.ndarray, ch: dict, noise: dict, rng, clock: float) -> Path:
+def log_run(path: Path, t: np.ndarray, ch: dict, noise: dict, rng, clock: float,
+            declare: dict | None = None) -> Path:
     """A field logger's CSV of one run: `time` on the logger's own clock (t + clock + up to 1 s, s), then
     the channels of `noise` with their white noise (standard deviation in the channel's unit) added,
-    started and stopped up to 125 samples late and early (draws from `rng` in that order)."""
+    started and stopped up to 125 samples late and early (draws from `rng` in that order). `declare`:
+    the logger's configuration written as `# key: value` lines before the header (e.g. accel_frame)."""
     names = list(noise)
     x = np.column_stack([ch[c] + rng.normal(0.0, noise[c], t.size) for c in names])
     k0 = int(rng.integers(0, 125))
     k1 = t.size - int(rng.integers(0, 125))
     clock = clock + rng.uniform(0.0, 1.0)
     with path.open("w") as fh:
+        fh.writelines(f"# {k}: {v}\n" for k, v in (declare or {}).items())
         fh.write(",".join(("time", *names)) + "\n")
         np.savetxt(fh, np.column_stack([t[k0:k1] + clock, x[k0:k1]]), delimiter=",", fmt="%.9g")
     return path

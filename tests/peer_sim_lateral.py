@@ -16,7 +16,9 @@ Model (SI units, ISO 8855 body axes: x forward, y left, z up; yaw rate r positiv
   a fixed effective rolling radius (describe's wheel_radius), rolling resistance c Fz r;
 - wheels: spin J omega' = T_drive - Fx r - My, integrated semi-implicitly in the slip (the tyre's
   slope d Fx / d omega taken implicitly), the body by symplectic Euler at `DT`;
-- accelerometer and gyro at the centre of mass (flat road: no gravity components).
+- accelerometer and gyro at the centre of mass (flat road: no gravity components); with no roll or
+  pitch its accelerations are the ground-plane (level-frame) ones, and its CSV files declare it
+  (`# accel_frame: level`, the declaration rtsim validate reads, as an INS logger's configuration says it).
 Hidden effects of its own: tyre stiffness scale (both stiffnesses), added mass (a point mass at the
 centre of mass: no yaw inertia), and any sensor bias, scale or delay applied to a recorded channel.
 
@@ -52,6 +54,7 @@ NOISE = {"steering_wheel_angle": 0.0005, "brake_pressure": 4.0, "wheel_torque_rl
          "wheel_angle_fl": 0.002, "wheel_angle_fr": 0.002, "wheel_angle_rl": 0.002, "wheel_angle_rr": 0.002,
          "accel_x": 0.1, "accel_y": 0.1, "gyro_z": 0.002}
 CHANNELS = tuple(NOISE)
+ACCEL_FRAME = "level"        # the frame of the recorded accel_x / accel_y: the ground plane (no roll, no pitch)
 
 # parameter vector layout (one float array for the compiled kernel)
 (P_M, P_IZZ, P_A, P_B, P_H, P_TF, P_TR, P_RE, P_JF, P_JR, P_CYF, P_CYR, P_CX, P_FZF, P_FZR, P_MU, P_RR, P_CDA,
@@ -237,5 +240,6 @@ def write_runs(folder: Path, car: dict, n: int = 7, seed: int = 0, stiffness_sca
                          stiffness_scale, added_mass)
         for c, eff in (sensor or {}).items():
             ch[c] = _sensor(t, ch[c], **eff)
-        paths.append(log_run(folder / f"lat{k + 1}.csv", t, ch, {c: NOISE[c] for c in CHANNELS}, rng, 80.0 * (k + 1)))
+        paths.append(log_run(folder / f"lat{k + 1}.csv", t, ch, {c: NOISE[c] for c in CHANNELS}, rng, 80.0 * (k + 1),
+                             declare={"accel_frame": ACCEL_FRAME}))
     return paths

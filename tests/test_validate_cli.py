@@ -49,7 +49,8 @@ def test_cli_writes_report_summary_and_new_config(report):
     assert hashlib.sha256(VEHICLE.read_bytes()).hexdigest() == digest          # original untouched
     summ = json.loads((out / "summary.json").read_text())
     assert set(summ) == {"effects", "before", "after", "iterations", "verdict", "channels", "nuisance",
-                         "correlations", "confounded"}
+                         "correlations", "confounded", "accel_frame"}
+    assert summ["accel_frame"] == "body" and "accelerometer frame: body" in text     # rtsim's own runs: body
     eff = summ["effects"][0]
     assert eff["name"] == "sensor_bias" and eff["parameters"]["channel"] == "accel_x"
     assert abs(eff["parameters"]["bias"] - 0.15) < 0.015 and eff["uncertainty"]["bias"] > 0

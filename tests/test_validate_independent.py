@@ -5,10 +5,13 @@ a tanh friction circle), quasi-static load transfer, no roll, no steering compli
 sharing only the car's `rtsim describe` numbers: 15 m/s, steering-wheel ramps to +-0.6 rad held 3 s,
 rear wheel torques that hold the speed recorded, seven repetitions. Against rtsim it differs, with no
 hidden effect, by a resistance offset (the wheel speeds drift apart by 0.8 rad/s over 12 s), the axles'
-rolling radii, and accel_y 6-7 % higher in the model in steady cornering (rtsim's accelerometer rolls
-with the body and senses gravity's component; the peer has no roll): structural mismatch the catalogue
-does not have. Longitudinal: tests/peer_sim.py, the pitch-plane peer (tests/test_validate_peer.py has
-its single-effect cases), here with a grade, no effect, and two effects at once.
+rolling radii, and a lag of about 25 ms of the model's lateral response (its tyres' relaxation
+length; the peer's tyre forces follow the slip at once): structural mismatch the catalogue does not
+have. The peer declares its accelerations level-frame (`# accel_frame: level`: it has no roll), and the
+cases compare them so (Options.accel_frame): in rtsim's body frame the accelerometer rolls with the body
+and reads gravity's component, accel_y 6-7 % higher in steady cornering, which hid any accel_y scale.
+Longitudinal: tests/peer_sim.py, the pitch-plane peer (tests/test_validate_peer.py has its single-effect
+cases), here with a grade, no effect, and two effects at once.
 
 The bar (issue 15): a sensor bias, scale or delay on one channel is named with its value within 10 %
 and that channel's RMS falls >= 5x; a model effect that changes the outputs by more than the structural
@@ -17,19 +20,25 @@ structural report and never a named effect; an effect smaller than the structura
 "cannot be told apart".
 
 Tuning vs held-out (marked per case below). TUNING: the cases the method's rules were decided or changed
-on: every lateral case except gyro_z scale and delay (the nuisance prior, the signature-channel
-information criterion and the accel_y/roll confounding were added after they failed), and the
-longitudinal none and two-at-once cases (a first rule on what a sensor effect may leave on its channel
-was dropped after two-at-once failed). HELD-OUT: gyro_z scale, gyro_z delay and the longitudinal grade
-passed the first time they ran, and stiffness 0.6 (seed 99) and the longitudinal mass-and-grade pair
-were written and run once after the rules were final.
+on: every lateral case except stiffness 0.6 and the accel_y bias and scale (the nuisance prior, the
+signature-channel information criterion and the accel_y/roll confounding were added after they failed;
+gyro_z scale and delay, held out in the body frame where they passed the first time, and accel_y delay
+failed in the level frame with road_grade added beside the sensor effect, and the rule that a grade is
+not named from level-frame data that never stand still was added on them), and the longitudinal none
+and two-at-once cases (a first rule on what a sensor effect may leave on its channel was dropped after
+two-at-once failed). HELD-OUT: the longitudinal grade passed the first time it ran; stiffness 0.6 (seed
+99), the longitudinal mass-and-grade pair and the accel_y bias and scale were written and run once after
+the rules that concern them were final (the level-frame grade rule changed neither: no grade was
+involved).
 """
 from __future__ import annotations
 
+import json
 import os
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import peer_sim
@@ -41,6 +50,7 @@ from rtsim.validate.workflow import Options, run
 
 VEHICLE = Path(__file__).resolve().parents[1] / "configs" / "vehicles" / "xbw.toml"
 WHEELS = ["wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr"]
+RELAXATION_M = 0.30     # m, the xbw tyres' lateral relaxation length at the nominal load (their .tir file)
 
 #: lateral case -> (hidden in the peer, expected (effect, parameter, value, channel) or a verdict word,
 #: "tuning"/"held-out")
@@ -49,16 +59,26 @@ LATERAL = {
     "gyro_z_bias": ({"sensor": {"gyro_z": {"bias": 0.03}}}, [("sensor_bias", "bias", 0.03, "gyro_z")], "tuning"),
     "stiffness_0.5": ({"stiffness_scale": 0.5}, [("tyre_slip_stiffness", "scale", 0.5, None)], "tuning"),
     "stiffness_0.7": ({"stiffness_scale": 0.7}, [("tyre_slip_stiffness", "scale", 0.7, None)], "tuning"),
-    "gyro_z_scale": ({"sensor": {"gyro_z": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "gyro_z")], "held-out"),
-    "gyro_z_delay": ({"sensor": {"gyro_z": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "gyro_z")], "held-out"),
+    "gyro_z_scale": ({"sensor": {"gyro_z": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "gyro_z")], "tuning"),
+    "gyro_z_delay": ({"sensor": {"gyro_z": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "gyro_z")], "tuning"),
     # 200 kg on a manoeuvre at constant speed: the speed controller's extra torque is a resistance
     # offset (a nuisance) and the yaw response barely moves; no named effect is the right answer
     "mass": ({"added_mass": 200.0}, ("no catalogue effect", "cannot be told apart"), "tuning"),
     "two_at_once": ({"stiffness_scale": 0.5, "sensor": {"gyro_z": {"bias": 0.03}}},
                     [("tyre_slip_stiffness", "scale", 0.5, None), ("sensor_bias", "bias", 0.03, "gyro_z")],
                     "tuning"),
-    "smaller_than_structural": ({"stiffness_scale": 0.92}, "cannot be told apart", "tuning"),
+    # in the level frame the structural mismatch left is smaller, and an 8 % softer tyre moves the outputs by
+    # less than a standard error: no effect stands out, and none may be named
+    "smaller_than_structural": ({"stiffness_scale": 0.92}, ("cannot be told apart", "no catalogue effect"), "tuning"),
     "stiffness_0.6": ({"stiffness_scale": 0.6}, [("tyre_slip_stiffness", "scale", 0.6, None)], "held-out"),
+    # accel_y, compared in the level frame the peer declares (no roll): written before their first run and
+    # never changed; scale and delay fail (KNOWN_FAILURES); delay is tuning: it showed the level-frame grade
+    # problem with the gyro_z cases
+    "accel_y_bias": ({"sensor": {"accel_y": {"bias": 0.3}}}, [("sensor_bias", "bias", 0.3, "accel_y")], "held-out"),
+    "accel_y_scale": ({"sensor": {"accel_y": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "accel_y")],
+                      "held-out"),
+    "accel_y_delay": ({"sensor": {"accel_y": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "accel_y")],
+                      "tuning"),
 }
 
 #: longitudinal (pitch-plane peer) case -> (hidden, expected, "held-out")
@@ -129,35 +149,17 @@ ALL = bool(os.environ.get("RTSIM_VALIDATE_ALL"))
 EXTRA = () if ALL else ("stiffness_0.7",)
 
 
-@pytest.mark.parametrize("case", [c for c in LATERAL if c not in EXTRA])
-def test_lateral_peer(replayer, car, folder, case):
-    hidden, expected, _ = LATERAL[case]
-    seed = 99 if case == "stiffness_0.6" else 5 if case in ("none", "gyro_z_bias", "stiffness_0.5") else \
-        17 + list(LATERAL).index(case)
-    paths = lateral.write_runs(folder / case, car, n=7, seed=seed, **hidden)
-    res = run(Options(VEHICLE, paths, folder / f"{case}_report"), replayer=replayer)
-    _show(case, res)
-    assert res.bench.lateral
-    _check(res, expected)
-    # the structural report: every compared channel has a status; accel_y's roll-induced gain is
-    # structural whenever no tyre effect was added to explain it
-    assert set(res.channels) == set(res.bench.compared)
-    if case == "none":
-        assert res.channels["accel_y"]["status"] == "structural", res.channels["accel_y"]
-        assert res.channels["accel_y"]["signature"]["kind"] == "gain"
-        for c in [*WHEELS, "gyro_z"]:
-            assert res.channels[c]["status"] == "inside the band", (c, res.channels[c])
-        assert res.nuisance and all(abs(v) > 0 for v, _ in res.nuisance.values())
-        report.write(res, folder / "html")
-        html = (folder / "html" / "report.html").read_text()
-        assert "Per channel: explained, structural or inside the band" in html
-        assert "structural, not in the catalogue; gain" in html and "Nuisance adjustments" in html
-    if case == "two_at_once":
-        assert res.correlations and all(abs(r) < 0.9 for _, _, r in res.correlations), res.correlations
-
-
-#: held-out cases that fail: the method's known limits, kept so that a fix shows (strict: a pass fails)
+#: cases that fail: the method's known limits, kept so that a fix shows (strict: a pass fails)
 KNOWN_FAILURES = {
+    "accel_y_scale": "named 1.111 (true 1.1), but accel_y's RMS falls 0.245 -> 0.058 m/s^2, 4.2 times, not 5: "
+                     "the structural mismatch left on accel_y (the model's lateral response lags the peer's by "
+                     "about 25 ms: its tyres' relaxation length, which the peer's tyres lack) is a floor of about "
+                     "0.056 m/s^2, a quarter of what the scale changes",
+    "accel_y_delay": "named 0.077 s (true 0.1): the model's own accel_y lags the peer's by about 25 ms (its "
+                     "tyres' relaxation length; the catalogue's tyre_relaxation only adds length), and a delay fitted "
+                     "on accel_y alone cannot tell the sensor's delay from that structural lag; a mass of -100 kg "
+                     "is added beside it (the wheel speeds' resistance drift, which a grade carried before the "
+                     "level-frame grade rule)",
     "mass_and_grade": "two model effects at once are added one by one: the grade is added first at 0.045 "
                       "(true 0.03) carrying part of the mass, then brake_lag and an accel_x bias; a joint fit of "
                       "two model effects is not implemented",
@@ -170,6 +172,44 @@ def _known(case: str):
         return pytest.param(case, marks=pytest.mark.xfail(strict=True, reason=why))
     return pytest.param(case, marks=pytest.mark.skip(reason=f"known failure ({why}); RTSIM_VALIDATE_ALL=1 runs it "
                                                              "as a strict expected failure"))
+
+
+@pytest.mark.parametrize("case", [_known(c) if c in KNOWN_FAILURES else c for c in LATERAL if c not in EXTRA])
+def test_lateral_peer(replayer, car, folder, case):
+    hidden, expected, _ = LATERAL[case]
+    seed = 99 if case == "stiffness_0.6" else 5 if case in ("none", "gyro_z_bias", "stiffness_0.5") else \
+        17 + list(LATERAL).index(case)
+    paths = lateral.write_runs(folder / case, car, n=7, seed=seed, **hidden)
+    res = run(Options(VEHICLE, paths, folder / f"{case}_report", accel_frame=lateral.ACCEL_FRAME), replayer=replayer)
+    _show(case, res)
+    assert res.bench.lateral and res.accel_frame == "level"
+    _check(res, expected)
+    # the structural report: every compared channel has a status; accel_y's roll-induced gain is
+    # structural whenever no tyre effect was added to explain it
+    assert set(res.channels) == set(res.bench.compared)
+    if case == "none":
+        # compared in the level frame the peer declares, the body's roll gain is gone: in steady cornering
+        # the model's accel_y matches the peer's within 2 % (6-7 % in the body frame); what is left is a
+        # lag of the model's lateral response, about the time its tyres' relaxation length takes (the
+        # peer's tyre forces have none): structural, reported as such
+        m, d = res.after["accel_y"], res.bench.bands["accel_y"].mean
+        hold = np.abs(d) > 2.0
+        assert abs(float(m[hold] @ d[hold] / (d[hold] @ d[hold])) - 1.0) < 0.02
+        ay = res.channels["accel_y"]
+        assert ay["status"] == "structural" and ay["signature"]["kind"] == "lag", ay
+        lag = RELAXATION_M / lateral.SPEED
+        assert 0.5 * lag < ay["signature"]["value"] < 2.0 * lag, (ay, lag)
+        for c in [*WHEELS, "gyro_z"]:
+            assert res.channels[c]["status"] == "inside the band", (c, res.channels[c])
+        assert res.nuisance and all(abs(v) > 0 for v, _ in res.nuisance.values())
+        report.write(res, folder / "html")
+        html = (folder / "html" / "report.html").read_text()
+        assert "Per channel: explained, structural or inside the band" in html
+        assert "structural, not in the catalogue; lag: the model lags" in html and "Nuisance adjustments" in html
+        assert "Accelerations compared in the level frame" in html
+        assert json.loads((folder / "html" / "summary.json").read_text())["accel_frame"] == "level"
+    if case == "two_at_once":
+        assert res.correlations and all(abs(r) < 0.9 for _, _, r in res.correlations), res.correlations
 
 
 @pytest.mark.parametrize("case", [_known(c) if c in KNOWN_FAILURES else c for c in LONGITUDINAL])

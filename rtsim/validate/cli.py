@@ -21,6 +21,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="'xcorr' (cross-correlation of the inputs, default) or 'event:<channel>[:<fraction>]'")
     p.add_argument("--compare", nargs="+", help="output channels to compare (default: wheel_speed_fl..rr, "
                                                 "accel_x; + accel_y, gyro_z, roll when steering)")
+    p.add_argument("--accel-frame", choices=("body", "level"),
+                   help="frame of the runs' accel_x/y/z: 'body' (the IMU's axes, senses gravity when the body rolls "
+                        "or pitches) or 'level' (yaw-aligned horizontal frame, as INS loggers output); default: as "
+                        "the runs declare it (CSV comment '# accel_frame: level' or MCAP metadata), else body")
     p.add_argument("--max-iterations", type=int, default=4, help="effects added at most (default 4)")
     p.add_argument("--workers", type=int, default=2, help="processes fitting candidates in parallel (default 2)")
     p.add_argument("--ray", metavar="auto|ADDRESS", help="re-simulate on Ray: 'auto' starts a local instance on "
@@ -65,7 +69,7 @@ def main(args: argparse.Namespace) -> int:
 
     opts = Options(vehicle=args.vehicle, runs=list(args.runs), report=args.report, road=args.road, rate=args.rate,
                    align=args.align, max_iterations=args.max_iterations, workers=args.workers, ray=args.ray,
-                   compare=args.compare)
+                   compare=args.compare, accel_frame=args.accel_frame)
     prog = nullcontext(None) if args.no_progress else RichProgress()
     with prog as pr:
         opts.progress = pr
@@ -80,6 +84,7 @@ def main(args: argparse.Namespace) -> int:
                                     "value +- 95 % half-width")
         summ = report.write(res, args.report)
     print(f"verdict: {res.verdict}")
+    print(f"accelerometer frame: {res.accel_frame}")
     for e in res.effects:
         print(f"added: {e.label()}  (+- {', '.join(f'{v:.2g}' for v in e.uncertainty.values())})")
     for c, m in summ["after"].items():

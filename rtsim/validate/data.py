@@ -9,6 +9,12 @@ What is checked, and what happens (one-line messages naming the file, column and
   counted in the run's notes; a channel with a longer gap is dropped from that run (noted);
 - columns that are not sensor channels (state columns of `rtsim run`, anything else) are ignored
   (named once in the notes); wheel angles are unwrapped.
+
+The accelerometer frame a logger writes (`accel_frame`: "body" or "level", see replay) may be declared
+in a run: a comment line `# accel_frame: level` before a CSV's header, or an MCAP metadata record (any
+name) with the key `accel_frame`. An unknown frame rejects the run; runs declaring different frames, or a
+declaration that contradicts the frame asked for (`rtsim validate --accel-frame`), are an error
+(`accel_frame`).
 """
 from __future__ import annotations
 
@@ -29,6 +35,8 @@ MAX_GAP = 0.1
 MIN_SAMPLES = 10
 #: The model inputs a run may carry (sensor channels measuring the inputs).
 INPUTS = ("brake_pressure", "wheel_torque_rl", "wheel_torque_rr", "throttle_angle", "steering_wheel_angle")
+#: accelerometer frames a logger may declare (replay.ACCEL_FRAMES; kept here so loading needs no model)
+ACCEL_FRAMES = ("body", "level")
 
 
 class DataError(ConfigError):
@@ -42,6 +50,7 @@ class Run:
     time: np.ndarray
     channels: dict[str, np.ndarray]
     notes: list[str] = field(default_factory=list)
+    accel_frame: str | None = None     # the frame the run declares for its accelerations, None: undeclared
 
     @property
     def name(self) -> str:
@@ -64,8 +73,25 @@ class Rejected:
 
 
 # ---------------------------------------------------------------------------------------- reading
-def _read_csv(path: Path) -> tuple[list[str], np.ndarray]:
-    """Header and a float matrix (NaN where a cell is empty or not a number)."""
+def _csv_declarations(text: str) -> dict[str, str]:
+    """`# key: value` (or `# key = value`) comment lines before the header, lower-case keys."""
+    out = {}
+    for ln in text.splitlines():
+        s = ln.strip()
+        if not s:
+            continue
+        if not s.startswith("#"):
+            break
+        key, sep, value = s.lstrip("#").partition(":")
+        if not sep:
+            key, sep, value = s.lstrip("#").partition("=")
+        if sep and key.strip():
+            out[key.strip().lower()] = value.strip()
+    return out
+
+
+def _read_csv(path: Path) -> tuple[list[str], np.ndarray, dict[str, str]]:
+    """Header, a float matrix (NaN where a cell is empty or not a number) and the declarations."""
     try:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as exc:
@@ -94,7 +120,7 @@ def _read_csv(path: Path) -> tuple[list[str], np.ndarray]:
                     pass
     if m.size == 0:
         m = np.zeros((0, ncol))
-    return header, m
+    return header, m, _csv_declarations(text)
 
 
 def _read_mcap(path: Path, sensor_names) -> tuple[list[str], np.ndarray]:
@@ -117,6 +143,11 @@ def _read_mcap(path: Path, sensor_names) -> tuple[list[str], np.ndarray]:
                 m[i, j] = float(v)
     if not info.complete:
         header.append("#incomplete")   # marker picked up by load_run's notes
+    frames = {str(rec["accel_frame"]).strip() for rec in info.metadata.values() if "accel_frame" in rec}
+    if len(frames) > 1:
+        raise DataError(f"{path}: metadata declare several accelerometer frames ({', '.join(sorted(frames))})")
+    if frames:
+        header.append("#accel_frame=" + frames.pop())
     return header, m
 
 
@@ -147,13 +178,20 @@ def load_run(path: str | Path, sensor_names=SENSOR_NAMES) -> Run:
     if not path.is_file():
         raise DataError(f"{path}: no such file")
     suffix = path.suffix.lower()
+    declared = None
     if suffix == ".csv":
-        header, m = _read_csv(path)
+        header, m, decl = _read_csv(path)
+        declared = decl.get("accel_frame")
     elif suffix == ".mcap":
         header, m = _read_mcap(path, sensor_names)
     else:
         raise DataError(f"{path}: unknown run format {path.suffix or '(none)'}; use .csv or .mcap")
     notes: list[str] = []
+    if header and header[-1].startswith("#accel_frame="):
+        declared = header.pop().partition("=")[2]
+    if declared is not None and declared.lower() not in ACCEL_FRAMES:
+        raise DataError(f"{path}: accel_frame {declared!r} is not an accelerometer frame (use one of "
+                        f"{', '.join(ACCEL_FRAMES)})")
     if header and header[-1] == "#incomplete":
         header = header[:-1]
         notes.append("MCAP file was not closed (recovered complete chunks only)")
@@ -193,7 +231,7 @@ def load_run(path: str | Path, sensor_names=SENSOR_NAMES) -> Run:
         channels[name] = x
     if not channels:
         raise DataError(f"{path}: no usable sensor channel (expected any of {', '.join(sensor_names)})")
-    return Run(path, t, channels, notes)
+    return Run(path, t, channels, notes, declared.lower() if declared is not None else None)
 
 
 def load_runs(paths: list[str | Path], sensor_names=SENSOR_NAMES) -> tuple[list[Run], list[Rejected]]:
@@ -217,6 +255,35 @@ def load_runs(paths: list[str | Path], sensor_names=SENSOR_NAMES) -> tuple[list[
         except DataError as exc:
             rejected.append(Rejected(f, str(exc)))
     return runs, rejected
+
+
+def accel_frame(runs: list[Run], asked: str | None = None) -> str:
+    """The accelerometer frame of a set of runs: the one they declare, else `asked`, else "body".
+    DataError when runs declare different frames, when some declare one and others none with nothing
+    asked, or when the declaration contradicts `asked`."""
+    if asked is not None and asked not in ACCEL_FRAMES:
+        raise DataError(f"accelerometer frame {asked!r}: use one of {', '.join(ACCEL_FRAMES)}")
+    by: dict[str | None, list[str]] = {}
+    for r in runs:
+        by.setdefault(r.accel_frame, []).append(r.name)
+
+    def names(frame):
+        f = by[frame]
+        return ", ".join(f[:3]) + (f" and {len(f) - 3} more" if len(f) > 3 else "")
+    declared = sorted(f for f in by if f is not None)
+    if len(declared) > 1:
+        raise DataError("the runs declare different accelerometer frames: " + "; ".join(
+            f"{f} ({names(f)})" for f in declared) + "; one set of runs has one frame")
+    if not declared:
+        return asked or "body"
+    frame = declared[0]
+    if asked is not None and asked != frame:
+        raise DataError(f"the runs declare accel_frame {frame} ({names(frame)}) but the {asked} frame was asked "
+                        f"for (--accel-frame)")
+    if None in by and asked is None:
+        raise DataError(f"some runs declare accel_frame {frame} ({names(frame)}), others none ({names(None)}): "
+                        f"declare it in every run or pass --accel-frame")
+    return frame
 
 
 def unit(channel: str) -> str:

@@ -43,8 +43,10 @@ the share of the signature channels' cost it removes. It is not eligible when it
 clearly worse (WORSE), when a model effect changes its channels by less than the residual it leaves
 there (cannot be told apart from the structural mismatch), when a sensor effect removes less than
 SENSOR_EXPLAINS of its channel's cost, or when a gain or lag of accel_y is asked for without the roll
-angle compared (TILT). The uncertainty of the winner combines the runs' scatter with the linearised
-interval whose noise is the residual left at the optimum: it widens with the unexplained residual.
+angle compared (TILT; body-frame accelerometers only: a level-frame one senses no tilt), or when a grade
+is asked for of level-frame data that never stand still (LEVEL_CONFOUNDED). The uncertainty of the
+winner combines the runs' scatter with the linearised interval whose noise is the residual left at the
+optimum: it widens with the unexplained residual.
 """
 from __future__ import annotations
 
@@ -59,7 +61,7 @@ from rtsim.errors import RtsimError
 from rtsim.vehicle.kit.sensor_model import delayed
 
 from .effectset import Effect, catalogue
-from .objective import Objective, _tau
+from .objective import MOVING, Objective, _tau
 from .stats import t_critical
 from .replay import Replayer, ReplayInputs
 from .signals import DERIVED
@@ -86,6 +88,10 @@ SENSOR_EXPLAINS = 0.75       # a sensor effect removes at least this share of it
 #: lag of accel_y cannot be told from the model's roll (its roll stiffness, not in the catalogue)
 TILT = {"accel_y": "roll"}
 TILT_CONFOUNDED = ("sensor_scale", "sensor_delay")
+#: a level-frame accelerometer senses a grade as it senses a resistance (a constant longitudinal force while
+#: the car moves: the resistance-offset nuisance), where a body-frame one senses no grade at all: in the level
+#: frame a grade is told from a resistance only where the car stands still
+LEVEL_CONFOUNDED = ("road_grade",)
 NEUTRAL = {"scale": 1.0, "stiffness": math.inf}
 SENSOR_FOR = {s: a for s, a in DERIVED.items()}      # wheel_speed_x -> wheel_angle_x
 
@@ -261,6 +267,14 @@ def _finish(ctx: Context, effect: Effect, kind: str, k: int, out: dict, J: np.nd
     return cand
 
 
+def _moves_throughout(ctx: Context) -> bool:
+    """Whether the benchmark's mean wheel speeds say the car moves (faster than objective.MOVING) at every
+    sample."""
+    obj = ctx.objective
+    w = [obj.mean[c] for c in obj.channels if c.startswith("wheel_speed_")]
+    return bool(w) and bool(np.all(np.abs(np.mean(w, axis=0)) * ctx.replayer.wheel_radius > MOVING))
+
+
 def channel_evidence(ctx: Context, cand: Candidate) -> None:
     """Per channel: the cost before and with the candidate and how far it moves the channel; its
     signature channels (a sensor effect: its own channel; a model effect: the channels it moves by at
@@ -299,10 +313,16 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         cand.delta_ic = local + cand.k * math.log(ntot)
         cand.ic = obj.ic(ctx.outputs, 0) + cand.delta_ic
     ch = cand.effect.channel
-    if cand.kind == "sensor" and cand.effect.name in TILT_CONFOUNDED and ch in TILT and TILT[ch] not in obj.channels:
+    if (cand.kind == "sensor" and cand.effect.name in TILT_CONFOUNDED and ch in TILT and TILT[ch] not in obj.channels
+            and ctx.replayer.accel_frame == "body"):          # a level-frame accelerometer senses no tilt
         what = cand.effect.name.split("_")[1]
         cand.confounded = (f"a {what} of {ch} cannot be told from the model's body {TILT[ch]} (the accelerometer "
                            f"reads g sin({TILT[ch]})): record {TILT[ch]} to tell them apart")
+    if (cand.effect.name in LEVEL_CONFOUNDED and ctx.replayer.accel_frame == "level" and obj.nuisance is not None
+            and _moves_throughout(ctx)):
+        cand.confounded = ("in the level frame a grade reads as a constant resistance (the resistance-offset "
+                           "adjustment) while the car moves, and it never stands still here: record the body "
+                           "frame (its accel_x senses no grade) to tell them apart")
     if not cand.plausible:
         return
     notes = [cand.note] if cand.note else []

@@ -36,6 +36,15 @@ could start a braked car rolling); the brake starts at the
 measured line pressure (stuck when at rest). A car found at rest first settles for `SETTLE` s with the
 first inputs held (it stood before the recording started; an added mass or a grade would otherwise
 show a start-up transient the runs do not have).
+
+Accelerometer frame (`accel_frame`, declared for a set of runs: a property of the logger, never fitted).
+`body` (default): the model's IMU reports the specific force in body axes, as rtsim's sensors do; on a
+rolled body accel_y reads a_y cos(roll) + g sin(roll) in a steady turn. `level`: the acceleration in the
+yaw-aligned horizontal frame that inertial navigation systems also output (x forward and y left in the
+ground plane under the body's heading, z up; roll and pitch removed, gravity not sensed): the body
+specific force f rotated by the inclinometer angles (z-y-x Euler, rtsim.channels: roll positive right
+side down, pitch positive nose down), a = Ry(pitch) Rx(roll) f, and accel_z = a_z - g (0 at rest), see
+`level_frame`. In a steady turn the level accel_y is v r.
 """
 from __future__ import annotations
 
@@ -54,11 +63,12 @@ from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE
 from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.kit.powertrain import PP_THR
 from rtsim.vehicle.kit.sensor_model import apply_to_series, neutral_params, sensor_params
-from rtsim.vehicle.car.sensors import NSENSOR
+from rtsim.vehicle.car.sensors import G_WORLD_Z, NSENSOR
 from rtsim.vehicle.car.sim import VehicleSim
 from rtsim.vehicle.kit.tyre.magic_formula import effective_rolling_radius
 
 from .benchmark import Benchmark
+from .data import ACCEL_FRAMES
 from .effectset import Effect, from_mapping, model_mapping
 from .signals import DERIVED, derive_wheel_speeds
 
@@ -72,6 +82,18 @@ STEER_TOL = 0.1       # matched when the angle's RMS error is below this many st
 STEER_PASSES = 4      # simulations at most to match the steering command
 STEER_FLOOR = 1e-4    # rad: matching never aims below this RMS error
 STEER_MAX_LEAD = 0.1  # s: longest loop delay the matching's phase lead allows for
+GRAVITY = -G_WORLD_Z  # m/s^2, the model's gravity (down)
+
+
+def level_frame(accel_x, accel_y, accel_z, roll, pitch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Body-axis specific force (m/s^2) at the IMU and the body's inclinometer roll and pitch (rad, ISO
+    8855: roll positive right side down, pitch positive nose down; the chassis is R = Rz(yaw) Ry(pitch)
+    Rx(roll)) -> the acceleration in the yaw-aligned level frame: Ry(pitch) Rx(roll) f, gravity removed
+    from the vertical (x forward, y left, z up; m/s^2)."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    zr = sr * accel_y + cr * accel_z             # Rx(roll) f, its z; its y follows
+    return cp * accel_x + sp * zr, cr * accel_y - sr * accel_z, -sp * accel_x + cp * zr - GRAVITY
 
 
 def _start_rate(bench: Benchmark, run: int | None) -> float:
@@ -121,7 +143,7 @@ class Replayer:
     """The vehicle model built once; `simulate` replays the inputs with a set of model effects."""
 
     def __init__(self, vehicle: str | Path, road: str | Path | None = None, dt: float = 1e-3,
-                 fit_dt: float = 2e-3):
+                 fit_dt: float = 2e-3, accel_frame: str = "body"):
         self.vehicle_path = Path(vehicle)
         self.config, base = load_vehicle(self.vehicle_path)
         self.model = build_vehicle(self.config, base)
@@ -133,6 +155,18 @@ class Replayer:
         self.wheel_radius = float(effective_rolling_radius(probe.tp, self.model.static_loads[0]))
         self.simulations = 0
         self._cache: dict = {}
+        self.accel_frame = accel_frame
+
+    @property
+    def accel_frame(self) -> str:
+        """The frame the model's accel_x/y/z are reported in: "body" or "level" (module docstring)."""
+        return self._accel_frame
+
+    @accel_frame.setter
+    def accel_frame(self, frame: str) -> None:
+        if frame not in ACCEL_FRAMES:
+            raise ConfigError(f"accelerometer frame {frame!r}: use one of {', '.join(ACCEL_FRAMES)}")
+        self._accel_frame = frame
 
     def inputs(self, bench: Benchmark, run: int | None = None) -> ReplayInputs:
         """The benchmark's mean inputs and start state (or those of run number `run`); the same object
@@ -310,5 +344,8 @@ class Replayer:
             out[k + 1] = row
         self.simulations += 1
         res = {name: out[:, i].copy() for i, name in enumerate(self.model.channels.sensor_names)}
+        if self._accel_frame == "level":
+            res["accel_x"], res["accel_y"], res["accel_z"] = level_frame(
+                res["accel_x"], res["accel_y"], res["accel_z"], res["roll"], res["pitch"])
         res.update(derive_wheel_speeds(res, dtg))
         return res

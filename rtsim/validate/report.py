@@ -5,8 +5,8 @@ backend) and `DIR/summary.json`:
      "before": {channel: {"rms", "max", "inside_band"}}, "after": {...},
      "iterations": [{"iteration", "model_effects", "cost", "metrics", "where", "verdict", "winner",
                      "runner_up", "candidates", "seconds"}, ...],
-     "verdict": text, "channels": {channel: {"status", "text", "signature", "inside_band", "rms",
-     "explained_by"}}, "nuisance": {name: {"value", "unit"}}, "correlations": [...], "confounded": [...]}
+     "verdict": text, "accel_frame": "body" | "level", "channels": {channel: {"status", "text", "signature",
+     "inside_band", "rms", "explained_by"}}, "nuisance": {name: {"value", "unit"}}, "correlations": [...], "confounded": [...]}
 
 rms and max are in the channel's SI unit; inside_band is the share of samples (0..1) inside the 95 %
 band, null when there is no band (one run). Uncertainties are 95 % half-widths in the parameter's unit.
@@ -46,6 +46,14 @@ def _clean(x):
     return x
 
 
+#: how the model's accelerations were reported, per accelerometer frame (replay.level_frame)
+FRAME_TEXT = {"body": "body (specific force in the body's axes, as rtsim's IMU measures it: it rolls and pitches "
+                      "with the body and senses gravity's component)",
+              "level": "level (the yaw-aligned horizontal frame: the model's body specific force rotated by its roll "
+                       "and pitch, gravity not sensed; declared for these runs, as an inertial navigation system's "
+                       "level-frame outputs)"}
+
+
 def summary(res: Result) -> dict:
     return _clean({
         "effects": [{"name": e.name, "parameters": dict(e.params), "uncertainty": dict(e.uncertainty)}
@@ -54,6 +62,7 @@ def summary(res: Result) -> dict:
         "after": res.metrics(res.after),
         "iterations": [it.summary() for it in res.iterations],
         "verdict": res.verdict,
+        "accel_frame": res.accel_frame,
         "channels": {c: {k: v for k, v in d.items()} for c, d in res.channels.items()},
         "nuisance": {n: {"value": v, "unit": u} for n, (v, u) in res.nuisance.items()},
         "correlations": [{"effects": [a, b], "correlation": r} for a, b, r in res.correlations],
@@ -170,7 +179,8 @@ def write(res: Result, folder: Path) -> dict:
     cat = catalogue()
     e = html.escape
     parts = [f"<h1>Validation report: {e(res.options.vehicle.name)}</h1>",
-             f"<p class=verdict><b>Verdict.</b> {e(res.verdict)}</p>"]
+             f"<p class=verdict><b>Verdict.</b> {e(res.verdict)}</p>",
+             f"<p>Accelerations compared in the {e(res.accel_frame)} frame (see Model and replay).</p>"]
     # identified effects
     if res.effects:
         rows = []
@@ -291,6 +301,7 @@ def write(res: Result, folder: Path) -> dict:
                  f"{e(str(res.replayer.road_path))}, step {res.replayer.dt * 1e3:g} ms (fits at "
                  f"{res.replayer.fit_dt * 1e3:g} ms); inputs replayed: {e(res.inputs.mode)}; start speed "
                  f"{res.inputs.speed0:.3g} m/s{e(steer)}; {e(base)}.</p>")
+    parts.append(f"<p>Accelerometer frame: {e(FRAME_TEXT[res.accel_frame])}.</p>")
     timing = ", ".join(f"{k} {v:.1f} s" if isinstance(v, float) else f"{k} {v}" for k, v in res.timings.items())
     parts.append(f"<p>Timing: {e(timing)}</p>")
     style = ("body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:90%}"

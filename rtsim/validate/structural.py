@@ -6,7 +6,7 @@ the nuisance adjustments (objective.Nuisance), one of
 - "structural, not in the catalogue": what is left has a shape no catalogue effect gave; its signature
   is the one of four single regressors that explains most of the residual (least squares): `offset`
   (a constant, unit of the channel), `gain` (the model's own signal, relative), `lag` (the model's
-  time derivative: a positive value means the car's channel lags the model's, s) or `drift` (a ramp
+  time derivative: a positive value means the model lags the car's channel, s) or `drift` (a ramp
   in time, unit/s), with the share of the residual it explains; below `SHAPED` share: "unshaped".
   An identified effect that moves such a channel is said to explain it in part.
 """
@@ -49,8 +49,9 @@ def describe_signature(sig: dict, unit: str) -> str:
     elif k == "gain":
         text = f"gain: the model's signal is {100 * v:+.1f} % larger"
     elif k == "lag":
-        text = f"lag: the car's signal lags the model's by {1e3 * v:.0f} ms" if v > 0 else \
-            f"lead: the car's signal leads the model's by {-1e3 * v:.0f} ms"
+        # residual = -v model' : the car's mean = model + v model' = model(t + v), the model v behind it
+        text = f"lag: the model lags the car's signal by {1e3 * v:.0f} ms" if v > 0 else \
+            f"lead: the model leads the car's signal by {-1e3 * v:.0f} ms"
     elif k == "drift":
         text = f"drift: the model drifts by {v:+.3g} {unit}/s"
     else:

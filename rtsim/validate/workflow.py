@@ -52,7 +52,7 @@ import numpy as np
 from rtsim.errors import RtsimError
 
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
-from .data import load_runs
+from .data import accel_frame, load_runs
 from .effectset import Effect, catalogue, from_mapping
 from .identify import (MAX_SIMS, MIN_DELTA_IC, MIN_REDUCTION, MIN_SIZE, Candidate, Context, combine_runs,
                        equivalents, evidence_strength, fit_model_effect, fit_sensor_effects, rank, run_estimate)
@@ -85,6 +85,8 @@ class Options:
     workers: int = 2
     ray: str | None = None            # re-simulations on Ray: "auto" (local, 127.0.0.1) or a cluster address
     compare: list[str] | None = None
+    accel_frame: str | None = None    # "body" or "level": the runs' accelerometer frame (None: as the runs
+                                      # declare it, else body; data.accel_frame)
     progress: object = None           # a Progress-like object with .stage(text, total) / .advance()
 
 
@@ -133,6 +135,7 @@ class Result:
     nuisance: dict = field(default_factory=dict)     # name -> (value, unit) fitted to `after`, never named
     channels: dict = field(default_factory=dict)     # structural.channel_report of `after`
     correlations: list = field(default_factory=list)  # (effect, effect, correlation of their sensitivities)
+    accel_frame: str = "body"                        # the frame the model's accelerations were compared in
     confounded: list = field(default_factory=list)    # pairs the data cannot separate
 
     def metrics(self, outputs: dict) -> dict:
@@ -355,12 +358,14 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     t0 = time.perf_counter()
     prog.stage("loading runs", None)
     runs, rejected = load_runs(opts.runs, _sensor_names(opts, replayer))
+    frame = accel_frame(runs, opts.accel_frame)
     bench = build_benchmark(runs, rejected, opts.rate, opts.align, opts.compare)
     tm["data"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     prog.stage("building the model", None)
     rp = replayer or Replayer(opts.vehicle, opts.road, opts.dt, opts.fit_dt)
     rp.simulations = 0
+    rp.accel_frame = frame
     inp = rp.inputs(bench)
     base = from_mapping(getattr(rp.config, "effects", None))
     tm["model_build"] = time.perf_counter() - t1
@@ -518,4 +523,4 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     tm["total"] = time.perf_counter() - t0
     return Result(opts, bench, inp, rp, obj, reg, base, effects, before, after, iterations, verdict, tm,
                   mean_input=replayed, comparison=comparison, nuisance=obj.nuisance_values(after),
-                  channels=chans, correlations=corr, confounded=confounded)
+                  channels=chans, correlations=corr, confounded=confounded, accel_frame=frame)
