@@ -53,7 +53,7 @@ def test_gyro_bias_is_named_and_cli(runs):
     base, r = runs
     rep = base / "rep_gyro"
     proc = subprocess.run([sys.executable, "-m", "rtsim.cli", "validate", "--vehicle", str(field.VEHICLE),
-                           *map(str, r["gyro"]), "--report", str(rep), "--max-iterations", "2"],
+                           "--runs", *map(str, r["gyro"]), "--report", str(rep), "--max-iterations", "2"],
                           cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     import json

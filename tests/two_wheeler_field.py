@@ -2,6 +2,8 @@
 model (drivers.rider) on a scenario, with a hidden effect and run-to-run variation, logged at 100 Hz as
 a data logger would write them (CSV of the two-wheeler's sensor channels, rtsim.channels).
 
+The throttle body and the brake calipers follow the rider's demands through a first-order lag
+(`ACTUATOR_TAU`), as actuators do; the logged `throttle` and `brake_pressure_*` are their outputs.
 Variation per seed: the start speed (+-0.3 m/s), the rider's target speeds (+-0.2 m/s), the
 logger's start (0..50 ms late) and white sensor noise (IMU, wheel speeds, steering, suspension).
 Hidden effects: an added mass (kg, at the rider) changes the vehicle file; a sensor bias is added to
@@ -15,14 +17,18 @@ import numpy as np
 
 from rtsim.channels import TWO_WHEELER_SENSORS
 from rtsim.vehicle.motorcycle.offline import prepare
-from rtsim.vehicle.motorcycle.plant import plant_sensors
+from drivers.rider import RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE
+from rtsim.vehicle.motorcycle.plant import (C_BRAKE_FRONT, C_BRAKE_FRONT_INVALID, C_BRAKE_REAR, C_BRAKE_REAR_INVALID,
+                                            C_THROTTLE, C_THROTTLE_INVALID, plant_sensors)
 
 ROOT = Path(__file__).resolve().parents[1]
 VEHICLE = ROOT / "configs" / "vehicles" / "motorcycle.toml"
 ROAD = ROOT / "configs" / "roads" / "flat.toml"
 NAMES = [c.name for c in TWO_WHEELER_SENSORS]
 NOISE_ON = 1.0
-LOG_EVERY = 1          # steps of 1 ms between logged rows (a 1 kHz logger)
+ACTUATOR_TAU = 0.04    # s: first-order lag of the throttle body and the brake modulator after the rider's demand
+LEAD_IN = 500          # ms ridden before the logger starts (the tyres' slips settled)
+LOG_EVERY = 10         # steps of 1 ms between logged rows (a 100 Hz logger)
 NOISE = {"accel_x": 0.05, "accel_y": 0.05, "accel_z": 0.05, "gyro_x": 0.002, "gyro_y": 0.002, "gyro_z": 0.002,
          "roll": 0.001, "pitch": 0.0005, "wheel_speed_front": 0.02, "wheel_speed_rear": 0.02, "steer_angle": 0.0005,
          "steer_rate": 0.005, "steering_torque": 0.2, "fork_travel": 0.0002, "shock_travel": 0.0002}
@@ -89,12 +95,19 @@ def ride(folder: Path, kind: str, seed: int, added_mass: float = 0.0, bias: dict
     r, _ = prepare(None, sc)
     s = r.sim
     p = s.parts
-    start = int(rng.integers(0, 50))              # ms of riding before the logger starts
-    n = int(round(duration * 1000.0))
+    start = LEAD_IN + int(rng.integers(0, 50))    # ms of riding before the logger starts
+    n = start + int(round(duration * 1000.0))
     rows = []
     buf = np.zeros(len(NAMES))
+    act = np.zeros(3)                              # throttle, front and rear caliper pressure
+    slots = (C_THROTTLE, C_BRAKE_FRONT, C_BRAKE_REAR)
+    for c in (C_THROTTLE_INVALID, C_BRAKE_FRONT_INVALID, C_BRAKE_REAR_INVALID):
+        r.commands[c] = 0.0                        # the actuators' outputs act (ride-by-wire, brake modulator)
+    a = 0.001 / ACTUATOR_TAU
     for i in range(n):
         r.step()
+        act += a * (r.out[[RO_THROTTLE, RO_BRAKE_F, RO_BRAKE_R]] - act)
+        r.commands[list(slots)] = act
         if i >= start and (i - start) % LOG_EVERY == LOG_EVERY - 1:
             plant_sensors(s.data, p.idx, p.par, r.params.pp, r.state.inp, buf)
             rows.append((s.time, *buf))

@@ -24,7 +24,8 @@ workflow reports as such; in steady lean both give the torque the physics needs.
 Start: the model settled upright at rest on its suspension (static pose, with the effects under test:
 an added mass sags it), then rolling straight at the speed the recorded front wheel speed gives at grid
 time 0 (slope of a quadratic over the first `START_WINDOW` s: the noise of a single sample stays out).
-A run must start upright (|roll| below `START_ROLL`); the lean loop takes the recorded roll from there.
+The first sample is taken after one grid interval with the first inputs held (the sensors need the
+accelerations of a step; the state at grid time 0 is that much advanced). A run must start upright (|roll| below `START_ROLL`); the lean loop takes the recorded roll from there.
 
 Effects (rtsim.validate.two_wheeler_effects) change the model through its parameters only: an added
 mass or a grade rebuilds the model (10 ms) and its static pose (cached per value), brake and tyre
@@ -66,6 +67,8 @@ START_WINDOW = 0.2       # s: the start speed is fitted over this much of the re
 START_ROLL = 0.1         # rad: a run must start with less lean than this
 ROLL_RATE_WINDOW = 0.1   # s: window of the recorded roll's differentiation
 SETTLE = 1.5             # s: static pose settling with the effects under test
+PROBE_SPEED = 15.0       # m/s: coasting straight at this speed gives the front wheel's spin per unit speed
+PROBE_TIME = 0.3         # s
 # lean loop gains (the rider's inner loop, stiffer than a person's: the replay should follow the recorded
 # roll closely; with the reference rate fed forward there is no lag to hide)
 P_ROLL = 400.0           # N m/rad
@@ -109,6 +112,16 @@ def _replay(m, d, veh, vd, parts, io, h, sub, roll, roll_rate, thr, bf, br, gain
     p, dd, ki, imax, cs, tmax = gains[0], gains[1], gains[2], gains[3], gains[4], gains[5]
     integ = 0.0
     n = roll.shape[0]
+    cmd[C_THROTTLE] = max(0.0, thr[0])
+    cmd[C_BRAKE_FRONT] = max(0.0, bf[0])
+    cmd[C_BRAKE_REAR] = max(0.0, br[0])
+    for j in range(sub):                 # one interval with the first inputs: the sensors need a step's accelerations
+        plant_view(d, parts.idx, veh.pp, view)
+        e = roll[0] - view[RV_PHI]
+        ro[RO_TORQUE] = min(max(p * e + dd * (roll_rate[0] - view[RV_PHIDOT]) - cs * view[RV_DELTADOT], -tmax), tmax)
+        status = plant_step(m, d, veh, vd, parts, io, h)
+        if status != 0:
+            return status, 0
     plant_sensors(d, parts.idx, parts.par, veh.pp, vd.inp, out[0])
     for k in range(n - 1):
         cmd[C_THROTTLE] = max(0.0, 0.5 * (thr[k] + thr[k + 1]))
@@ -157,9 +170,12 @@ class TwoWheelerReplayer:
         self.model = mm
         self.sensor_names = tuple(c.name for c in _sensors())
         self.wheel_radius = float(self.config.front_wheel.radius_m)
-        q, _ = self._model(0.0, 0.0, self.dt)[1:]
-        qd = straight_running_velocity(mm, q, 1.0)
-        self._spin_per_speed = float(qd[mm.bike.idx[K_PHI_F]])      # rad/s of the front wheel per m/s
+        q, loads = self._model(0.0, 0.0, self.dt)[1:]
+        probe = TwoWheelerSim(mm, dt=self.dt, speed=PROBE_SPEED, q=q)
+        probe.parts.tyre[:, TO_FZ] = loads
+        probe.run(PROBE_TIME)
+        # rad/s of the front wheel per m/s rolling freely: the loaded tyre's effective rolling radius
+        self._spin_per_speed = float(probe.data.qd[mm.bike.idx[K_PHI_F]]) / probe.velocity[0]
 
     def __setstate__(self, state):
         from .profile import activate

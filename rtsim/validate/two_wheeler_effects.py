@@ -109,3 +109,30 @@ EFFECTS: dict[str, EffectSpec] = {e.name: e for e in (
 #: The model effects' names, in the order the workflow screens them.
 MODEL_EFFECTS = tuple(n for n, e in EFFECTS.items() if e.kind == "model")
 assert all(math.isfinite(p.default) for e in EFFECTS.values() for p in e.params if e.kind == "model")
+
+
+def check_effects(mapping: dict) -> None:
+    """A vehicle file's [effects] for the two-wheeler: known names, every parameter given and inside its
+    plausible range (sensor effects: arrays of tables with a `channel` of the two-wheeler). ValueError
+    naming the effect, parameter and value otherwise."""
+    for name, val in mapping.items():
+        spec = EFFECTS.get(name)
+        if spec is None:
+            raise ValueError(f"effects.{name}: unknown effect (the two-wheeler's are {', '.join(EFFECTS)})")
+        rows = val if isinstance(val, list) else [val]
+        for row in rows:
+            if not isinstance(row, dict):
+                raise ValueError(f"effects.{name}: must be a table")
+            ch = row.get("channel")
+            if spec.kind == "sensor" and ch not in UNITS:
+                raise ValueError(f"effects.{name}.channel = {ch!r}: not a two-wheeler sensor channel")
+            extra = set(row) - set(spec.param_names) - ({"channel"} if spec.kind == "sensor" else set())
+            if extra:
+                raise ValueError(f"effects.{name}: unknown key(s) {', '.join(sorted(extra))}")
+            for p in spec.params:
+                if p.name not in row:
+                    raise ValueError(f"effects.{name}.{p.name}: missing (required)")
+                lo, hi = spec.bounds(p.name, ch)
+                v = row[p.name]
+                if not isinstance(v, (int, float)) or not lo <= float(v) <= hi:
+                    raise ValueError(f"effects.{name}.{p.name} = {v!r}: outside the plausible range [{lo:g}, {hi:g}]")
