@@ -4,7 +4,7 @@ a data logger would write them (CSV of the two-wheeler's sensor channels, rtsim.
 
 The throttle body and the brake calipers follow the rider's demands through a first-order lag
 (`ACTUATOR_TAU`), as actuators do; the logged `throttle` and `brake_pressure_*` are their outputs.
-Variation per seed: the start speed (+-0.3 m/s), the rider's target speeds (+-0.2 m/s), the
+Variation per seed: the start speed (+-0.1 m/s), the rider's target speeds (+-0.05 m/s), the
 logger's start (0..50 ms late) and white sensor noise (IMU, wheel speeds, steering, suspension).
 Hidden effects: an added mass (kg, at the rider) changes the vehicle file; a sensor bias is added to
 the logged channel."""
@@ -83,8 +83,8 @@ def ride(folder: Path, kind: str, seed: int, added_mass: float = 0.0, bias: dict
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     vehicle = vehicle_with_mass(folder, added_mass) if added_mass else VEHICLE
-    dv = float(rng.uniform(-0.2, 0.2))
-    v0 = 15.0 + float(rng.uniform(-0.3, 0.3))
+    dv = float(rng.uniform(-0.05, 0.05))
+    v0 = 15.0 + float(rng.uniform(-0.1, 0.1))
     if kind == "straight":
         text = STRAIGHT.format(vehicle=vehicle.as_posix(), road=ROAD.as_posix(), duration=duration, v0=v0, a=15.0 + dv, b=21.0 + dv,
                                c=12.0 + dv)
