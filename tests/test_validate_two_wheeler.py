@@ -77,11 +77,6 @@ def test_gyro_bias_is_named_and_cli(runs):
     assert abs(named[0]["parameters"]["bias"] - 0.03) <= 0.1 * 0.03
 
 
-@pytest.mark.skipif(not os.environ.get("RTSIM_VALIDATE_ALL"), reason="known failure (40 s): set RTSIM_VALIDATE_ALL=1")
-@pytest.mark.xfail(strict=True, reason="known failure: the mean-input replay of the rider's throttle/brake "
-                   "hand-overs (averaged over runs whose switching times differ) leaves a braking mismatch that "
-                   "brake_friction (scale about 0.89) absorbs; each run replayed alone matches (wheel speed RMS "
-                   "0.02 rad/s)")
 def test_no_effect_names_nothing(runs):
     base, r = runs
     res = _validate(r["none"], base / "rep_none")
