@@ -47,7 +47,7 @@ def runs(tmp_path_factory):
 
 
 def _validate(paths, report, **kw):
-    return run(Options(vehicle=field.VEHICLE, runs=list(paths), report=report, workers=2, max_iterations=2, **kw))
+    return run(Options(vehicle=field.VEHICLE, runs=list(paths), report=report, workers=2, max_iterations=1, **kw))
 
 
 def test_added_mass_is_named(runs):
@@ -66,7 +66,7 @@ def test_gyro_bias_is_named_and_cli(runs):
     base, r = runs
     rep = base / "rep_gyro"
     proc = subprocess.run([sys.executable, "-m", "rtsim.cli", "validate", "--vehicle", str(field.VEHICLE),
-                           "--runs", *map(str, r["gyro"]), "--report", str(rep), "--max-iterations", "2"],
+                           "--runs", *map(str, r["gyro"]), "--report", str(rep), "--max-iterations", "1"],
                           cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     import json

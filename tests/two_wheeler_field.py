@@ -45,7 +45,7 @@ speed = {v0}
 x = [0.0, 1000.0]
 y = [0.0, 0.0]
 speed = [{a}, {a}, {b}, {b}, {c}]
-time = [0.0, 1.0, 3.5, 4.5, 7.0]
+time = [0.0, 1.0, 2.5, 3.0, 5.5]
 """
 
 LANE_CHANGE = """name = "field_lane_change"
@@ -78,7 +78,7 @@ def vehicle_with_mass(folder: Path, added_mass: float) -> Path:
 
 
 def ride(folder: Path, kind: str, seed: int, added_mass: float = 0.0, bias: dict | None = None,
-         duration: float = 7.0) -> Path:
+         duration: float = 5.0) -> Path:
     """One field run as CSV in `folder`; kind 'straight' (speed up, hold, brake) or 'lane_change'."""
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -86,8 +86,8 @@ def ride(folder: Path, kind: str, seed: int, added_mass: float = 0.0, bias: dict
     dv = float(rng.uniform(-0.05, 0.05))
     v0 = 15.0 + float(rng.uniform(-0.1, 0.1))
     if kind == "straight":
-        text = STRAIGHT.format(vehicle=vehicle.as_posix(), road=ROAD.as_posix(), duration=duration, v0=v0, a=15.0 + dv, b=21.0 + dv,
-                               c=12.0 + dv)
+        text = STRAIGHT.format(vehicle=vehicle.as_posix(), road=ROAD.as_posix(), duration=duration, v0=v0, a=15.0 + dv, b=20.0 + dv,
+                               c=13.0 + dv)
     else:
         text = LANE_CHANGE.format(vehicle=vehicle.as_posix(), road=ROAD.as_posix(), duration=duration, v0=v0 + 3.0, a=18.0 + dv)
     sc = folder / f"scenario_{kind}_{seed}.toml"
