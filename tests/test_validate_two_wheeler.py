@@ -40,6 +40,15 @@ class _Runs(dict):
         return self[key]
 
 
+@pytest.fixture(autouse=True)
+def _car_profile_after():
+    """The workflow leaves its vehicle's profile active (the report and the config writer read it):
+    later tests that build benchmarks directly expect the car's."""
+    yield
+    from rtsim.validate.profile import activate
+    activate("car")
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("moto_field")

@@ -2,7 +2,8 @@
 the compared channels, the effect catalogue and the replayer (the car's, or the two-wheeler's).
 
 The workflow activates the profile of its vehicle once per run (`activate`) before it loads the data;
-the benchmark, the alignment and the effect catalogue then read the active profile (`active`). Worker
+the benchmark, the alignment, the effect catalogue, the report and the config writer then read the
+active profile (`active`); it stays active after the run until another run activates its own. Worker
 processes forked by the workflow inherit it; a two-wheeler replayer shipped to another process
 activates its profile when it is unpickled.
 """
