@@ -113,3 +113,58 @@ def test_fall_during_replay_is_a_clear_failure(runs, tmp_path):
     rp = TwoWheelerReplayer(field.VEHICLE)
     with pytest.raises(SimulationError, match="fell"):
         rp.simulate(rp.inputs(bench), [])
+
+
+def test_effects_change_the_model_through_its_parameters(runs):
+    """Each model effect of the catalogue, replayed on one noise-free field run: an added mass slows the
+    braking by M / (M + dm) (the brakes' and the drag's forces do not depend on the mass); a grade slows
+    the motorcycle by g sin(atan(grade)) while the IMU's specific force barely changes and its pitch
+    reads the slope; a lower pad friction brakes less and leaves the acceleration phase alone; the tyres'
+    cornering stiffness does nothing on a straight."""
+    from rtsim.validate.benchmark import build_benchmark
+    from rtsim.validate.data import load_runs
+    from rtsim.validate.effectset import Effect
+    from rtsim.validate.profile import activate
+    from rtsim.validate.replay_two_wheeler import TwoWheelerReplayer
+    base = runs[0]
+    old = field.NOISE_ON
+    field.NOISE_ON = 0.0
+    try:
+        path = field.ride(base / "clean", "straight", 1)
+    finally:
+        field.NOISE_ON = old
+    activate("two_wheeler")
+    loaded, rej = load_runs([path], field.NAMES)
+    bench = build_benchmark(loaded, rej)
+    rp = TwoWheelerReplayer(field.VEHICLE)
+    inp = rp.inputs(bench)
+    cfg = rp.config
+    total = sum(b.mass_kg for b in (cfg.rear_frame, cfg.rider, cfg.swingarm, cfg.upper_fork, cfg.lower_fork,
+                                    cfg.front_wheel, cfg.rear_wheel))
+    braking, driving = inp.brake_front > 200.0, inp.throttle > 0.3
+    assert braking.sum() > 50 and driving.sum() > 50
+    r0 = rp.simulate(inp, [])
+    ax0 = r0["accel_x"]
+
+    rm = rp.simulate(inp, [Effect("mass", {"added_mass": 25.0})])
+    assert np.mean(rm["accel_x"][braking]) / np.mean(ax0[braking]) == pytest.approx(total / (total + 25.0), rel=5e-3)
+
+    grade = 0.05
+    rg = rp.simulate(inp, [Effect("road_grade", {"grade": grade})])
+    t = bench.t
+    k0 = int(np.searchsorted(t, 0.5))
+    k1 = int(np.searchsorted(t, 1.0))                     # holding speed: the engine near one operating point
+    dv = (rg["wheel_speed_front"][k1] - r0["wheel_speed_front"][k1]) - (rg["wheel_speed_front"][k0] - r0["wheel_speed_front"][k0])
+    slow = 9.81 * math.sin(math.atan(grade)) * (t[k1] - t[k0])          # m/s lost to the slope
+    assert -dv / rp._spin_per_speed == pytest.approx(slow, rel=0.15)
+    assert np.median(np.abs(rg["accel_x"] - ax0)) < 0.15
+    assert np.median(rg["pitch"] - r0["pitch"]) == pytest.approx(-math.atan(grade), abs=0.005)
+
+    rb = rp.simulate(inp, [Effect("brake_friction", {"scale": 0.8})])
+    assert np.mean(rb["accel_x"][braking]) > np.mean(ax0[braking]) + 0.05       # less deceleration
+    free = driving & (inp.brake_front < 1.0) & (inp.brake_rear < 1.0)
+    first = int(np.argmax(braking))                       # before the first braking: the same motion
+    np.testing.assert_allclose(rb["accel_x"][:first][free[:first]], ax0[:first][free[:first]], atol=1e-6)
+
+    rt = rp.simulate(inp, [Effect("tyre_cornering_stiffness", {"scale": 0.7})])
+    np.testing.assert_allclose(rt["wheel_speed_front"], r0["wheel_speed_front"], atol=1e-6)
