@@ -6,7 +6,6 @@ replay that falls as a per-run failure."""
 from __future__ import annotations
 
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path

@@ -28,9 +28,11 @@ workflow reports as such; in steady lean both give the torque the physics needs.
 
 Start: the model settled upright at rest on its suspension (static pose, with the effects under test:
 an added mass sags it), then rolling straight at the speed the recorded front wheel speed gives at grid
-time 0 (slope of a quadratic over the first `START_WINDOW` s: the noise of a single sample stays out).
+time 0 (the value at 0 of a quadratic fitted over the first `START_WINDOW` s: the noise of a single
+sample stays out) through the loaded tyre's rolling radius (measured once on the model coasting).
 The first sample is taken after one grid interval with the first inputs held (the sensors need the
-accelerations of a step; the state at grid time 0 is that much advanced). A run must start upright (|roll| below `START_ROLL`); the lean loop takes the recorded roll from there.
+accelerations of a step; the state at grid time 0 is that much advanced). A run must start upright
+(|roll| below `START_ROLL`); the lean loop takes the recorded roll from there.
 
 Step: the fits run at the model's step `dt` too (the workflow's coarser `fit_dt` is not used): at 2 ms the
 two-wheeler's brakes (a smooth Coulomb law of the wheel's slip against its carrier) and tyres act
@@ -39,7 +41,8 @@ accel_x RMS error 0.22 instead of 0.06 m/s^2, front wheel speed 0.9 rad/s low at
 brake_friction of 0.89 on data without any effect).
 
 Effects (rtsim.validate.two_wheeler_effects) change the model through its parameters only: an added
-mass or a grade rebuilds the model (10 ms) and its static pose (cached per value), brake and tyre
+mass or a grade rebuilds the model (10 ms) and its static pose (cached per value; the IMU then reads
+the tilted gravity, `_tilt`), brake and tyre
 scales change the parameter arrays of that simulation; the stepping loop is one compiled kernel
 (`_replay`) over the model's arrays, no Python per step. A fall (roll past 70 deg, both tyres off the
 road) or a failed step ends the simulation with a SimulationError naming the run time: the workflow
@@ -65,9 +68,8 @@ from rtsim.vehicle.motorcycle.plant import (C_ASSIST_INVALID, C_BRAKE_FRONT, C_B
                                             C_BRAKE_REAR_INVALID,
                                             C_THROTTLE, C_THROTTLE_INVALID, FELL, NCOMMAND, PP_BRAKE_GAIN_F,
                                             PP_BRAKE_GAIN_R, S_ACCEL_X, S_ACCEL_Y, S_ACCEL_Z, S_PITCH, PlantIO,
-                                            PlantParams, PlantState, _frame_axis, make_plant, plant_sensors,
+                                            PlantParams, _frame_axis, make_plant, plant_sensors,
                                             plant_step, plant_view)
-from rtsim.vehicle.motorcycle.build import straight_running_velocity
 from rtsim.vehicle.motorcycle.sim import TwoWheelerSim, static_pose
 from rtsim.vehicle.motorcycle.step import TO_FZ
 from drivers.rider import RO_TORQUE, RV_DELTADOT, RV_PHI, RV_PHIDOT
@@ -375,6 +377,3 @@ def _sensors():
     from rtsim.channels import TWO_WHEELER_SENSORS
     return TWO_WHEELER_SENSORS
 
-
-def base_effects(replayer: TwoWheelerReplayer) -> list[Effect]:
-    return from_mapping(getattr(replayer.config, "effects", None))
