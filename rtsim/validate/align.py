@@ -23,7 +23,8 @@ import numpy as np
 
 from rtsim.errors import ConfigError
 
-from .data import INPUTS, Run
+from .data import Run
+from .profile import active
 from .signals import box_average
 
 XCORR_RATE = 100.0          # Hz
@@ -45,7 +46,8 @@ def varying_inputs(runs: list[Run]) -> list[str]:
     over 0.1 s exceeds MIN_RANGE and ten times the sample noise (estimated from second differences),
     in every run. A channel that only carries noise would make the correlation meaningless."""
     out = []
-    for name in INPUTS:
+    prof = active()
+    for name in prof.inputs:
         if not all(name in r.channels for r in runs):
             continue
         ok = True
@@ -54,7 +56,7 @@ def varying_inputs(runs: list[Run]) -> list[str]:
             sm = box_average(r.time, x, 0.1)
             d2 = np.diff(x, 2)
             noise = float(np.median(np.abs(d2 - np.median(d2)))) / 0.6745 / np.sqrt(6.0) if d2.size else 0.0
-            if float(np.ptp(sm)) <= max(MIN_RANGE[name], 10.0 * noise):
+            if float(np.ptp(sm)) <= max(prof.min_range.get(name, MIN_RANGE.get(name, 0.0)), 10.0 * noise):
                 ok = False
                 break
         if ok:
@@ -110,7 +112,7 @@ def align_xcorr(runs: list[Run], names: list[str], fs: float = XCORR_RATE) -> Al
     """Offsets by cross-correlation of the varying inputs `names` (see the module docstring)."""
     if not names:
         raise ConfigError("cannot align the runs by cross-correlation: no input channel varies "
-                          f"(looked for {', '.join(INPUTS)}); use --align event:<channel>")
+                          f"(looked for {', '.join(active().inputs)}); use --align event:<channel>")
     scales = {}
     for n in names:
         allv = np.concatenate([r.channels[n] for r in runs])

@@ -20,7 +20,8 @@ from rtsim.channels import SENSOR_NAMES
 from rtsim.errors import ConfigError
 
 from .align import Alignment, align, varying_inputs
-from .data import INPUTS, Rejected, Run
+from .data import Rejected, Run
+from .profile import active
 from .signals import DERIVED, WHEEL_SPEEDS, derive_wheel_speeds, resample
 from .stats import Band, band
 
@@ -57,7 +58,7 @@ class Benchmark:
 
 def _majority_inputs(runs: list[Run], rejected: list[Rejected]) -> list[Run]:
     keep = list(runs)
-    for name in INPUTS:
+    for name in active().inputs:
         have = [r for r in keep if name in r.channels]
         if 0 < len(have) < len(keep) and len(have) > len(keep) / 2:
             for r in keep:
@@ -174,7 +175,8 @@ def build_benchmark(runs: list[Run], rejected: list[Rejected] | None = None, rat
         if a in values:
             values[s] = np.stack([derive_wheel_speeds({a: row}, dt)[s] for row in values[a]])
             members[s] = members[a]
-    inputs = [c for c in INPUTS if c in values and members[c] == n]
+    prof = active()
+    inputs = [c for c in prof.inputs if c in values and members[c] == n]
     for c, k in members.items():
         if k < n:
             notes.append(f"channel {c}: recorded in {k} of {n} runs; its band uses those")
@@ -189,14 +191,14 @@ def build_benchmark(runs: list[Run], rejected: list[Rejected] | None = None, rat
     sw = bands.get("steering_wheel_angle")
     ay = bands.get("accel_y")
     lateral = bool((sw is not None and np.ptp(sw.mean) > 0.05) or (ay is not None and np.max(np.abs(ay.mean)) > 0.5))
-    wanted = list(compare) if compare else [*LONGITUDINAL, *(LATERAL if lateral else ())]
-    compared = [c for c in wanted if c in bands and c not in INPUTS]
+    wanted = list(compare) if compare else list(prof.compared) if prof.compared else \
+        [*LONGITUDINAL, *(LATERAL if lateral else ())]
+    compared = [c for c in wanted if c in bands and c not in prof.inputs]
     missing = [c for c in wanted if c not in bands]
     if missing:
         notes.append(f"not compared (not recorded): {', '.join(missing)}")
     if not compared:
         raise ConfigError("no output channel to compare: the runs carry none of " + ", ".join(wanted))
     if not inputs:
-        raise ConfigError("the runs carry no model input (brake_pressure, wheel_torque_rl/rr, throttle_angle, "
-                          "steering_wheel_angle): nothing to replay")
+        raise ConfigError(f"the runs carry no model input ({', '.join(prof.inputs)}): nothing to replay")
     return Benchmark(t, dt, runs, rejected, al, values, bands, inputs, compared, rep, lateral, notes)

@@ -79,7 +79,12 @@ def write_config(original: str | Path, effects: list[Effect], out: str | Path, h
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(new)
     try:
-        load_vehicle(out)
+        from .profile import active
+        if active().kind == "two_wheeler":
+            from rtsim.vehicle.motorcycle.config import load_motorcycle
+            load_motorcycle(out)
+        else:
+            load_vehicle(out)
     except ConfigError as exc:
         bad = out.with_suffix(".rejected.toml")
         out.replace(bad)

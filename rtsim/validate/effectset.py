@@ -14,7 +14,12 @@ SENSOR_EFFECTS = ("sensor_delay", "sensor_bias", "sensor_scale")
 
 
 def catalogue() -> dict:
-    """The model's effect catalogue: name -> EffectSpec (ConfigError when the model has none)."""
+    """The validated vehicle's effect catalogue (rtsim.validate.profile.active): name -> EffectSpec
+    (ConfigError when the model has none)."""
+    from .profile import active
+    if active().kind == "two_wheeler":
+        from .two_wheeler_effects import EFFECTS as TW
+        return TW
     try:
         from rtsim.vehicle.car.effects import EFFECTS
     except ImportError as exc:

@@ -126,9 +126,10 @@ def _plot_inputs(res: Result, path: Path) -> None:
     steering-wheel angle after matching the steer-by-wire command, see replay)."""
     names = res.bench.inputs
     inp = res.inputs
-    replayed = {c for c, x in (("brake_pressure", inp.brake), ("wheel_torque_rl", inp.torque_rl),
-                               ("wheel_torque_rr", inp.torque_rr), ("throttle_angle", inp.throttle),
-                               ("steering_wheel_angle", inp.steer)) if x is not None}
+    replayed = set(getattr(inp, "channels", ())) or {     # a two-wheeler's inputs name their channels
+        c for c, x in (("brake_pressure", inp.brake), ("wheel_torque_rl", inp.torque_rl),
+                       ("wheel_torque_rr", inp.torque_rr), ("throttle_angle", inp.throttle),
+                       ("steering_wheel_angle", inp.steer)) if x is not None}
     fig, axes = plt.subplots(len(names), 1, figsize=(10, 1.8 * len(names) + 0.6), sharex=True, squeeze=False)
     t = res.bench.t
     for ax, c in zip(axes[:, 0], names):
@@ -291,6 +292,8 @@ def write(res: Result, folder: Path) -> dict:
             else "no effects in the config")
     kind = ("lateral (steering: " + ", ".join(c for c in bench.compared if c in LATERAL) + " compared)"
             if bench.lateral else "longitudinal (no steering: lateral channels not compared)")
+    if getattr(res.replayer, "kind", "car") == "two_wheeler":
+        kind = "two-wheeler (the recorded roll followed; compared: " + ", ".join(bench.compared) + ")"
     steer = ""
     err = res.inputs.steer_error.get(res.replayer.dt)
     if err is not None and math.isfinite(err):

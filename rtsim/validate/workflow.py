@@ -57,7 +57,9 @@ from .effectset import Effect, catalogue, from_mapping
 from .identify import (MAX_SIMS, MIN_DELTA_IC, MIN_REDUCTION, MIN_SIZE, Candidate, Context, combine_runs,
                        equivalents, evidence_strength, fit_model_effect, fit_sensor_effects, rank, run_estimate)
 from .objective import Objective
+from .profile import activate, active, vehicle_kind
 from .replay import Replayer, ReplayInputs
+from .replay_two_wheeler import TwoWheelerReplayer
 from .residuals import Regimes, describe, locate, regimes
 from .stats import error_metrics
 from .structural import channel_report, correlations
@@ -327,7 +329,10 @@ def _replay_runs(ctx: Context, effects: list[Effect], workers: int) -> tuple[dic
 def _sensor_names(opts: Options, replayer: Replayer | None) -> tuple[str, ...]:
     """The validated vehicle's sensor channels (its channel dictionary), without building its model."""
     if replayer is not None:
-        return replayer.model.channels.sensor_names
+        return getattr(replayer, "sensor_names", None) or replayer.model.channels.sensor_names
+    if active().kind == "two_wheeler":
+        from rtsim.channels import TWO_WHEELER_SENSORS
+        return tuple(c.name for c in TWO_WHEELER_SENSORS)
     from rtsim.vehicle.car.build import vehicle_channels
     from rtsim.vehicle.car.config import load_vehicle
     return vehicle_channels(load_vehicle(opts.vehicle)[0]).sensor_names
@@ -356,6 +361,8 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     prog = opts.progress or _Quiet()
     tm = {}
     t0 = time.perf_counter()
+    kind = getattr(replayer, "kind", None) or vehicle_kind(opts.vehicle)
+    activate(kind)                        # the vehicle's inputs, compared channels and effect catalogue
     prog.stage("loading runs", None)
     runs, rejected = load_runs(opts.runs, _sensor_names(opts, replayer))
     frame = accel_frame(runs, opts.accel_frame)
@@ -363,7 +370,8 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     tm["data"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     prog.stage("building the model", None)
-    rp = replayer or Replayer(opts.vehicle, opts.road, opts.dt, opts.fit_dt)
+    rp = replayer or (TwoWheelerReplayer if kind == "two_wheeler" else Replayer)(opts.vehicle, opts.road, opts.dt,
+                                                                                  opts.fit_dt)
     rp.simulations = 0
     rp.accel_frame = frame
     inp = rp.inputs(bench)

@@ -82,7 +82,8 @@ def combine(*bodies: Body) -> tuple[float, np.ndarray, np.ndarray]:
     return m, cg, inertia
 
 
-def build_motorcycle(cfg: MotorcycleConfig, base: Path) -> MotorcycleModel:
+def build_motorcycle(cfg: MotorcycleConfig, base: Path, gravity=(0.0, 0.0, -G)) -> MotorcycleModel:
+    """The compiled two-wheeler; `gravity` (m/s^2, design frame): tilted for a road grade (rtsim.validate)."""
     des = design(cfg)
     p0 = pose(des, np.zeros(11))
     # the projections refactor at the converged q: reusing the Newton factor for them feeds energy into
@@ -152,7 +153,7 @@ def build_motorcycle(cfg: MotorcycleConfig, base: Path) -> MotorcycleModel:
     if knife:
         b.rolling_disc(w_r, v, b_r, c_r, cfg.rear_wheel.radius_m, name="rear wheel")
         b.rolling_disc(w_f, e_u, b_f, c_f, cfg.front_wheel.radius_m, name="front wheel")
-    b.gravity((0.0, 0.0, -G))
+    b.gravity(tuple(float(g) for g in gravity))
     mech = b.compile()
     # the step's own forces (rtsim.vehicle.motorcycle.step) add stiffness and damping: the finishing stage
     # rebuilds W = M before they add theirs for the projections (otherwise they would be added twice)

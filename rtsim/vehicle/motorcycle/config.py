@@ -257,9 +257,14 @@ class MotorcycleConfig(Strict):
     aero: Aero = Aero()
     sensors: Sensors = Sensors()
     interface: Interface = Interface()
+    effects: dict | None = Field(default=None, description="effects identified by rtsim validate "
+                                 "(rtsim.validate.two_wheeler_effects); applied by its replay")
 
     @model_validator(mode="after")
     def _consistent(self):
+        if self.effects is not None:
+            from rtsim.validate.two_wheeler_effects import check_effects
+            check_effects(self.effects)
         px, pz = self.geometry.swingarm_pivot_m
         if math.hypot(px, pz - self.rear_wheel.radius_m) < 0.05:
             raise ValueError("swingarm_pivot_m is too close to the rear axle")
