@@ -69,6 +69,9 @@ LONGITUDINAL = {
                     [("brake_friction", "scale", 0.75, None), ("sensor_bias", "bias", 0.25, "accel_x")], "tuning"),
     "mass_and_grade": ({"added_mass": 150.0, "grade": 0.03},
                        [("mass", "added_mass", 150.0, None), ("road_grade", "grade", 0.03, None)], "held-out"),
+    # written before the joint fit of two model effects was run on it, never tuned on
+    "brake_and_grade": ({"brake_scale": 0.8, "grade": 0.03},
+                        [("brake_friction", "scale", 0.8, None), ("road_grade", "grade", 0.03, None)], "held-out"),
 }
 
 
