@@ -4,7 +4,7 @@ backend) and `DIR/summary.json`:
     {"effects": [{"name", "parameters": {...}, "uncertainty": {...}}, ...],   # in the order added
      "before": {channel: {"rms", "max", "inside_band"}}, "after": {...},
      "iterations": [{"iteration", "model_effects", "cost", "metrics", "where", "verdict", "winner",
-                     "runner_up", "candidates", "seconds"}, ...],
+                     "runner_up", "partners", "refitted", "joint", "candidates", "seconds"}, ...],
      "verdict": text, "channels": {channel: {"status", "text", "signature", "inside_band", "rms",
      "explained_by"}}, "nuisance": {name: {"value", "unit"}}, "correlations": [...], "confounded": [...]}
 
@@ -235,6 +235,28 @@ def write(res: Result, folder: Path) -> dict:
                 f"fitted {vals} (95 %); removes {100 * w.reduction:.1f} % of the disagreement; information "
                 f"criterion {w.delta_ic:+.1f}; its signature ({spec.signature if spec else ''}) matches the "
                 f"residual with cosine {w.match:.2f} (by channel: {bych})") + "</p>")
+            for p in it.partners:
+                vals = "; ".join(f"{k} = {v:.5g} +- {p.effect.uncertainty.get(k, float('nan')):.2g}"
+                                 for k, v in p.effect.values().items())
+                parts.append("<p><b>Added jointly with it: " + e(p.effect.label()) + ".</b> " + e(
+                    f"fitted together with the winner, {vals} (95 %, joint interval); beyond the winner it removes "
+                    f"{100 * p.local_reduction:.1f} % of the disagreement on its channels ({', '.join(p.signature)}), "
+                    f"information criterion {p.delta_ic:+.1f}") + "</p>")
+            if it.refitted:
+                parts.append("<p><b>Re-fitted jointly with it:</b> " + e(", ".join(
+                    f"{a} -> {b}" for a, b in it.refitted)) + "</p>")
+            if it.joint.get("tried"):
+                rows = [[d["winner"], d["partner"], f"{d['correlation']:+.2f}",
+                         f"{100 * d['winner_beyond']['local_reduction']:.1f} % (IC {d['winner_beyond']['delta_ic']:+.1f})",
+                         f"{100 * d['partner_beyond']['local_reduction']:.1f} % (IC {d['partner_beyond']['delta_ic']:+.1f})",
+                         "yes" if d["winner_beyond"]["eligible"] and d["partner_beyond"]["eligible"] else "no",
+                         d["simulations"]] if "failed" not in d else [w.effect.label(), d["partner"], "", "", "",
+                                                                      d["failed"], ""]
+                        for d in it.joint["tried"]]
+                parts.append("<p><b>Joint fits tried</b> (each member judged beyond the other on its own channels)</p>"
+                             + _table(rows, ["winner (joint value)", "partner (joint value)",
+                                             "correlation of sensitivities", "winner beyond the partner",
+                                             "partner beyond the winner", "both eligible", "simulations"]))
             if it.runner_up:
                 r = it.runner_up
                 parts.append("<p><b>Runner-up:</b> " + e(

@@ -72,6 +72,7 @@ SCREEN_SIMS = 3              # trial, one Gauss-Newton step (and that step halve
 REFINE_TOP = 3               # model effects refined to convergence per iteration
 JOINT_TOP = 2                # model effects tried jointly with a model winner
 JOINT_PROMISE = 0.1          # share of the winner's remaining cost a partner must be predicted to remove (linearised)
+JOINT_SIZE = 0.5             # and the share of MIN_SIZE it must be predicted to move the outputs by (RMS)
 
 
 @dataclass
@@ -311,9 +312,10 @@ class _Joint:
     info: dict
 
 
-def _promise(ctx: Context, win: Candidate, cols: list[np.ndarray], cand: Candidate) -> float:
-    """The share of the winner's remaining cost `cand` would remove on top of it (linearised: its
-    sensitivity made orthogonal to the columns of the effects refitted with it)."""
+def _promise(ctx: Context, win: Candidate, cols: list[np.ndarray], cand: Candidate) -> tuple[float, float]:
+    """The share of the winner's remaining cost `cand` would remove on top of it and how far it would
+    move the outputs (RMS, standard errors), linearised: its sensitivity made orthogonal to the columns
+    of the effects refitted with it."""
     r = ctx.objective.residual(win.outputs)
     j = cand.J.astype(float).copy()
     for c in cols:
@@ -321,32 +323,38 @@ def _promise(ctx: Context, win: Candidate, cols: list[np.ndarray], cand: Candida
         if cc > 0:
             j -= (float(c @ j) / cc) * c
     jj, rr = float(j @ j), float(r @ r)
-    return (float(j @ r) ** 2 / jj / rr) if jj > 0 and rr > 0 else 0.0
+    if not (jj > 0 and rr > 0):
+        return 0.0, 0.0
+    return float(j @ r) ** 2 / jj / rr, abs(float(j @ r)) / math.sqrt(jj * r.size)
 
 
 def _joint_model(ctx: Context, win: Candidate, ranked: list[Candidate], earlier: list[Candidate],
-                 workers, progress) -> _Joint | None:
+                 workers, progress, info: dict) -> _Joint | None:
     """Several model effects at once. The model winner `win` (its value from the runs, its outputs in
     hand) is fitted jointly (identify.fit_joint) with the model effects added in earlier iterations
     (`earlier`: a first effect that absorbed part of a second is corrected) and, in turn, with the
     `JOINT_TOP` model candidates predicted to remove at least `JOINT_PROMISE` of what the winner leaves
-    (linearised, from their single fits' sensitivities: nothing is simulated when none qualifies). A
+    and to move the outputs by `JOINT_SIZE` of the size an eligible effect needs (linearised, from their
+    single fits' sensitivities: nothing is simulated when none qualifies, nor
+    when the winner brings every channel within the data's own uncertainty, the loop's stop). A
     partner is added when each of the two is eligible beyond the other (identify.joint_member: the joint
     fit judged against the partner's own single fit for the winner and against the winner's (re-)fit for
     the partner, on their signature channels, information criterion included) and both values clear the
-    off value by `CLEAR` half-widths of their joint intervals from the runs one by one."""
+    off value by `CLEAR` half-widths of their joint intervals from the runs one by one. What was tried
+    goes to `info` (the iteration's `joint`)."""
     bench, rp = ctx.bench, ctx.replayer
     keys = {c.effect.key for c in earlier}
     fixed = [e for e in ctx.effects if not (e.kind == "model" and e.key in keys)]
     base = [Member.of(c) for c in [*earlier, win]]
     cols = [m.J for m in base]
     partners = []
-    for c in ranked:
+    within = max(ctx.objective.channel_cost(win.outputs).values()) <= 1.0
+    for c in ([] if within else ranked):       # with the winner in, the model is within the data's uncertainty
         if (c.kind != "model" or c is win or c.J is None or c.coord is None or not c.sims
                 or not float(c.J @ c.J) > 0 or c.reduction < LITTLE):
             continue
-        share = _promise(ctx, win, cols, c)
-        if share >= JOINT_PROMISE:
+        share, size = _promise(ctx, win, cols, c)
+        if share >= JOINT_PROMISE and size >= JOINT_SIZE * MIN_SIZE:
             partners.append((share, c))
     partners = [c for _, c in sorted(partners, key=lambda x: -x[0])[:JOINT_TOP]]
     if not earlier and not partners:
@@ -363,7 +371,8 @@ def _joint_model(ctx: Context, win: Candidate, ranked: list[Candidate], earlier:
     if isinstance(refit, _Failed):
         refit = None
     w_at = len(earlier)
-    pair, best_ic, info = None, math.inf, {"tried": []}
+    pair, best_ic = None, math.inf
+    info["tried"] = []
     for c, f in zip(partners, fits):
         if isinstance(f, _Failed):
             info["tried"].append({"partner": c.effect.label(), "failed": f.message})
@@ -616,10 +625,10 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
                 win.outputs = rp.reported(win.raw, bench.t, [*current, eff])
             else:
                 win.outputs = rp.reported(raw, bench.t, [*current, eff])
-        joint = None
+        joint, tried = None, {}
         if win.kind == "model" and win.raw is not None and win.J is not None and win.coord is not None:
             earlier = [latest[e.key] for e in effects if e.kind == "model" and e.key in latest]
-            joint = _joint_model(ctx, win, ranked, earlier, workers, prog)
+            joint = _joint_model(ctx, win, ranked, earlier, workers, prog, tried)
         refitted = []
         if joint is not None:
             for old, new in zip(joint.refitted, joint.members):
@@ -645,8 +654,10 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
         effects.append(win.effect)
         latest[win.effect.key] = win
         partners = []
-        if joint is not None:
+        if joint is not None and joint.text:
             v += "; " + joint.text
+        if tried.get("rejected"):
+            v += "; " + tried["rejected"]
             if joint.partner is not None:
                 partners.append(joint.partner)
                 effects.append(joint.partner.effect)
@@ -659,7 +670,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
         it = Iteration(k, label, cost, metrics, where, ranked, win, runner, v, time.perf_counter() - ti)
         it.equivalent = [(c.effect.label(), d) for c, d in ties]
         it.partners, it.refitted = partners, refitted
-        it.joint = joint.info if joint is not None else {}
+        it.joint = tried
         iterations.append(it)
     else:
         verdict = f"stopped after {opts.max_iterations} iterations: " + iterations[-1].verdict
