@@ -166,11 +166,7 @@ def test_lateral_peer(replayer, car, folder, case):
 
 
 #: held-out cases that fail: the method's known limits, kept so that a fix shows (strict: a pass fails)
-KNOWN_FAILURES = {
-    "mass_and_grade": "two model effects at once are added one by one: the grade is added first at 0.045 "
-                      "(true 0.03) carrying part of the mass, then brake_lag and an accel_x bias; a joint fit of "
-                      "two model effects is not implemented",
-}
+KNOWN_FAILURES: dict[str, str] = {}
 
 
 def _known(case: str):
@@ -191,7 +187,7 @@ def test_longitudinal_peer(replayer, folder, case):
     res = run(Options(VEHICLE, paths, folder / f"long_{case}_report"), replayer=replayer)
     _show(f"long_{case}", res)
     _check(res, expected)
-    if isinstance(expected, list) and all(kind(n) == "model" for n, *_ in expected):
+    if isinstance(expected, list) and len(expected) == 2 and all(kind(n) == "model" for n, *_ in expected):
         # two model effects: their values from a joint fit (added together, or the first re-fitted with the
         # second), their correlation reported and called confounded at |r| >= 0.9, the report shows the fit
         joint = [it for it in res.iterations if it.partners or it.refitted]

@@ -45,6 +45,16 @@ there (cannot be told apart from the structural mismatch), when a sensor effect 
 SENSOR_EXPLAINS of its channel's cost, or when a gain or lag of accel_y is asked for without the roll
 angle compared (TILT). The uncertainty of the winner combines the runs' scatter with the linearised
 interval whose noise is the residual left at the optimum: it widens with the unexplained residual.
+
+Several model effects at once (fit_joint, joint_member, joint_run_estimate). Fitted one by one, the first
+of two model effects takes part of the second (a grade added first carries part of a hidden mass), and the
+model then asks for wrong third effects. A joint fit is Gauss-Newton over the members' coordinates from
+their single fits' sensitivities, updated by Broyden's rank-one rule after each simulation, refreshed by
+finite differences when the steps stall (a secant from a single fit far away stalls it early), within
+JOINT_SIMS simulations. Each member is then judged beyond the others with channel_evidence: the joint
+outputs against the model without it, one value counted, so a member that only re-distributes what the
+other explains is not eligible. Its interval is the joint one (the sandwich of _uncertainty with the
+Jacobian's columns: the other members' uncertainty included), then combined with the runs' scatter.
 """
 from __future__ import annotations
 

@@ -19,7 +19,9 @@
 Structural mismatch (issue 15): every residual carries the nuisance adjustments (objective.Nuisance:
 axle rolling radii, a small resistance offset; reported, never named); candidates are judged per
 channel (identify.channel_evidence); when nothing is eligible alone, the sensor effects are fitted again
-on top of the best model candidate (_joint_sensor); at the end every channel is reported as explained,
+on top of the best model candidate (_joint_sensor); a model winner is fitted jointly with the model
+candidates that promise to explain what it leaves, and with the model effects added in earlier
+iterations (_joint_model: a first effect that absorbed part of a second is re-fitted with it); at the end every channel is reported as explained,
 inside the band or structural with its shape (structural.channel_report), the identified effects'
 sensitivities are correlated (|r| >= CONFOUNDED: confounded), and the verdict says "no catalogue effect"
 or "cannot be told apart" when no effect stands out from the structural mismatch.
@@ -27,7 +29,9 @@ or "cannot be told apart" when no effect stands out from the structural mismatch
 The loop also stops when every channel's normalised cost (objective) is at most 1, i.e. the model is
 within the data's own uncertainty: a candidate fitted there would fit noise and averaging artefacts.
 
-Cost per iteration: every model effect is screened with two or three simulations (a trial value, one
+Cost per iteration: a joint fit takes at most identify.JOINT_SIMS simulations per pair (JOINT_TOP pairs,
+none when no partner promises to move the outputs) and one per-run replay of each run when accepted;
+every model effect is screened with two or three simulations (a trial value, one
 Gauss-Newton step, halved once when it overshoots), the `REFINE_TOP` best are refined to convergence
 (identify.MAX_SIMS simulations at most), sensor effects need none; candidates are fitted in parallel by
 `workers` processes forked after the model is built (the compiled model is shared, never rebuilt), or
@@ -312,12 +316,25 @@ class _Joint:
     info: dict
 
 
-def _promise(ctx: Context, win: Candidate, cols: list[np.ndarray], cand: Candidate) -> tuple[float, float]:
-    """The share of the winner's remaining cost `cand` would remove on top of it and how far it would
-    move the outputs (RMS, standard errors), linearised: its sensitivity made orthogonal to the columns
-    of the effects refitted with it."""
+def _near_off(ctx: Context, cand: Candidate) -> np.ndarray:
+    """A model candidate's sensitivity near its off value, where a joint fit starts it: the secant from
+    the model as it stands to the candidate's simulated point nearest the off value (its single-fit
+    secant sits where it was pushed to carry the winner's part too, on a bound at worst)."""
+    pts = [(th, raw) for th, raw in cand.points if th != 0.0 and raw]
+    if not pts:
+        return cand.J
+    th, raw = min(pts, key=lambda p: abs(p[0]))
+    obj = ctx.objective
+    r = obj.residual(ctx.replayer.reported(raw, ctx.inputs.t, ctx.effects))
+    return (r - obj.residual(ctx.outputs)) / th
+
+
+def _promise(ctx: Context, win: Candidate, cols: list[np.ndarray], j: np.ndarray) -> tuple[float, float]:
+    """The share of the winner's remaining cost an effect of sensitivity `j` would remove on top of it
+    and how far it would move the outputs (RMS, standard errors), linearised: `j` made orthogonal to
+    the columns of the effects refitted with it."""
     r = ctx.objective.residual(win.outputs)
-    j = cand.J.astype(float).copy()
+    j = np.array(j, dtype=float)
     for c in cols:
         cc = float(c @ c)
         if cc > 0:
@@ -353,18 +370,20 @@ def _joint_model(ctx: Context, win: Candidate, ranked: list[Candidate], earlier:
         if (c.kind != "model" or c is win or c.J is None or c.coord is None or not c.sims
                 or not float(c.J @ c.J) > 0 or c.reduction < LITTLE):
             continue
-        share, size = _promise(ctx, win, cols, c)
+        j0 = _near_off(ctx, c)
+        share, size = _promise(ctx, win, cols, j0)
         if share >= JOINT_PROMISE and size >= JOINT_SIZE * MIN_SIZE:
-            partners.append((share, c))
-    partners = [c for _, c in sorted(partners, key=lambda x: -x[0])[:JOINT_TOP]]
+            partners.append((share, c, j0))
+    partners = [(c, j0) for _, c, j0 in sorted(partners, key=lambda x: -x[0])[:JOINT_TOP]]
     if not earlier and not partners:
         return None
     start = (win.raw, win.outputs)
     tasks = ([("joint", fixed, base, start)] if earlier else [])
-    for c in partners:
+    for c, j0 in partners:
         m = Member.of(c)
-        m.theta = 0.0
+        m.theta, m.J = 0.0, j0
         tasks.append(("joint", fixed, [*base, m], start))
+    partners = [c for c, _ in partners]
     fits = _map(ctx, tasks, workers, progress)
     rp.simulations += sum(f.sims for f in fits if isinstance(f, JointFit))
     refit = fits.pop(0) if earlier else None
@@ -658,10 +677,10 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
             v += "; " + joint.text
         if tried.get("rejected"):
             v += "; " + tried["rejected"]
-            if joint.partner is not None:
-                partners.append(joint.partner)
-                effects.append(joint.partner.effect)
-                latest[joint.partner.effect.key] = joint.partner
+        if joint is not None and joint.partner is not None:
+            partners.append(joint.partner)
+            effects.append(joint.partner.effect)
+            latest[joint.partner.effect.key] = joint.partner
         out = win.outputs
         if win.kind == "model":
             raw = win.raw if win.raw is not None else rp.simulate(inp, [*base, *effects], fit=True)
