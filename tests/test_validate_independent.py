@@ -21,8 +21,21 @@ on: every lateral case except gyro_z scale and delay (the nuisance prior, the si
 information criterion and the accel_y/roll confounding were added after they failed), and the
 longitudinal none and two-at-once cases (a first rule on what a sensor effect may leave on its channel
 was dropped after two-at-once failed). HELD-OUT: gyro_z scale, gyro_z delay and the longitudinal grade
-passed the first time they ran, and stiffness 0.6 (seed 99) and the longitudinal mass-and-grade pair
-were written and run once after the rules were final.
+passed the first time they ran, and stiffness 0.6 (seed 99) was written and run once after the rules were
+final.
+
+Two model effects at once (the joint fit, rtsim.validate.workflow._joint_model). It was developed on mass
+200 kg with rolling resistance 0.012 (seed 77, TUNING; before it rolling resistance was named first at
+0.0268, then brake_lag; after it 0.0119 and 198.8 kg). Mass 150 kg with grade 0.03 had been run once
+before, failing (the grade added first at 0.045, then brake_lag and an accel_x bias). With the joint fit
+it was run twice: the first run failed (an edit had left an accepted partner out of the effects, and the
+pair tried was grade with brake friction 0.65, since the mass, whose single fit sat on its 600 kg bound,
+was predicted by that fit's secant to remove too little to be tried); the partners' promise was then
+taken from their sensitivity near the off value, where the joint fit starts them, and the second run
+passed (grade 0.0300, mass 148.4 kg). That change was made after seeing this case, so it counts as
+TUNING now. Brake friction 0.8 with grade 0.03 (HELD-OUT) was written down before the joint fit first ran
+on it and never tuned on; run twice: first with the same dropped-partner bug (grade 0.02998 alone), then
+with the final method (grade 0.02998, brake friction 0.8019).
 """
 from __future__ import annotations
 
@@ -62,14 +75,14 @@ LATERAL = {
     "stiffness_0.6": ({"stiffness_scale": 0.6}, [("tyre_slip_stiffness", "scale", 0.6, None)], "held-out"),
 }
 
-#: longitudinal (pitch-plane peer) case -> (hidden, expected, "held-out")
+#: longitudinal (pitch-plane peer) case -> (hidden, expected, "tuning"/"held-out")
 LONGITUDINAL = {
     "grade": ({"grade": 0.04}, [("road_grade", "grade", 0.04, None)], "held-out"),
     "none": ({}, ("no catalogue effect", "no missing effect"), "tuning"),
     "two_at_once": ({"brake_scale": 0.75, "accel_bias": 0.25},
                     [("brake_friction", "scale", 0.75, None), ("sensor_bias", "bias", 0.25, "accel_x")], "tuning"),
     "mass_and_grade": ({"added_mass": 150.0, "grade": 0.03},
-                       [("mass", "added_mass", 150.0, None), ("road_grade", "grade", 0.03, None)], "held-out"),
+                       [("mass", "added_mass", 150.0, None), ("road_grade", "grade", 0.03, None)], "tuning"),
     # the joint fit of two model effects was developed on this one (before it: rolling resistance 0.0268 named
     # first, carrying the mass, then brake_lag)
     "mass_and_rolling_resistance": ({"added_mass": 200.0, "rr_added": 0.012},
@@ -110,7 +123,7 @@ def _show(case, res):
     print(f"\n[{case}] effects: {[e.label() for e in res.effects]} +- {[e.uncertainty for e in res.effects]}")
     print("  RMS before -> after: " + ", ".join(f"{c} {b[c]['rms']:.4g} -> {a[c]['rms']:.4g}" for c in b))
     print("  channels: " + "; ".join(f"{c}: {v['text']}" for c, v in res.channels.items()))
-    print(f"  nuisance: {res.nuisance}\n  verdict: {res.verdict}")
+    print(f"  nuisance: {res.nuisance}\n  correlations: {res.correlations}\n  verdict: {res.verdict}")
 
 
 def _check(res, expected):

@@ -46,6 +46,18 @@ def _clean(x):
     return x
 
 
+def _joint_row(d: dict) -> list:
+    """A row of the joint fits tried (workflow._joint_model's record)."""
+    if "failed" in d:
+        return ["", d["partner"], "", "", "", d["failed"], ""]
+
+    def beyond(x: dict) -> str:
+        return f"{100 * x['local_reduction']:.1f} % (IC {x['delta_ic']:+.1f})"
+    both = d["winner_beyond"]["eligible"] and d["partner_beyond"]["eligible"]
+    return [d["winner"], d["partner"], f"{d['correlation']:+.2f}", beyond(d["winner_beyond"]),
+            beyond(d["partner_beyond"]), "yes" if both else "no", d["simulations"]]
+
+
 def summary(res: Result) -> dict:
     return _clean({
         "effects": [{"name": e.name, "parameters": dict(e.params), "uncertainty": dict(e.uncertainty)}
@@ -246,17 +258,12 @@ def write(res: Result, folder: Path) -> dict:
                 parts.append("<p><b>Re-fitted jointly with it:</b> " + e(", ".join(
                     f"{a} -> {b}" for a, b in it.refitted)) + "</p>")
             if it.joint.get("tried"):
-                rows = [[d["winner"], d["partner"], f"{d['correlation']:+.2f}",
-                         f"{100 * d['winner_beyond']['local_reduction']:.1f} % (IC {d['winner_beyond']['delta_ic']:+.1f})",
-                         f"{100 * d['partner_beyond']['local_reduction']:.1f} % (IC {d['partner_beyond']['delta_ic']:+.1f})",
-                         "yes" if d["winner_beyond"]["eligible"] and d["partner_beyond"]["eligible"] else "no",
-                         d["simulations"]] if "failed" not in d else [w.effect.label(), d["partner"], "", "", "",
-                                                                      d["failed"], ""]
-                        for d in it.joint["tried"]]
-                parts.append("<p><b>Joint fits tried</b> (each member judged beyond the other on its own channels)</p>"
-                             + _table(rows, ["winner (joint value)", "partner (joint value)",
-                                             "correlation of sensitivities", "winner beyond the partner",
-                                             "partner beyond the winner", "both eligible", "simulations"]))
+                rows = [_joint_row(d) for d in it.joint["tried"]]
+                parts.append("<p><b>Joint fits tried</b> (each member judged beyond the other on its own "
+                             "channels)</p>" + _table(rows, ["winner (joint value)", "partner (joint value)",
+                                                             "correlation of sensitivities", "winner beyond the partner",
+                                                             "partner beyond the winner", "both eligible",
+                                                             "simulations"]))
             if it.runner_up:
                 r = it.runner_up
                 parts.append("<p><b>Runner-up:</b> " + e(

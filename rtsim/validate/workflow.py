@@ -21,8 +21,8 @@ axle rolling radii, a small resistance offset; reported, never named); candidate
 channel (identify.channel_evidence); when nothing is eligible alone, the sensor effects are fitted again
 on top of the best model candidate (_joint_sensor); a model winner is fitted jointly with the model
 candidates that promise to explain what it leaves, and with the model effects added in earlier
-iterations (_joint_model: a first effect that absorbed part of a second is re-fitted with it); at the end every channel is reported as explained,
-inside the band or structural with its shape (structural.channel_report), the identified effects'
+iterations (_joint_model: a first effect that absorbed part of a second is re-fitted with it); at the end
+every channel is reported as explained, inside the band or structural with its shape (structural.channel_report), the identified effects'
 sensitivities are correlated (|r| >= CONFOUNDED: confounded), and the verdict says "no catalogue effect"
 or "cannot be told apart" when no effect stands out from the structural mismatch.
 
