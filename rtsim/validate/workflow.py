@@ -22,8 +22,8 @@ channel (identify.channel_evidence); when nothing is eligible alone, the sensor 
 on top of the best model candidate (_joint_sensor); a model winner is fitted jointly with the model
 candidates that promise to explain what it leaves, and with the model effects added in earlier
 iterations (_joint_model: a first effect that absorbed part of a second is re-fitted with it); at the end
-every channel is reported as explained, inside the band or structural with its shape (structural.channel_report), the identified effects'
-sensitivities are correlated (|r| >= CONFOUNDED: confounded), and the verdict says "no catalogue effect"
+every channel is reported as explained, inside the band or structural with its shape
+(structural.channel_report), the identified effects' sensitivities are correlated (|r| >= CONFOUNDED: confounded), and the verdict says "no catalogue effect"
 or "cannot be told apart" when no effect stands out from the structural mismatch.
 
 The loop also stops when every channel's normalised cost (objective) is at most 1, i.e. the model is
@@ -352,8 +352,8 @@ def _joint_model(ctx: Context, win: Candidate, ranked: list[Candidate], earlier:
     (`earlier`: a first effect that absorbed part of a second is corrected) and, in turn, with the
     `JOINT_TOP` model candidates predicted to remove at least `JOINT_PROMISE` of what the winner leaves
     and to move the outputs by `JOINT_SIZE` of the size an eligible effect needs (linearised, from their
-    single fits' sensitivities: nothing is simulated when none qualifies, nor
-    when the winner brings every channel within the data's own uncertainty, the loop's stop). A
+    sensitivities near the off value, _near_off: nothing is simulated when none qualifies, nor when the
+    winner brings every channel within the data's own uncertainty, the loop's stop). A
     partner is added when each of the two is eligible beyond the other (identify.joint_member: the joint
     fit judged against the partner's own single fit for the winner and against the winner's (re-)fit for
     the partner, on their signature channels, information criterion included) and both values clear the
