@@ -23,8 +23,9 @@ on top of the best model candidate (_joint_sensor); a model winner is fitted joi
 candidates that promise to explain what it leaves, and with the model effects added in earlier
 iterations (_joint_model: a first effect that absorbed part of a second is re-fitted with it); at the end
 every channel is reported as explained, inside the band or structural with its shape
-(structural.channel_report), the identified effects' sensitivities are correlated (|r| >= CONFOUNDED: confounded), and the verdict says "no catalogue effect"
-or "cannot be told apart" when no effect stands out from the structural mismatch.
+(structural.channel_report), the identified effects' sensitivities are correlated (|r| >= CONFOUNDED:
+confounded), and the verdict says "no catalogue effect" or "cannot be told apart" when no effect stands
+out from the structural mismatch.
 
 The loop also stops when every channel's normalised cost (objective) is at most 1, i.e. the model is
 within the data's own uncertainty: a candidate fitted there would fit noise and averaging artefacts.
