@@ -27,9 +27,23 @@ failed in the level frame with road_grade added beside the sensor effect, and th
 not named from level-frame data that never stand still was added on them), and the longitudinal none
 and two-at-once cases (a first rule on what a sensor effect may leave on its channel was dropped after
 two-at-once failed). HELD-OUT: the longitudinal grade passed the first time it ran; stiffness 0.6 (seed
-99), the longitudinal mass-and-grade pair and the accel_y bias and scale were written and run once after
-the rules that concern them were final (the level-frame grade rule changed neither: no grade was
-involved).
+99) and the accel_y bias and scale were written and run once after the rules that concern them were
+final (the level-frame grade rule changed neither: no grade was involved); the longitudinal pairs of
+model effects: see below.
+
+Two model effects at once (the joint fit, rtsim.validate.workflow._joint_model). It was developed on mass
+200 kg with rolling resistance 0.012 (seed 77, TUNING; before it rolling resistance was named first at
+0.0268, then brake_lag; after it 0.0119 and 198.8 kg). Mass 150 kg with grade 0.03 had been run once
+before, failing (the grade added first at 0.045, then brake_lag and an accel_x bias). With the joint fit
+it was run twice: the first run failed (an edit had left an accepted partner out of the effects, and the
+pair tried was grade with brake friction 0.65, since the mass, whose single fit sat on its 600 kg bound,
+was predicted by that fit's secant to remove too little to be tried); the partners' promise was then
+taken from their sensitivity near the off value, where the joint fit starts them, and the second run
+passed (grade 0.0300, mass 148.4 kg; a third, after changes to docstrings and the report only, gave the
+same). That change was made after seeing this case, so it counts as TUNING now. Brake friction 0.8 with
+grade 0.03 (HELD-OUT) was written down before the joint fit first ran on it and never tuned on; run three
+times: first with the same dropped-partner bug (grade 0.02998 alone), then twice with the final method
+(grade 0.02998, brake friction 0.8019, the sensitivities correlating +0.50).
 """
 from __future__ import annotations
 
@@ -45,6 +59,7 @@ import peer_sim
 import peer_sim_lateral as lateral
 
 from rtsim.validate import report
+from rtsim.validate.effectset import kind
 from rtsim.validate.replay import Replayer
 from rtsim.validate.workflow import Options, run
 
@@ -81,14 +96,22 @@ LATERAL = {
                       "tuning"),
 }
 
-#: longitudinal (pitch-plane peer) case -> (hidden, expected, "held-out")
+#: longitudinal (pitch-plane peer) case -> (hidden, expected, "tuning"/"held-out")
 LONGITUDINAL = {
     "grade": ({"grade": 0.04}, [("road_grade", "grade", 0.04, None)], "held-out"),
     "none": ({}, ("no catalogue effect", "no missing effect"), "tuning"),
     "two_at_once": ({"brake_scale": 0.75, "accel_bias": 0.25},
                     [("brake_friction", "scale", 0.75, None), ("sensor_bias", "bias", 0.25, "accel_x")], "tuning"),
     "mass_and_grade": ({"added_mass": 150.0, "grade": 0.03},
-                       [("mass", "added_mass", 150.0, None), ("road_grade", "grade", 0.03, None)], "held-out"),
+                       [("mass", "added_mass", 150.0, None), ("road_grade", "grade", 0.03, None)], "tuning"),
+    # the joint fit of two model effects was developed on this one (before it: rolling resistance 0.0268 named
+    # first, carrying the mass, then brake_lag)
+    "mass_and_rolling_resistance": ({"added_mass": 200.0, "rr_added": 0.012},
+                                    [("mass", "added_mass", 200.0, None),
+                                     ("rolling_resistance", "coefficient", 0.012, None)], "tuning"),
+    # written before the joint fit of two model effects was run on it, never tuned on
+    "brake_and_grade": ({"brake_scale": 0.8, "grade": 0.03},
+                        [("brake_friction", "scale", 0.8, None), ("road_grade", "grade", 0.03, None)], "held-out"),
 }
 
 
@@ -121,7 +144,7 @@ def _show(case, res):
     print(f"\n[{case}] effects: {[e.label() for e in res.effects]} +- {[e.uncertainty for e in res.effects]}")
     print("  RMS before -> after: " + ", ".join(f"{c} {b[c]['rms']:.4g} -> {a[c]['rms']:.4g}" for c in b))
     print("  channels: " + "; ".join(f"{c}: {v['text']}" for c, v in res.channels.items()))
-    print(f"  nuisance: {res.nuisance}\n  verdict: {res.verdict}")
+    print(f"  nuisance: {res.nuisance}\n  correlations: {res.correlations}\n  verdict: {res.verdict}")
 
 
 def _check(res, expected):
@@ -146,7 +169,7 @@ def _check(res, expected):
 #: RTSIM_VALIDATE_ALL=1 also runs the cases the suite's 20-minute budget leaves out: the third tyre-stiffness
 #: value (0.5 and 0.6 stay) and the known failures (as strict expected failures)
 ALL = bool(os.environ.get("RTSIM_VALIDATE_ALL"))
-EXTRA = () if ALL else ("stiffness_0.7",)
+EXTRA = () if ALL else ("stiffness_0.7", "mass_and_rolling_resistance")
 
 
 #: cases that fail: the method's known limits, kept so that a fix shows (strict: a pass fails)
@@ -160,9 +183,6 @@ KNOWN_FAILURES = {
                      "on accel_y alone cannot tell the sensor's delay from that structural lag; a mass of -100 kg "
                      "is added beside it (the wheel speeds' resistance drift, which a grade carried before the "
                      "level-frame grade rule)",
-    "mass_and_grade": "two model effects at once are added one by one: the grade is added first at 0.045 "
-                      "(true 0.03) carrying part of the mass, then brake_lag and an accel_x bias; a joint fit of "
-                      "two model effects is not implemented",
 }
 
 
@@ -212,12 +232,23 @@ def test_lateral_peer(replayer, car, folder, case):
         assert res.correlations and all(abs(r) < 0.9 for _, _, r in res.correlations), res.correlations
 
 
-@pytest.mark.parametrize("case", [_known(c) if c in KNOWN_FAILURES else c for c in LONGITUDINAL])
+@pytest.mark.parametrize("case", [_known(c) if c in KNOWN_FAILURES else c for c in LONGITUDINAL
+                                  if c not in EXTRA])
 def test_longitudinal_peer(replayer, folder, case):
     hidden, expected, _ = LONGITUDINAL[case]
     car = peer_sim.Car.from_config(VEHICLE)
-    paths = peer_sim.write_runs(folder / f"long_{case}", car, n=7, seed=31 + list(LONGITUDINAL).index(case),
-                                **hidden)
+    seed = 77 if case == "mass_and_rolling_resistance" else 31 + list(LONGITUDINAL).index(case)
+    paths = peer_sim.write_runs(folder / f"long_{case}", car, n=7, seed=seed, **hidden)
     res = run(Options(VEHICLE, paths, folder / f"long_{case}_report"), replayer=replayer)
     _show(f"long_{case}", res)
     _check(res, expected)
+    if isinstance(expected, list) and len(expected) == 2 and all(kind(n) == "model" for n, *_ in expected):
+        # two model effects: their values from a joint fit (added together, or the first re-fitted with the
+        # second), their correlation reported and called confounded at |r| >= 0.9, the report shows the fit
+        joint = [it for it in res.iterations if it.partners or it.refitted]
+        assert joint, res.verdict
+        assert len(res.correlations) == 1 and abs(res.correlations[0][2]) < 1.0, res.correlations
+        assert ("confounded" in res.verdict) == (abs(res.correlations[0][2]) >= 0.9), res.verdict
+        report.write(res, folder / f"long_{case}_html")
+        html = (folder / f"long_{case}_html" / "report.html").read_text()
+        assert "Added jointly with it" in html or "Re-fitted jointly with it" in html

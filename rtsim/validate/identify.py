@@ -44,9 +44,18 @@ clearly worse (WORSE), when a model effect changes its channels by less than the
 there (cannot be told apart from the structural mismatch), when a sensor effect removes less than
 SENSOR_EXPLAINS of its channel's cost, or when a gain or lag of accel_y is asked for without the roll
 angle compared (TILT; body-frame accelerometers only: a level-frame one senses no tilt), or when a grade
-is asked for of level-frame data that never stand still (LEVEL_CONFOUNDED). The uncertainty of the
-winner combines the runs' scatter with the linearised interval whose noise is the residual left at the
-optimum: it widens with the unexplained residual.
+is asked for of level-frame data that never stand still (LEVEL_CONFOUNDED). The uncertainty of the winner combines the runs' scatter with the linearised
+interval whose noise is the residual left at the optimum: it widens with the unexplained residual.
+
+Several model effects at once (fit_joint, joint_member, joint_run_estimate). Fitted one by one, the first
+of two model effects takes part of the second (a grade added first carries part of a hidden mass), and the
+model then asks for wrong third effects. A joint fit is Gauss-Newton over the members' coordinates from
+their single fits' sensitivities, updated by Broyden's rank-one rule after each simulation, refreshed by
+finite differences when the steps stall (a secant from a single fit far away stalls it early), within
+JOINT_SIMS simulations. Each member is then judged beyond the others with channel_evidence: the joint
+outputs against the model without it, one value counted, so a member that only re-distributes what the
+other explains is not eligible. Its interval is the joint one (the sandwich of _uncertainty with the
+Jacobian's columns: the other members' uncertainty included), then combined with the runs' scatter.
 """
 from __future__ import annotations
 
@@ -623,3 +632,201 @@ def evidence_strength(delta: float) -> str:
     if d < 10:
         return "strong evidence"
     return "very strong evidence"
+
+
+# ------------------------------------------------------------------------- joint fit of model effects
+JOINT_SIMS = 10              # simulations per joint fit at most
+JOINT_DIFF = 0.1             # finite-difference step, relative to the coordinate (floor: 5 % of its range)
+JOINT_STEP = 0.01            # a joint step shorter than this share of every coordinate's scale: converged
+
+
+@dataclass
+class Member:
+    """One model effect of a joint fit: its name, coordinate, the other (fixed) parameters, its
+    starting coordinate and its sensitivity column there (a single fit's secant)."""
+    name: str
+    coord: Coord
+    others: dict
+    theta: float
+    J: np.ndarray
+
+    @classmethod
+    def of(cls, cand: "Candidate") -> "Member":
+        return cls(cand.effect.name, cand.coord, {k: v for k, v in cand.effect.values().items()
+                                                  if k != cand.coord.name}, float(cand.theta), cand.J)
+
+    def effect(self, th: float) -> Effect:
+        return Effect(self.name, {self.coord.name: self.coord.value(th), **self.others})
+
+
+@dataclass
+class JointFit:
+    """Model effects fitted together by re-simulation (fit_joint): the coordinates, the residual's
+    Jacobian there (columns: members), the outputs, the cost, the 95 % half-widths (linearised, residual
+    left as noise) and the correlation of the sensitivities; `requested` the value a member asks for
+    beyond its plausible range (None when inside)."""
+    members: list[Member]
+    theta: np.ndarray
+    J: np.ndarray
+    outputs: dict
+    raw: dict
+    cost: float
+    u_theta: np.ndarray
+    corr: np.ndarray
+    sims: int
+    requested: list
+    note: str = ""
+
+    def effects(self, theta: np.ndarray | None = None) -> list[Effect]:
+        th = self.theta if theta is None else theta
+        return [m.effect(float(t)) for m, t in zip(self.members, th)]
+
+
+def _lstsq_step(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The Gauss-Newton step -argmin |r + J d| (a tiny ridge keeps near-collinear columns finite)."""
+    A = J.T @ J
+    A = A + 1e-9 * np.trace(A) / len(A) * np.eye(len(A))
+    return -np.linalg.solve(A, J.T @ r)
+
+
+def joint_uncertainty(obj: Objective, J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """95 % half-widths of the jointly fitted coordinates (the sandwich of _uncertainty in several
+    dimensions: the residual left as the noise, samples correlated within a channel) and the
+    correlation of their estimates."""
+    m = J.shape[1]
+    A = J.T @ J
+    try:
+        Ai = np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        return np.full(m, math.inf), np.full((m, m), math.nan)
+    n = r.size // len(obj.channels)
+    meat = np.zeros((m, m))
+    for i in range(len(obj.channels)):
+        rc, jc = r[i * n:(i + 1) * n], J[i * n:(i + 1) * n]
+        meat += _tau(rc) * float(rc @ rc) / n * (jc.T @ jc)
+    cov = Ai @ meat @ Ai
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    corr = cov / np.outer(sd, sd) if np.all(sd > 0) else np.full((m, m), math.nan)
+    return 1.96 * sd, corr
+
+
+def sensitivity_correlation(J: np.ndarray) -> np.ndarray:
+    """Cosines between the Jacobian's columns (structural.correlations' measure)."""
+    nrm = np.linalg.norm(J, axis=0)
+    nrm[nrm == 0] = 1.0
+    return (J.T @ J) / np.outer(nrm, nrm)
+
+
+def fit_joint(ctx: Context, fixed: list[Effect], members: list[Member], start: tuple[dict, dict] | None,
+              budget: int = JOINT_SIMS) -> JointFit:
+    """The members fitted together over their coordinates with the effects `fixed` in the model:
+    Gauss-Newton from the members' starting coordinates (`start`: (raw, reported outputs) there, else
+    simulated) with the single fits' sensitivity columns, the Jacobian updated after every simulation
+    with the change it saw (Broyden's rank-one update), a step that costs more halved. When the steps
+    stall (shorter than JOINT_STEP of every coordinate, or halved thrice) the Jacobian is taken afresh by
+    finite differences at the best point (one simulation per member): a secant carried from a single
+    fit far away can stall the search far from the joint minimum. Converged when a step on a fresh
+    Jacobian stalls; coordinates stay in the plausible range. At most `budget` simulations."""
+    obj, rp = ctx.objective, ctx.replayer
+    th0 = np.array([m.theta for m in members], dtype=float)
+    lo = np.array([m.coord.tlo for m in members])
+    hi = np.array([m.coord.thi for m in members])
+    span = hi - lo
+    J = np.column_stack([m.J for m in members]).astype(float)
+    sims = 0
+    note = ""
+
+    def simulate(th: np.ndarray):
+        effects = [*fixed, *(m.effect(float(t)) for m, t in zip(members, th))]
+        raw = rp.simulate(ctx.inputs, effects, fit=True)
+        return raw, rp.reported(raw, ctx.inputs.t, effects)
+
+    if start is None:
+        raw, out = simulate(th0)
+        sims += 1
+    else:
+        raw, out = start
+    best = (th0, obj.residual(out), out, raw)
+    cur = best
+    shrink, fresh = 1.0, False
+
+    def run(th: np.ndarray):
+        nonlocal sims, note
+        sims += 1
+        try:
+            raw_n, out_n = simulate(th)
+        except RtsimError as exc:           # the model cannot run there
+            note = f"a joint step failed to simulate ({str(exc).splitlines()[0][:80]})"
+            return None
+        return (th, obj.residual(out_n), out_n, raw_n)
+
+    while sims < budget:
+        d = _lstsq_step(J, best[1]) * shrink
+        thn = np.clip(best[0] + d, lo, hi)
+        scale = np.maximum(np.abs(best[0]), 0.02 * span)
+        if np.all(np.abs(thn - best[0]) <= JOINT_STEP * scale) or shrink < 0.2:
+            if fresh:
+                break                       # converged with a Jacobian taken at the best point
+            # the step stalls on a Jacobian carried from elsewhere: finite differences at the best point
+            for k in range(len(members)):
+                if sims >= budget:
+                    break
+                h = JOINT_DIFF * max(abs(best[0][k]), 0.05 * span[k])
+                if best[0][k] + h > hi[k]:
+                    h = -h
+                th = best[0].copy()
+                th[k] += h
+                p = run(th)
+                if p is not None:
+                    J[:, k] = (p[1] - best[1]) / h
+                    if float(p[1] @ p[1]) < float(best[1] @ best[1]):
+                        best = p
+            fresh, shrink, cur = True, 1.0, best
+            continue
+        p = run(thn)
+        if p is None:
+            shrink *= 0.5
+            continue
+        s_ = thn - cur[0]
+        J = J + np.outer((p[1] - cur[1]) - J @ s_, s_) / float(s_ @ s_)
+        cur, fresh = p, False
+        if float(p[1] @ p[1]) < float(best[1] @ best[1]):
+            best, shrink = p, 1.0
+        else:
+            shrink *= 0.5
+    th, r, out, raw = best
+    # a coordinate held on its bound while the unconstrained step points beyond it: the data ask for more
+    free = th + _lstsq_step(J, r)
+    requested = [m.coord.value(float(f)) if (abs(f - float(np.clip(f, a, b))) > 0.05 * sp
+                                             and (not m.coord.inverse or f > 0)) else None
+                 for m, f, a, b, sp in zip(members, free, lo, hi, span)]
+    u, _ = joint_uncertainty(obj, J, r)
+    return JointFit(members, th, J, out, raw, float(np.mean(r * r)), u, sensitivity_correlation(J), sims,
+                    requested, note)
+
+
+def joint_run_estimate(ctx: Context, fixed: list[Effect], fit: JointFit, i: int) -> np.ndarray:
+    """Run i's own estimate of the joint coordinates (run_estimate in several dimensions): the model with
+    the joint values replayed with run i's inputs at the model's step, one Gauss-Newton step against run i."""
+    effects = [*fixed, *fit.effects()]
+    inp = ctx.replayer.inputs(ctx.bench, run=i)
+    raw = ctx.replayer.simulate(inp, effects)
+    out = ctx.replayer.reported(raw, inp.t, effects)
+    return fit.theta + _lstsq_step(fit.J, ctx.objective.residual_to_run(out, i))
+
+
+def joint_member(ctx: Context, fit: JointFit, k: int, base_outputs: dict) -> Candidate:
+    """Member k of a joint fit judged beyond the others (channel_evidence): the joint outputs against
+    `base_outputs`, the model without member k (the others at their own fit), one value counted; its
+    interval is the joint one (the others' uncertainty included)."""
+    m = fit.members[k]
+    base = Context(ctx.bench, ctx.objective, ctx.replayer, ctx.inputs, ctx.effects, base_outputs, {},
+                   ctx.objective.cost(base_outputs), ctx.n_runs)
+    th = float(fit.theta[k])
+    cand = _finish(base, m.effect(th), "model", 1, fit.outputs, fit.J[:, k].copy(), th, m.coord, fit.sims,
+                   fit.requested[k], "")
+    cand.u_theta = float(fit.u_theta[k])
+    cand.effect.uncertainty = {m.coord.name: m.coord.value_uncertainty(th, cand.u_theta)}
+    cand.significant = bool(abs(th) > cand.u_theta) and math.isfinite(cand.u_theta)
+    cand.raw = fit.raw
+    return cand

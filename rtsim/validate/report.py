@@ -4,7 +4,7 @@ backend) and `DIR/summary.json`:
     {"effects": [{"name", "parameters": {...}, "uncertainty": {...}}, ...],   # in the order added
      "before": {channel: {"rms", "max", "inside_band"}}, "after": {...},
      "iterations": [{"iteration", "model_effects", "cost", "metrics", "where", "verdict", "winner",
-                     "runner_up", "candidates", "seconds"}, ...],
+                     "runner_up", "partners", "refitted", "joint", "candidates", "seconds"}, ...],
      "verdict": text, "accel_frame": "body" | "level", "channels": {channel: {"status", "text", "signature",
      "inside_band", "rms", "explained_by"}}, "nuisance": {name: {"value", "unit"}}, "correlations": [...], "confounded": [...]}
 
@@ -52,6 +52,18 @@ FRAME_TEXT = {"body": "body (specific force in the body's axes, as rtsim's IMU m
               "level": "level (the yaw-aligned horizontal frame: the model's body specific force rotated by its roll "
                        "and pitch, gravity not sensed; declared for these runs, as an inertial navigation system's "
                        "level-frame outputs)"}
+
+
+def _joint_row(d: dict) -> list:
+    """A row of the joint fits tried (workflow._joint_model's record)."""
+    if "failed" in d:
+        return ["", d["partner"], "", "", "", d["failed"], ""]
+
+    def beyond(x: dict) -> str:
+        return f"{100 * x['local_reduction']:.1f} % (IC {x['delta_ic']:+.1f})"
+    both = d["winner_beyond"]["eligible"] and d["partner_beyond"]["eligible"]
+    return [d["winner"], d["partner"], f"{d['correlation']:+.2f}", beyond(d["winner_beyond"]),
+            beyond(d["partner_beyond"]), "yes" if both else "no", d["simulations"]]
 
 
 def summary(res: Result) -> dict:
@@ -246,6 +258,23 @@ def write(res: Result, folder: Path) -> dict:
                 f"fitted {vals} (95 %); removes {100 * w.reduction:.1f} % of the disagreement; information "
                 f"criterion {w.delta_ic:+.1f}; its signature ({spec.signature if spec else ''}) matches the "
                 f"residual with cosine {w.match:.2f} (by channel: {bych})") + "</p>")
+            for p in it.partners:
+                vals = "; ".join(f"{k} = {v:.5g} +- {p.effect.uncertainty.get(k, float('nan')):.2g}"
+                                 for k, v in p.effect.values().items())
+                parts.append("<p><b>Added jointly with it: " + e(p.effect.label()) + ".</b> " + e(
+                    f"fitted together with the winner, {vals} (95 %, joint interval); beyond the winner it removes "
+                    f"{100 * p.local_reduction:.1f} % of the disagreement on its channels ({', '.join(p.signature)}), "
+                    f"information criterion {p.delta_ic:+.1f}") + "</p>")
+            if it.refitted:
+                parts.append("<p><b>Re-fitted jointly with it:</b> " + e(", ".join(
+                    f"{a} -> {b}" for a, b in it.refitted)) + "</p>")
+            if it.joint.get("tried"):
+                rows = [_joint_row(d) for d in it.joint["tried"]]
+                parts.append("<p><b>Joint fits tried</b> (each member judged beyond the other on its own "
+                             "channels)</p>" + _table(rows, ["winner (joint value)", "partner (joint value)",
+                                                             "correlation of sensitivities", "winner beyond the partner",
+                                                             "partner beyond the winner", "both eligible",
+                                                             "simulations"]))
             if it.runner_up:
                 r = it.runner_up
                 parts.append("<p><b>Runner-up:</b> " + e(

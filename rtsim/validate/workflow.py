@@ -19,15 +19,20 @@
 Structural mismatch (issue 15): every residual carries the nuisance adjustments (objective.Nuisance:
 axle rolling radii, a small resistance offset; reported, never named); candidates are judged per
 channel (identify.channel_evidence); when nothing is eligible alone, the sensor effects are fitted again
-on top of the best model candidate (_joint_sensor); at the end every channel is reported as explained,
-inside the band or structural with its shape (structural.channel_report), the identified effects'
-sensitivities are correlated (|r| >= CONFOUNDED: confounded), and the verdict says "no catalogue effect"
-or "cannot be told apart" when no effect stands out from the structural mismatch.
+on top of the best model candidate (_joint_sensor); a model winner is fitted jointly with the model
+candidates that promise to explain what it leaves, and with the model effects added in earlier
+iterations (_joint_model: a first effect that absorbed part of a second is re-fitted with it); at the end
+every channel is reported as explained, inside the band or structural with its shape
+(structural.channel_report), the identified effects' sensitivities are correlated (|r| >= CONFOUNDED:
+confounded), and the verdict says "no catalogue effect" or "cannot be told apart" when no effect stands
+out from the structural mismatch.
 
 The loop also stops when every channel's normalised cost (objective) is at most 1, i.e. the model is
 within the data's own uncertainty: a candidate fitted there would fit noise and averaging artefacts.
 
-Cost per iteration: every model effect is screened with two or three simulations (a trial value, one
+Cost per iteration: a joint fit takes at most identify.JOINT_SIMS simulations per pair (JOINT_TOP pairs,
+none when no partner promises to move the outputs) and one per-run replay of each run when accepted;
+every model effect is screened with two or three simulations (a trial value, one
 Gauss-Newton step, halved once when it overshoots), the `REFINE_TOP` best are refined to convergence
 (identify.MAX_SIMS simulations at most), sensor effects need none; candidates are fitted in parallel by
 `workers` processes forked after the model is built (the compiled model is shared, never rebuilt), or
@@ -54,8 +59,9 @@ from rtsim.errors import RtsimError
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import accel_frame, load_runs
 from .effectset import Effect, catalogue, from_mapping
-from .identify import (MAX_SIMS, MIN_DELTA_IC, MIN_REDUCTION, MIN_SIZE, Candidate, Context, combine_runs,
-                       equivalents, evidence_strength, fit_model_effect, fit_sensor_effects, rank, run_estimate)
+from .identify import (LITTLE, MAX_SIMS, MIN_DELTA_IC, MIN_REDUCTION, MIN_SIZE, Candidate, Context, JointFit,
+                       Member, combine_runs, equivalents, evidence_strength, fit_joint, fit_model_effect,
+                       fit_sensor_effects, joint_member, joint_run_estimate, rank, run_estimate)
 from .objective import Objective
 from .profile import activate, active, vehicle_kind
 from .replay import Replayer, ReplayInputs
@@ -71,6 +77,9 @@ CLEAR = 2.0                  # a winner's value must lie this many 95 % half-wid
 CONFOUNDED = 0.9             # |correlation| of two identified effects' sensitivities above which they are confounded
 SCREEN_SIMS = 3              # trial, one Gauss-Newton step (and that step halved if it overshoots)
 REFINE_TOP = 3               # model effects refined to convergence per iteration
+JOINT_TOP = 2                # model effects tried jointly with a model winner
+JOINT_PROMISE = 0.1          # share of the winner's remaining cost a partner must be predicted to remove (linearised)
+JOINT_SIZE = 0.5             # and the share of MIN_SIZE it must be predicted to move the outputs by (RMS)
 
 
 @dataclass
@@ -105,6 +114,9 @@ class Iteration:
     verdict: str
     seconds: float
     equivalent: list = field(default_factory=list)     # (label, distance) of indistinguishable candidates
+    partners: list = field(default_factory=list)       # model effects added jointly with the winner (Candidate)
+    refitted: list = field(default_factory=list)       # (label before, label after) of earlier effects re-fitted
+    joint: dict = field(default_factory=dict)          # the joint fit: members, correlations, evidence
 
     def summary(self) -> dict:
         return {"iteration": self.index, "model_effects": self.model, "cost": self.cost, "metrics": self.metrics,
@@ -112,6 +124,8 @@ class Iteration:
                 "indistinguishable": [{"effect": lab, "distance": d} for lab, d in self.equivalent],
                 "winner": self.winner.summary() if self.winner else None,
                 "runner_up": self.runner_up.summary() if self.runner_up else None,
+                "partners": [c.summary() for c in self.partners],
+                "refitted": [{"before": a, "after": b} for a, b in self.refitted], "joint": self.joint,
                 "candidates": [c.summary() for c in self.candidates], "seconds": self.seconds}
 
 
@@ -172,6 +186,10 @@ def _run_task(ctx: Context, task: tuple):
     try:
         if task[0] == "fit":
             return fit_model_effect(ctx, *task[1:])
+        if task[0] == "joint":
+            return fit_joint(ctx, *task[1:])
+        if task[0] == "jrun":
+            return joint_run_estimate(ctx, *task[1:])
         if task[0] == "inputs":
             inp = ctx.replayer.inputs(ctx.bench, run=task[1])
             ctx.replayer.steering_command(inp, ctx.replayer.dt)
@@ -290,6 +308,174 @@ def _joint_sensor(ctx: Context, ranked: list[Candidate]) -> list[Candidate]:
     return out
 
 
+@dataclass
+class _Joint:
+    """The outcome of _joint_model: the members' candidates at their final (per-run) values, in the fit's
+    order (earlier effects, the winner, the partner), the partner (None: a re-fit only), the outputs."""
+    members: list[Candidate]
+    partner: Candidate | None
+    refitted: list[Candidate]
+    outputs: dict
+    raw: dict
+    fit: JointFit
+    text: str
+    info: dict
+
+
+def _near_off(ctx: Context, cand: Candidate) -> np.ndarray:
+    """A model candidate's sensitivity near its off value, where a joint fit starts it: the secant from
+    the model as it stands to the candidate's simulated point nearest the off value (its single-fit
+    secant sits where it was pushed to carry the winner's part too, on a bound at worst)."""
+    pts = [(th, raw) for th, raw in cand.points if th != 0.0 and raw]
+    if not pts:
+        return cand.J
+    th, raw = min(pts, key=lambda p: abs(p[0]))
+    obj = ctx.objective
+    r = obj.residual(ctx.replayer.reported(raw, ctx.inputs.t, ctx.effects))
+    return (r - obj.residual(ctx.outputs)) / th
+
+
+def _promise(ctx: Context, win: Candidate, cols: list[np.ndarray], j: np.ndarray) -> tuple[float, float]:
+    """The share of the winner's remaining cost an effect of sensitivity `j` would remove on top of it
+    and how far it would move the outputs (RMS, standard errors), linearised: `j` made orthogonal to
+    the columns of the effects refitted with it."""
+    r = ctx.objective.residual(win.outputs)
+    j = np.array(j, dtype=float)
+    for c in cols:
+        cc = float(c @ c)
+        if cc > 0:
+            j -= (float(c @ j) / cc) * c
+    jj, rr = float(j @ j), float(r @ r)
+    if not (jj > 0 and rr > 0):
+        return 0.0, 0.0
+    return float(j @ r) ** 2 / jj / rr, abs(float(j @ r)) / math.sqrt(jj * r.size)
+
+
+def _joint_model(ctx: Context, win: Candidate, ranked: list[Candidate], earlier: list[Candidate],
+                 workers, progress, info: dict) -> _Joint | None:
+    """Several model effects at once. The model winner `win` (its value from the runs, its outputs in
+    hand) is fitted jointly (identify.fit_joint) with the model effects added in earlier iterations
+    (`earlier`: a first effect that absorbed part of a second is corrected) and, in turn, with the
+    `JOINT_TOP` model candidates predicted to remove at least `JOINT_PROMISE` of what the winner leaves
+    and to move the outputs by `JOINT_SIZE` of the size an eligible effect needs (linearised, from their
+    sensitivities near the off value, _near_off: nothing is simulated when none qualifies, nor when the
+    winner brings every channel within the data's own uncertainty, the loop's stop). A
+    partner is added when each of the two is eligible beyond the other (identify.joint_member: the joint
+    fit judged against the partner's own single fit for the winner and against the winner's (re-)fit for
+    the partner, on their signature channels, information criterion included) and both values clear the
+    off value by `CLEAR` half-widths of their joint intervals from the runs one by one. What was tried
+    goes to `info` (the iteration's `joint`)."""
+    bench, rp = ctx.bench, ctx.replayer
+    keys = {c.effect.key for c in earlier}
+    fixed = [e for e in ctx.effects if not (e.kind == "model" and e.key in keys)]
+    base = [Member.of(c) for c in [*earlier, win]]
+    cols = [m.J for m in base]
+    partners = []
+    within = max(ctx.objective.channel_cost(win.outputs).values()) <= 1.0
+    for c in ([] if within else ranked):       # with the winner in, the model is within the data's uncertainty
+        if (c.kind != "model" or c is win or c.J is None or c.coord is None or not c.sims
+                or not float(c.J @ c.J) > 0 or c.reduction < LITTLE):
+            continue
+        j0 = _near_off(ctx, c)
+        share, size = _promise(ctx, win, cols, j0)
+        if share >= JOINT_PROMISE and size >= JOINT_SIZE * MIN_SIZE:
+            partners.append((share, c, j0))
+    partners = [(c, j0) for _, c, j0 in sorted(partners, key=lambda x: -x[0])[:JOINT_TOP]]
+    if not earlier and not partners:
+        return None
+    start = (win.raw, win.outputs)
+    tasks = ([("joint", fixed, base, start)] if earlier else [])
+    for c, j0 in partners:
+        m = Member.of(c)
+        m.theta, m.J = 0.0, j0
+        tasks.append(("joint", fixed, [*base, m], start))
+    partners = [c for c, _ in partners]
+    fits = _map(ctx, tasks, workers, progress)
+    rp.simulations += sum(f.sims for f in fits if isinstance(f, JointFit))
+    refit = fits.pop(0) if earlier else None
+    if isinstance(refit, _Failed):
+        refit = None
+    w_at = len(earlier)
+    pair, best_ic = None, math.inf
+    info["tried"] = []
+    for c, f in zip(partners, fits):
+        if isinstance(f, _Failed):
+            info["tried"].append({"partner": c.effect.label(), "failed": f.message})
+            continue
+        p_beyond = joint_member(ctx, f, w_at + 1, refit.outputs if refit else win.outputs)
+        w_beyond = joint_member(ctx, f, w_at, c.outputs)
+        ok = p_beyond.eligible and w_beyond.eligible
+        ic = ctx.objective.ic(f.outputs, len(f.members))
+        info["tried"].append({"partner": p_beyond.effect.label(), "winner": w_beyond.effect.label(),
+                              "partner_beyond": {"local_reduction": p_beyond.local_reduction,
+                                                 "delta_ic": p_beyond.delta_ic, "eligible": p_beyond.eligible,
+                                                 "note": p_beyond.note},
+                              "winner_beyond": {"local_reduction": w_beyond.local_reduction,
+                                                "delta_ic": w_beyond.delta_ic, "eligible": w_beyond.eligible,
+                                                "note": w_beyond.note},
+                              "correlation": float(f.corr[w_at, w_at + 1]), "simulations": f.sims})
+        if ok and ic < best_ic:
+            pair, best_ic = (f, w_beyond, p_beyond), ic
+    chosen = []
+    if pair is not None:
+        chosen.append(pair)
+    if refit is not None:
+        chosen.append((refit, None, None))
+    for f, w_beyond, p_beyond in chosen:
+        ests = _map(ctx, [("jrun", fixed, f, i) for i in range(bench.n)], workers, progress) if bench.n >= 2 else []
+        rp.simulations += len(ests)
+        runs = None if not ests or any(isinstance(e, _Failed) for e in ests) else np.array(ests)
+        cands = []
+        for k, m in enumerate(f.members):
+            if w_beyond is not None and k == w_at:
+                cand = w_beyond
+            elif p_beyond is not None and k == w_at + 1:
+                cand = p_beyond
+            else:
+                cand = joint_member(ctx, f, k, ctx.outputs)
+            if runs is not None:
+                combine_runs(cand, list(runs[:, k]))
+            cands.append(cand)
+        new = cands[w_at:]
+        unclear = [c for c in new if not abs(c.theta) >= CLEAR * c.u_theta]
+        if p_beyond is not None and unclear:
+            info["rejected"] = ("not added jointly: " + ", ".join(c.effect.label() for c in unclear) +
+                                f" does not clear the off value by {CLEAR:g} of its 95 % joint interval")
+            continue
+        effects = [*fixed, *(c.effect for c in cands)]
+        try:
+            raw = rp.simulate(ctx.inputs, effects, fit=True)
+        except RtsimError as exc:
+            info["rejected"] = f"the joint values do not simulate ({str(exc).splitlines()[0][:80]})"
+            continue
+        rp.simulations += 1
+        out = rp.reported(raw, ctx.inputs.t, effects)
+        J = f.J
+        for k, c in enumerate(cands):
+            c.J = J[:, k].copy()
+            c.raw, c.outputs = raw, out
+        partner = cands[w_at + 1] if p_beyond is not None else None
+        if partner is None and ctx.objective.cost(out) >= ctx.objective.cost(win.outputs):
+            return None                     # the re-fit does not improve on the winner alone
+        corr = f.corr
+        parts = []
+        if partner is not None:
+            w, p = cands[w_at], partner
+            parts.append(
+                f"{w.effect.label()} and {p.effect.label()} fitted jointly remove "
+                f"{100 * (1 - ctx.objective.cost(out) / ctx.cost):.0f} % of the disagreement; beyond the other, "
+                f"{w.effect.name} removes {100 * w.local_reduction:.0f} % on its channels (IC {w.delta_ic:+.0f}) and "
+                f"{p.effect.name} {100 * p.local_reduction:.0f} % (IC {p.delta_ic:+.0f}); correlation of their "
+                f"sensitivities {corr[w_at, w_at + 1]:+.2f}")
+        if earlier:
+            parts.append("re-fitted jointly with the new effect: " + ", ".join(
+                f"{a.effect.label()} -> {b.effect.label()}" for a, b in zip(earlier, cands[:w_at])))
+        info["members"] = [c.effect.label() for c in cands]
+        info["sensitivity_correlation"] = [[float(x) for x in row] for row in corr]
+        return _Joint(cands, partner, list(earlier), out, raw, f, "; ".join(parts), info)
+    return None
+
+
 # ------------------------------------------------------------------------------------ the loop
 def _metrics(bench: Benchmark, outputs: dict) -> dict:
     return {c: error_metrics(outputs[c], bench.bands[c]) for c in bench.compared}
@@ -387,6 +573,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     reg = regimes(bench, rp.wheel_radius)
     cat = catalogue()
     effects: list[Effect] = []
+    latest: dict = {}                   # effect key -> the candidate that fitted its current value
     iterations: list[Iteration] = []
     verdict = ""
     workers = RayWorkers(opts.ray) if opts.ray else max(1, min(opts.workers, os.cpu_count() or 1))
@@ -471,6 +658,21 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
                 win.outputs = rp.reported(win.raw, bench.t, [*current, eff])
             else:
                 win.outputs = rp.reported(raw, bench.t, [*current, eff])
+        joint, tried = None, {}
+        if win.kind == "model" and win.raw is not None and win.J is not None and win.coord is not None:
+            earlier = [latest[e.key] for e in effects if e.kind == "model" and e.key in latest]
+            joint = _joint_model(ctx, win, ranked, earlier, workers, prog, tried)
+        refitted = []
+        if joint is not None:
+            for old, new in zip(joint.refitted, joint.members):
+                effects[effects.index(old.effect)] = new.effect
+                refitted.append((old.effect.label(), new.effect.label()))
+                latest[new.effect.key] = new
+            w = joint.members[len(joint.refitted)]
+            win.effect.params.update(w.effect.params)
+            win.effect.uncertainty = dict(w.effect.uncertainty)
+            win.theta, win.u_theta, win.J, win.per_run = w.theta, w.u_theta, w.J, w.per_run
+            win.raw, win.outputs = joint.raw, joint.outputs
         ties = equivalents(obj, win, ranked)
         runner = next((c for c in ranked if c is not win and c.plausible), None)
         gap = (runner.ic - win.ic) if runner else float("inf")
@@ -483,6 +685,16 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
             v += (f"; runner-up {runner.effect.label()} ({100 * runner.reduction:.0f} %, "
                   f"{evidence_strength(gap)} for the winner, IC gap {gap:.1f})")
         effects.append(win.effect)
+        latest[win.effect.key] = win
+        partners = []
+        if joint is not None and joint.text:
+            v += "; " + joint.text
+        if tried.get("rejected"):
+            v += "; " + tried["rejected"]
+        if joint is not None and joint.partner is not None:
+            partners.append(joint.partner)
+            effects.append(joint.partner.effect)
+            latest[joint.partner.effect.key] = joint.partner
         out = win.outputs
         if win.kind == "model":
             raw = win.raw if win.raw is not None else rp.simulate(inp, [*base, *effects], fit=True)
@@ -490,6 +702,8 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
             v += "; the model is still outside the band: no single effect explains all of it, iterating"
         it = Iteration(k, label, cost, metrics, where, ranked, win, runner, v, time.perf_counter() - ti)
         it.equivalent = [(c.effect.label(), d) for c, d in ties]
+        it.partners, it.refitted = partners, refitted
+        it.joint = tried
         iterations.append(it)
     else:
         verdict = f"stopped after {opts.max_iterations} iterations: " + iterations[-1].verdict
@@ -508,7 +722,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     else:
         comparison = f"the mean inputs replayed ({why or 'a per-run replay failed'})"
     tm["final_simulation"] = time.perf_counter() - t3
-    winners = [it.winner for it in iterations if it.winner is not None]
+    winners = [latest[e.key] for e in effects if e.key in latest]
     explained: dict[str, list[str]] = {}
     for w in winners:
         for c in w.signature:
