@@ -50,13 +50,22 @@ def test_step_advances_exactly_and_publishes_every_sample(service):
     t0 = client.control("step", n=1, timeout=EVENT)["sim_time"]
     r = client.control("step", n=100, timeout=EVENT)
     assert r["ok"] and r["sim_time"] == pytest.approx(t0 + 0.1)
+    # wait for the last sample each stream owes for those 100 steps: the sensors' at t0 + 0.1; the
+    # state's (every state_every steps) at the latest within the last state_every steps. (Waiting for
+    # a state sample at t0 + 0.1 itself ran into the bound whenever t0 was off the state's grid.)
+    state_dt = svc.loop.state_every * svc.sim.dt
+    last = {"sensors": t0 + 0.1, "state": t0 + 0.1 - state_dt + svc.sim.dt}
     deadline = time.monotonic() + EVENT
-    while time.monotonic() < deadline and any(got[k][-1]["time"] < t0 + 0.1 - 1e-9 for k in ("sensors", "state")):
+    while time.monotonic() < deadline and any(got[k][-1]["time"] < last[k] - 1e-9 for k in last):
         time.sleep(0.05)
     times = [m["time"] for m in got["sensors"] if m["time"] > t0]
     # 500 Hz in simulated time: every sample of the 100 steps, exactly 2 ms apart
     assert len(times) == 50 and times[-1] == pytest.approx(t0 + 0.1)
     assert times == pytest.approx([t0 + 0.002 * (k + 1) for k in range(50)], abs=1e-9)
+    # the state at its own rate (100 Hz by default): every sample of the 100 steps, state_dt apart
+    st = [m["time"] for m in got["state"] if t0 + 1e-9 < m["time"] <= t0 + 0.1 + 1e-9]
+    assert len(st) == round(0.1 / state_dt) and st[-1] >= last["state"] - 1e-9, (t0, st)
+    assert st == pytest.approx([st[0] + state_dt * k for k in range(len(st))], abs=1e-9)
     for kind, msgs in got.items():
         assert msgs, kind
         assert payloads.validation_errors(kind, msgs[-1]) == [], kind

@@ -76,17 +76,31 @@ def _without_times(d):
     return [_without_times(v) for v in d] if isinstance(d, list) else d
 
 
+def _numba_cache_files(root: Path) -> set[Path]:
+    """numba's compiled-code files: beside the sources, or under NUMBA_CACHE_DIR when set."""
+    import numba
+    where = [root / d for d in ("rtsim", "bridge", "drivers")]
+    if numba.config.CACHE_DIR:
+        where.append(Path(numba.config.CACHE_DIR))
+    return {p for d in where if d.is_dir() for p in d.rglob("*.nbc")}
+
+
 def test_cli_on_ray_gives_the_same_summary(runs, report, tmp_path):
     """The re-simulations as Ray tasks (rtsim.batch.executors.ray_map: the iteration's context shipped once
     to each worker): the same summary as the forked workers' (every number; the iterations' durations
-    aside)."""
+    aside), and no kernel compiled again in the Ray workers."""
     out = tmp_path / "ray"
     root = VEHICLE.parents[2]
     env = {**os.environ, "PYTHONPATH": str(root), "RAY_USAGE_STATS_ENABLED": "0"}
+    compiled = _numba_cache_files(root)
     r = subprocess.run([sys.executable, "-m", "rtsim.cli", "validate", "--vehicle", str(VEHICLE), "--runs",
                         *map(str, runs), "--report", str(out), "--no-progress", "--ray", "auto"],
                        cwd=root, env=env, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
+    # the Ray workers load the kernels the run without Ray compiled (same types: writable arrays), none
+    # compiled again (read-only arrays from Ray's object store would make every kernel a new variant)
+    new = sorted(p.name for p in _numba_cache_files(root) - compiled)
+    assert not new, f"the Ray workers compiled kernel variants the run without Ray had not: {new[:8]}"
     ray_summary = json.loads((out / "summary.json").read_text())
     plain = json.loads((report[0] / "summary.json").read_text())
     assert ray_summary["effects"] and _without_times(ray_summary) == _without_times(plain)
