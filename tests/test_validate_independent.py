@@ -31,7 +31,7 @@ two-at-once failed). HELD-OUT: the longitudinal grade passed the first time it r
 final (the level-frame grade rule changed neither: no grade was involved); the longitudinal pairs of
 model effects: see below.
 
-Two model effects at once (the joint fit, rtsim.validate.workflow._joint_model). It was developed on mass
+Two model effects at once (the joint fit, rtsim.validate.joint.joint_model). It was developed on mass
 200 kg with rolling resistance 0.012 (seed 77, TUNING; before it rolling resistance was named first at
 0.0268, then brake_lag; after it 0.0119 and 198.8 kg). Mass 150 kg with grade 0.03 had been run once
 before, failing (the grade added first at 0.045, then brake_lag and an accel_x bias). With the joint fit

@@ -32,7 +32,7 @@ from validate_fieldgen import write_runs as write_straight
 from validate_fieldgen_lateral import crop_runs, write_runs
 
 from rtsim.errors import ConvergenceError
-from rtsim.validate import report, workflow
+from rtsim.validate import report, tasks
 from rtsim.validate.benchmark import LATERAL, build_benchmark
 from rtsim.validate.data import load_runs
 from rtsim.validate.replay import Replayer
@@ -186,7 +186,7 @@ def test_a_failing_worker_task_comes_back_as_a_failure(monkeypatch):
     the parent kills the pool's result thread and hangs the workflow."""
     def fail(ctx, cand, i):
         raise ConvergenceError(f"run {i}: Newton-Raphson did not converge", 1, 0.001)
-    monkeypatch.setattr(workflow, "run_estimate", fail)
-    out = workflow._map(None, [("run", None, 0), ("run", None, 1)], 2, workflow._Quiet())
-    assert [type(r) for r in out] == [workflow._Failed] * 2
+    monkeypatch.setattr(tasks, "run_estimate", fail)
+    out = tasks.map_tasks(None, [("run", None, 0), ("run", None, 1)], 2, tasks.Quiet())
+    assert [type(r) for r in out] == [tasks.Failed] * 2
     assert "ConvergenceError: run 1" in out[1].message

@@ -87,6 +87,7 @@ class _Budget(Exception):
 MIN_DELTA_IC = 10.0          # "very strong" evidence on the Kass-Raftery scale of 2 ln(Bayes factor)
 MIN_REDUCTION = 0.10         # a winner removes at least this share of the disagreement
 MIN_SIZE = 1.0               # and moves the outputs by at least this many standard errors (RMS)
+CLEAR = 2.0                  # a winner's value must lie this many 95 % half-widths from the off value
 SIGNATURE_SHARE = 0.2        # a channel is in a candidate's signature when it moves it by >= this share of
                              # its largest move (and by >= MIN_SIZE standard errors)
 WORSE = 1.5                  # a candidate that multiplies a channel's cost by more than this (and leaves it

@@ -55,7 +55,7 @@ FRAME_TEXT = {"body": "body (specific force in the body's axes, as rtsim's IMU m
 
 
 def _joint_row(d: dict) -> list:
-    """A row of the joint fits tried (workflow._joint_model's record)."""
+    """A row of the joint fits tried (joint.joint_model's record)."""
     if "failed" in d:
         return ["", d["partner"], "", "", "", d["failed"], ""]
 

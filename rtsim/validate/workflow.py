@@ -21,7 +21,7 @@ axle rolling radii, a small resistance offset; reported, never named); candidate
 channel (identify.channel_evidence); when nothing is eligible alone, the sensor effects are fitted again
 on top of the best model candidate (_joint_sensor); a model winner is fitted jointly with the model
 candidates that promise to explain what it leaves, and with the model effects added in earlier
-iterations (_joint_model: a first effect that absorbed part of a second is re-fitted with it); at the end
+iterations (joint.joint_model: a first effect that absorbed part of a second is re-fitted with it); at the end
 every channel is reported as explained, inside the band or structural with its shape
 (structural.channel_report), the identified effects' sensitivities are correlated (|r| >= CONFOUNDED:
 confounded), and the verdict says "no catalogue effect" or "cannot be told apart" when no effect stands
@@ -30,7 +30,7 @@ out from the structural mismatch.
 The loop also stops when every channel's normalised cost (objective) is at most 1, i.e. the model is
 within the data's own uncertainty: a candidate fitted there would fit noise and averaging artefacts.
 
-Cost per iteration: a joint fit takes at most identify.JOINT_SIMS simulations per pair (JOINT_TOP pairs,
+Cost per iteration: a joint fit takes at most identify.JOINT_SIMS simulations per pair (joint.JOINT_TOP pairs,
 none when no partner promises to move the outputs) and one per-run replay of each run when accepted;
 every model effect is screened with two or three simulations (a trial value, one
 Gauss-Newton step, halved once when it overshoots), the `REFINE_TOP` best are refined to convergence
@@ -40,13 +40,12 @@ with `ray` (an address, "auto": a local instance on 127.0.0.1) by Ray tasks (rts
 the iteration's context shipped once to each worker; the same results, in the same order). Each
 run's replay inputs (its steering command matched to its measured angle, see replay) are prepared once,
 in parallel, before the first per-run replay. A simulation error in a worker comes back as text
-(_Failed): a per-run replay that fails leaves the mean-input fit and its linearised interval, said so in
+(tasks.Failed): a per-run replay that fails leaves the mean-input fit and its linearised interval, said so in
 the candidate's note.
 """
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
 import os
 import time
 from dataclasses import dataclass, field
@@ -54,14 +53,12 @@ from pathlib import Path
 
 import numpy as np
 
-from rtsim.errors import RtsimError
-
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import accel_frame, load_runs
 from .effectset import Effect, catalogue, from_mapping
-from .identify import (LITTLE, MAX_SIMS, MIN_DELTA_IC, MIN_REDUCTION, MIN_SIZE, Candidate, Context, JointFit,
-                       Member, combine_runs, equivalents, evidence_strength, fit_joint, fit_model_effect,
-                       fit_sensor_effects, joint_member, joint_run_estimate, rank, run_estimate)
+from .identify import (CLEAR, MAX_SIMS, MIN_DELTA_IC, MIN_REDUCTION, MIN_SIZE, Candidate, Context, combine_runs,
+                       equivalents, evidence_strength, fit_sensor_effects, rank)
+from .joint import joint_model
 from .objective import Objective
 from .profile import activate, active, vehicle_kind
 from .replay import Replayer, ReplayInputs
@@ -69,17 +66,14 @@ from .replay_two_wheeler import TwoWheelerReplayer
 from .residuals import Regimes, describe, locate, regimes
 from .stats import error_metrics
 from .structural import channel_report, correlations
+from .tasks import Failed, Quiet, RayWorkers, map_tasks, raise_failed
 
 INSIDE_ENOUGH = 0.95
 INSIDE_MOSTLY = 0.90
 TRY_WINNERS = 2              # eligible candidates checked run by run before giving up
-CLEAR = 2.0                  # a winner's value must lie this many 95 % half-widths from the off value
 CONFOUNDED = 0.9             # |correlation| of two identified effects' sensitivities above which they are confounded
 SCREEN_SIMS = 3              # trial, one Gauss-Newton step (and that step halved if it overshoots)
 REFINE_TOP = 3               # model effects refined to convergence per iteration
-JOINT_TOP = 2                # model effects tried jointly with a model winner
-JOINT_PROMISE = 0.1          # share of the winner's remaining cost a partner must be predicted to remove (linearised)
-JOINT_SIZE = 0.5             # and the share of MIN_SIZE it must be predicted to move the outputs by (RMS)
 
 
 @dataclass
@@ -158,108 +152,13 @@ class Result:
         return {c: error_metrics(outputs[c], self.bench.bands[c]) for c in self.bench.compared}
 
 
-class _Quiet:
-    def stage(self, text: str, total: int | None = None) -> None:
-        pass
-
-    def advance(self, n: int = 1) -> None:
-        pass
-
-
-# ------------------------------------------------------------------------------ parallel fitting
-_CTX: Context | None = None
-
-
-@dataclass
-class _Failed:
-    """A task's RtsimError, as text: SimulationError and its kind cannot be unpickled (their __init__
-    takes more than the message), and an exception that fails to unpickle in the parent kills the
-    pool's result thread and hangs the workflow."""
-    message: str
-
-
-def _run_task(ctx: Context, task: tuple):
-    """One unit of parallel work on the iteration's context: ("fit", name, budget, seed),
-    ("run", candidate, run index), ("inputs", run index): that run's replay inputs with the steering
-    command matched at the model's step, or ("replay", effects, run index): the model's outputs under
-    that run's inputs. An RtsimError comes back as _Failed."""
-    try:
-        if task[0] == "fit":
-            return fit_model_effect(ctx, *task[1:])
-        if task[0] == "joint":
-            return fit_joint(ctx, *task[1:])
-        if task[0] == "jrun":
-            return joint_run_estimate(ctx, *task[1:])
-        if task[0] == "inputs":
-            inp = ctx.replayer.inputs(ctx.bench, run=task[1])
-            ctx.replayer.steering_command(inp, ctx.replayer.dt)
-            return inp
-        if task[0] == "replay":
-            effects, i = task[1], task[2]
-            inp = ctx.replayer.inputs(ctx.bench, run=i)
-            return ctx.replayer.reported(ctx.replayer.simulate(inp, effects), inp.t, effects)
-        return run_estimate(ctx, task[1], task[2])
-    except RtsimError as exc:
-        return _Failed(f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
-
-
-def _task(task: tuple):
-    """_run_task on the context a forked worker inherited."""
-    return _run_task(_CTX, task)
-
-
-def _same(ctx: Context) -> Context:
-    """A Ray worker's context: the one shipped (built once per worker by ray_map)."""
-    return ctx
-
-
-@dataclass(frozen=True)
-class RayWorkers:
-    """Where `_map` runs its tasks when the workflow runs on Ray: the cluster `address` (connected once
-    by `run`)."""
-    address: str
-
-
-def _map(ctx: Context, tasks: list[tuple], workers: int | RayWorkers, progress) -> list:
-    """The tasks' results, in order, computed by `workers` forked processes or by Ray tasks."""
-    global _CTX
-    if isinstance(workers, RayWorkers):
-        from rtsim.batch.executors import ray_map
-
-        out = ray_map(_run_task, tasks, _same, (ctx,), address=workers.address)
-        progress.advance(len(out))
-        return out
-    _CTX = ctx
-    out = []
-    try:
-        if workers > 1 and len(tasks) > 1 and "fork" in mp.get_all_start_methods():
-            with mp.get_context("fork").Pool(min(workers, len(tasks))) as pool:
-                for res in pool.imap(_task, tasks):
-                    out.append(res)
-                    progress.advance()
-        else:
-            for t in tasks:
-                out.append(_task(t))
-                progress.advance()
-    finally:
-        _CTX = None
-    return out
-
-
-def _raise_failed(results: list) -> list:
-    for r in results:
-        if isinstance(r, _Failed):
-            raise RtsimError(r.message)
-    return results
-
-
 def _fit_model_candidates(ctx: Context, names: list[str], workers: int, progress) -> list[Candidate]:
     """Screen every model effect (trial + one damped Gauss-Newton step), then refine the `REFINE_TOP` best to
     convergence, continuing from their screening simulations; candidates run in parallel."""
-    screened = _raise_failed(_map(ctx, [("fit", n, SCREEN_SIMS, None) for n in names], workers, progress))
+    screened = raise_failed(map_tasks(ctx, [("fit", n, SCREEN_SIMS, None) for n in names], workers, progress))
     screened.sort(key=lambda c: c.cost)
     top = [c for c in screened[:REFINE_TOP] if c.reduction > 0.0]
-    refined = _raise_failed(_map(ctx, [("fit", c.effect.name, MAX_SIMS, c.points) for c in top], workers,
+    refined = raise_failed(map_tasks(ctx, [("fit", c.effect.name, MAX_SIMS, c.points) for c in top], workers,
                                  progress))
     byname = {c.effect.name: c for c in refined}
     out = []
@@ -308,174 +207,6 @@ def _joint_sensor(ctx: Context, ranked: list[Candidate]) -> list[Candidate]:
     return out
 
 
-@dataclass
-class _Joint:
-    """The outcome of _joint_model: the members' candidates at their final (per-run) values, in the fit's
-    order (earlier effects, the winner, the partner), the partner (None: a re-fit only), the outputs."""
-    members: list[Candidate]
-    partner: Candidate | None
-    refitted: list[Candidate]
-    outputs: dict
-    raw: dict
-    fit: JointFit
-    text: str
-    info: dict
-
-
-def _near_off(ctx: Context, cand: Candidate) -> np.ndarray:
-    """A model candidate's sensitivity near its off value, where a joint fit starts it: the secant from
-    the model as it stands to the candidate's simulated point nearest the off value (its single-fit
-    secant sits where it was pushed to carry the winner's part too, on a bound at worst)."""
-    pts = [(th, raw) for th, raw in cand.points if th != 0.0 and raw]
-    if not pts:
-        return cand.J
-    th, raw = min(pts, key=lambda p: abs(p[0]))
-    obj = ctx.objective
-    r = obj.residual(ctx.replayer.reported(raw, ctx.inputs.t, ctx.effects))
-    return (r - obj.residual(ctx.outputs)) / th
-
-
-def _promise(ctx: Context, win: Candidate, cols: list[np.ndarray], j: np.ndarray) -> tuple[float, float]:
-    """The share of the winner's remaining cost an effect of sensitivity `j` would remove on top of it
-    and how far it would move the outputs (RMS, standard errors), linearised: `j` made orthogonal to
-    the columns of the effects refitted with it."""
-    r = ctx.objective.residual(win.outputs)
-    j = np.array(j, dtype=float)
-    for c in cols:
-        cc = float(c @ c)
-        if cc > 0:
-            j -= (float(c @ j) / cc) * c
-    jj, rr = float(j @ j), float(r @ r)
-    if not (jj > 0 and rr > 0):
-        return 0.0, 0.0
-    return float(j @ r) ** 2 / jj / rr, abs(float(j @ r)) / math.sqrt(jj * r.size)
-
-
-def _joint_model(ctx: Context, win: Candidate, ranked: list[Candidate], earlier: list[Candidate],
-                 workers, progress, info: dict) -> _Joint | None:
-    """Several model effects at once. The model winner `win` (its value from the runs, its outputs in
-    hand) is fitted jointly (identify.fit_joint) with the model effects added in earlier iterations
-    (`earlier`: a first effect that absorbed part of a second is corrected) and, in turn, with the
-    `JOINT_TOP` model candidates predicted to remove at least `JOINT_PROMISE` of what the winner leaves
-    and to move the outputs by `JOINT_SIZE` of the size an eligible effect needs (linearised, from their
-    sensitivities near the off value, _near_off: nothing is simulated when none qualifies, nor when the
-    winner brings every channel within the data's own uncertainty, the loop's stop). A
-    partner is added when each of the two is eligible beyond the other (identify.joint_member: the joint
-    fit judged against the partner's own single fit for the winner and against the winner's (re-)fit for
-    the partner, on their signature channels, information criterion included) and both values clear the
-    off value by `CLEAR` half-widths of their joint intervals from the runs one by one. What was tried
-    goes to `info` (the iteration's `joint`)."""
-    bench, rp = ctx.bench, ctx.replayer
-    keys = {c.effect.key for c in earlier}
-    fixed = [e for e in ctx.effects if not (e.kind == "model" and e.key in keys)]
-    base = [Member.of(c) for c in [*earlier, win]]
-    cols = [m.J for m in base]
-    partners = []
-    within = max(ctx.objective.channel_cost(win.outputs).values()) <= 1.0
-    for c in ([] if within else ranked):       # with the winner in, the model is within the data's uncertainty
-        if (c.kind != "model" or c is win or c.J is None or c.coord is None or not c.sims
-                or not float(c.J @ c.J) > 0 or c.reduction < LITTLE):
-            continue
-        j0 = _near_off(ctx, c)
-        share, size = _promise(ctx, win, cols, j0)
-        if share >= JOINT_PROMISE and size >= JOINT_SIZE * MIN_SIZE:
-            partners.append((share, c, j0))
-    partners = [(c, j0) for _, c, j0 in sorted(partners, key=lambda x: -x[0])[:JOINT_TOP]]
-    if not earlier and not partners:
-        return None
-    start = (win.raw, win.outputs)
-    tasks = ([("joint", fixed, base, start)] if earlier else [])
-    for c, j0 in partners:
-        m = Member.of(c)
-        m.theta, m.J = 0.0, j0
-        tasks.append(("joint", fixed, [*base, m], start))
-    partners = [c for c, _ in partners]
-    fits = _map(ctx, tasks, workers, progress)
-    rp.simulations += sum(f.sims for f in fits if isinstance(f, JointFit))
-    refit = fits.pop(0) if earlier else None
-    if isinstance(refit, _Failed):
-        refit = None
-    w_at = len(earlier)
-    pair, best_ic = None, math.inf
-    info["tried"] = []
-    for c, f in zip(partners, fits):
-        if isinstance(f, _Failed):
-            info["tried"].append({"partner": c.effect.label(), "failed": f.message})
-            continue
-        p_beyond = joint_member(ctx, f, w_at + 1, refit.outputs if refit else win.outputs)
-        w_beyond = joint_member(ctx, f, w_at, c.outputs)
-        ok = p_beyond.eligible and w_beyond.eligible
-        ic = ctx.objective.ic(f.outputs, len(f.members))
-        info["tried"].append({"partner": p_beyond.effect.label(), "winner": w_beyond.effect.label(),
-                              "partner_beyond": {"local_reduction": p_beyond.local_reduction,
-                                                 "delta_ic": p_beyond.delta_ic, "eligible": p_beyond.eligible,
-                                                 "note": p_beyond.note},
-                              "winner_beyond": {"local_reduction": w_beyond.local_reduction,
-                                                "delta_ic": w_beyond.delta_ic, "eligible": w_beyond.eligible,
-                                                "note": w_beyond.note},
-                              "correlation": float(f.corr[w_at, w_at + 1]), "simulations": f.sims})
-        if ok and ic < best_ic:
-            pair, best_ic = (f, w_beyond, p_beyond), ic
-    chosen = []
-    if pair is not None:
-        chosen.append(pair)
-    if refit is not None:
-        chosen.append((refit, None, None))
-    for f, w_beyond, p_beyond in chosen:
-        ests = _map(ctx, [("jrun", fixed, f, i) for i in range(bench.n)], workers, progress) if bench.n >= 2 else []
-        rp.simulations += len(ests)
-        runs = None if not ests or any(isinstance(e, _Failed) for e in ests) else np.array(ests)
-        cands = []
-        for k, m in enumerate(f.members):
-            if w_beyond is not None and k == w_at:
-                cand = w_beyond
-            elif p_beyond is not None and k == w_at + 1:
-                cand = p_beyond
-            else:
-                cand = joint_member(ctx, f, k, ctx.outputs)
-            if runs is not None:
-                combine_runs(cand, list(runs[:, k]))
-            cands.append(cand)
-        new = cands[w_at:]
-        unclear = [c for c in new if not abs(c.theta) >= CLEAR * c.u_theta]
-        if p_beyond is not None and unclear:
-            info["rejected"] = ("not added jointly: " + ", ".join(c.effect.label() for c in unclear) +
-                                f" does not clear the off value by {CLEAR:g} of its 95 % joint interval")
-            continue
-        effects = [*fixed, *(c.effect for c in cands)]
-        try:
-            raw = rp.simulate(ctx.inputs, effects, fit=True)
-        except RtsimError as exc:
-            info["rejected"] = f"the joint values do not simulate ({str(exc).splitlines()[0][:80]})"
-            continue
-        rp.simulations += 1
-        out = rp.reported(raw, ctx.inputs.t, effects)
-        J = f.J
-        for k, c in enumerate(cands):
-            c.J = J[:, k].copy()
-            c.raw, c.outputs = raw, out
-        partner = cands[w_at + 1] if p_beyond is not None else None
-        if partner is None and ctx.objective.cost(out) >= ctx.objective.cost(win.outputs):
-            return None                     # the re-fit does not improve on the winner alone
-        corr = f.corr
-        parts = []
-        if partner is not None:
-            w, p = cands[w_at], partner
-            parts.append(
-                f"{w.effect.label()} and {p.effect.label()} fitted jointly remove "
-                f"{100 * (1 - ctx.objective.cost(out) / ctx.cost):.0f} % of the disagreement; beyond the other, "
-                f"{w.effect.name} removes {100 * w.local_reduction:.0f} % on its channels (IC {w.delta_ic:+.0f}) and "
-                f"{p.effect.name} {100 * p.local_reduction:.0f} % (IC {p.delta_ic:+.0f}); correlation of their "
-                f"sensitivities {corr[w_at, w_at + 1]:+.2f}")
-        if earlier:
-            parts.append("re-fitted jointly with the new effect: " + ", ".join(
-                f"{a.effect.label()} -> {b.effect.label()}" for a, b in zip(earlier, cands[:w_at])))
-        info["members"] = [c.effect.label() for c in cands]
-        info["sensitivity_correlation"] = [[float(x) for x in row] for row in corr]
-        return _Joint(cands, partner, list(earlier), out, raw, f, "; ".join(parts), info)
-    return None
-
-
 # ------------------------------------------------------------------------------------ the loop
 def _metrics(bench: Benchmark, outputs: dict) -> dict:
     return {c: error_metrics(outputs[c], bench.bands[c]) for c in bench.compared}
@@ -491,8 +222,8 @@ def _prepare_runs(ctx: Context, workers: int) -> None:
     rp, bench = ctx.replayer, ctx.bench
     if rp.prepared(bench):
         return
-    for i, ri in enumerate(_map(ctx, [("inputs", i) for i in range(bench.n)], workers, _Quiet())):
-        if not isinstance(ri, _Failed):
+    for i, ri in enumerate(map_tasks(ctx, [("inputs", i) for i in range(bench.n)], workers, Quiet())):
+        if not isinstance(ri, Failed):
             rp.remember(bench, i, ri)
 
 
@@ -504,9 +235,9 @@ def _replay_runs(ctx: Context, effects: list[Effect], workers: int) -> tuple[dic
     if bench.n < 2:
         return None, "one run"
     _prepare_runs(ctx, workers)
-    outs = _map(ctx, [("replay", effects, i) for i in range(bench.n)], workers, _Quiet())
+    outs = map_tasks(ctx, [("replay", effects, i) for i in range(bench.n)], workers, Quiet())
     ctx.replayer.simulations += bench.n
-    failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(outs) if isinstance(r, _Failed)]
+    failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(outs) if isinstance(r, Failed)]
     if failed:
         return None, "a per-run replay failed (" + "; ".join(failed) + ")"
     return {c: np.mean([o[c] for o in outs], axis=0) for c in outs[0]}, ""
@@ -544,7 +275,7 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
 
 
 def _run(opts: Options, replayer: Replayer | None) -> Result:
-    prog = opts.progress or _Quiet()
+    prog = opts.progress or Quiet()
     tm = {}
     t0 = time.perf_counter()
     kind = getattr(replayer, "kind", None) or vehicle_kind(opts.vehicle)
@@ -609,14 +340,14 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
         for cand in trials:
             if bench.n >= 2:
                 _prepare_runs(ctx, workers)                 # the value and its interval from the runs one by one
-                ests = _map(ctx, [("run", cand, i) for i in range(bench.n)], workers, prog)
+                ests = map_tasks(ctx, [("run", cand, i) for i in range(bench.n)], workers, prog)
                 rp.simulations += bench.n
-                failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(ests) if isinstance(r, _Failed)]
+                failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(ests) if isinstance(r, Failed)]
                 if failed:
                     cand.note = (cand.note + "; " if cand.note else "") + (
                         "per-run replay failed (" + "; ".join(failed) + "): the mean-input fit and its "
                         "linearised interval kept")
-                combine_runs(cand, [math.nan if isinstance(r, _Failed) else r for r in ests])
+                combine_runs(cand, [math.nan if isinstance(r, Failed) else r for r in ests])
             if abs(cand.theta) >= CLEAR * cand.u_theta:
                 win = cand
                 break
@@ -661,7 +392,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
         joint, tried = None, {}
         if win.kind == "model" and win.raw is not None and win.J is not None and win.coord is not None:
             earlier = [latest[e.key] for e in effects if e.kind == "model" and e.key in latest]
-            joint = _joint_model(ctx, win, ranked, earlier, workers, prog, tried)
+            joint = joint_model(ctx, win, ranked, earlier, workers, prog, tried)
         refitted = []
         if joint is not None:
             for old, new in zip(joint.refitted, joint.members):
