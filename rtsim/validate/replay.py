@@ -139,7 +139,35 @@ class ReplayInputs:
     reference: "ReplayInputs | None" = None              # a run's: the mean inputs (first guess of matching)
 
 
-class Replayer:
+class InputCache:
+    """A replayer's replay inputs per benchmark and run, made once by the replayer's ``_inputs(bench,
+    run)`` (a car's carry the matched steering commands, a two-wheeler's the advanced roll reference)."""
+
+    _cache: dict
+
+    def inputs(self, bench: Benchmark, run: int | None = None):
+        """The benchmark's mean inputs and start state (or those of run number `run`); the same object
+        for the same benchmark and run."""
+        if getattr(self, "_cache", {}).get("bench") is not bench:
+            self._cache = {"bench": bench}
+        key = ("inputs", run)
+        if key not in self._cache:
+            self._cache[key] = self._inputs(bench, run)
+        return self._cache[key]
+
+    def prepared(self, bench: Benchmark) -> bool:
+        """Whether every run's inputs of `bench` are in hand."""
+        return getattr(self, "_cache", {}).get("bench") is bench and all(
+            ("inputs", i) in self._cache for i in range(bench.n))
+
+    def remember(self, bench: Benchmark, run: int | None, inp) -> None:
+        """Keep inputs prepared elsewhere (e.g. matched in a worker process) for `inputs`."""
+        if getattr(self, "_cache", {}).get("bench") is not bench:
+            self._cache = {"bench": bench}
+        self._cache[("inputs", run)] = inp
+
+
+class Replayer(InputCache):
     """The vehicle model built once; `simulate` replays the inputs with a set of model effects."""
 
     def __init__(self, vehicle: str | Path, road: str | Path | None = None, dt: float = 1e-3,
@@ -167,26 +195,6 @@ class Replayer:
         if frame not in ACCEL_FRAMES:
             raise ConfigError(f"accelerometer frame {frame!r}: use one of {', '.join(ACCEL_FRAMES)}")
         self._accel_frame = frame
-
-    def inputs(self, bench: Benchmark, run: int | None = None) -> ReplayInputs:
-        """The benchmark's mean inputs and start state (or those of run number `run`); the same object
-        for the same benchmark and run (it carries the matched steering commands, computed once)."""
-        if self._cache.get("bench") is not bench:
-            self._cache = {"bench": bench}
-        key = ("inputs", run)
-        if key not in self._cache:
-            self._cache[key] = self._inputs(bench, run)
-        return self._cache[key]
-
-    def prepared(self, bench: Benchmark) -> bool:
-        """Whether every run's inputs of `bench` are in hand."""
-        return self._cache.get("bench") is bench and all(("inputs", i) in self._cache for i in range(bench.n))
-
-    def remember(self, bench: Benchmark, run: int | None, inp: ReplayInputs) -> None:
-        """Keep inputs prepared elsewhere (e.g. matched in a worker process) for `inputs`."""
-        if self._cache.get("bench") is not bench:
-            self._cache = {"bench": bench}
-        self._cache[("inputs", run)] = inp
 
     def _inputs(self, bench: Benchmark, run: int | None) -> ReplayInputs:
         m = {c: (bench.mean(c) if run is None else bench.values[c][run]) for c in bench.inputs}

@@ -76,6 +76,7 @@ from drivers.rider import RO_TORQUE, RV_DELTADOT, RV_PHI, RV_PHIDOT
 
 from .benchmark import Benchmark
 from .effectset import Effect, from_mapping
+from .replay import InputCache
 from .signals import wheel_speed as smooth_rate
 
 START_WINDOW = 0.2       # s: the start speed is fitted over this much of the recording
@@ -187,7 +188,7 @@ def _start_rate(t: np.ndarray, w: np.ndarray) -> float:
     return float(np.polyfit(t[:k], w[:k], 2)[2]) if k >= 5 else float(w[0])
 
 
-class TwoWheelerReplayer:
+class TwoWheelerReplayer(InputCache):
     """The two-wheeler's model, rebuilt per effect set where the effect needs it (module docstring)."""
 
     kind = "two_wheeler"
@@ -239,22 +240,6 @@ class TwoWheelerReplayer:
         return self._models[key]
 
     # ---- inputs -------------------------------------------------------------------------------------
-    def inputs(self, bench: Benchmark, run: int | None = None) -> TwoWheelerInputs:
-        if self._cache.get("bench") is not bench:
-            self._cache = {"bench": bench}
-        key = ("inputs", run)
-        if key not in self._cache:
-            self._cache[key] = self._inputs(bench, run)
-        return self._cache[key]
-
-    def prepared(self, bench: Benchmark) -> bool:
-        return self._cache.get("bench") is bench and all(("inputs", i) in self._cache for i in range(bench.n))
-
-    def remember(self, bench: Benchmark, run: int | None, inp) -> None:
-        if self._cache.get("bench") is not bench:
-            self._cache = {"bench": bench}
-        self._cache[("inputs", run)] = inp
-
     def steering_command(self, inp: TwoWheelerInputs, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """The lean loop's roll reference and its rate (grid) at step dt: the recorded ones advanced by
         the loop's lag, found once on the mean inputs (the shift that best aligns the model's roll rate,

@@ -54,6 +54,12 @@ FRAME_TEXT = {"body": "body (specific force in the body's axes, as rtsim's IMU m
                        "level-frame outputs)"}
 
 
+def _values(effect) -> str:
+    """An effect's fitted values with their 95 % half-widths, "name = value +- half; ..."."""
+    return "; ".join(f"{k} = {v:.5g} +- {effect.uncertainty.get(k, float('nan')):.2g}"
+                     for k, v in effect.values().items())
+
+
 def _joint_row(d: dict) -> list:
     """A row of the joint fits tried (joint.joint_model's record)."""
     if "failed" in d:
@@ -252,15 +258,13 @@ def write(res: Result, folder: Path) -> dict:
             w = it.winner
             spec = cat.get(w.effect.name)
             bych = ", ".join(f"{c} {m:.2f}" for c, m in w.match_by_channel.items())
-            vals = "; ".join(f"{k} = {v:.5g} +- {w.effect.uncertainty.get(k, float('nan')):.2g}"
-                             for k, v in w.effect.values().items())
+            vals = _values(w.effect)
             parts.append("<p><b>Evidence for " + e(w.effect.label()) + ":</b> " + e(
                 f"fitted {vals} (95 %); removes {100 * w.reduction:.1f} % of the disagreement; information "
                 f"criterion {w.delta_ic:+.1f}; its signature ({spec.signature if spec else ''}) matches the "
                 f"residual with cosine {w.match:.2f} (by channel: {bych})") + "</p>")
             for p in it.partners:
-                vals = "; ".join(f"{k} = {v:.5g} +- {p.effect.uncertainty.get(k, float('nan')):.2g}"
-                                 for k, v in p.effect.values().items())
+                vals = _values(p.effect)
                 parts.append("<p><b>Added jointly with it: " + e(p.effect.label()) + ".</b> " + e(
                     f"fitted together with the winner, {vals} (95 %, joint interval); beyond the winner it removes "
                     f"{100 * p.local_reduction:.1f} % of the disagreement on its channels ({', '.join(p.signature)}), "

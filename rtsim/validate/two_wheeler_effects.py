@@ -49,13 +49,8 @@ def _bias_range(channel: str) -> tuple[float, float]:
 class TwoWheelerEffectSpec(EffectSpec):
     """An effect of the two-wheeler's catalogue: sensor biases bounded by the two-wheeler's channel units."""
 
-    def bounds(self, param: str, channel: str | None = None) -> tuple[float, float]:
-        if self.name == "sensor_bias" and param == "bias":
-            if channel is None:
-                raise ValueError("sensor_bias.bias: the plausible range depends on the channel; give it")
-            return _bias_range(channel)
-        p = self.param(param)
-        return p.lo, p.hi
+    def bias_range(self, channel: str) -> tuple[float, float]:
+        return _bias_range(channel)
 
 
 def _p(name, unit, default, lo, hi, description, neutral=0.0) -> ParamSpec:

@@ -98,9 +98,13 @@ class EffectSpec:
         if self.name == "sensor_bias" and param == "bias":
             if channel is None:
                 raise ValueError("sensor_bias.bias: the plausible range depends on the channel; give it")
-            return _bias_range(channel)
+            return self.bias_range(channel)
         p = self.param(param)
         return p.lo, p.hi
+
+    def bias_range(self, channel: str) -> tuple[float, float]:
+        """Plausible sensor offsets of a channel of this catalogue's vehicle (the car's: `_bias_range`)."""
+        return _bias_range(channel)
 
 
 def _bias_range(channel: str) -> tuple[float, float]:
