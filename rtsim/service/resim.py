@@ -323,8 +323,9 @@ def main(args) -> int:
     if args.json:
         print(json.dumps(rep, indent=2, default=float))
     else:
-        print(f"rtsim resim: {rep['recording']}: {rep['frames_replayed']} received frames and "
-              f"{rep['user_changes_applied']} of {rep['user_changes']} user-command changes replayed in "
+        print(f"rtsim resim: {rep['recording']}: {rep['frames_replayed']} received frames, "
+              f"{rep['user_changes_applied']} of {rep['user_changes']} user-command changes and "
+              f"{rep['control_ops_applied']} of {rep['control_ops']} control requests replayed in "
               f"{rep['mode']} mode, {rep['sim_time']:.3f} s simulated ({'; '.join(rep['files'])})")
         for part in ("sensors", "state"):
             c = rep[part]
