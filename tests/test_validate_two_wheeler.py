@@ -1,8 +1,8 @@
 """`rtsim validate` on motorcycle runs (rtsim.validate.replay_two_wheeler): field runs of rtsim's own
 motorcycle ridden by the rider model with a hidden effect and run-to-run variation (tests/two_wheeler_field),
-7 repetitions as 1 kHz CSV logs; the workflow must name the hidden effect with its value (20 % for a model
+7 repetitions as 100 Hz CSV logs; the workflow must name the hidden effect with its value (20 % for a model
 effect, 10 % for a sensor effect), shrink the gap, name nothing on a set without an effect, and report a
-replay that falls as a per-run failure."""
+replay that falls as a clear error naming the fall and its time."""
 from __future__ import annotations
 
 import math
