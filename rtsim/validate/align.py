@@ -28,9 +28,6 @@ from .profile import active
 from .signals import box_average
 
 XCORR_RATE = 100.0          # Hz
-#: Smallest range (peak to peak over all runs) for an input to count as varying, in its SI unit.
-MIN_RANGE = {"brake_pressure": 10.0, "wheel_torque_rl": 2.0, "wheel_torque_rr": 2.0, "throttle_angle": 0.005,
-             "steering_wheel_angle": 0.005}
 
 
 @dataclass
@@ -43,7 +40,7 @@ class Alignment:
 
 def varying_inputs(runs: list[Run]) -> list[str]:
     """Inputs present in every run that vary across the manoeuvre: the range of the signal smoothed
-    over 0.1 s exceeds MIN_RANGE and ten times the sample noise (estimated from second differences),
+    over 0.1 s exceeds the vehicle profile's min_range and ten times the sample noise (estimated from second differences),
     in every run. A channel that only carries noise would make the correlation meaningless."""
     out = []
     prof = active()
@@ -56,7 +53,7 @@ def varying_inputs(runs: list[Run]) -> list[str]:
             sm = box_average(r.time, x, 0.1)
             d2 = np.diff(x, 2)
             noise = float(np.median(np.abs(d2 - np.median(d2)))) / 0.6745 / np.sqrt(6.0) if d2.size else 0.0
-            if float(np.ptp(sm)) <= max(prof.min_range.get(name, MIN_RANGE.get(name, 0.0)), 10.0 * noise):
+            if float(np.ptp(sm)) <= max(prof.min_range.get(name, 0.0), 10.0 * noise):
                 ok = False
                 break
         if ok:
@@ -145,7 +142,7 @@ def event_time(run: Run, channel: str, fraction: float = 0.5) -> float:
     x0 = float(np.median(x[t <= t[0] + 0.2]))
     k = int(np.argmax(np.abs(x - x0)))
     ext = float(x[k])
-    if abs(ext - x0) < MIN_RANGE.get(channel, 1e-9):
+    if abs(ext - x0) < active().min_range.get(channel, 1e-9):
         raise ConfigError(f"{run.path}: alignment event channel {channel!r} does not change "
                           f"(initial {x0:.6g}, extreme {ext:.6g})")
     level = x0 + fraction * (ext - x0)

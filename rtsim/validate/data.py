@@ -33,8 +33,6 @@ from .signals import WHEEL_ANGLES, unwrap_angle
 #: Longest run of missing samples (s) filled by interpolation; longer gaps drop the channel.
 MAX_GAP = 0.1
 MIN_SAMPLES = 10
-#: The model inputs a run may carry (sensor channels measuring the inputs).
-INPUTS = ("brake_pressure", "wheel_torque_rl", "wheel_torque_rr", "throttle_angle", "steering_wheel_angle")
 #: accelerometer frames a logger may declare (replay.ACCEL_FRAMES; kept here so loading needs no model)
 ACCEL_FRAMES = ("body", "level")
 

@@ -21,7 +21,8 @@ class Profile:
     kind: str                                  # "car" or "two_wheeler"
     inputs: tuple[str, ...]                    # the channels the replay follows (never compared)
     compared: tuple[str, ...] | None           # default compared channels (None: the car's own rule)
-    min_range: dict = field(default_factory=dict)   # input -> least range that counts as varying (alignment)
+    min_range: dict = field(default_factory=dict)   # input -> least range (peak to peak, SI) that counts as
+                                               # varying (alignment)
 
 
 CAR = Profile("car", ("brake_pressure", "wheel_torque_rl", "wheel_torque_rr", "throttle_angle",
