@@ -204,3 +204,19 @@ def test_control_requests_are_recorded_and_resimulated(tmp_path):
         assert min(yaw) < -0.02          # the live wheel turned the car right: the op made this session
     finally:
         hub.close()
+
+
+def test_a_malformed_event_in_a_recording_is_a_clear_error():
+    """A control or user event that does not match its schema (a hand-edited or foreign recording) stops the
+    re-simulation with a message naming the topic, the event and what is wrong, never a traceback."""
+    from types import SimpleNamespace
+
+    from rtsim.errors import ConfigError
+    from rtsim.service.resim import SessionEvents
+    ok = SimpleNamespace(data={"time": 0.0, "step": 0, "op": "pause", "args": {}, "order": 0})
+    warp = SimpleNamespace(data={"time": 0.0, "step": 0, "op": "warp", "args": {}, "order": 1})
+    assert len(SessionEvents(None, (), [ok]).events) == 1
+    with pytest.raises(ConfigError, match=r"control event 1 of the recording is malformed: .*'warp' is not one of"):
+        SessionEvents(None, (), [ok, warp])
+    with pytest.raises(ConfigError, match=r"user event 0 of the recording is malformed: .*missing required"):
+        SessionEvents(None, [SimpleNamespace(data={"time": 0.0})], ())

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bridge import payloads
 from bridge.can_codec import Codec
 from rtsim.errors import ConfigError
 
@@ -86,6 +87,11 @@ class SessionEvents:
         after a restart of time, where the step count falls, are left out.)"""
         self.loop = loop
         self.ended_by = None
+        for topic, msgs in (("user", user), ("control", control)):
+            for n, m in enumerate(msgs):
+                bad = payloads.validation_errors(topic, m.data)
+                if bad:
+                    raise ConfigError(f"re-simulation: {topic} event {n} of the recording is malformed: {bad[0]}")
         merged = [(m.data.get("order", n), "user", m.data) for n, m in enumerate(user)]
         merged += [(m.data["order"], m.data["op"], m.data) for m in control]
         merged.sort(key=lambda e: e[0])
