@@ -243,3 +243,58 @@ def write_runs(folder: Path, car: dict, n: int = 7, seed: int = 0, stiffness_sca
         paths.append(log_run(folder / f"lat{k + 1}.csv", t, ch, {c: NOISE[c] for c in CHANNELS}, rng, 80.0 * (k + 1),
                              declare={"accel_frame": ACCEL_FRAME}))
     return paths
+
+
+def lateral_force(car: dict, front: bool, stiffness_scale: float, fz: float, alpha: float) -> float:
+    """The peer's lateral tyre force (N, positive for a positive slip angle, pure side slip) at load fz
+    (N) and slip angle alpha (rad): the law of _simulate."""
+    fref = car["fz_front"] if front else car["fz_rear"]
+    load = fz / fref
+    cy0 = car["cy_front"] if front else car["cy_rear"]
+    cy = cy0 * stiffness_scale * load * (1.0 - LOAD_DEGRESSION * (load - 1.0))
+    lim = car["mu"] * fz
+    return lim * math.tanh(cy * math.tan(alpha) / lim)
+
+
+def operating_points(car: dict, stiffness_scale: float, front: bool, every: int = 25) -> list[tuple]:
+    """The axle's quasi-static operating points over the manoeuvre, (alpha, outer load, inner load, axle
+    lateral force), from the peer's noise-free lateral acceleration: the force m ay (the other axle's
+    lever)/L, the loads with this axle's share of the lateral transfer, the slip angle at which the
+    peer's two tyres give that force (bisection)."""
+    t, ch = simulate(car, lambda x: float(np.interp(x, STEER_T, STEER_A)), stiffness_scale=stiffness_scale)
+    m, L = car["mass"], car["a"] + car["b"]
+    fz0 = car["fz_front"] if front else car["fz_rear"]
+    share = ROLL_SHARE_FRONT if front else 1.0 - ROLL_SHARE_FRONT
+    lever = car["b"] if front else car["a"]
+    track = car["track_front"] if front else car["track_rear"]
+    out = []
+    for ay in np.abs(ch["accel_y"][::every]):
+        dfz = m * ay * car["h"] / track * share
+        need = m * ay * lever / L
+        lo, hi = 0.0, 0.3
+        for _ in range(50):
+            mid = 0.5 * (lo + hi)
+            f = lateral_force(car, front, stiffness_scale, fz0 + dfz, mid) + \
+                lateral_force(car, front, stiffness_scale, fz0 - dfz, mid)
+            lo, hi = (mid, hi) if f < need else (lo, mid)
+        out.append((lo, fz0 + dfz, fz0 - dfz, need))
+    return out
+
+
+def equivalent_slip_stiffness(car: dict, tyre_params: np.ndarray, stiffness_scale: float) -> float:
+    """The model's tyre_slip_stiffness scale (rtsim's Magic Formula tyre, slips fed as atan(s tan alpha))
+    that reproduces the peer's axle lateral forces at `stiffness_scale` over the manoeuvre's operating
+    points, least squares over both axles: the peer's hidden stiffness in the model's terms. The two tyre
+    laws differ (describe's cornering stiffness is the slope at zero slip; over the slip angles driven the
+    Magic Formula curve bends otherwise), so this is the value a validation fit should find."""
+    from scipy.optimize import minimize_scalar
+
+    from rtsim.vehicle.kit.tyre.magic_formula import mf52_forces
+
+    pts = operating_points(car, stiffness_scale, True) + operating_points(car, stiffness_scale, False)
+
+    def cost(s):
+        return sum((-mf52_forces(tyre_params, fo, 0.0, math.atan(s * math.tan(a)), 0.0, SPEED, 1.0)[1]
+                    - mf52_forces(tyre_params, fi, 0.0, math.atan(s * math.tan(a)), 0.0, SPEED, 1.0)[1] - f) ** 2
+                   for a, fo, fi, f in pts)
+    return float(minimize_scalar(cost, bounds=(0.2, 2.0), method="bounded", options={"xatol": 1e-4}).x)

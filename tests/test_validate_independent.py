@@ -5,31 +5,38 @@ a tanh friction circle), quasi-static load transfer, no roll, no steering compli
 sharing only the car's `rtsim describe` numbers: 15 m/s, steering-wheel ramps to +-0.6 rad held 3 s,
 rear wheel torques that hold the speed recorded, seven repetitions. Against rtsim it differs, with no
 hidden effect, by a resistance offset (the wheel speeds drift apart by 0.8 rad/s over 12 s), the axles'
-rolling radii, and a lag of about 25 ms of the model's lateral response (its tyres' relaxation
-length; the peer's tyre forces follow the slip at once): structural mismatch the catalogue does not
-have. The peer declares its accelerations level-frame (`# accel_frame: level`: it has no roll), and the
+rolling radii, and a lag of the model's lateral response behind the peer's, about 10 ms on gyro_z and
+25 ms on accel_y: structural mismatch the catalogue does not have. It is the model's roll, which the peer
+lacks: with anti-roll bars 33 times stiffer (a fifth of the roll) the lag is under 2 ms on both channels
+and a 6 % gain difference from the changed load transfer takes its place; lengthening the model's tyre
+relaxation by 0.3 m adds only 3-5 ms. The lag has the signature a sensor delay on accel_y or gyro_z has.
+The tyre laws differ too: the peer's stiffness scale x is about 1.08 x in the model's terms
+(peer_sim_lateral.equivalent_slip_stiffness), the value the intervals of the stiffness cases must hold.
+The peer declares its accelerations level-frame (`# accel_frame: level`: it has no roll), and the
 cases compare them so (Options.accel_frame): in rtsim's body frame the accelerometer rolls with the body
 and reads gravity's component, accel_y 6-7 % higher in steady cornering, which hid any accel_y scale.
 Longitudinal: tests/peer_sim.py, the pitch-plane peer (tests/test_validate_peer.py has its single-effect
 cases), here with a grade, no effect, and two effects at once.
 
 The bar (issue 15): a sensor bias, scale or delay on one channel is named with its value within 10 %
-and that channel's RMS falls >= 5x; a model effect that changes the outputs by more than the structural
-mismatch is named within 20 %; no hidden effect gives "no catalogue effect" with the per-channel
-structural report and never a named effect; an effect smaller than the structural mismatch gives
-"cannot be told apart".
+and that channel's RMS falls >= 5x (both RMS with the nuisance adjustments fitted to them applied, as
+the report's per-channel table shows them); a model effect that changes the outputs by more than the
+structural mismatch is named within 20 %; no hidden effect gives "no catalogue effect" with the
+per-channel structural report and never a named effect; an effect smaller than the structural mismatch
+gives "cannot be told apart". And (item 4) every named effect's 95 % interval, model error included,
+holds the true value, except a sensor delay's (identify, "Uncertainty").
 
 Tuning vs held-out (marked per case below). TUNING: the cases the method's rules were decided or changed
-on: every lateral case except stiffness 0.6 and the accel_y bias and scale (the nuisance prior, the
+on: every lateral case except stiffness 0.6 and the accel_y bias (the nuisance prior, the
 signature-channel information criterion and the accel_y/roll confounding were added after they failed;
 gyro_z scale and delay, held out in the body frame where they passed the first time, and accel_y delay
 failed in the level frame with road_grade added beside the sensor effect, and the rule that a grade is
 not named from level-frame data that never stand still was added on them), and the longitudinal none
 and two-at-once cases (a first rule on what a sensor effect may leave on its channel was dropped after
 two-at-once failed). HELD-OUT: the longitudinal grade passed the first time it ran; stiffness 0.6 (seed
-99) and the accel_y bias and scale were written and run once after the rules that concern them were
-final (the level-frame grade rule changed neither: no grade was involved); the longitudinal pairs of
-model effects: see below.
+99) and the accel_y bias and scale 1.1 (which fails: KNOWN_FAILURES) were written and run once after the
+rules that concern them were final (the level-frame grade rule changed neither: no grade was
+involved); the longitudinal pairs of model effects: see below.
 
 Two model effects at once (the joint fit, rtsim.validate.joint.joint_model). It was developed on mass
 200 kg with rolling resistance 0.012 (seed 77, TUNING; before it rolling resistance was named first at
@@ -44,6 +51,13 @@ same). That change was made after seeing this case, so it counts as TUNING now. 
 grade 0.03 (HELD-OUT) was written down before the joint fit first ran on it and never tuned on; run three
 times: first with the same dropped-partner bug (grade 0.02998 alone), then twice with the final method
 (grade 0.02998, brake friction 0.8019, the sensitivities correlating +0.50).
+
+Intervals (item 4): none of these cases is held out for them. The block jackknife was added after mass
+148.4 +- 0.7 kg (true 150) and grade 0.04011 +- 0.00006 (true 0.04) missed; the discrepancy bound after the
+tyre stiffness intervals (+-0.03) missed the peer's values; the tyre-level equivalence that the stiffness
+intervals are held against was computed from the two tyre laws alone, after that (it does not use the
+vehicle fits). The linear problem of tests/test_validate_uncertainty.py, with a known answer, checks the
+coverage over many draws.
 """
 from __future__ import annotations
 
@@ -65,7 +79,6 @@ from rtsim.validate.workflow import Options, run
 
 VEHICLE = Path(__file__).resolve().parents[1] / "configs" / "vehicles" / "xbw.toml"
 WHEELS = ["wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr"]
-RELAXATION_M = 0.30     # m, the xbw tyres' lateral relaxation length at the nominal load (their .tir file)
 
 #: lateral case -> (hidden in the peer, expected (effect, parameter, value, channel) or a verdict word,
 #: "tuning"/"held-out")
@@ -82,18 +95,26 @@ LATERAL = {
     "two_at_once": ({"stiffness_scale": 0.5, "sensor": {"gyro_z": {"bias": 0.03}}},
                     [("tyre_slip_stiffness", "scale", 0.5, None), ("sensor_bias", "bias", 0.03, "gyro_z")],
                     "tuning"),
-    # in the level frame the structural mismatch left is smaller, and an 8 % softer tyre moves the outputs by
-    # less than a standard error: no effect stands out, and none may be named
+    # 0.92 in the peer is 0.99 in the model's terms (peer_sim_lateral.equivalent_slip_stiffness: the peer's
+    # tyre at full stiffness is the model's at 1.08): it moves the outputs by less than a standard error, no
+    # effect stands out, and none may be named
     "smaller_than_structural": ({"stiffness_scale": 0.92}, ("cannot be told apart", "no catalogue effect"), "tuning"),
     "stiffness_0.6": ({"stiffness_scale": 0.6}, [("tyre_slip_stiffness", "scale", 0.6, None)], "held-out"),
     # accel_y, compared in the level frame the peer declares (no roll): written before their first run and
-    # never changed; scale and delay fail (KNOWN_FAILURES); delay is tuning: it showed the level-frame grade
-    # problem with the gyro_z cases
+    # never changed; scale 1.1 and delay fail (KNOWN_FAILURES); delay is tuning: it showed the level-frame
+    # grade problem with the gyro_z cases, and the rule that a model effect the nuisance adjustments
+    # reproduce is not named (Nuisance.mimic) was added on it (a mass of -99 kg had been named beside the
+    # delay for the wheel speeds' resistance drift)
     "accel_y_bias": ({"sensor": {"accel_y": {"bias": 0.3}}}, [("sensor_bias", "bias", 0.3, "accel_y")], "held-out"),
     "accel_y_scale": ({"sensor": {"accel_y": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "accel_y")],
                       "held-out"),
     "accel_y_delay": ({"sensor": {"accel_y": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "accel_y")],
                       "tuning"),
+    # chosen after scale 1.1 failed, as the smallest step of 0.1 whose change of accel_y (RMS 0.49 m/s^2)
+    # is more than 5 times the floor the no-effect case leaves there (0.056 m/s^2: the structural lag and
+    # the mean's noise), so that the 5x bar can be met at all
+    "accel_y_scale_1.2": ({"sensor": {"accel_y": {"scale": 1.2}}}, [("sensor_scale", "scale", 1.2, "accel_y")],
+                          "tuning"),
 }
 
 #: longitudinal (pitch-plane peer) case -> (hidden, expected, "tuning"/"held-out")
@@ -129,6 +150,13 @@ def car(replayer):
 
 
 @pytest.fixture(scope="module")
+def tyre_params(replayer):
+    """The packed Magic Formula parameters of the model's tyres."""
+    from rtsim.vehicle.car.sim import VehicleSim
+    return VehicleSim(replayer.model, replayer.road, 1e-3).tp
+
+
+@pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     return tmp_path_factory.mktemp("validate_independent")
 
@@ -141,13 +169,18 @@ def _tol(name: str) -> float:
 def _show(case, res):
     """What was found (shown with pytest -s): effects, per-channel RMS before -> after, verdict."""
     b, a = res.metrics(res.before), res.metrics(res.after)
+    ba, aa = res.metrics(res.before, adjusted=True), res.metrics(res.after, adjusted=True)
     print(f"\n[{case}] effects: {[e.label() for e in res.effects]} +- {[e.uncertainty for e in res.effects]}")
-    print("  RMS before -> after: " + ", ".join(f"{c} {b[c]['rms']:.4g} -> {a[c]['rms']:.4g}" for c in b))
+    print("  RMS before -> after (nuisance adjusted): " + ", ".join(
+        f"{c} {b[c]['rms']:.4g} -> {a[c]['rms']:.4g} ({ba[c]['rms']:.4g} -> {aa[c]['rms']:.4g})" for c in b))
     print("  channels: " + "; ".join(f"{c}: {v['text']}" for c, v in res.channels.items()))
     print(f"  nuisance: {res.nuisance}\n  correlations: {res.correlations}\n  verdict: {res.verdict}")
 
 
-def _check(res, expected):
+def _check(res, expected, in_model_terms: dict | None = None):
+    """`in_model_terms`: effect name -> the hidden value in the model's terms, where the peer's parameter
+    means something else in rtsim's model (its tyre stiffness: equivalent_slip_stiffness); the interval
+    must hold that one."""
     if isinstance(expected, (str, tuple)):
         words = (expected,) if isinstance(expected, str) else expected
         assert res.effects == [], (res.verdict, [e.label() for e in res.effects])
@@ -158,9 +191,15 @@ def _check(res, expected):
         assert (name, channel) in found, (name, channel, res.verdict)
         e = found[(name, channel)]
         assert abs(e.params[param] - true) <= _tol(name) * abs(true), (e.label(), true, res.verdict)
-        assert e.uncertainty[param] > 0.0
-        if channel is not None:          # a sensor effect: its own channel's RMS falls >= 5x
-            before, after = res.metrics(res.before), res.metrics(res.after)
+        assert e.uncertainty[param] >= e.model_error[param] > 0.0, (e.uncertainty, e.model_error)
+        # the interval, model error included, holds the true value (issue 15, item 4); not a sensor delay's:
+        # the model's own structural lag on the channel reads as part of the delay (identify, "Uncertainty")
+        if name != "sensor_delay":
+            ref = (in_model_terms or {}).get(name, true)
+            assert abs(e.params[param] - ref) <= e.uncertainty[param], (e.label(), e.uncertainty, ref)
+        if channel is not None:          # a sensor effect: its own channel's RMS falls >= 5x, both with the
+            # nuisance adjustments (the structural mismatch they stand for, left in the data on purpose) applied
+            before, after = res.metrics(res.before, adjusted=True), res.metrics(res.after, adjusted=True)
             c = channel if channel in before else next(s for s in before if channel in s)
             assert before[c]["rms"] >= 5.0 * after[c]["rms"], (c, before[c], after[c])
     assert len(res.effects) == len(expected), [e.label() for e in res.effects]
@@ -175,14 +214,14 @@ EXTRA = () if ALL else ("stiffness_0.7", "mass_and_rolling_resistance")
 #: cases that fail: the method's known limits, kept so that a fix shows (strict: a pass fails)
 KNOWN_FAILURES = {
     "accel_y_scale": "named 1.111 (true 1.1), but accel_y's RMS falls 0.245 -> 0.058 m/s^2, 4.2 times, not 5: "
-                     "the structural mismatch left on accel_y (the model's lateral response lags the peer's by "
-                     "about 25 ms: its tyres' relaxation length, which the peer's tyres lack) is a floor of about "
-                     "0.056 m/s^2, a quarter of what the scale changes",
-    "accel_y_delay": "named 0.077 s (true 0.1): the model's own accel_y lags the peer's by about 25 ms (its "
-                     "tyres' relaxation length; the catalogue's tyre_relaxation only adds length), and a delay fitted "
-                     "on accel_y alone cannot tell the sensor's delay from that structural lag; a mass of -100 kg "
-                     "is added beside it (the wheel speeds' resistance drift, which a grade carried before the "
-                     "level-frame grade rule)",
+                     "with no hidden effect the model leaves 0.056 m/s^2 there (the structural lag and the "
+                     "mean's noise), so a change of 0.245 can fall at most 4.4 times whatever the method "
+                     "(accel_y_scale_1.2 clears the bar)",
+    "accel_y_delay": "named 0.075 +- 0.012 s (true 0.1): the model's accel_y lags the peer's by about 25 ms "
+                     "(its roll, which the peer lacks; 15 ms more than on gyro_z), a structural lag with a "
+                     "sensor delay's signature on that channel: the fitted delay takes it in, and leaves no "
+                     "residual that would widen its interval (gyro_z's 10 ms make its 0.1 s delay 0.090, "
+                     "inside the 10 %)",
 }
 
 
@@ -195,7 +234,7 @@ def _known(case: str):
 
 
 @pytest.mark.parametrize("case", [_known(c) if c in KNOWN_FAILURES else c for c in LATERAL if c not in EXTRA])
-def test_lateral_peer(replayer, car, folder, case):
+def test_lateral_peer(replayer, car, tyre_params, folder, case):
     hidden, expected, _ = LATERAL[case]
     seed = 99 if case == "stiffness_0.6" else 5 if case in ("none", "gyro_z_bias", "stiffness_0.5") else \
         17 + list(LATERAL).index(case)
@@ -203,22 +242,29 @@ def test_lateral_peer(replayer, car, folder, case):
     res = run(Options(VEHICLE, paths, folder / f"{case}_report", accel_frame=lateral.ACCEL_FRAME), replayer=replayer)
     _show(case, res)
     assert res.bench.lateral and res.accel_frame == "level"
-    _check(res, expected)
+    terms = None
+    if "stiffness_scale" in hidden:
+        terms = {"tyre_slip_stiffness": lateral.equivalent_slip_stiffness(car, tyre_params, hidden["stiffness_scale"])}
+        print(f"  the peer's stiffness scale {hidden['stiffness_scale']} in the model's terms: {terms}")
+    _check(res, expected, terms)
     # the structural report: every compared channel has a status; accel_y's roll-induced gain is
     # structural whenever no tyre effect was added to explain it
     assert set(res.channels) == set(res.bench.compared)
     if case == "none":
         # compared in the level frame the peer declares, the body's roll gain is gone: in steady cornering
         # the model's accel_y matches the peer's within 2 % (6-7 % in the body frame); what is left is a
-        # lag of the model's lateral response, about the time its tyres' relaxation length takes (the
-        # peer's tyre forces have none): structural, reported as such
+        # lag of the model's lateral response, reported as structural with the lag the time shift that
+        # best aligns the model's accel_y with the peer's has (found by shifting and interpolating: a
+        # different measure), within 30 %
         m, d = res.after["accel_y"], res.bench.bands["accel_y"].mean
         hold = np.abs(d) > 2.0
         assert abs(float(m[hold] @ d[hold] / (d[hold] @ d[hold])) - 1.0) < 0.02
         ay = res.channels["accel_y"]
         assert ay["status"] == "structural" and ay["signature"]["kind"] == "lag", ay
-        lag = RELAXATION_M / lateral.SPEED
-        assert 0.5 * lag < ay["signature"]["value"] < 2.0 * lag, (ay, lag)
+        t = res.bench.t
+        shifts = np.arange(0.0, 0.06, 0.001)
+        best = shifts[np.argmin([np.mean((np.interp(t + s, t, m) - d) ** 2) for s in shifts])]
+        assert abs(ay["signature"]["value"] - best) < 0.3 * best, (ay, best)
         for c in [*WHEELS, "gyro_z"]:
             assert res.channels[c]["status"] == "inside the band", (c, res.channels[c])
         assert res.nuisance and all(abs(v) > 0 for v, _ in res.nuisance.values())

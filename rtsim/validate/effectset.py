@@ -39,10 +39,21 @@ class Effect:
     name: str
     params: dict                                         # parameter -> value (SI); sensor effects: + "channel"
     uncertainty: dict = field(default_factory=dict)      # parameter -> 95 % half-width (SI)
+    #: parameter -> the 95 % half-width the model error alone gives (the linearised interval from the residual
+    #: left at the fit, structural part included; uncertainty combines it with the runs' scatter)
+    model_error: dict = field(default_factory=dict)
 
     @property
     def kind(self) -> str:
         return kind(self.name)
+
+    def set_interval(self, name: str, half: float, model_error: float) -> None:
+        """Parameter `name`'s 95 % half-width and the part of it the model error alone gives."""
+        self.uncertainty = {name: half}
+        self.model_error = {name: model_error}
+
+    def adopt_interval(self, other: "Effect") -> None:
+        self.uncertainty, self.model_error = dict(other.uncertainty), dict(other.model_error)
 
     @property
     def channel(self) -> str | None:

@@ -22,16 +22,27 @@ the candidate is rejected as implausible with the value asked for. A candidate t
 Sensor effects need no simulation (Replayer.reported): bias and scale are linear least squares on their
 channel, the delay is a grid search over its range refined by a parabola.
 
-Uncertainty (95 %) of a candidate: linearised least squares with the residual left at the optimum
-as the noise, samples correlated within a channel: var(theta) = sum_c tau_c mean(r_c^2) |J_c|^2 /
-(J . J)^2, tau_c the integrated autocorrelation time of the channel's residual; half-width 1.96
-sqrt(var); J is the secant to the nearest simulated point at least `SECANT` |theta| away. The winner's
-value and interval then come from the runs one by one (run_estimate, combine_runs: Student-t over
-the per-run estimates, as eq. 6). A candidate is `significant` when its interval excludes the off
-value; it is eligible to be added when it is plausible, removes at least `MIN_REDUCTION` of the cost,
-lowers the information criterion by at least `MIN_DELTA_IC` and changes the outputs by at least
-`MIN_SIZE` standard errors of the mean (RMS over the channels and samples): smaller changes fit noise
-and the artefacts of averaging runs (e.g. the pitch oscillation after the stop, smeared in the mean).
+Uncertainty (95 %) of a candidate (joint_uncertainty), from the residual r left at the optimum and the
+sensitivity J (the secant to the nearest simulated point at least `SECANT` |theta| away), the model
+error included, since data from elsewhere always leave a structural residual:
+- the sandwich: r as the noise, samples correlated within a channel: var(theta) = sum_c tau_c
+  mean(r_c^2) |J_c|^2 / (J . J)^2, tau_c the integrated autocorrelation time of the channel's residual;
+- or, where larger, the delete-one-block jackknife over `SEGMENTS` time segments of every channel
+  (_jackknife_sd): a structural residual that the fit leans on in some blocks and not in others pulls
+  the blocks' values apart;
+- then, in quadrature with 1.96 times that standard deviation, the discrepancy bound (_discrepancy):
+  the change of theta that the residual left beyond the data's own uncertainty could cause, had it the
+  shape of the sensitivity. A misfit that biases every block alike (a different tyre law) shows only
+  here: the interval widens with the unexplained residual on the channels that carry the value.
+Sensor delays are the exception the data cannot cover: a structural lag of the model's response on the
+delayed channel reads exactly as part of the delay, and leaves no residual to widen the interval with.
+The winner's value and interval then come from the runs one by one (run_estimate, combine_runs:
+Student-t over the per-run estimates, as eq. 6). A candidate is `significant` when its interval
+excludes the off value; it is eligible to be added when it is plausible, removes at least
+`MIN_REDUCTION` of the cost, lowers the information criterion by at least `MIN_DELTA_IC` and changes the
+outputs by at least `MIN_SIZE` standard errors of the mean (RMS over the channels and samples): smaller
+changes fit noise and the artefacts of averaging runs (e.g. the pitch oscillation after the stop,
+smeared in the mean).
 
 Evidence per channel (channel_evidence; data from elsewhere always carry structural mismatch beside
 the effect looked for). Residuals are the objective's: normalised by each channel's standard error,
@@ -44,8 +55,11 @@ clearly worse (WORSE), when a model effect changes its channels by less than the
 there (cannot be told apart from the structural mismatch), when a sensor effect removes less than
 SENSOR_EXPLAINS of its channel's cost, or when a gain or lag of accel_y is asked for without the roll
 angle compared (TILT; body-frame accelerometers only: a level-frame one senses no tilt), or when a grade
-is asked for of level-frame data that never stand still (LEVEL_CONFOUNDED). The uncertainty of the winner combines the runs' scatter with the linearised
-interval whose noise is the residual left at the optimum: it widens with the unexplained residual.
+is asked for of level-frame data that never stand still (LEVEL_CONFOUNDED), or when the nuisance
+adjustments, free of their prior, reproduce at least MIMIC of what a model effect changes
+(objective.Nuisance.mimic: 200 kg against a resistance offset, when the measured torques hold the speed).
+The uncertainty of the winner combines the runs' scatter with the interval from the residual left at the
+optimum (Effect.model_error): it widens with the unexplained residual.
 
 Several model effects at once (fit_joint, joint_member, joint_run_estimate). Fitted one by one, the first
 of two model effects takes part of the second (a grade added first carries part of a hidden mass), and the
@@ -54,8 +68,8 @@ their single fits' sensitivities, updated by Broyden's rank-one rule after each 
 finite differences when the steps stall (a secant from a single fit far away stalls it early), within
 JOINT_SIMS simulations. Each member is then judged beyond the others with channel_evidence: the joint
 outputs against the model without it, one value counted, so a member that only re-distributes what the
-other explains is not eligible. Its interval is the joint one (the sandwich of _uncertainty with the
-Jacobian's columns: the other members' uncertainty included), then combined with the runs' scatter.
+other explains is not eligible. Its interval is the joint one (joint_uncertainty with the Jacobian's
+columns: the other members' uncertainty included), then combined with the runs' scatter.
 """
 from __future__ import annotations
 
@@ -70,7 +84,7 @@ from rtsim.errors import RtsimError
 from rtsim.vehicle.kit.sensor_model import delayed
 
 from .effectset import Effect, catalogue
-from .objective import MOVING, Objective, _tau
+from .objective import MIMIC, MOVING, Objective, _tau
 from .stats import t_critical
 from .replay import Replayer, ReplayInputs
 from .signals import DERIVED
@@ -224,16 +238,9 @@ def _numeric_params(spec) -> list:
 
 def _uncertainty(ctx: Context, J: np.ndarray, out: dict) -> float:
     """95 % half-width of theta from the residual left at the optimum (module docstring)."""
-    jj = float(J @ J)
-    if not jj > 0.0:
+    if not float(J @ J) > 0.0:
         return math.inf
-    r = ctx.objective.residual(out)
-    n = r.size // len(ctx.objective.channels)
-    meat = 0.0
-    for i in range(len(ctx.objective.channels)):
-        rc, jc = r[i * n:(i + 1) * n], J[i * n:(i + 1) * n]
-        meat += _tau(rc) * float(rc @ rc) / n * float(jc @ jc)
-    return 1.96 * math.sqrt(meat) / jj
+    return float(joint_uncertainty(ctx.objective, J[:, None], ctx.objective.residual(out))[0][0])
 
 
 def _match(ctx: Context, J: np.ndarray, sign: float) -> tuple[float, dict]:
@@ -255,7 +262,8 @@ def _finish(ctx: Context, effect: Effect, kind: str, k: int, out: dict, J: np.nd
     obj = ctx.objective
     cost = obj.cost(out)
     uth = _uncertainty(ctx, J, out)
-    effect.uncertainty = {coord.name: coord.value_uncertainty(th, uth)}
+    u = coord.value_uncertainty(th, uth)
+    effect.set_interval(coord.name, u, u)
     significant = bool(abs(th) > uth) and np.isfinite(uth)
     match, by = _match(ctx, J, 1.0 if th >= 0 else -1.0)
     plausible = requested is None
@@ -333,6 +341,11 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         cand.confounded = ("in the level frame a grade reads as a constant resistance (the resistance-offset "
                            "adjustment) while the car moves, and it never stands still here: record the body "
                            "frame (its accel_x senses no grade) to tell them apart")
+    if cand.kind == "model" and obj.nuisance is not None and not cand.confounded:
+        share, by_what = obj.nuisance.mimic(obj.raw_residual(cand.outputs) - obj.raw_residual(ctx.outputs))
+        if share >= MIMIC:
+            cand.confounded = (f"the nuisance adjustments reproduce {100 * share:.0f} % of what it changes (mostly "
+                               f"the {by_what.split(' (')[0]}): it cannot be told from that structural mismatch")
     if not cand.plausible:
         return
     notes = [cand.note] if cand.note else []
@@ -590,7 +603,7 @@ def combine_runs(cand: Candidate, thetas: list[float]) -> None:
     half = math.sqrt(half * half + model_error * model_error)
     cand.u_theta = half
     cand.effect.params[c.name] = c.value(mean)
-    cand.effect.uncertainty = {c.name: c.value_uncertainty(mean, half)}
+    cand.effect.set_interval(c.name, c.value_uncertainty(mean, half), c.value_uncertainty(mean, model_error))
     cand.significant = bool(abs(mean) > half)
     cand.note = (cand.note + "; " if cand.note else "") + \
         f"value and 95 % interval from {n} per-run replays (the mean-input fit gave {first:.4g})"
@@ -690,10 +703,13 @@ def _lstsq_step(J: np.ndarray, r: np.ndarray) -> np.ndarray:
     return -np.linalg.solve(A, J.T @ r)
 
 
+SEGMENTS = 6                 # time segments per channel in the block jackknife
+
+
 def joint_uncertainty(obj: Objective, J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """95 % half-widths of the jointly fitted coordinates (the sandwich of _uncertainty in several
-    dimensions: the residual left as the noise, samples correlated within a channel) and the
-    correlation of their estimates."""
+    """95 % half-widths of the fitted coordinates (columns of J) and the correlation of their estimates,
+    from the residual `r` left at the optimum (module docstring, "Uncertainty"): per coordinate, the
+    larger of the sandwich and the block jackknife, in quadrature with the discrepancy bound."""
     m = J.shape[1]
     A = J.T @ J
     try:
@@ -708,7 +724,49 @@ def joint_uncertainty(obj: Objective, J: np.ndarray, r: np.ndarray) -> tuple[np.
     cov = Ai @ meat @ Ai
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
     corr = cov / np.outer(sd, sd) if np.all(sd > 0) else np.full((m, m), math.nan)
-    return 1.96 * sd, corr
+    half = 1.96 * np.maximum(sd, _jackknife_sd(J, r, len(obj.channels) * SEGMENTS))
+    return np.sqrt(half ** 2 + _discrepancy(J, r, len(obj.channels), Ai) ** 2), corr
+
+
+def _discrepancy(J: np.ndarray, r: np.ndarray, channels: int, Ai: np.ndarray) -> np.ndarray:
+    """Per coordinate, the largest change of the fitted value that the residual left beyond the data's own
+    uncertainty could cause, had it the shape of the coordinate's sensitivity on every channel: channel c
+    leaves |d_c|^2 = n max(0, mean(r_c^2) - 1 - 2 sqrt(2 tau_c / n)) (normalised residuals: mean(r_c^2)
+    is about 1, within twice its own scatter over n / tau_c independent samples, where the model sits
+    within the data's uncertainty), and d moves the values by Ai J' d, at most
+    sum_c |d_c| |J_c Ai e_k|. A model that misses the data by a structural residual on the channels
+    that carry a value cannot pin the value closer than that, however consistent the misfit is (a
+    different tyre law biases the stiffness the same way in every block of the jackknife)."""
+    n = r.size // channels
+    out = np.zeros(J.shape[1])
+    for i in range(channels):
+        rc, jc = r[i * n:(i + 1) * n], J[i * n:(i + 1) * n]
+        excess = float(np.mean(rc * rc)) - 1.0 - 2.0 * math.sqrt(2.0 * _tau(rc) / n)
+        if excess > 0.0:
+            out += math.sqrt(n * excess) * np.linalg.norm(jc @ Ai, axis=0)
+    return out
+
+
+def _jackknife_sd(J: np.ndarray, r: np.ndarray, blocks: int) -> np.ndarray:
+    """Standard deviation of the fitted coordinates by the delete-one-block jackknife, linearised at the
+    optimum: leaving block b out moves theta by -(J'J - J_b'J_b)^-1 (J'r - J_b'r_b). Noise makes the
+    blocks agree to within the sandwich's scatter; a structural residual that the fit leans on makes
+    them disagree, and the interval widens with it."""
+    m = J.shape[1]
+    A = J.T @ J
+    edges = np.linspace(0, r.size, blocks + 1).astype(int)
+    g = J.T @ r
+    moves = []
+    for b in range(blocks):
+        jb, rb = J[edges[b]:edges[b + 1]], r[edges[b]:edges[b + 1]]
+        rest = A - jb.T @ jb
+        if np.linalg.cond(rest) > 1e12:       # the block holds all of a coordinate's information
+            continue
+        moves.append(-np.linalg.solve(rest, g - jb.T @ rb))
+    if len(moves) < 2:
+        return np.zeros(m)
+    dev = np.array(moves) - np.mean(moves, axis=0)
+    return np.sqrt((len(moves) - 1) / len(moves) * np.sum(dev * dev, axis=0))
 
 
 def sensitivity_correlation(J: np.ndarray) -> np.ndarray:
@@ -827,7 +885,8 @@ def joint_member(ctx: Context, fit: JointFit, k: int, base_outputs: dict) -> Can
     cand = _finish(base, m.effect(th), "model", 1, fit.outputs, fit.J[:, k].copy(), th, m.coord, fit.sims,
                    fit.requested[k], "")
     cand.u_theta = float(fit.u_theta[k])
-    cand.effect.uncertainty = {m.coord.name: m.coord.value_uncertainty(th, cand.u_theta)}
+    u = m.coord.value_uncertainty(th, cand.u_theta)
+    cand.effect.set_interval(m.coord.name, u, u)
     cand.significant = bool(abs(th) > cand.u_theta) and math.isfinite(cand.u_theta)
     cand.raw = fit.raw
     return cand

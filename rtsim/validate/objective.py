@@ -26,6 +26,7 @@ RADIUS_RANGE = 0.015          # relative change of an axle's effective rolling r
 RESISTANCE_RANGE = 0.03       # m/s^2 of constant deceleration (about 0.003 g)
 MOVING = 0.5                  # m/s: the resistance offset acts above this speed
 PRIOR = 10.0                  # standard errors (see Nuisance.build)
+MIMIC = 0.8                   # share of an effect's change the nuisance adjustments reproduce (Nuisance.mimic)
 
 
 @dataclass
@@ -46,6 +47,19 @@ class Nuisance:
     def project(self, r: np.ndarray) -> np.ndarray:
         """The residual with the adjustments applied to the model: r + D p."""
         return r + self.D @ self.values(r)
+
+    def mimic(self, d: np.ndarray) -> tuple[float, str]:
+        """How much of the change `d` (normalised, concatenated) an effect makes the adjustments reproduce,
+        within their ranges and free of their prior: the share of |d|^2 they explain and the adjustment that
+        carries most of it. An effect they reproduce (share >= MIMIC) cannot be told from the structural
+        mismatch they stand for; one that goes beyond their ranges can."""
+        dd = float(d @ d)
+        if dd <= 0.0:
+            return 0.0, ""
+        p = np.clip(np.linalg.lstsq(self.D, d, rcond=None)[0], self.lo, self.hi)
+        fit = self.D @ p
+        share = [float(np.linalg.norm(self.D[:, j] * p[j])) for j in range(p.size)]
+        return 1.0 - float(np.sum((d - fit) ** 2)) / dd, self.names[int(np.argmax(share))]
 
     @classmethod
     def build(cls, channels: list[str], scale: dict, mean: dict, t: np.ndarray, wheel_radius: float):

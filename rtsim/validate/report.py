@@ -1,7 +1,7 @@
 """The report of a validation run: `DIR/report.html` with plots (PNG, matplotlib's headless Agg
 backend) and `DIR/summary.json`:
 
-    {"effects": [{"name", "parameters": {...}, "uncertainty": {...}}, ...],   # in the order added
+    {"effects": [{"name", "parameters": {...}, "uncertainty": {...}, "model_error": {...}}, ...],  # as added
      "before": {channel: {"rms", "max", "inside_band"}}, "after": {...},
      "iterations": [{"iteration", "model_effects", "cost", "metrics", "where", "verdict", "winner",
                      "runner_up", "partners", "refitted", "joint", "candidates", "seconds"}, ...],
@@ -9,7 +9,8 @@ backend) and `DIR/summary.json`:
      "inside_band", "rms", "explained_by"}}, "nuisance": {name: {"value", "unit"}}, "correlations": [...], "confounded": [...]}
 
 rms and max are in the channel's SI unit; inside_band is the share of samples (0..1) inside the 95 %
-band, null when there is no band (one run). Uncertainties are 95 % half-widths in the parameter's unit.
+band, null when there is no band (one run). Uncertainties are 95 % half-widths in the parameter's unit;
+model_error is the part of it the residual left at the fit gives alone (the rest: the runs' scatter).
 """
 from __future__ import annotations
 
@@ -74,8 +75,8 @@ def _joint_row(d: dict) -> list:
 
 def summary(res: Result) -> dict:
     return _clean({
-        "effects": [{"name": e.name, "parameters": dict(e.params), "uncertainty": dict(e.uncertainty)}
-                    for e in res.effects],
+        "effects": [{"name": e.name, "parameters": dict(e.params), "uncertainty": dict(e.uncertainty),
+                     "model_error": dict(e.model_error)} for e in res.effects],
         "before": res.metrics(res.before),
         "after": res.metrics(res.after),
         "iterations": [it.summary() for it in res.iterations],
@@ -210,9 +211,16 @@ def write(res: Result, folder: Path) -> dict:
                 pu = next((p.unit for p in spec.params if p.name == k), "") if spec else ""
                 if pu.startswith("unit") and eff.channel:
                     pu = unit(eff.channel)
-                rows.append([eff.name, eff.channel or "", k, f"{v:.5g}", _fmt(u, ".2g"), pu])
+                rows.append([eff.name, eff.channel or "", k, f"{v:.5g}", _fmt(u, ".2g"),
+                             _fmt(eff.model_error.get(k), ".2g"), pu])
         parts.append("<h2>Effects added to the model (in order)</h2>" +
-                     _table(rows, ["effect", "channel", "parameter", "value", "+- 95 %", "unit"]))
+                     _table(rows, ["effect", "channel", "parameter", "value", "+- 95 %",
+                                   "of which the model error alone", "unit"]) +
+                     "<p>The interval combines the runs' scatter with the model error: the residual the fit "
+                     "leaves (structural mismatch included) as correlated noise, the spread of the value over "
+                     "the channels' time segments, and the change of the value that residual could cause. "
+                     "A sensor delay's interval cannot hold a structural lag of the model on that channel: "
+                     "the two read alike.</p>")
     else:
         parts.append("<h2>Effects added to the model</h2><p>none</p>")
     # before / after

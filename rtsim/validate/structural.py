@@ -47,7 +47,7 @@ def describe_signature(sig: dict, unit: str) -> str:
     if k == "offset":
         text = f"offset: the model reads {v:+.3g} {unit} more"
     elif k == "gain":
-        text = f"gain: the model's signal is {100 * v:+.1f} % larger"
+        text = f"gain: the model's signal is {100 * abs(v):.1f} % {'larger' if v >= 0 else 'smaller'}"
     elif k == "lag":
         # residual = -v model' : the car's mean = model + v model' = model(t + v), the model v behind it
         text = f"lag: the model lags the car's signal by {1e3 * v:.0f} ms" if v > 0 else \

@@ -17,9 +17,10 @@
    (report.html, plots, summary.json).
 
 Structural mismatch (issue 15): every residual carries the nuisance adjustments (objective.Nuisance:
-axle rolling radii, a small resistance offset; reported, never named); candidates are judged per
-channel (identify.channel_evidence); when nothing is eligible alone, the sensor effects are fitted again
-on top of the best model candidate (_joint_sensor); a model winner is fitted jointly with the model
+axle rolling radii, a small resistance offset; reported, never named, and a model effect they reproduce
+is not named either); candidates are judged per channel (identify.channel_evidence); the intervals carry
+the model error (identify.joint_uncertainty); when nothing is eligible alone, the sensor effects are
+fitted again on top of the best model candidate (_joint_sensor); a model winner is fitted jointly with the model
 candidates that promise to explain what it leaves, and with the model effects added in earlier
 iterations (joint.joint_model: a first effect that absorbed part of a second is re-fitted with it); at the end
 every channel is reported as explained, inside the band or structural with its shape
@@ -148,7 +149,11 @@ class Result:
     accel_frame: str = "body"                        # the frame the model's accelerations were compared in
     confounded: list = field(default_factory=list)    # pairs the data cannot separate
 
-    def metrics(self, outputs: dict) -> dict:
+    def metrics(self, outputs: dict, adjusted: bool = False) -> dict:
+        """Per compared channel, the error metrics of `outputs`; `adjusted`: with the nuisance adjustments
+        fitted to them applied (what is left beside the structural mismatch they stand for)."""
+        if adjusted:
+            outputs = self.objective.adjusted(outputs)
         return {c: error_metrics(outputs[c], self.bench.bands[c]) for c in self.bench.compared}
 
 
@@ -194,7 +199,7 @@ def _joint_sensor(ctx: Context, ranked: list[Candidate]) -> list[Candidate]:
         if same is None:
             continue
         same.effect.params.update(j.effect.params)
-        same.effect.uncertainty = dict(j.effect.uncertainty)
+        same.effect.adopt_interval(j.effect)
         same.theta, same.u_theta = j.theta, j.u_theta
         same.outputs = rp.reported(ctx.raw, ctx.inputs.t, [*ctx.effects, same.effect])
         corr = float(m.J @ j.J) / (float(np.linalg.norm(m.J) * np.linalg.norm(j.J)) or 1.0) if m.J is not None \
@@ -401,7 +406,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
                 latest[new.effect.key] = new
             w = joint.members[len(joint.refitted)]
             win.effect.params.update(w.effect.params)
-            win.effect.uncertainty = dict(w.effect.uncertainty)
+            win.effect.adopt_interval(w.effect)
             win.theta, win.u_theta, win.J, win.per_run = w.theta, w.u_theta, w.J, w.per_run
             win.raw, win.outputs = joint.raw, joint.outputs
         ties = equivalents(obj, win, ranked)
