@@ -307,9 +307,18 @@ NOISE = {"accel_x": 0.2, "wheel_angle_fl": 0.002, "wheel_angle_fr": 0.002, "whee
          "wheel_angle_rr": 0.002, "brake_pressure": 4.0, "wheel_torque_rl": 1.0, "wheel_torque_rr": 1.0}
 
 
+def sensor_reading(t: np.ndarray, x: np.ndarray, bias: float = 0.0, scale: float = 1.0,
+                   delay: float = 0.0) -> np.ndarray:
+    """A hidden sensor effect on a recorded channel: y = scale x(t - delay) + bias (linear interpolation;
+    the first value held before the start)."""
+    y = np.interp(t - delay, t, x) if delay else x
+    return scale * y + bias
+
+
 def write_runs(folder: Path, car: Car, n: int = 7, seed: int = 0, duration: float = 12.0,
-               accel_bias: float = 0.0, **hidden) -> list[Path]:
-    """n repetitions with run-to-run variation, noise and logger offsets, as CSV files."""
+               accel_bias: float = 0.0, sensor: dict | None = None, **hidden) -> list[Path]:
+    """n repetitions with run-to-run variation, noise and logger offsets, as CSV files. `sensor`: channel
+    -> {"bias": b, "scale": s, "delay": d} hidden in the recorded channel (sensor_reading)."""
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     paths = []
@@ -324,6 +333,8 @@ def write_runs(folder: Path, car: Car, n: int = 7, seed: int = 0, duration: floa
         t, ch = simulate(car, lambda s: float(np.interp(s, bt, bp)), lambda s: float(np.interp(s, tt, tv)),
                          duration, **hidden)
         ch["accel_x"] = ch["accel_x"] + accel_bias
+        for c, eff in (sensor or {}).items():
+            ch[c] = sensor_reading(t, ch[c], **eff)
         paths.append(log_run(folder / f"peer{k + 1}.csv", t, ch, NOISE, rng, 50.0 * (k + 1)))
     return paths
 

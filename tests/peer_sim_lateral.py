@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from peer_sim import log_run, read_tir
+from peer_sim import log_run, read_tir, sensor_reading
 
 DT = 5e-4                    # s, integrator step
 RATE = 500.0                 # Hz, logger rate
@@ -216,12 +216,6 @@ def simulate(car: dict, steer_fn, speed: float = SPEED, duration: float = DURATI
     return t, ch
 
 
-def _sensor(t: np.ndarray, x: np.ndarray, bias: float = 0.0, scale: float = 1.0, delay: float = 0.0) -> np.ndarray:
-    """y = scale x(t - delay) + bias (linear interpolation; the first value held before the start)."""
-    y = np.interp(t - delay, t, x) if delay else x
-    return scale * y + bias
-
-
 def write_runs(folder: Path, car: dict, n: int = 7, seed: int = 0, stiffness_scale: float = 1.0,
                added_mass: float = 0.0, sensor: dict | None = None) -> list[Path]:
     """n repetitions of the manoeuvre with run-to-run scatter, noise and logger offsets, as CSV files.
@@ -239,7 +233,7 @@ def write_runs(folder: Path, car: dict, n: int = 7, seed: int = 0, stiffness_sca
         t, ch = simulate(car, lambda x: float(np.interp(x, st, sa)), speed, DURATION + 0.5,
                          stiffness_scale, added_mass)
         for c, eff in (sensor or {}).items():
-            ch[c] = _sensor(t, ch[c], **eff)
+            ch[c] = sensor_reading(t, ch[c], **eff)
         paths.append(log_run(folder / f"lat{k + 1}.csv", t, ch, {c: NOISE[c] for c in CHANNELS}, rng, 80.0 * (k + 1),
                              declare={"accel_frame": ACCEL_FRAME}))
     return paths

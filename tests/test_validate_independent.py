@@ -75,6 +75,7 @@ import peer_sim_lateral as lateral
 from rtsim.validate import report
 from rtsim.validate.effectset import kind
 from rtsim.validate.replay import Replayer
+from rtsim.validate.signals import DERIVED
 from rtsim.validate.workflow import Options, run
 
 VEHICLE = Path(__file__).resolve().parents[1] / "configs" / "vehicles" / "xbw.toml"
@@ -133,6 +134,15 @@ LONGITUDINAL = {
     # written before the joint fit of two model effects was run on it, never tuned on
     "brake_and_grade": ({"brake_scale": 0.8, "grade": 0.03},
                         [("brake_friction", "scale", 0.8, None), ("road_grade", "grade", 0.03, None)], "held-out"),
+    # sensor scale and delay on the longitudinal channels ("any one channel"): written down before their
+    # first run, after the method of this file was final; delay and the wheel's scale passed, accel_x's
+    # scale failed (KNOWN_FAILURES)
+    "accel_x_scale": ({"sensor": {"accel_x": {"scale": 1.1}}}, [("sensor_scale", "scale", 1.1, "accel_x")],
+                      "held-out"),
+    "accel_x_delay": ({"sensor": {"accel_x": {"delay": 0.1}}}, [("sensor_delay", "delay", 0.1, "accel_x")],
+                      "held-out"),
+    "wheel_angle_scale": ({"sensor": {"wheel_angle_fl": {"scale": 1.03}}},
+                          [("sensor_scale", "scale", 1.03, "wheel_angle_fl")], "held-out"),
 }
 
 
@@ -200,7 +210,7 @@ def _check(res, expected, in_model_terms: dict | None = None):
         if channel is not None:          # a sensor effect: its own channel's RMS falls >= 5x, both with the
             # nuisance adjustments (the structural mismatch they stand for, left in the data on purpose) applied
             before, after = res.metrics(res.before, adjusted=True), res.metrics(res.after, adjusted=True)
-            c = channel if channel in before else next(s for s in before if channel in s)
+            c = channel if channel in before else next(s for s, a in DERIVED.items() if a == channel)
             assert before[c]["rms"] >= 5.0 * after[c]["rms"], (c, before[c], after[c])
     assert len(res.effects) == len(expected), [e.label() for e in res.effects]
 
@@ -213,6 +223,12 @@ EXTRA = () if ALL else ("stiffness_0.7", "mass_and_rolling_resistance")
 
 #: cases that fail: the method's known limits, kept so that a fix shows (strict: a pass fails)
 KNOWN_FAILURES = {
+    "accel_x_scale": "not named (held out; its first run): fitted 1.083 on the mean-input replay, where it "
+                     "explains 42 % of accel_x (the rule asks 75 %): the stop, smeared in the data's mean and "
+                     "crisp in a replay of the mean inputs, dominates what is left; on the per-run replays "
+                     "averaged (the before/after) 1.095 explains 84 %, but accel_x's RMS falls only 0.135 -> "
+                     "0.054 m/s^2 there (the no-effect case leaves 0.050): sensor effects are not yet fitted "
+                     "on the per-run replays",
     "accel_y_scale": "named 1.111 (true 1.1), but accel_y's RMS falls 0.245 -> 0.058 m/s^2, 4.2 times, not 5: "
                      "with no hidden effect the model leaves 0.056 m/s^2 there (the structural lag and the "
                      "mean's noise), so a change of 0.245 can fall at most 4.4 times whatever the method "
