@@ -33,30 +33,24 @@ NOISE = {"accel_x": 0.05, "accel_y": 0.05, "accel_z": 0.05, "gyro_x": 0.002, "gy
          "roll": 0.001, "pitch": 0.0005, "wheel_speed_front": 0.02, "wheel_speed_rear": 0.02, "steer_angle": 0.0005,
          "steer_rate": 0.005, "steering_torque": 0.2, "fork_travel": 0.0002, "shock_travel": 0.0002}
 
-STRAIGHT = """name = "field_straight"
-vehicle = "{vehicle}"
+#: the scenario lines both manoeuvres share after their name (files, timing, start speed)
+HEADER = """vehicle = "{vehicle}"
 road = "{road}"
 duration = {duration}
 dt = 0.001
 output_rate = 100.0
 [initial]
 speed = {v0}
-[rider]
+"""
+
+STRAIGHT = 'name = "field_straight"\n' + HEADER + """[rider]
 x = [0.0, 1000.0]
 y = [0.0, 0.0]
 speed = [{a}, {a}, {b}, {b}, {c}]
 time = [0.0, 1.0, 2.5, 3.0, 5.5]
 """
 
-LANE_CHANGE = """name = "field_lane_change"
-vehicle = "{vehicle}"
-road = "{road}"
-duration = {duration}
-dt = 0.001
-output_rate = 100.0
-[initial]
-speed = {v0}
-[rider]
+LANE_CHANGE = 'name = "field_lane_change"\n' + HEADER + """[rider]
 speed = {a}
 [rider.double_lane_change]
 offset = 3.0
