@@ -1,6 +1,7 @@
-"""A session someone drove from `rtsim view`, or stepped and steered through control requests, re-simulates bit for bit: the service records every change of
-the user command source (the ``drive`` op: values, takeover, release, lapse) on the ``user`` topic with the
-step it applied it at, and `rtsim resim` applies them at the same steps.
+"""A session someone drove from `rtsim view`, or stepped and steered through control requests, re-simulates
+bit for bit: the service records every change of the user command source (the ``drive`` op: values,
+takeover, release, lapse) on the ``user`` topic with the step it applied it at, and `rtsim resim` applies
+them at the same steps.
 
 A lockstep service in this process (CAN on a loopback hub started here, Zenoh off, recording on); the test
 is the lockstep ECU on the bus (commands, then SIM_STEP_REQ, then the acknowledgement) and the user (the

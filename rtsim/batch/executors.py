@@ -4,8 +4,9 @@ seeded by its spec).
 
 - `local_pool`: concurrent.futures.ProcessPoolExecutor, one worker per core by default; each worker's
   initializer loads the numba kernels once (a 20 ms run of each kind of vehicle in the plan), not per
-  run; on an empty cache the workers compile different kinds side by side (`_init`). A worker that dies (BrokenProcessPool) takes the pool with it: the runs not yet back are
-  submitted again to a fresh pool, up to `retries` times.
+  run; on an empty cache the workers compile different kinds side by side (`_init`). A worker that dies
+  (BrokenProcessPool) takes the pool with it: the runs not yet back are submitted again to a fresh pool,
+  up to `retries` times.
 - `ray_cluster`: Ray tasks (`max_retries`: a lost worker's run is run again elsewhere); `address="auto"`
   starts a Ray instance on this machine bound to 127.0.0.1 with usage statistics off, else connects to
   the cluster at `address`.
