@@ -19,8 +19,10 @@ the data ask for a value beyond it (the Gauss-Newton estimate or the slope at th
 the candidate is rejected as implausible with the value asked for. A candidate that removes less than
 `LITTLE` of the cost at the trial and the first step is not refined.
 
-Sensor effects need no simulation (Replayer.reported): bias and scale are linear least squares on their
-channel, the delay is a grid search over its range refined by a parabola.
+Sensor effects need no simulation of their own (Replayer.reported): bias and scale are linear least
+squares on their channel, the delay is a grid search over its range refined by a parabola; their
+sensitivity is seen through the nuisance adjustments, as the model effects' differences of residuals
+are (Nuisance.project_direction). The workflow fits them on the per-run replays averaged (rebase).
 
 Uncertainty (95 %) of a candidate (joint_uncertainty), from the residual r left at the optimum and the
 sensitivity J (the secant to the nearest simulated point at least `SECANT` |theta| away), the model
@@ -34,8 +36,10 @@ error included, since data from elsewhere always leave a structural residual:
   the change of theta that the residual left beyond the data's own uncertainty could cause, had it the
   shape of the sensitivity. A misfit that biases every block alike (a different tyre law) shows only
   here: the interval widens with the unexplained residual on the channels that carry the value.
-Sensor delays are the exception the data cannot cover: a structural lag of the model's response on the
-delayed channel reads exactly as part of the delay, and leaves no residual to widen the interval with.
+What no residual shows is a structural mismatch with exactly the effect's signature on its channel: a lag
+of the model's response reads as part of a sensor delay, a constant offset as part of a bias. The
+interval then holds the value in the model's terms (the hidden value composed with what the model reads
+in the same data without it), not the value alone.
 The winner's value and interval then come from the runs one by one (run_estimate, combine_runs:
 Student-t over the per-run estimates, as eq. 6). A candidate is `significant` when its interval
 excludes the off value; it is eligible to be added when it is plausible, removes at least
@@ -275,7 +279,9 @@ def _finish(ctx: Context, effect: Effect, kind: str, k: int, out: dict, J: np.nd
         notes.append(f"{coord.name} = {coord.value(th):.4g} +- {effect.uncertainty[coord.name]:.2g}: the interval "
                      f"includes the off value")
     ic = obj.ic(out, k)
-    size = distance(obj, out, ctx.outputs)
+    # how far it moves the outputs: a sensor effect on its own channel(s), where it is judged (a move
+    # spread over every compared channel would shrink with their number)
+    size = distance(obj, out, ctx.outputs, _own(obj, effect.channel) if kind == "sensor" else None)
     if plausible and size < MIN_SIZE:
         notes.append(f"too small to matter: it moves the outputs by {size:.2f} standard errors (RMS)")
     cand = Candidate(effect, kind, k, cost, ic, 1.0 - cost / ctx.cost, ic - obj.ic(ctx.outputs, 0), plausible,
@@ -293,6 +299,12 @@ def _moves_throughout(ctx: Context) -> bool:
     return bool(w) and bool(np.all(np.abs(np.mean(w, axis=0)) * ctx.replayer.wheel_radius > MOVING))
 
 
+def _own(obj: Objective, sensor: str) -> list[str]:
+    """The compared channels a sensor effect on `sensor` changes: its own, or the wheel speed derived from a
+    wheel angle."""
+    return [c for c in obj.channels if c == sensor or SENSOR_FOR.get(c) == sensor]
+
+
 def channel_evidence(ctx: Context, cand: Candidate) -> None:
     """Per channel: the cost before and with the candidate and how far it moves the channel; its
     signature channels (a sensor effect: its own channel; a model effect: the channels it moves by at
@@ -308,8 +320,7 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         by[c] = (float(np.mean(rb[c] ** 2)), float(np.mean(ra[c] ** 2)), float(np.sqrt(np.mean(d * d))))
     cand.by_channel = by
     if cand.kind == "sensor":
-        own = cand.effect.channel
-        sig = [c for c in obj.channels if c == own or SENSOR_FOR.get(c) == own]
+        sig = _own(obj, cand.effect.channel)
     else:
         top = max(v[2] for v in by.values())
         sig = [c for c, v in by.items() if v[2] >= max(MIN_SIZE, SIGNATURE_SHARE * top)]
@@ -526,13 +537,17 @@ def fit_sensor_effects(ctx: Context) -> list[Candidate]:
                 e = Effect(name, {"channel": sensor, coord.name: v})
                 return ctx.replayer.reported(ctx.raw, t, [*ctx.effects, e])
 
-            J = np.zeros_like(r0)
+            def direction(change: np.ndarray, seg=seg, s=s) -> np.ndarray:
+                """d residual / d value: `change` on the channel, as the residual sees it (the model
+                effects' J are differences of residuals): the nuisance adjustments absorb their share."""
+                J = np.zeros_like(r0)
+                J[seg] = change / s
+                return obj.nuisance.project_direction(J) if obj.nuisance is not None else J
+
             if name == "sensor_bias":
-                J[seg] = 1.0 / s
+                J = direction(np.ones(n))
             elif name == "sensor_scale":
-                J[seg] = y / s
-            else:
-                J[seg] = -np.gradient(y, t) / s
+                J = direction(y)
             if name in ("sensor_bias", "sensor_scale"):
                 jj = float(J @ J)
                 free = -float(J @ r0) / jj if jj > 0 else 0.0
@@ -549,8 +564,7 @@ def fit_sensor_effects(ctx: Context) -> list[Candidate]:
                     den = c0 - 2 * c1 + c2
                     if den > 0:
                         free += 0.5 * (c0 - c2) / den * (grid[1] - grid[0])
-                yd = delayed(y, float(t[1] - t[0]), free)
-                J[seg] = -np.gradient(yd, t) / s
+                J = direction(-np.gradient(delayed(y, float(t[1] - t[0]), free), t))
             th = coord.clip(free)
             span = coord.thi - coord.tlo
             requested = coord.value(free) if abs(free - th) > 0.05 * span else None
@@ -561,18 +575,33 @@ def fit_sensor_effects(ctx: Context) -> list[Candidate]:
     return cands
 
 
+def rebase(cands: list[Candidate], ctx: Context) -> None:
+    """Sensor candidates fitted and judged in another context of the same model (the per-run replays
+    averaged, workflow) re-expressed against `ctx` (the mean-input replay the iteration ranks on): their
+    IC is ctx's plus the difference they make there, their outputs ctx's with them applied. Their
+    value, evidence, reduction and interval stay the ones of the context they were fitted in (there
+    the mean-input replay's averaging artefact is gone, which is no model error of theirs)."""
+    ic0 = ctx.objective.ic(ctx.outputs, 0)
+    for c in cands:
+        c.ic = ic0 + c.delta_ic
+        c.outputs = ctx.replayer.reported(ctx.raw, ctx.inputs.t, [*ctx.effects, c.effect])
+
+
 # ------------------------------------------------------------------------------ per-run estimates
-def run_estimate(ctx: Context, cand: Candidate, i: int) -> float:
+def run_estimate(ctx: Context, cand: Candidate, i: int, raw: dict | None = None) -> float:
     """Run i's own estimate of the winner's coordinate: the model with the winner at theta* replayed
     with run i's own inputs, and one Gauss-Newton step from theta* against run i's channels,
     theta_i = theta* - (J . r_i) / (J . J). Replaying each run's own inputs removes the bias that
     averaging runs with slightly different event times gives to the mean (an onset of motion or a
     stop smeared by the averaging, against the model's crisp one); these replays run at the model's
     own step (dt), which also removes the small bias of fitting at fit_dt. The interval combine_runs
-    draws from them covers the run-to-run scatter, not systematic errors of the rest of the model."""
+    draws from them covers the run-to-run scatter, not systematic errors of the rest of the model.
+    `raw`: run i's replay of the model without the candidate, given for a sensor effect (which does not
+    change the car's motion, only what the sensors report of it): no simulation then."""
     effects = [*ctx.effects, cand.effect]
     inp = ctx.replayer.inputs(ctx.bench, run=i)
-    raw = ctx.replayer.simulate(inp, effects)        # at the model's own step: no discretisation bias
+    if raw is None:
+        raw = ctx.replayer.simulate(inp, effects)    # at the model's own step: no discretisation bias
     out = ctx.replayer.reported(raw, inp.t, effects)
     r = ctx.objective.residual_to_run(out, i)
     return cand.theta - float(cand.J @ r) / float(cand.J @ cand.J)
@@ -612,10 +641,14 @@ def combine_runs(cand: Candidate, thetas: list[float]) -> None:
 TIE_DISTANCE = 0.5
 
 
-def distance(obj: Objective, a: dict, b: dict) -> float:
-    """RMS difference of two model responses in units of the channels' standard errors: below
-    TIE_DISTANCE the data cannot tell the two apart."""
-    d = obj.residual(a) - obj.residual(b)
+def distance(obj: Objective, a: dict, b: dict, channels: list[str] | None = None) -> float:
+    """RMS difference of two model responses in units of the channels' standard errors (on `channels`,
+    default all compared): below TIE_DISTANCE the data cannot tell the two apart."""
+    if channels is not None:
+        ra, rb = obj.channel_residual(a), obj.channel_residual(b)
+        d = np.concatenate([ra[c] - rb[c] for c in channels])
+    else:
+        d = obj.residual(a) - obj.residual(b)
     return float(np.sqrt(np.mean(d * d)))
 
 

@@ -48,6 +48,11 @@ class Nuisance:
         """The residual with the adjustments applied to the model: r + D p."""
         return r + self.D @ self.values(r)
 
+    def project_direction(self, d: np.ndarray) -> np.ndarray:
+        """A change of the model's outputs (normalised, concatenated, e.g. a sensitivity) as the residual
+        sees it with the adjustments re-fitted: the part of `d` they cannot absorb (inside their ranges)."""
+        return d + self.D @ (self.solve @ d)
+
     def mimic(self, d: np.ndarray) -> tuple[float, str]:
         """How much of the change `d` (normalised, concatenated) an effect makes the adjustments reproduce,
         within their ranges and free of their prior: the share of |d|^2 they explain and the adjustment that

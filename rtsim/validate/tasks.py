@@ -36,8 +36,9 @@ class Failed:
 def run_task(ctx: Context, task: tuple):
     """One unit of parallel work on the iteration's context: ("fit", name, budget, seed),
     ("run", candidate, run index), ("inputs", run index): that run's replay inputs with the steering
-    command matched at the model's step, or ("replay", effects, run index): the model's outputs under
-    that run's inputs. An RtsimError comes back as Failed."""
+    command matched at the model's step, ("replay", effects, run index): the model's outputs under
+    that run's inputs, or ("raw", effects, run index): the same before the sensor model. An RtsimError
+    comes back as Failed."""
     try:
         if task[0] == "fit":
             return fit_model_effect(ctx, *task[1:])
@@ -49,10 +50,11 @@ def run_task(ctx: Context, task: tuple):
             inp = ctx.replayer.inputs(ctx.bench, run=task[1])
             ctx.replayer.steering_command(inp, ctx.replayer.dt)
             return inp
-        if task[0] == "replay":
+        if task[0] in ("replay", "raw"):
             effects, i = task[1], task[2]
             inp = ctx.replayer.inputs(ctx.bench, run=i)
-            return ctx.replayer.reported(ctx.replayer.simulate(inp, effects), inp.t, effects)
+            raw = ctx.replayer.simulate(inp, effects)
+            return raw if task[0] == "raw" else ctx.replayer.reported(raw, inp.t, effects)
         return run_estimate(ctx, task[1], task[2])
     except RtsimError as exc:
         return Failed(f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")

@@ -35,7 +35,9 @@ Cost per iteration: a joint fit takes at most identify.JOINT_SIMS simulations pe
 none when no partner promises to move the outputs) and one per-run replay of each run when accepted;
 every model effect is screened with two or three simulations (a trial value, one
 Gauss-Newton step, halved once when it overshoots), the `REFINE_TOP` best are refined to convergence
-(identify.MAX_SIMS simulations at most), sensor effects need none; candidates are fitted in parallel by
+(identify.MAX_SIMS simulations at most), the sensor effects one replay of each run for all of them
+(_ensemble: they are fitted on the per-run replays averaged, without the mean-input replay's averaging
+artefact, and a sensor winner's per-run values reuse those replays); candidates are fitted in parallel by
 `workers` processes forked after the model is built (the compiled model is shared, never rebuilt), or
 with `ray` (an address, "auto": a local instance on 127.0.0.1) by Ray tasks (rtsim.batch.executors.ray_map:
 the iteration's context shipped once to each worker; the same results, in the same order). Each
@@ -58,7 +60,7 @@ from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import accel_frame, load_runs
 from .effectset import Effect, catalogue, from_mapping
 from .identify import (CLEAR, MAX_SIMS, MIN_DELTA_IC, MIN_REDUCTION, MIN_SIZE, Candidate, Context, combine_runs,
-                       equivalents, evidence_strength, fit_sensor_effects, rank)
+                       equivalents, evidence_strength, fit_sensor_effects, rank, rebase, run_estimate)
 from .joint import joint_model
 from .objective import Objective
 from .profile import activate, active, vehicle_kind
@@ -248,6 +250,27 @@ def _replay_runs(ctx: Context, effects: list[Effect], workers: int) -> tuple[dic
     return {c: np.mean([o[c] for o in outs], axis=0) for c in outs[0]}, ""
 
 
+def _ensemble(ctx: Context, workers: int) -> tuple[Context | None, list | None]:
+    """The iteration's model (its physical outputs) replayed with every run's own inputs and averaged over
+    the runs like the data, as a context to fit the sensor effects in, and the per-run replays. A sensor
+    effect is linear in the reading (a bias, a scale, a delay), so on the average of the replays it is
+    the average of each replay with the effect: fitted there it is judged without the averaging
+    artefact the mean-input replay leaves (a stop smeared in the data's mean, crisp in the replay, that a
+    scale of accel_x cannot explain). (None, None) with one run or when a replay fails."""
+    bench, rp = ctx.bench, ctx.replayer
+    if bench.n < 2:
+        return None, None
+    _prepare_runs(ctx, workers)
+    raws = map_tasks(ctx, [("raw", ctx.effects, i) for i in range(bench.n)], workers, Quiet())
+    rp.simulations += bench.n
+    if any(isinstance(r, Failed) for r in raws):
+        return None, None
+    raw = {c: np.mean([r[c] for r in raws], axis=0) for c in raws[0]}
+    out = rp.reported(raw, bench.t, ctx.effects)
+    return Context(bench, ctx.objective, rp, ctx.inputs, ctx.effects, out, raw, ctx.objective.cost(out),
+                   ctx.n_runs), raws
+
+
 def _sensor_names(opts: Options, replayer: Replayer | None) -> tuple[str, ...]:
     """The validated vehicle's sensor channels (its channel dictionary), without building its model."""
     if replayer is not None:
@@ -335,7 +358,13 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
         names = [n for n, s in cat.items() if s.kind == "model" and n not in taken]
         prog.stage(f"iteration {k}: fitting effects", len(names) + REFINE_TOP + 1 + bench.n)
         cands = _fit_model_candidates(ctx, names, workers, prog)
-        cands += fit_sensor_effects(ctx)
+        ens, raws = _ensemble(ctx, workers)
+        sensors = fit_sensor_effects(ens or ctx)
+        if ens is not None:
+            rebase(sensors, ctx)
+            for c in sensors:
+                c.note = (c.note + "; " if c.note else "") + "judged on the per-run replays averaged"
+        cands += sensors
         prog.advance()
         ranked = rank(cands)
         win = None
@@ -345,8 +374,11 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
         for cand in trials:
             if bench.n >= 2:
                 _prepare_runs(ctx, workers)                 # the value and its interval from the runs one by one
-                ests = map_tasks(ctx, [("run", cand, i) for i in range(bench.n)], workers, prog)
-                rp.simulations += bench.n
+                if cand.kind == "sensor" and raws is not None:      # its motion is the replays'
+                    ests = [run_estimate(ctx, cand, i, raws[i]) for i in range(bench.n)]
+                else:
+                    ests = map_tasks(ctx, [("run", cand, i) for i in range(bench.n)], workers, prog)
+                    rp.simulations += bench.n
                 failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(ests) if isinstance(r, Failed)]
                 if failed:
                     cand.note = (cand.note + "; " if cand.note else "") + (
