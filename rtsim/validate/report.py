@@ -219,8 +219,10 @@ def write(res: Result, folder: Path) -> dict:
                      "<p>The interval combines the runs' scatter with the model error: the residual the fit "
                      "leaves (structural mismatch included) as correlated noise, the spread of the value over "
                      "the channels' time segments, and the change of the value that residual could cause. "
-                     "A sensor delay's interval cannot hold a structural lag of the model on that channel: "
-                     "the two read alike.</p>")
+                     "A sensor effect's value is in the model's terms: a structural mismatch of the model "
+                     "with the same signature on that channel (a lag of its own response beside a delay, a "
+                     "constant offset beside a bias) reads as part of it and leaves no residual to widen the "
+                     "interval with.</p>")
     else:
         parts.append("<h2>Effects added to the model</h2><p>none</p>")
     # before / after
