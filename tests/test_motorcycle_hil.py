@@ -168,3 +168,19 @@ def test_demo_over_can_end_to_end(tmp_path):
     assert t[-1] > rx_t[-1] + 0.2 and np.max(np.abs([m.data["roll_angle"] for m in st])) < 1.0
     report = resim(rec)
     assert report["identical"], report
+
+
+def test_identified_effects_stop_the_service_and_the_offline_ride(tmp_path):
+    """A two-wheeler file with [effects] as `rtsim validate` writes them: the service and the offline ride
+    apply none of them (the validation replay does), so both stop with an error naming them rather than run
+    the nominal model under a file that says otherwise."""
+    from rtsim.errors import ConfigError
+    from rtsim.validate.configwrite import _rebase
+    from rtsim.vehicle.motorcycle.offline import prepare
+
+    out = tmp_path / "motorcycle_validated.toml"
+    out.write_text(_rebase(VEHICLE.read_text(), VEHICLE.parent, tmp_path) + "\n[effects.brake_friction]\nscale = 0.9\n")
+    with pytest.raises(ConfigError, match=r"\[effects\] \(brake_friction\).*not yet by the service"):
+        build_sim(ROOT / "configs" / "scenarios" / "motorcycle_hil.toml", out, models={})
+    with pytest.raises(ConfigError, match=r"\[effects\] \(brake_friction\).*not yet by the offline ride"):
+        prepare(out, ROOT / "configs" / "scenarios" / "motorcycle_steady_turn.toml")

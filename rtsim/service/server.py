@@ -104,7 +104,7 @@ def _two_wheeler_sim(sc, vpath: Path, dt: float | None, models: dict, rider: boo
     two-wheeler's tyres run on the plane z = 0 only), its friction scale the tyres' road friction."""
     from rtsim.road.config import FlatRoadConfig, read_road_config
     from rtsim.vehicle.motorcycle.build import build_motorcycle
-    from rtsim.vehicle.motorcycle.config import load_motorcycle
+    from rtsim.vehicle.motorcycle.config import load_motorcycle, refuse_effects
     from drivers.rider import P_TYRE_LEAN
     from rtsim.vehicle.motorcycle.hil import TwoWheelerHil
     from rtsim.vehicle.motorcycle.ride import tyre_lean_ratio
@@ -119,6 +119,7 @@ def _two_wheeler_sim(sc, vpath: Path, dt: float | None, models: dict, rider: boo
     key = (vpath.resolve(), "two_wheeler")
     if key not in models:
         cfg, base = load_motorcycle(vpath)
+        refuse_effects(cfg, vpath, "the service")
         mm = build_motorcycle(cfg, base)
         models[key] = (mm, (base / cfg.interface.dbc).resolve(), static_pose(mm)[0])
     mm, dbc, q = models[key]

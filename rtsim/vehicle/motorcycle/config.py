@@ -17,6 +17,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from rtsim.configfile import Strict, bad, load_toml, validate
+from rtsim.errors import ConfigError
 
 from ..kit.tyre.two_wheel import TwoWheelTyreSpec, sport_front, sport_rear
 
@@ -294,6 +295,15 @@ class MotorcycleConfig(Strict):
     def trail(self) -> float:
         eps = self.caster_rad
         return (self.front_wheel.radius_m * math.sin(eps) - self.fork_offset) / math.cos(eps)
+
+
+def refuse_effects(cfg: MotorcycleConfig, path: str | Path, runner: str) -> None:
+    """A two-wheeler's [effects] are applied by `rtsim validate`'s replay only: `runner` (the service, the
+    offline ride) would run the nominal model under a file that says otherwise, so it stops instead."""
+    if cfg.effects:
+        raise ConfigError(f"{path}: [effects] ({', '.join(cfg.effects)}): a two-wheeler's identified effects are "
+                          f"applied by `rtsim validate`'s replay only, not yet by {runner}; run the file they were "
+                          "identified on, or remove the [effects] tables to run the nominal model")
 
 
 def load_motorcycle(path: str | Path) -> tuple[MotorcycleConfig, Path]:

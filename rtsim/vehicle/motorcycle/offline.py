@@ -35,7 +35,7 @@ from rtsim.errors import ConfigError, SimulationError
 from rtsim.configfile import problem
 
 from .build import build_motorcycle, combine
-from .config import Body, load_motorcycle
+from .config import Body, load_motorcycle, refuse_effects
 from .layout import K_E1, K_P
 from .plant import plant_state
 from .ride import Ride, tyre_lean_ratio
@@ -106,6 +106,7 @@ def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario) -> tupl
     if vpath is None:
         raise problem(sc.path, "vehicle", None, "a two-wheeler scenario names its vehicle file (or give --vehicle)")
     cfg, base = load_motorcycle(vpath)
+    refuse_effects(cfg, vpath, "the offline ride")
     mm = build_motorcycle(cfg, base)
     q, loads = static_pose(mm, dt=sc.dt)
     sim = TwoWheelerSim(mm, dt=sc.dt, speed=ini.speed, q=q, mu=mu)
