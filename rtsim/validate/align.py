@@ -40,8 +40,8 @@ class Alignment:
 
 def varying_inputs(runs: list[Run]) -> list[str]:
     """Inputs present in every run that vary across the manoeuvre: the range of the signal smoothed
-    over 0.1 s exceeds the vehicle profile's min_range and ten times the sample noise (estimated from second differences),
-    in every run. A channel that only carries noise would make the correlation meaningless."""
+    over 0.1 s exceeds the vehicle profile's min_range and ten times the sample noise (estimated from
+    second differences), in every run. A channel that only carries noise would make the correlation meaningless."""
     out = []
     prof = active()
     for name in prof.inputs:

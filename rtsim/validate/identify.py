@@ -44,9 +44,9 @@ The winner's value and interval then come from the runs one by one (run_estimate
 Student-t over the per-run estimates, as eq. 6). A candidate is `significant` when its interval
 excludes the off value; it is eligible to be added when it is plausible, removes at least
 `MIN_REDUCTION` of the cost, lowers the information criterion by at least `MIN_DELTA_IC` and changes the
-outputs by at least `MIN_SIZE` standard errors of the mean (RMS over the channels and samples): smaller
-changes fit noise and the artefacts of averaging runs (e.g. the pitch oscillation after the stop,
-smeared in the mean).
+outputs by at least `MIN_SIZE` standard errors of the mean (RMS over the channels and samples; a sensor
+effect's over its own channel): smaller changes fit noise and the artefacts of averaging runs (e.g. the
+pitch oscillation after the stop, smeared in the mean).
 
 Evidence per channel (channel_evidence; data from elsewhere always carry structural mismatch beside
 the effect looked for). Residuals are the objective's: normalised by each channel's standard error,
