@@ -37,7 +37,9 @@ two-at-once failed), and the longitudinal accel_x scale (held out at first: fitt
 on the per-run replays averaged was decided on it). HELD-OUT: the longitudinal grade passed the first
 time it ran; stiffness 0.6 (seed 99) and the accel_y bias and scale 1.1 (which fails: KNOWN_FAILURES)
 were written and run once after the rules that concern them were final (the level-frame grade rule
-changed neither: no grade was involved); the longitudinal pairs of model effects: see below.
+changed neither: no grade was involved), and so was the longitudinal accel_x scale 1.2 (which fails too),
+after test_rms_bar_reach had shown that scale 1.1's RMS cannot fall 5 times on its runs for any model;
+the longitudinal pairs of model effects: see below.
 
 Two model effects at once (the joint fit, rtsim.validate.joint.joint_model). It was developed on mass
 200 kg with rolling resistance 0.012 (seed 77, TUNING; before it rolling resistance was named first at
@@ -67,6 +69,7 @@ sensor delays, exempt before, are held to it too.
 """
 from __future__ import annotations
 
+import inspect
 import json
 import os
 
@@ -154,6 +157,12 @@ LONGITUDINAL = {
                       "held-out"),
     "wheel_angle_scale": ({"sensor": {"wheel_angle_fl": {"scale": 1.03}}},
                           [("sensor_scale", "scale", 1.03, "wheel_angle_fl")], "held-out"),
+    # written down, with the method final, before its first run, after the peer itself was found unable to
+    # take scale 1.1's RMS 5 times down (test_rms_bar_reach): the smallest step of 0.1 the peer can; with
+    # the 0.050 m/s^2 the model leaves on accel_x it was expected to reach about 5.3 times; it did not
+    # (KNOWN_FAILURES)
+    "accel_x_scale_1.2": ({"sensor": {"accel_x": {"scale": 1.2}}}, [("sensor_scale", "scale", 1.2, "accel_x")],
+                          "held-out"),
 }
 
 
@@ -204,13 +213,18 @@ def _best_delay(t: np.ndarray, model: np.ndarray, data: np.ndarray, delays: np.n
     return float(delays[np.argmin([np.mean((np.interp(t - d, t, model) - data) ** 2) for d in delays])])
 
 
+def _bench(paths: list[Path], replayer=None):
+    """The benchmark `rtsim validate` builds of `paths` with its default options."""
+    opts = Options(VEHICLE, paths, Path("."))
+    runs, rejected = load_runs(paths, _sensor_names(opts, replayer))
+    return build_benchmark(runs, rejected, opts.rate, opts.align, opts.compare)
+
+
 def _reading(replayer, res, paths, name: str, channel: str, param: str) -> float:
     """What the model, with the model effects `res` found, reads as the sensor effect `name` on `channel`
     in `paths` (the same runs without the hidden sensor effect), fitted as the workflow fits one (on the
     per-run replays averaged): the structural mismatch's share of that effect."""
-    opts = Options(VEHICLE, paths, Path("."), accel_frame=res.accel_frame)
-    runs, rejected = load_runs(paths, _sensor_names(opts, replayer))
-    bench = build_benchmark(runs, rejected, opts.rate, opts.align, opts.compare)
+    bench = _bench(paths, replayer)
     obj = Objective.from_benchmark(bench, replayer.wheel_radius)
     model = [e for e in res.effects if e.kind == "model"]
     ens, _ = _ensemble(Context(bench, obj, replayer, replayer.inputs(bench), model, {}, {}, 0.0, bench.n), 2)
@@ -282,9 +296,14 @@ EXTRA = () if ALL else ("stiffness_0.7", "mass_and_rolling_resistance")
 #: of what the data can tell, kept so that a change shows (strict: a pass fails)
 KNOWN_FAILURES = {
     "accel_x_scale": (RmsBar, "named 1.095 +- 0.008 (true 1.1; 1.095 in the model's terms), but accel_x's RMS "
-                      "falls 0.135 -> 0.054 m/s^2, 2.5 times, not 5: with no hidden effect the model leaves "
-                      "0.050 m/s^2 there (the pitch-plane peer's structural mismatch), so a change of 0.135 can "
-                      "fall at most 2.7 times whatever the method"),
+                      "falls 0.135 -> 0.054 m/s^2, 2.5 times, not 5: the noise left in the data's mean (0.034) "
+                      "stops any model at 3.9 times, the peer that made the runs included (test_rms_bar_reach); "
+                      "with no hidden effect rtsim leaves 0.050 there (that noise and the stop's structural "
+                      "mismatch), 2.7 times at most"),
+    "accel_x_scale_1.2": (RmsBar, "named 1.196 +- 0.009 (true 1.2; 1.197 in the model's terms), but accel_x's "
+                          "RMS falls 0.258 -> 0.060 m/s^2, 4.3 times, not 5 (the peer itself: 7.6 times): the "
+                          "structural mismatch at the stop, which the scale reads larger too, stays beside "
+                          "the mean's noise"),
     "accel_y_scale": (RmsBar, "named 1.111 +- 0.023 (true 1.1; 1.111 in the model's terms), but accel_y's RMS "
                       "falls 0.245 -> 0.058 m/s^2, 4.2 times, not 5: with no hidden effect the model leaves "
                       "0.056 m/s^2 there (the structural lag and the mean's noise), so a change of 0.245 can "
@@ -354,12 +373,42 @@ def test_lateral_peer(replayer, car, tyre_params, folder, case):
         assert res.correlations and all(abs(r) < 0.9 for _, _, r in res.correlations), res.correlations
 
 
+def _long_seed(case: str) -> int:
+    return 77 if case == "mass_and_rolling_resistance" else 31 + list(LONGITUDINAL).index(case)
+
+
+@pytest.mark.parametrize("case", ["accel_x_scale", "accel_x_scale_1.2"])
+def test_rms_bar_reach(folder, monkeypatch, case):
+    """How far a sensor effect's channel RMS can fall on a case's data whatever the model. Against the
+    mean of n runs, any model keeps the noise left in the mean, sigma / sqrt(k n) (white noise of
+    deviation sigma, box-averaged over the k logged samples of one grid step): the peer that made the
+    runs, with the hidden effect and without the channel's noise, the best model there is, keeps exactly
+    that. The RMS the peer without the effect leaves is what an effect-free model starts from: divided by
+    that floor it is under 5 for accel_x scale 1.1 (the reason its RMS bar fails whatever the method) and
+    over 5 for 1.2 (its failure is the model's: KNOWN_FAILURES)."""
+    hidden = LONGITUDINAL[case][0]
+    (channel, _), = hidden["sensor"].items()
+    car, seed, n = peer_sim.Car.from_config(VEHICLE), _long_seed(case), 7
+    bench = _bench(peer_sim.write_runs(folder / f"reach_{case}", car, n=n, seed=seed, **hidden))
+    k = round(inspect.signature(peer_sim.simulate).parameters["rate"].default * bench.dt)
+    floor = peer_sim.NOISE[channel] / np.sqrt(k * n)
+    monkeypatch.setitem(peer_sim.NOISE, channel, 0.0)     # the same draws: a zero deviation still takes them
+    rms = {}
+    for name, h in (("with", hidden), ("without", {})):
+        best = _bench(peer_sim.write_runs(folder / f"reach_{case}_{name}", car, n=n, seed=seed, **h))
+        rms[name] = float(np.sqrt(np.mean((best.bands[channel].mean - bench.bands[channel].mean) ** 2)))
+    print(f"  {case}: {channel}'s RMS {rms['without']:.4g} without the effect, {rms['with']:.4g} with it "
+          f"(the mean's noise: {floor:.4g}); the most it can fall: {rms['without'] / floor:.3g} times")
+    assert rms["with"] == pytest.approx(floor, rel=0.05)
+    assert (rms["without"] / floor >= 5.0) == (case != "accel_x_scale")
+
+
 @pytest.mark.parametrize("case", [_known(c) if c in KNOWN_FAILURES else c for c in LONGITUDINAL
                                   if c not in EXTRA])
 def test_longitudinal_peer(replayer, folder, case):
     hidden, expected, _ = LONGITUDINAL[case]
     car = peer_sim.Car.from_config(VEHICLE)
-    seed = 77 if case == "mass_and_rolling_resistance" else 31 + list(LONGITUDINAL).index(case)
+    seed = _long_seed(case)
     paths = peer_sim.write_runs(folder / f"long_{case}", car, n=7, seed=seed, **hidden)
     res = run(Options(VEHICLE, paths, folder / f"long_{case}_report"), replayer=replayer)
     _show(f"long_{case}", res)
