@@ -32,6 +32,14 @@ DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 _VID = re.compile(r"[A-Za-z0-9_\-]+\Z")
 _LOOPBACK_NAMES = ("localhost",)
 _JSON = zenoh.Encoding.APPLICATION_JSON
+#: control requests: numpy values made plain, NaN and infinity kept as literals (the service refuses them)
+def _plain(obj):
+    if hasattr(obj, "tolist"):          # numpy scalars and arrays
+        return obj.tolist()
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
+_CONTROL_ENCODER = json.JSONEncoder(allow_nan=True, separators=(",", ":"), default=_plain).encode
 
 
 def _zerr(e: BaseException) -> str:
@@ -356,8 +364,10 @@ class ZenohClient:
 
     def control(self, op: str, timeout: float = 10.0, **args) -> dict:
         """Send ``{"op": op, **args}`` to ``rtsim/<vid>/control``; returns the reply dict (check
-        ``reply["ok"]``). Raises RtsimError when no service answers within ``timeout`` s."""
-        return self._query("control", encode_json({"op": op, **args}), timeout)
+        ``reply["ok"]``). Raises RtsimError when no service answers within ``timeout`` s. A non-finite
+        number goes as JSON's NaN/Infinity literal (never as null, which would mean "hand back"), so that
+        the service refuses it with its reason."""
+        return self._query("control", _CONTROL_ENCODER({"op": op, **args}).encode(), timeout)
 
     def config(self, timeout: float = 10.0) -> dict:
         """The service's configuration (reply of ``rtsim/<vid>/config``)."""

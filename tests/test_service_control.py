@@ -99,3 +99,58 @@ def test_reset_and_load_scenario_restart_time(service):
     assert cfg["vehicle"]["id"] == "xbw" and cfg["options"]["mode"] == "lockstep"
     # the new scenario starts at 80 km/h: the car is moving (the brake holds, so it slows down)
     assert svc.loop.state[12] > 15.0
+
+
+def test_refused_requests_change_nothing_and_say_why(service):
+    """Unknown arguments, wrong types and non-finite numbers are refused with one line (ok false) and never
+    applied: the step counter and the user's channels are as before (rtsim.service.control_args)."""
+    svc, client = service
+    assert client.control("step", n=3, timeout=EVENT)["ok"]
+    k = svc.loop.k
+    for op, args, words in [("step", {"steps": 5}, "unknown argument 'steps'"),
+                            ("step", {"count": 7}, "unknown argument 'count'"),
+                            ("step", {"n": 5.5}, "n = 5.5"),
+                            ("step", {"n": "5"}, "n = '5'"),
+                            ("pause", {"now": True}, "unknown argument 'now'"),
+                            ("drive", {"throttle_angle_cmd": float("nan")}, "not a finite number"),
+                            ("drive", {"throttle_angle_cmd": 0.2, "brake_pressure_cmd": float("inf")},
+                             "not a finite number"),
+                            ("drive", {"throttle": 0.5}, "unknown argument 'throttle'"),
+                            ("load_scenario", {"scenario": "/etc/passwd"}, "absolute path"),
+                            ("load_scenario", {"scenario": "../vehicles/xbw"}, "'..'")]:
+        r = client.control(op, **args, timeout=EVENT)
+        assert r["ok"] is False and words in r["error"] and "\n" not in r["error"], (op, args, r)
+        assert r["error"].startswith(f"{op}: "), r
+    assert svc.loop.k == k and svc.loop.run_state == "running"
+    assert svc.loop.user_status()["channels"] == {} and svc.loop.user_status()["requests"] == 0
+    # the same request with its declared argument runs
+    assert client.control("step", n=5, timeout=EVENT)["sim_time"] == pytest.approx((k + 5) * svc.sim.dt)
+
+
+def test_load_scenario_reads_the_declared_scenario_folders_only(service, tmp_path):
+    """A folder the settings declare (scenario_dirs) is read; a link in it that leads out is refused."""
+    import os
+    from pathlib import Path
+
+    svc, client = service
+    mine, outside = tmp_path / "mine", tmp_path / "outside"
+    mine.mkdir()
+    outside.mkdir()
+    shipped = Path(__file__).resolve().parent.parent / "configs" / "scenarios"
+    text = (shipped / "hil_flat.toml").read_text().replace('name = "hil_flat"', 'name = "mine"')
+    text = text.replace('road = "../roads/flat.toml"', f'road = "{shipped.parent / "roads" / "flat.toml"}"')
+    (mine / "mine.toml").write_text(text)
+    (outside / "away.toml").write_text(text)
+    os.symlink(outside / "away.toml", mine / "away.toml")
+    r = client.control("load_scenario", scenario="mine", timeout=EVENT)
+    assert r["ok"] is False and "no scenario 'mine'" in r["error"], r
+    before = svc.opts.scenario_dirs
+    svc.opts.scenario_dirs = [mine]
+    try:
+        r = client.control("load_scenario", scenario="away", timeout=EVENT)
+        assert r["ok"] is False and "is a link to" in r["error"], r
+        r = client.control("load_scenario", scenario="mine", timeout=EVENT)
+        assert r["ok"] and r["scenario"] == "mine", r
+    finally:
+        svc.opts.scenario_dirs = before
+        assert client.control("load_scenario", scenario="hil_flat", timeout=EVENT)["ok"]

@@ -40,6 +40,9 @@ class ServeOptions(BaseModel):
 
     scenario: Optional[Path] = setting(None, "scenario TOML or name in configs/scenarios (road, start, step; "
                                        "default hil_flat, motorcycle_hil for a two-wheeler)", "simulation.scenario")
+    scenario_dirs: list[Path] = setting(
+        [], "folder the control op load_scenario may read scenarios from, besides the shipped configs/scenarios "
+        "(repeatable; a name outside these folders is refused)", "simulation.scenario_dirs", "--scenario-dir")
     vehicle: Optional[Path] = setting(None, "vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)",
                                       "simulation.vehicle")
     dt: Optional[Step] = setting(None, "fixed step, s (default: the scenario's, 0.001)",
@@ -67,6 +70,9 @@ class ServeOptions(BaseModel):
                                            "can.interface")
     can_channel: Optional[str] = setting(None, "python-can channel (vcan0, can0, 127.0.0.1:54701, ...)",
                                          "can.channel")
+    can_hub_port: Optional[int] = setting(
+        None, "port of the loopback CAN hub on 127.0.0.1 (used when no --can-interface is given and the kernel "
+        "has no vcan0; default: $RTSIM_CAN_HUB_PORT, else 54701)", "can.hub_port", ge=1, le=65535)
     start_hub: bool = setting(True, "do not start the embedded loopback CAN hub", "can.start_hub", "--no-hub")
     zenoh: bool = setting(True, "do not publish over Zenoh", "zenoh.enabled", "--no-zenoh")
     zenoh_listen: list[str] = setting([DEFAULT_ZENOH_LISTEN], f"Zenoh listen endpoint (repeatable; default "
@@ -150,6 +156,8 @@ def load_service_config(path: str | Path) -> dict:
             v = raw[sec][k]
             if f.annotation in (Path, Optional[Path]) and v is not None and not Path(v).is_absolute():
                 v = path.parent / v
+            elif f.annotation == list[Path] and isinstance(v, list):
+                v = [path.parent / e if isinstance(e, str) and not Path(e).is_absolute() else e for e in v]
             out[name] = v
     return out
 
@@ -177,6 +185,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         elif f.annotation == list[str]:
             p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append", metavar="ENDPOINT",
                            help=f.description)
+        elif f.annotation == list[Path]:
+            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append", metavar="FOLDER",
+                           type=Path, help=f.description)
         else:
             p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, type=_arg_type(f.annotation),
                            help=f.description)

@@ -30,6 +30,7 @@ from rtsim.realtime.health import LoopHealth
 from rtsim.realtime.pacer import Pacer
 
 from .config import DEFAULT_SCENARIO, TWO_WHEELER_SCENARIO, ServeOptions
+from .control_args import ControlError, check_request, scenario_file, scenario_folders
 from .loop import HilLoop, Request
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -233,7 +234,7 @@ class Service:
             if socketcan_available(chan or "vcan0"):
                 iface, chan = "socketcan", chan or "vcan0"
             else:
-                port = default_hub_port()
+                port = o.can_hub_port or default_hub_port()
                 if chan is None and o.start_hub and not _reachable(HUB_HOST, port):
                     self.hub = LoopbackHub(port)
                     self.out(f"rtsim serve: started the loopback CAN hub on {self.hub.channel} "
@@ -268,10 +269,15 @@ class Service:
     def control(self, request: dict) -> dict:
         """Handle one control request (see ``HilLoop._control``); builds new simulations here, off the
         loop thread, and waits for the loop to take the request."""
-        op = str(request.get("op", ""))
-        args = {k: v for k, v in request.items() if k != "op"}
+        op = request.get("op")
+        try:          # every argument as its op declares it (rtsim.service.control_args), before the loop
+            args = check_request(op, {k: v for k, v in request.items() if k != "op"})
+            if op == "load_scenario":
+                path = scenario_file(args["scenario"], scenario_folders(self.opts.scenario_dirs))
+        except ControlError as exc:
+            return {"ok": False, "error": str(exc)}
         if op in ("reset", "load_scenario"):
-            path = self.scenario_path if op == "reset" else resolve_scenario(str(args.get("scenario", "")))
+            path = self.scenario_path if op == "reset" else path
             sim, sc = build_sim(path, self.opts.vehicle, self.opts.dt, self.models, self.opts.rider == "on")
             if op == "load_scenario":
                 self.scenario_path, self.sc, self.model = path, sc, sim.vm
