@@ -16,6 +16,10 @@ def main(args) -> int:
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)     # start-up and progress lines show at once in a pipe
     opts = options(args)
+    opts.check()
+    from .ports import check_ports, service_ports
+    for line in check_ports(service_ports(opts), "rtsim serve", join_hub=True):   # before any compile
+        print(line, flush=True)
     with CompileProgress("rtsim", lambda line: print(line, flush=True)):
         svc = Service(opts)
     summary = svc.run()

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bridge.can_bus import HUB_HOST, default_hub_port, socketcan_available
+from bridge.can_bus import DEFAULT_HUB_PORT, HUB_HOST, HUB_PORT_ENV, default_hub_port, socketcan_available
 
 from rtsim.compile_status import CompileProgress
 from rtsim.errors import RtsimError
@@ -48,6 +48,7 @@ ROOT = Path(__file__).resolve().parents[2]
 #: manoeuvre and duration arguments are appended)
 ECU_COMMAND_ENV = "RTSIM_DEMO_ECU"
 EPS_SCENARIO = "step_steer_80kph"
+DEFAULT_ZENOH_PORT = 7447
 TWO_WHEELER_DURATION = 20.0      # s of simulated time: the figure-eight's two circles and straights
 
 
@@ -72,6 +73,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                                       "much simulated time, s (the watchdog's safe state)")
     p.add_argument("--can-interface", help="python-can interface (default: vcan0 if present, else the hub)")
     p.add_argument("--can-channel", help="python-can channel")
+    p.add_argument("--can-hub-port", type=int, metavar="PORT",
+                   help="port of the loopback CAN hub the demo starts on 127.0.0.1 when there is no vcan0 and no "
+                        f"--can-interface (default: ${HUB_PORT_ENV}, else {DEFAULT_HUB_PORT}); it must be free")
+    p.add_argument("--zenoh-port", type=int, default=DEFAULT_ZENOH_PORT, metavar="PORT",
+                   help=f"port of the service's Zenoh endpoint tcp/127.0.0.1:PORT (default {DEFAULT_ZENOH_PORT}); "
+                        "every port is checked before anything is compiled")
 
 
 def recorded_motion(path: Path, vehicle_id: str) -> dict:
@@ -143,9 +150,15 @@ def main(args) -> int:
     kw = {"vehicle": vehicle} if vehicle is not None else {}
     if args.scenario or eps:
         kw["scenario"] = resolve_scenario(args.scenario or EPS_SCENARIO)
+    for flag, port in (("--can-hub-port", args.can_hub_port), ("--zenoh-port", args.zenoh_port)):
+        if port is not None and not 1 <= port <= 65535:
+            raise RtsimError(f"{flag} {port}: a TCP port is 1..65535")
     opts = ServeOptions(mode=args.mode, record=Path(args.record), zenoh=not args.no_zenoh,
-                        can_interface=args.can_interface, can_channel=args.can_channel, **kw)
+                        can_interface=args.can_interface, can_channel=args.can_channel,
+                        can_hub_port=args.can_hub_port, zenoh_listen=[f"tcp/127.0.0.1:{args.zenoh_port}"], **kw)
     opts.check()                # bad options fail before any process starts
+    from .ports import check_ports, service_ports
+    check_ports(service_ports(opts, "--zenoh-port"), "rtsim demo")    # every port, before the ECU and any compile
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise RtsimError(f"--duration {args.duration}: must be a positive number of seconds")
     if args.silent_after is not None and not ((eps or two_wheeler) and args.silent_after > 0):
@@ -157,7 +170,7 @@ def main(args) -> int:
     iface, chan = args.can_interface, args.can_channel
     if iface is None:       # the service's default choice, known before it starts
         iface, chan = ("socketcan", chan or "vcan0") if socketcan_available(chan or "vcan0") else \
-            ("remote", chan or f"{HUB_HOST}:{default_hub_port()}")
+            ("remote", chan or f"{HUB_HOST}:{args.can_hub_port or default_hub_port()}")
     # the ECU starts first (its imports and its own kernels take seconds) and waits for the service's
     # bus and first frames (bounded, saying so); the service ends when the ECU does
     ecu_module = "drivers.eps_demo" if eps else ("drivers.rider_assist_demo" if two_wheeler else "drivers.ecu_demo")
