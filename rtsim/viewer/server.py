@@ -17,6 +17,13 @@ file (rtsim.viewer.recording), then only answers pings: the page plays them with
 - page -> server: ``pull`` (once per drawn frame: the page sets its own rate), ``drive`` (the user's
   commands, rtsim.service.user_input channels), ``reset`` (the service's reset op: the scenario's start
   again), ``ping``.
+
+Driving guard: a server given a session ``token`` (``rtsim view`` makes one, random, whenever it binds an
+address off loopback: ``--web-allow-remote``) takes ``drive`` and ``reset`` only from a page whose
+WebSocket URL carries it (``/ws?token=...``: the page passes on its own URL's query, and the URL printed
+at start has it). Any other page may watch; its driving requests are answered ``ok: false`` with the
+reason, counted in ``refused`` and logged (one line per page). Without a token (loopback) every page
+this server served may drive, as the WebSocket's origin check allows.
 """
 from __future__ import annotations
 
@@ -25,6 +32,8 @@ import http
 import itertools
 import json
 import mimetypes
+import secrets
+import sys
 import time
 import urllib.parse
 from pathlib import Path
@@ -74,8 +83,10 @@ class ViewServer:
     or two recordings (``recordings``: rtsim.viewer.recording.Recording) the page plays with a timeline."""
 
     def __init__(self, relay: Relay | None, bind: str = "127.0.0.1", port: int = 8470, config_timeout: float = 30.0,
-                 recordings=()):
+                 recordings=(), token: str | None = None):
         check_libraries()
+        self.token = token
+        self.refused = 0                                # driving requests refused for want of the token
         self.relay = relay
         self.recordings = list(recordings)
         if (relay is None) == (not self.recordings):
@@ -131,14 +142,37 @@ class ViewServer:
         return connection.respond(http.HTTPStatus.NOT_FOUND, f"not found: {path}\n")
 
     # -- WebSocket --------------------------------------------------------------------------------------
+    def may_drive(self, ws) -> bool:
+        """True when this page's WebSocket URL carries the session token (or the server needs none)."""
+        if self.token is None:
+            return True
+        query = urllib.parse.urlsplit(getattr(getattr(ws, "request", None), "path", "") or "").query
+        given = urllib.parse.parse_qs(query).get("token", [""])[0]
+        return secrets.compare_digest(given.encode(), self.token.encode())
+
+    async def _refuse(self, ws, kind: str, logged: list) -> None:
+        """A driving request from a page without the token: counted, logged once per page, answered."""
+        self.refused += 1
+        if not logged:
+            logged.append(True)
+            peer = getattr(ws, "remote_address", None)
+            print(f"rtsim view: refused a {kind} request from {peer[0] if peer else 'a page'}: no valid session "
+                  f"token in its URL ({self.refused} refused so far)", file=sys.stderr, flush=True)
+        reply = {"ok": False, "error": f"{kind} refused: this page's URL has no valid session token (open the "
+                                       f"URL `rtsim view` printed)"}
+        await ws.send(encode({"type": "drive_ack" if kind == "drive" else "reset_ack", "seq": None, "reply": reply}))
+
     async def _page(self, ws) -> None:
         self.pages += 1
         self._conns.add(ws)
         last: dict[str, int] = {}
+        driver = self.may_drive(ws)
+        logged: list = []
         try:
             info = await asyncio.get_running_loop().run_in_executor(None, self.info)
             source = "live" if self.relay is not None else "replay"
-            await ws.send(encode({"type": "hello", "source": source, "info": info, "server_time": time.time()}))
+            await ws.send(encode({"type": "hello", "source": source, "info": info, "server_time": time.time(),
+                                  "may_drive": driver}))
             for i, rec in enumerate(self.recordings):
                 await ws.send(rec.payload(i))
             async for text in ws:
@@ -154,6 +188,8 @@ class ViewServer:
                     continue                        # a recording: the page plays it by itself
                 if kind == "pull":
                     await ws.send(self.relay.batch(last))
+                elif kind in ("drive", "reset") and not driver:
+                    await self._refuse(ws, kind, logged)
                 elif kind == "drive":
                     token = next(self._tokens)
                     self._drive_from[token] = ws

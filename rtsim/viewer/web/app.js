@@ -39,7 +39,7 @@ function keep(a, x, n = 50) { a.push(x); if (a.length > n) a.shift(); }
 function fmt(x, d = 1) { return x == null || !Number.isFinite(x) ? '–' : x.toFixed(d); }
 
 // ---- the source ---------------------------------------------------------------------------------------
-const ws = new WebSocket(`ws://${location.host}/ws`);
+const ws = new WebSocket(`ws://${location.host}/ws${location.search}`);   // ?token=…: the session's, when the server asks for one
 ws.onmessage = (ev) => {
   const m = JSON.parse(ev.data);
   if (m.type === 'hello') start(m.info, m.source);
