@@ -283,12 +283,12 @@ def test_new_scenario_brings_its_road(tmp_path):
     hub = LoopbackHub(0, start_timeout=HUB_START)
     path = tmp_path / "two.mcap"
     svc = Service(ServeOptions(mode="lockstep", can_interface="remote", can_channel=hub.channel, start_hub=False,
-                               zenoh=False, record=path), out=lambda *a: None)
+                               zenoh=False, record=path, scenario_dirs=[tmp_path]), out=lambda *a: None)
     th = threading.Thread(target=svc.run, daemon=True)
     th.start()
     try:
         assert svc.control({"op": "step", "n": 50})["ok"]
-        assert svc.control({"op": "load_scenario", "scenario": str(grade)})["ok"]
+        assert svc.control({"op": "load_scenario", "scenario": "grade"})["ok"]
         assert svc.control({"op": "step", "n": 50})["ok"]
     finally:
         svc.stop()
