@@ -151,3 +151,55 @@ def test_view_refuses_a_remote_bind_before_listening(capsys):
     rc = cli.main(["view", "--bind", "0.0.0.0", "--port", "0", "--duration", "1"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "--web-allow-remote" in err[0], err
+
+
+def test_the_page_passes_its_token_on_and_a_page_without_it_only_watches():
+    """In the browser, against a running service: the page opened at the printed URL (with the token) drives;
+    one opened without it shows the car, has its driving controls off, and its reset is refused."""
+    import os
+
+    from playwright import sync_api as playwright_api
+
+    from service_harness import ServiceProcess, free_port
+    from viewer_harness import NO_CHROMIUM, ViewThread, chromium_path, launch
+    from waits import EVENT
+
+    require_page_libraries()
+    if chromium_path() is None:
+        pytest.skip(NO_CHROMIUM)
+    zport = free_port()
+    svc = ServiceProcess("virtual", f"rtsim-view-token-{os.getpid()}", "--zenoh-listen", f"tcp/127.0.0.1:{zport}",
+                         "--mode", "realtime")
+    view = pw = browser = None
+    try:
+        view = ViewThread("xbw", [f"tcp/127.0.0.1:{zport}"], token=TOKEN)
+        assert view.url.endswith(f"/?token={TOKEN}")
+        pw = playwright_api.sync_playwright().start()
+        browser = launch(pw)
+        ready = "window.rtsimView && window.rtsimView.pose !== null"
+        bare = browser.new_page(viewport={"width": 640, "height": 360})
+        bare.goto(view.base_url)
+        bare.wait_for_function(ready, timeout=EVENT * 1000)
+        assert bare.evaluate("['drive', 'takeover', 'release', 'reset'].every((id) => document.getElementById(id).disabled)")
+        bare.evaluate("const b = document.getElementById('reset'); b.disabled = false; b.click()")
+        bare.wait_for_function("(rtsimView.drive.error || '').includes('reset refused')", timeout=EVENT * 1000)
+        refused = view.server.refused
+        assert refused == 1
+        good = browser.new_page(viewport={"width": 640, "height": 360})
+        good.goto(view.url)
+        good.wait_for_function(ready, timeout=EVENT * 1000)
+        assert not good.evaluate("document.getElementById('drive').disabled")
+        good.keyboard.down("ArrowUp")
+        good.wait_for_function("rtsimView.drive.last && rtsimView.drive.last.ok === true", timeout=EVENT * 1000)
+        good.keyboard.up("ArrowUp")
+        good.evaluate("document.getElementById('release').click()")
+        assert view.server.refused == refused
+    finally:
+        if browser is not None:
+            browser.close()
+        if pw is not None:
+            pw.stop()
+        if view is not None:
+            view.close()
+        svc.stop()
+        svc.close()

@@ -38,13 +38,13 @@ class ViewThread:
     of a live service (``vehicle_id``, ``connect``) or of recordings (``recordings``: MCAP paths)."""
 
     def __init__(self, vehicle_id: str | None = None, connect: list[str] | None = None, timeout: float = 60.0,
-                 recordings=()):
+                 recordings=(), token: str | None = None):
         from rtsim.viewer.recording import Recording
         from rtsim.viewer.relay import Relay
         from rtsim.viewer.server import ViewServer
 
         relay = Relay(vehicle_id, connect) if not recordings else None
-        self.server = ViewServer(relay, "127.0.0.1", 0, recordings=[Recording(r) for r in recordings])
+        self.server = ViewServer(relay, "127.0.0.1", 0, recordings=[Recording(r) for r in recordings], token=token)
         self._started = threading.Event()
         self._loop = None
         self._stop = None
@@ -52,7 +52,8 @@ class ViewThread:
         self._thread.start()
         if not self._started.wait(timeout):
             raise RuntimeError("rtsim view server did not start")
-        self.url = f"http://127.0.0.1:{self.server.port}/"
+        self.base_url = f"http://127.0.0.1:{self.server.port}/"
+        self.url = self.base_url + (f"?token={token}" if token else "")     # as `rtsim view` prints it
 
     async def _run(self):
         self._loop = asyncio.get_running_loop()

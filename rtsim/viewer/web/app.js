@@ -42,7 +42,14 @@ function fmt(x, d = 1) { return x == null || !Number.isFinite(x) ? '–' : x.toF
 const ws = new WebSocket(`ws://${location.host}/ws${location.search}`);   // ?token=…: the session's, when the server asks for one
 ws.onmessage = (ev) => {
   const m = JSON.parse(ev.data);
-  if (m.type === 'hello') start(m.info, m.source);
+  if (m.type === 'hello') {
+    start(m.info, m.source);
+    if (m.may_drive === false) {        // served off loopback and this page's URL lacks the session token: watch only
+      for (const id of ['drive', 'takeover', 'release', 'reset']) $(id).disabled = true;
+      view.driveDeclined = true;
+      view.drive.error = 'watching only: driving needs the URL with the session token that rtsim view printed';
+    }
+  }
   else if (m.type === 'recording') loaded(m);
   else if (m.type === 'data') take(m);
   else if (m.type === 'drive_ack') ack(m);
