@@ -16,6 +16,11 @@ minute or more; the service shows that progress). When the ECU finishes its mano
 printed: commands accepted, distance and peak speed (from the recorded state), whether the lane change
 was reached, loop health and the file written; exit 0.
 
+Ports: the hub's (``--can-hub-port``, else ``$RTSIM_CAN_HUB_PORT``, else 54701) and Zenoh's
+(``--zenoh-port``, 7447) are checked before the ECU starts or anything is built (rtsim.service.ports): a
+held one ends the demo at once with one line naming the port, its flag and its holder; a hub already
+running on the hub port is refused too (the demo needs a bus of its own).
+
 The demo is supervised both ways: if the ECU process ends any other way (killed, crashed, could not
 reach the service) the service stops at once, during its build as well as while it runs, and one line
 ``rtsim demo: error: the demo ECU process (pid N) exited with code C after T s; its last stderr line:
