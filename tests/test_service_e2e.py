@@ -420,7 +420,9 @@ def test_sigkill_leaves_every_completed_chunk_readable(segment, tmp_path):
     finally:
         svc.close()
     messages, info = read_recording(rec)
-    print(f"\nkilled recording: {info.messages} messages in {info.chunks} chunks; {info.note}")
+    sensors = messages.get("rtsim/xbw/sensors", [])
+    print(f"\nkilled recording: {info.messages} messages in {info.chunks} chunks, sensors to "
+          f"{sensors[-1].data['time'] if sensors else None} s; {info.note}")
     assert not info.complete and info.chunks >= 2
     assert info.metadata["rtsim.session"]["mode"] == "realtime"
     for topic in ("sensors", "state", "can/tx"):
