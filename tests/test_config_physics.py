@@ -141,6 +141,8 @@ BAD = [
     ("eps_car.toml", "eps.rack_travel_per_rad_m", 3.0e-2, "the overall steering ratio is 5.17"),
     # where the masses sit, the two-wheeler's geometry
     ("xbw.toml", "chassis.cg_m", [0.5, 0.0, 0.5], "must lie between the axles and above the ground"),
+    ("eps_car.toml", "rear.hardpoints.wheel_centre", [-2.72, 0.09, 0.295], "the rear tyres overlap"),
+    ("eps_car.toml", "front.hardpoints.wheel_centre", [0.0, 0.05, 0.295], "the front tyres overlap"),
     ("eps_car.toml", "chassis.cg_m", [-1.06, 0.0, -0.1], "must lie between the axles and above the ground"),
     ("motorcycle.toml", "rear_frame.cg_m", [-3.0, 0.52], "not between the tyre contacts"),
     ("motorcycle.toml", "geometry.wheelbase_m", 0.6, "the wheels overlap"),
@@ -172,6 +174,19 @@ def test_an_impossible_machine_is_refused_naming_file_key_value_and_rule(vehicle
     assert "\n" not in line
     assert line.startswith(f"{path}: {named}: "), line
     assert rule in line, line
+
+
+def test_overlapping_front_and_rear_tyres_are_refused(vehicles_dir):
+    """A wheelbase of 0.5 m with the prototype's 0.289 m tyres (two keys: the centre of mass must stay
+    between the axles)."""
+    text = with_key(with_key((VEHICLES / "xbw.toml").read_text(), "rear.hardpoints.wheel_centre", [-0.5, 0.675, 0.28]),
+                    "chassis.cg_m", [-0.25, 0.0, 0.5])
+    path = vehicles_dir / "xbw_short.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        load(path)
+    assert str(err.value) == (f"{path}: rear.hardpoints.wheel_centre = (-0.5, 0.675, 0.28): the front and rear tyres "
+                              "overlap: wheelbase 0.5 m, need more than 2 x the tyre's unloaded radius (0.578 m)")
 
 
 def test_the_steering_ratio_from_the_linkage_is_the_models():

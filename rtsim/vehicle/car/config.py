@@ -18,7 +18,7 @@ import numpy as np
 from pydantic import Field, field_validator, model_validator
 
 from rtsim.channels import SENSOR_NAMES
-from rtsim.configfile import Strict, bad, load_toml, validate
+from rtsim.configfile import Strict, bad, load_toml, problem, validate
 from rtsim.errors import ConfigError, ModelError
 
 from ..kit.actuators import over_defaults
@@ -334,7 +334,29 @@ def load_vehicle(path: str | Path) -> tuple[VehicleConfig, Path]:
     data = load_toml(path)
     if "effects" in data:
         data["effects"] = validate_effects(data["effects"], f"{path}: effects")
-    return validate(VehicleConfig, data, str(path)), path.parent
+    cfg = validate(VehicleConfig, data, str(path))
+    _tyres_apart(cfg, path)
+    return cfg, path.parent
+
+
+def _tyres_apart(cfg: VehicleConfig, path: Path) -> None:
+    """The wheels, with the tyres of the property file, do not overlap: wheelbase > 2 x unloaded radius,
+    each axle's track > the tyre's width. (A tyre file that cannot be read is reported where the model
+    loads it.)"""
+    from ..kit.tyre.tir import load_tir
+
+    try:
+        tyre = load_tir(path.parent / cfg.tyres.property_file)
+    except ConfigError:
+        return
+    wf, wr = cfg.front.hardpoints.wheel_centre, cfg.rear.hardpoints.wheel_centre
+    if wf[0] - wr[0] <= 2.0 * tyre.unloaded_radius:
+        raise problem(path, "rear.hardpoints.wheel_centre", wr, f"the front and rear tyres overlap: wheelbase "
+                      f"{wf[0] - wr[0]:g} m, need more than 2 x the tyre's unloaded radius ({2 * tyre.unloaded_radius:g} m)")
+    for axle, w in (("front", wf), ("rear", wr)):
+        if 2.0 * w[1] <= tyre.width:
+            raise problem(path, f"{axle}.hardpoints.wheel_centre", w, f"the {axle} tyres overlap: track {2 * w[1]:g} m, "
+                          f"need more than the tyre's width ({tyre.width:g} m)")
 
 
 __all__ = ["VehicleConfig", "load_vehicle", "validate", "load_toml"]
