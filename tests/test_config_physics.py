@@ -137,7 +137,8 @@ BAD = [
     ("xbw.toml", "steering.rack_travel_per_rad", 3.0e-3, "the overall steering ratio is 38.84, outside the "
                                                          "plausible 10 <= ratio <= 25"),
     ("xbw_fwd.toml", "front.hardpoints.tie_outer", [-0.05, 0.60, 0.22],
-     "(front.hardpoints: a 50 mm steering arm) the overall steering ratio is 7.81", "steering.rack_travel_per_rad = 0.0064"),
+     "(front.hardpoints: a 50 mm steering arm) the overall steering ratio is 7.81",
+     "steering.rack_travel_per_rad = 0.0064"),
     ("eps_car.toml", "eps.rack_travel_per_rad_m", 3.0e-2, "the overall steering ratio is 5.17"),
     # where the masses sit, the two-wheeler's geometry
     ("xbw.toml", "chassis.cg_m", [0.5, 0.0, 0.5], "must lie between the axles and above the ground"),
@@ -227,7 +228,8 @@ COMMANDS = {
          "cfg-physics-test", "--duration", "1"),
     ],
 }
-CLI_BAD = {"motorcycle.toml": ("front_wheel.mass_kg", 0.0), "xbw.toml": ("front.hardpoints.upper_rear", [0.12, 0.40, 0.43])}
+CLI_BAD = {"motorcycle.toml": ("front_wheel.mass_kg", 0.0),
+           "xbw.toml": ("front.hardpoints.upper_rear", [0.12, 0.40, 0.43])}
 
 
 @pytest.mark.parametrize("shipped, args", [(s, a) for s, cmds in COMMANDS.items() for a in cmds],

@@ -321,9 +321,9 @@ class VehicleConfig(Strict):
                       f"assembled at straight ahead: {exc}") from None
         lo, hi = STEERING_RATIO_RANGE
         if not lo <= ratio <= hi:
-            raise bad(key, rp, f"with the front linkage (front.hardpoints: a {1e3 * steering_arm(geom):.0f} mm steering "
-                      f"arm) the overall steering ratio is {ratio:.2f}, outside the plausible {lo:g} <= ratio <= {hi:g} "
-                      "of road cars (steering-wheel angle per road-wheel angle at straight ahead)")
+            raise bad(key, rp, f"with the front linkage (front.hardpoints: a {1e3 * steering_arm(geom):.0f} mm "
+                      f"steering arm) the overall steering ratio is {ratio:.2f}, outside the plausible {lo:g} <= "
+                      f"ratio <= {hi:g} of road cars (steering-wheel angle per road-wheel angle at straight ahead)")
         return self
 
 
@@ -352,11 +352,12 @@ def _tyres_apart(cfg: VehicleConfig, path: Path) -> None:
     wf, wr = cfg.front.hardpoints.wheel_centre, cfg.rear.hardpoints.wheel_centre
     if wf[0] - wr[0] <= 2.0 * tyre.unloaded_radius:
         raise problem(path, "rear.hardpoints.wheel_centre", wr, f"the front and rear tyres overlap: wheelbase "
-                      f"{wf[0] - wr[0]:g} m, need more than 2 x the tyre's unloaded radius ({2 * tyre.unloaded_radius:g} m)")
+                      f"{wf[0] - wr[0]:g} m, need more than 2 x the tyre's unloaded radius "
+                      f"({2 * tyre.unloaded_radius:g} m)")
     for axle, w in (("front", wf), ("rear", wr)):
         if 2.0 * w[1] <= tyre.width:
-            raise problem(path, f"{axle}.hardpoints.wheel_centre", w, f"the {axle} tyres overlap: track {2 * w[1]:g} m, "
-                          f"need more than the tyre's width ({tyre.width:g} m)")
+            raise problem(path, f"{axle}.hardpoints.wheel_centre", w, f"the {axle} tyres overlap: track "
+                          f"{2 * w[1]:g} m, need more than the tyre's width ({tyre.width:g} m)")
 
 
 __all__ = ["VehicleConfig", "load_vehicle", "validate", "load_toml"]

@@ -68,7 +68,8 @@ def short_link(suspension: str, hardpoints: dict) -> tuple[str, tuple, str] | No
         if hardpoints.get(key) is None or any(hardpoints.get(r) is None for r in refs):
             continue
         n = 2 if what.endswith("(planar)") else 3
-        d = _distance(np.array(hardpoints[key], dtype=float)[:n], [np.array(hardpoints[r], dtype=float)[:n] for r in refs])
+        point = np.array(hardpoints[key], dtype=float)[:n]
+        d = _distance(point, [np.array(hardpoints[r], dtype=float)[:n] for r in refs])
         if d < MIN_LINK_M:
             other = refs[0] if len(refs) == 1 else f"the line {refs[0]}-{refs[1]}"
             what = what.replace("(planar)", "(in the horizontal plane)")

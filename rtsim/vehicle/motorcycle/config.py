@@ -112,8 +112,9 @@ class Spring(Strict):
 def _within_stroke(part):
     """The design position lies inside the spring's stroke: 0 <= design_travel_m < spring.stroke_m."""
     if part.design_travel_m >= part.spring.stroke_m:
-        raise bad("design_travel_m", part.design_travel_m, f"at or beyond spring.stroke_m ({part.spring.stroke_m:g} m): "
-                  "the design position must lie inside the stroke (0 <= design_travel_m < stroke_m)")
+        raise bad("design_travel_m", part.design_travel_m, f"at or beyond spring.stroke_m ("
+                  f"{part.spring.stroke_m:g} m): the design position must lie inside the stroke "
+                  "(0 <= design_travel_m < stroke_m)")
     return part
 
 
@@ -136,9 +137,10 @@ class Shock(Strict):
 
     @model_validator(mode="after")
     def _shock_length(self):
-        if math.dist(self.frame_mount_m, self.swingarm_mount_m) < MIN_LINK_M:
-            raise bad("swingarm_mount_m", self.swingarm_mount_m, f"{1e3 * math.dist(self.frame_mount_m, self.swingarm_mount_m):.1f} "
-                      f"mm from frame_mount_m: the shock has no length (its eyes at least {1e3 * MIN_LINK_M:g} mm apart)")
+        length = math.dist(self.frame_mount_m, self.swingarm_mount_m)
+        if length < MIN_LINK_M:
+            raise bad("swingarm_mount_m", self.swingarm_mount_m, f"{1e3 * length:.1f} mm from frame_mount_m: the shock "
+                      f"has no length (its eyes at least {1e3 * MIN_LINK_M:g} mm apart)")
         return self
 
 
@@ -326,8 +328,8 @@ class MotorcycleConfig(Strict):
         g = self.geometry
         rf, rr = self.front_wheel.radius_m, self.rear_wheel.radius_m
         if g.wheelbase_m <= rf + rr:
-            raise bad("geometry.wheelbase_m", g.wheelbase_m, f"the wheels overlap: need wheelbase_m > front_wheel.radius_m "
-                      f"+ rear_wheel.radius_m ({rf + rr:g} m)")
+            raise bad("geometry.wheelbase_m", g.wheelbase_m, "the wheels overlap: need wheelbase_m > "
+                      f"front_wheel.radius_m + rear_wheel.radius_m ({rf + rr:g} m)")
         px, pz = g.swingarm_pivot_m
         if not (0.0 < px < g.wheelbase_m and pz > 0.0):
             raise bad("geometry.swingarm_pivot_m", g.swingarm_pivot_m, "must lie between the axles and above the "
