@@ -18,7 +18,7 @@ from rtsim.errors import ModelError
 
 from .linkages import DoubleWishbone, VerticalSlider, _solve_double_wishbone, _solve_vertical_slider
 
-MIN_LINK_M = 0.01
+MIN_LINK_M = 0.01        # m: the shortest link, pivot axis or lever (a shock's eyes too) that is not degenerate
 #: Overall steering ratios of road cars: about 10 (quick racing racks) to 25 (heavy cars without assist).
 STEERING_RATIO_RANGE = (10.0, 25.0)
 RACK_STEP_M = 1e-3

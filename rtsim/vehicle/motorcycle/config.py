@@ -20,10 +20,10 @@ from rtsim.configfile import Strict, bad, load_toml, validate
 from rtsim.errors import ConfigError
 
 from ..kit.inertia import inertia_problem
+from ..kit.linkage_checks import MIN_LINK_M
 from ..kit.tyre.two_wheel import TwoWheelTyreSpec, sport_front, sport_rear
 
 Vec2 = tuple[float, float]
-MIN_LINK_M = 0.01        # m: the shortest link (two pivots, a shock's eyes) that is not a degenerate one
 
 
 class Body(Strict):
