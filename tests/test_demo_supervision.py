@@ -20,13 +20,12 @@ import sys
 import threading
 import time
 
+import can  # noqa: F401  (hard dependencies: an ImportError fails the module, never skips it)
+import can_remote  # noqa: F401
 import pytest
 
-pytest.importorskip("can")
-pytest.importorskip("can_remote")
-
-from bridge.mcap_recorder import read_recording  # noqa: E402
-from service_harness import ROOT, free_port  # noqa: E402
+from bridge.mcap_recorder import read_recording
+from service_harness import ROOT, free_port
 
 pytestmark = pytest.mark.realtime_e2e
 

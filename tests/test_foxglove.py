@@ -18,16 +18,15 @@ import time
 
 import numpy as np
 import pytest
+# Hard dependencies (websockets: rtsim's; protobuf: the test extra's): missing, they fail the module.
+import websockets.sync.client as websockets_sync
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from bridge.can_bus import LoopbackHub
 from rtsim.errors import ConfigError
 from rtsim.service.server import ServeOptions, Service
 from service_harness import free_port
 from waits import EVENT, HUB_START
-
-websockets_sync = pytest.importorskip("websockets.sync.client", reason="the test client needs websockets")
-pytest.importorskip("google.protobuf", reason="decoding the scene needs protobuf")
-from google.protobuf import descriptor_pb2, descriptor_pool, message_factory  # noqa: E402
 
 # The Foxglove WebSocket protocol's names: the SDK's server speaks it as foxglove.sdk.v1 (the same messages
 # as foxglove.websocket.v1, renamed); a client offers both, as the Foxglove app does.

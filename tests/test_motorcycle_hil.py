@@ -23,6 +23,8 @@ from drivers.rider import P_TYRE_LEAN, RO_THROTTLE
 from rtsim.service.loop import HilLoop
 from rtsim.service.server import build_sim
 from rtsim.vehicle.motorcycle.plant import IN_ASSIST, IN_RIDER_TORQUE, IN_THROTTLE
+from rtsim.service.rings import H_TX, RingReader
+from rtsim.vehicle.motorcycle.geometry import frame_rotation
 from rtsim.vehicle.motorcycle.ride import Ride, tyre_lean_ratio
 from rtsim.vehicle.motorcycle.sim import TwoWheelerSim
 from service_harness import ROOT, free_port
@@ -63,29 +65,58 @@ def test_the_rider_in_the_loop_rides_as_offline(riding):
     assert _value(loop, "state", "roll_angle") == pytest.approx(off.roll, abs=1e-8)
 
 
+def frame_roll(mm, q) -> tuple[float, float, float]:
+    """Yaw, roll and pitch of the rear frame from its three unit vectors in the multibody state q, without
+    the model's own roll function: the rotation R that takes the design axes (e1, v, h) to the current
+    ones, read as yaw about z, then roll about the new x, then pitch about the new y (R = Rz Rx Ry, the
+    definition of rtsim.vehicle.motorcycle.geometry.frame_rotation), its second column R e_y =
+    (-sin yaw cos roll, cos yaw cos roll, sin roll)."""
+    axes = [mm.group(q, n) for n in ("E1", "V", "H_AX")]
+    des = mm.design
+    rot = np.column_stack(axes) @ np.linalg.inv(np.column_stack([des.e1, des.v, des.h]))
+    yaw = math.atan2(-rot[0, 1], rot[1, 1])
+    roll = math.atan2(rot[2, 1], math.hypot(rot[0, 1], rot[1, 1]))
+    pitch = math.atan2(-rot[2, 0], rot[2, 2])
+    assert np.allclose(frame_rotation(yaw, roll, pitch), rot, atol=1e-9)     # it is that rotation
+    return yaw, roll, pitch
+
+
 def test_sensors_in_the_steady_turn(riding):
     """In the circle the IMU's specific force has the magnitude sqrt(g^2 + (u r)^2), its rates the
-    magnitude of the frame's angular velocity (the yaw rate, nearly vertical), the roll sensor the state's
-    roll; the wheel speeds are the speed over the rolling radii (within the tyres' slip and crown)."""
-    _sim, _sc, loop = riding
+    magnitude of the frame's angular velocity (the yaw rate, nearly vertical); the roll sensor reads the
+    rear frame's roll taken from its orientation in the multibody state (frame_roll), and the steady
+    turn's lean: tan(phi_k) = u r / g for the line from the contacts to the mass centre, the frame leaning
+    (1 + k) times further on tyres of crown radius rho (k = rho / (h - rho), tyre_lean_ratio), to within
+    the gyroscopic and rider terms (5 %); the wheel speeds are the speed over the rolling radii (within the
+    tyres' slip and crown)."""
+    sim, _sc, loop = riding
+    mm = MODELS[(VEHICLE.resolve(), "two_wheeler")][0]
     u, r = _value(loop, "state", "speed"), _value(loop, "state", "yaw_rate")
     f = [_value(loop, "sensors", f"accel_{a}") for a in "xyz"]
     w = [_value(loop, "sensors", f"gyro_{a}") for a in "xyz"]
     assert abs(r) > 0.3                                    # in a circle, not on a straight
     assert np.linalg.norm(f) == pytest.approx(math.hypot(9.81, u * r), rel=0.02)
     assert np.linalg.norm(w) == pytest.approx(abs(r), rel=0.05)
-    assert _value(loop, "sensors", "roll") == pytest.approx(_value(loop, "state", "roll_angle"), abs=1e-12)
+    roll = _value(loop, "sensors", "roll")
+    assert roll == pytest.approx(frame_roll(mm, sim.data.q)[1], abs=1e-9)
+    # ISO 8855: leaning into a left turn (r > 0) is a negative roll
+    assert roll == pytest.approx(-math.atan(u * r / 9.81) * (1.0 + tyre_lean_ratio(mm)), rel=0.05)
     assert _value(loop, "sensors", "wheel_speed_rear") * 0.30 == pytest.approx(u, rel=0.05)
     assert _value(loop, "sensors", "fork_travel") > 0.0 and _value(loop, "sensors", "shock_travel") > 0.0
 
 
 def test_ecu_commands_replace_the_riders_demand_and_time_out_to_it():
-    """A valid throttle command replaces the rider's demand, the assist torque adds to the rider's; when
-    the ECU goes silent the time-out flags rise within 3 DBC periods (10 ms frame: 30 ms; 2 ms frame:
-    6 ms) and the rider's own demand acts again."""
+    """A valid throttle command replaces the rider's demand, the assist torque adds to the rider's, and
+    while they arrive their time-out flags stay clear, in the receiver and in every SIM_STATUS frame sent
+    (as the ECU decodes them with the DBC); when the ECU goes silent the time-out flags rise within 3 DBC
+    periods (10 ms frame: 30 ms; 2 ms frame: 6 ms) and the rider's own demand acts again."""
     sim, _sc, loop = _loop()
     codec = loop.codec
     inp = sim.state.inp
+    rings = loop.rings
+    tx = RingReader(rings.heads, H_TX, rings.tx_id.shape[0])
+    status_id = codec.status_frame.frame_id
+    status = []                                            # (sim time, decoded SIM_STATUS) sent while commanded
     for k in range(100):                                   # 0.2 s of commands: throttle every 10 ms, assist every 2 ms
         if k % 5 == 0:
             loop.rx_writer.put(*codec.encode_command("throttle_cmd", 0.5, k // 5))
@@ -94,7 +125,16 @@ def test_ecu_commands_replace_the_riders_demand_and_time_out_to_it():
         loop.advance(2)
         assert inp[IN_THROTTLE] == pytest.approx(0.5, abs=1e-4)
         assert sim.parts.u[0] == pytest.approx(inp[IN_RIDER_TORQUE] + 2.0, abs=1e-3)
+        assert not loop.rx.faults["throttle_timeout"] and not loop.rx.faults["assist_timeout"], loop.rx.faults
+        cap = rings.tx_id.shape[0]
+        for n in tx.take():
+            if int(rings.tx_id[n % cap]) == status_id and float(rings.tx_t[n % cap]) > 0.0:
+                data = int(rings.tx_word[n % cap]).to_bytes(8, "little", signed=True)
+                status.append((float(rings.tx_t[n % cap]), codec.db.decode_message(status_id, data)))
     assert loop.rx.accepted == 120
+    assert [t for t, _ in status] == pytest.approx([0.1, 0.2])     # SIM_STATUS every 100 ms of the 0.2 s
+    for t, frame in status:
+        assert frame["fault_throttle_timeout"] == 0 and frame["fault_assist_timeout"] == 0, (t, frame)
     t_silent = loop.sim_time
     faults_at = {}
     while loop.sim_time < t_silent + 0.05:

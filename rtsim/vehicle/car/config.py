@@ -14,21 +14,26 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
 from pydantic import Field, field_validator, model_validator
 
 from rtsim.channels import SENSOR_NAMES
-from rtsim.configfile import Strict, load_toml, validate
-from rtsim.errors import ConfigError
+from rtsim.configfile import Strict, bad, load_toml, problem, validate
+from rtsim.errors import ConfigError, ModelError
 
 from ..kit.actuators import over_defaults
 from ..kit.brake import BrakeConfig
 from ..kit.eps import EpsConfig
+from ..kit.inertia import inertia_problem
+from ..kit.linkage_checks import STEERING_RATIO_RANGE, short_link, steering_arm, steering_ratio
+from ..kit.linkages import DoubleWishbone, VerticalSlider
 from ..kit.powertrain import PowertrainConfig
 from ..kit.steering import SteeringConfig
 
 from .effects import validate_effects
 
 Vec3 = tuple[float, float, float]
+MAX_TRAVEL_M = 0.3       # m: wheel travel either way from design ride height
 
 
 class Chassis(Strict):
@@ -39,10 +44,9 @@ class Chassis(Strict):
 
     @model_validator(mode="after")
     def _positive_inertia(self):
-        ixx, iyy, izz = self.inertia_kgm2
-        if min(ixx, iyy, izz) <= 0 or ixx + iyy < izz or iyy + izz < ixx or izz + ixx < iyy:
-            raise ValueError(f"inertia_kgm2 {self.inertia_kgm2} is not a physical inertia (positive, "
-                             "triangle inequalities)")
+        problem = inertia_problem(self.inertia_kgm2, self.ixz_kgm2, strict=True)
+        if problem is not None:
+            raise bad(problem[0], getattr(self, problem[0]), problem[1])
         return self
 
 
@@ -170,6 +174,25 @@ class Axle(Strict):
             raise ValueError(f"hardpoints do not match suspension '{self.suspension}'")
         return self
 
+    @model_validator(mode="after")
+    def _physical(self):
+        """Travel limits in order around the design ride height; no degenerate link in the linkage."""
+        rebound, bump = self.travel_m
+        if not -MAX_TRAVEL_M <= rebound < 0.0 < bump <= MAX_TRAVEL_M:
+            raise bad("travel_m", self.travel_m, f"need -{MAX_TRAVEL_M:g} <= rebound < 0 < bump <= {MAX_TRAVEL_M:g} m "
+                      "(wheel travel from the design ride height, rebound first)")
+        link = short_link(self.suspension, self.hardpoints.model_dump())
+        if link is not None:
+            raise bad(f"hardpoints.{link[0]}", link[1], link[2])
+        return self
+
+    def spin_axis(self) -> np.ndarray:
+        """The left wheel's spin axis at the design position with static toe and camber (as the model's
+        build: toe-in turns the wheel's front inwards, positive camber tilts its top outwards)."""
+        camber, toe = self.static_camber_rad, self.static_toe_rad
+        axis = np.array([-np.sin(toe), np.cos(toe) * np.cos(camber), -np.sin(camber)])
+        return axis / np.linalg.norm(axis)
+
     @property
     def steered(self) -> bool:
         """Linked to the rack: a double wishbone, or a vertical slider with tie rods."""
@@ -277,6 +300,32 @@ class VehicleConfig(Strict):
             raise ValueError("compliance steer is modelled at the front axle only")
         return self
 
+    @model_validator(mode="after")
+    def _physical(self):
+        """The sprung mass's centre between the axles and above the ground (positive static axle loads), and
+        the steering ratio the front linkage and the rack give inside STEERING_RATIO_RANGE."""
+        cx, _cy, cz = self.chassis.cg_m
+        xf, xr = self.front.hardpoints.wheel_centre[0], self.rear.hardpoints.wheel_centre[0]
+        if not (xr < cx < xf and cz > 0.0):
+            raise bad("chassis.cg_m", self.chassis.cg_m, f"must lie between the axles and above the ground ({xr:g} < x "
+                      f"< {xf:g} m, the wheel centres: else an axle carries a negative load; z > 0)")
+        key, rp = (("eps.rack_travel_per_rad_m", self.eps.rack_travel_per_rad_m) if self.eps is not None
+                   else ("steering.rack_travel_per_rad", self.steering.rack_travel_per_rad))
+        hp = {k: None if v is None else np.array(v, dtype=float) for k, v in self.front.hardpoints.model_dump().items()}
+        geom = (DoubleWishbone if self.front.suspension == "double_wishbone" else VerticalSlider)(
+            spin_axis=self.front.spin_axis(), **hp)
+        try:
+            ratio = steering_ratio(geom, rp)
+        except ModelError as exc:
+            raise bad("front.hardpoints", self.front.hardpoints.model_dump(), f"the steering linkage cannot be "
+                      f"assembled at straight ahead: {exc}") from None
+        lo, hi = STEERING_RATIO_RANGE
+        if not lo <= ratio <= hi:
+            raise bad(key, rp, f"with the front linkage (front.hardpoints: a {1e3 * steering_arm(geom):.0f} mm "
+                      f"steering arm) the overall steering ratio is {ratio:.2f}, outside the plausible {lo:g} <= "
+                      f"ratio <= {hi:g} of road cars (steering-wheel angle per road-wheel angle at straight ahead)")
+        return self
+
 
 def load_vehicle(path: str | Path) -> tuple[VehicleConfig, Path]:
     """The validated vehicle config and the folder its relative paths refer to. The [effects] tables
@@ -285,7 +334,30 @@ def load_vehicle(path: str | Path) -> tuple[VehicleConfig, Path]:
     data = load_toml(path)
     if "effects" in data:
         data["effects"] = validate_effects(data["effects"], f"{path}: effects")
-    return validate(VehicleConfig, data, str(path)), path.parent
+    cfg = validate(VehicleConfig, data, str(path))
+    _tyres_apart(cfg, path)
+    return cfg, path.parent
+
+
+def _tyres_apart(cfg: VehicleConfig, path: Path) -> None:
+    """The wheels, with the tyres of the property file, do not overlap: wheelbase > 2 x unloaded radius,
+    each axle's track > the tyre's width. (A tyre file that cannot be read is reported where the model
+    loads it.)"""
+    from ..kit.tyre.tir import load_tir
+
+    try:
+        tyre = load_tir(path.parent / cfg.tyres.property_file)
+    except ConfigError:
+        return
+    wf, wr = cfg.front.hardpoints.wheel_centre, cfg.rear.hardpoints.wheel_centre
+    if wf[0] - wr[0] <= 2.0 * tyre.unloaded_radius:
+        raise problem(path, "rear.hardpoints.wheel_centre", wr, f"the front and rear tyres overlap: wheelbase "
+                      f"{wf[0] - wr[0]:g} m, need more than 2 x the tyre's unloaded radius "
+                      f"({2 * tyre.unloaded_radius:g} m)")
+    for axle, w in (("front", wf), ("rear", wr)):
+        if 2.0 * w[1] <= tyre.width:
+            raise problem(path, f"{axle}.hardpoints.wheel_centre", w, f"the {axle} tyres overlap: track "
+                          f"{2 * w[1]:g} m, need more than the tyre's width ({tyre.width:g} m)")
 
 
 __all__ = ["VehicleConfig", "load_vehicle", "validate", "load_toml"]

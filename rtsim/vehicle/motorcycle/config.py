@@ -19,13 +19,17 @@ from pydantic import Field, model_validator
 from rtsim.configfile import Strict, bad, load_toml, validate
 from rtsim.errors import ConfigError
 
+from ..kit.inertia import inertia_problem
+from ..kit.linkage_checks import MIN_LINK_M
 from ..kit.tyre.two_wheel import TwoWheelTyreSpec, sport_front, sport_rear
 
 Vec2 = tuple[float, float]
 
 
 class Body(Strict):
-    """A rigid body's mass properties (massless bodies: mass_kg = 0)."""
+    """A rigid body's mass properties (massless bodies: mass_kg = 0). The inertia tensor is a rigid body's:
+    principal moments non-negative and within the triangle inequalities (a body of the vehicle file with
+    mass: positive, checked by MotorcycleConfig)."""
     mass_kg: float = Field(ge=0, le=2000)
     cg_m: Vec2 = Field(default=(0.0, 0.0), description="centre of mass (x, z), design frame")
     inertia_kgm2: tuple[float, float, float] = Field(default=(0.0, 0.0, 0.0), description="Ixx, Iyy, Izz about the CG")
@@ -33,22 +37,27 @@ class Body(Strict):
 
     @model_validator(mode="after")
     def _physical(self):
-        ixx, iyy, izz = self.inertia_kgm2
-        tol = 1e-12 * max(1.0, ixx + iyy + izz)
-        if min(ixx, iyy, izz) < 0 or ixx + iyy < izz - tol or iyy + izz < ixx - tol or izz + ixx < iyy - tol:
-            raise ValueError(f"inertia_kgm2 {self.inertia_kgm2} is not a physical inertia (non-negative, "
-                             "triangle inequalities)")
-        if ixx * izz < self.ixz_kgm2 ** 2 - tol:
-            raise ValueError(f"ixz_kgm2 = {self.ixz_kgm2}: the x-z inertia block is not positive "
-                             "(need ixz^2 <= Ixx Izz)")
+        problem = inertia_problem(self.inertia_kgm2, self.ixz_kgm2, strict=False)
+        if problem is not None:
+            raise bad(problem[0], getattr(self, problem[0]), problem[1])
         return self
 
 
 class Wheel(Strict):
-    mass_kg: float = Field(ge=0, le=100, description="wheel, tyre, disc(s) and sprocket")
+    """A wheel is a body of the model (its in-plane axes are coordinates): mass and both moments positive,
+    and spin <= 2 x diametral (the triangle inequality of an axisymmetric body: equal for a thin disc)."""
+    mass_kg: float = Field(gt=0, le=100, description="wheel, tyre, disc(s) and sprocket")
     radius_m: float = Field(gt=0.1, le=1.0, description="unloaded outer radius of the tyre")
-    spin_inertia_kgm2: float = Field(ge=0, le=10, description="about the axle")
-    diametral_inertia_kgm2: float = Field(ge=0, le=10, description="about a diameter")
+    spin_inertia_kgm2: float = Field(gt=0, le=10, description="about the axle")
+    diametral_inertia_kgm2: float = Field(gt=0, le=10, description="about a diameter")
+
+    @model_validator(mode="after")
+    def _physical(self):
+        if self.spin_inertia_kgm2 > 2.0 * self.diametral_inertia_kgm2 * (1.0 + 1e-9):
+            raise bad("spin_inertia_kgm2", self.spin_inertia_kgm2, "more than twice diametral_inertia_kgm2 "
+                      f"({self.diametral_inertia_kgm2:g}): violates the triangle inequality of the principal "
+                      "moments (spin <= 2 x diametral, equal for a thin disc)")
+        return self
 
 
 class Geometry(Strict):
@@ -100,10 +109,21 @@ class Spring(Strict):
     bottom_out_n_per_m: float = Field(default=2e6, ge=0, le=1e8)
 
 
+def _within_stroke(part):
+    """The design position lies inside the spring's stroke: 0 <= design_travel_m < spring.stroke_m."""
+    if part.design_travel_m >= part.spring.stroke_m:
+        raise bad("design_travel_m", part.design_travel_m, f"at or beyond spring.stroke_m ("
+                  f"{part.spring.stroke_m:g} m): the design position must lie inside the stroke "
+                  "(0 <= design_travel_m < stroke_m)")
+    return part
+
+
 class Fork(Strict):
     spring: Spring
     damper: Damper = Damper()
     design_travel_m: float = Field(default=0.0, ge=0, le=0.5, description="compression at the design position")
+
+    _stroke = model_validator(mode="after")(_within_stroke)
 
 
 class Shock(Strict):
@@ -112,6 +132,16 @@ class Shock(Strict):
     spring: Spring
     damper: Damper = Damper()
     design_travel_m: float = Field(default=0.0, ge=0, le=0.5, description="compression at the design position")
+
+    _stroke = model_validator(mode="after")(_within_stroke)
+
+    @model_validator(mode="after")
+    def _shock_length(self):
+        length = math.dist(self.frame_mount_m, self.swingarm_mount_m)
+        if length < MIN_LINK_M:
+            raise bad("swingarm_mount_m", self.swingarm_mount_m, f"{1e3 * length:.1f} mm from frame_mount_m: the shock "
+                      f"has no length (its eyes at least {1e3 * MIN_LINK_M:g} mm apart)")
+        return self
 
 
 class Suspension(Strict):
@@ -271,6 +301,55 @@ class MotorcycleConfig(Strict):
             raise ValueError("swingarm_pivot_m is too close to the rear axle")
         if self.powertrain is not None and self.chain is None:
             raise ValueError("[powertrain] needs [chain] (its sprockets give the final ratio)")
+        return self
+
+    @model_validator(mode="after")
+    def _physical(self):
+        """The machine as physics: bodies the model needs have mass, every massive body a rigid body's
+        inertia, a massless one none; the wheels apart, the swingarm pivot between them, the whole machine's
+        centre of mass between the tyre contacts; a positive trail where tyres steer the fork."""
+        for key in ("rear_frame", "upper_fork"):
+            body = getattr(self, key)
+            if body.mass_kg <= 0.0:
+                raise bad(f"{key}.mass_kg", body.mass_kg, "must be positive: the model needs this body's mass "
+                          "and inertia (its axes are coordinates of the model)")
+        for key in ("rear_frame", "rider", "swingarm", "upper_fork", "lower_fork"):
+            body = getattr(self, key)
+            if body is None:
+                continue
+            if body.mass_kg > 0.0:
+                problem = inertia_problem(body.inertia_kgm2, body.ixz_kgm2, strict=True)
+                if problem is not None:
+                    raise bad(f"{key}.{problem[0]}", getattr(body, problem[0]),
+                              f"a body of mass {body.mass_kg:g} kg: {problem[1]}")
+            elif any(body.inertia_kgm2) or body.ixz_kgm2:
+                raise bad(f"{key}.mass_kg", body.mass_kg, f"a massless body has no inertia, yet inertia_kgm2 = "
+                          f"{body.inertia_kgm2}, ixz_kgm2 = {body.ixz_kgm2:g} (give its mass, or no inertia)")
+        g = self.geometry
+        rf, rr = self.front_wheel.radius_m, self.rear_wheel.radius_m
+        if g.wheelbase_m <= rf + rr:
+            raise bad("geometry.wheelbase_m", g.wheelbase_m, "the wheels overlap: need wheelbase_m > "
+                      f"front_wheel.radius_m + rear_wheel.radius_m ({rf + rr:g} m)")
+        px, pz = g.swingarm_pivot_m
+        if not (0.0 < px < g.wheelbase_m and pz > 0.0):
+            raise bad("geometry.swingarm_pivot_m", g.swingarm_pivot_m, "must lie between the axles and above the "
+                      f"ground (0 < x < wheelbase_m = {g.wheelbase_m:g} m, z > 0)")
+        masses = [(b.mass_kg, b.cg_m[0]) for b in (self.rear_frame, self.rider, self.swingarm, self.upper_fork,
+                                                    self.lower_fork) if b is not None]
+        masses += [(self.rear_wheel.mass_kg, 0.0), (self.front_wheel.mass_kg, g.wheelbase_m)]
+        x_cg = sum(m * x for m, x in masses) / sum(m for m, _ in masses)
+        if not 0.0 < x_cg < g.wheelbase_m:
+            raise bad("rear_frame.cg_m", self.rear_frame.cg_m, f"puts the whole machine's centre of mass at x = "
+                      f"{x_cg:.3f} m, not between the tyre contacts (0 < x < wheelbase_m = {g.wheelbase_m:g} m): "
+                      "a wheel would carry a negative load")
+        if self.tyres.model != "knife_edge" and not self.trail > 0.0:
+            key = "geometry.trail_m" if g.trail_m is not None else "geometry.fork_offset_m"
+            raise bad(key, getattr(g, key.split(".")[1]), f"gives a ground trail of {self.trail:.4f} m: with "
+                      "tyre forces the trail must be positive (the front tyre's side force then turns the "
+                      "steering back; knife_edge wheels, a theoretical bicycle, may have any trail)")
+        if g.fork_offset_m is not None and not -0.2 <= self.trail <= 0.3:
+            raise bad("geometry.fork_offset_m", g.fork_offset_m, f"gives a ground trail of {self.trail:.4f} m "
+                      "(allowed -0.2 <= trail <= 0.3 m, as trail_m)")
         return self
 
     @property
