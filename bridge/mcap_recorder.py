@@ -371,12 +371,24 @@ class RecordingInfo:
             how += f", last status {end['last_run_state']}"
         fault = end.get("model_fault")
         if fault:
-            how += (f": {fault.get('reason_code') or fault.get('reason') or ''} {fault.get('message', '')}".rstrip()
-                    + (f" at t = {fault['sim_time']} s" if fault.get("sim_time") not in (None, "") else ""))
+            how += ": " + _fault_text(fault)
         lost_any = self.chunks_skipped or lost is None or lost or self.bytes_discarded or self.cut
         head = (("DAMAGED recording: " if lost_any else "UNCLOSED recording: ") + ", ".join(parts) if parts
                 else "recording intact, closed")
         return (f"{head}; {self.chunks} chunks, {self.messages} messages read; session ended: {how}")
+
+
+def _fault_text(fault: dict) -> str:
+    """A model fault's fields in words: "non_finite_force (code 3): <message> at step 2525, t = 2.525 s,
+    coordinate rack" (the fields present)."""
+    reason, code = fault.get("reason"), fault.get("reason_code")
+    head = " ".join(filter(None, (str(reason) if reason not in (None, "") else "",
+                                  f"(code {code})" if code not in (None, "") else "")))
+    where = ", ".join(filter(None, (f"step {fault['step']}" if fault.get("step") not in (None, "") else "",
+                                    f"t = {fault['sim_time']} s" if fault.get("sim_time") not in (None, "") else "",
+                                    f"coordinate {fault['coordinate']}" if fault.get("coordinate") else "")))
+    text = ": ".join(filter(None, (head, str(fault.get("message") or ""))))
+    return " at ".join(filter(None, (text or "model fault", where)))
 
 
 def _decode(encoding: str, data: bytes):
