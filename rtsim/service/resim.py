@@ -177,6 +177,9 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
     session = meta.get("rtsim.session")
     if session is None:
         raise ConfigError(f"{path}: no rtsim.session metadata; record with `rtsim serve --record`{damage}")
+    for key, given in (("scenario", scenario), ("vehicle", vehicle)):
+        if given is None and f"rtsim.{key}" not in meta:
+            raise ConfigError(f"{path}: no rtsim.{key} metadata (not written by rtsim serve?){damage}")
     vid = session["vehicle_id"]
     if not (messages.get(f"rtsim/{vid}/sensors") or messages.get(f"rtsim/{vid}/state")):
         raise ConfigError(f"{path}: nothing to re-simulate: no sensor or state sample of vehicle {vid!r} in the "
