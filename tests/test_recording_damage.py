@@ -354,6 +354,10 @@ def test_resim_of_the_first_half_says_it_was_cut(session, tmp_path, capsys):
     rc, out, _ = _cli(capsys, "resim", half, "--json")
     rep = json.loads(out)
     assert rep["identical"] and rep["damage"]["cut"] and not rep["damage"]["closed"]
+    rc, _, _ = _cli(capsys, "resim", half, "--strict")      # identical, but not over the whole session
+    assert rc == 1
+    rc, _, _ = _cli(capsys, "resim", session[0], "--strict")
+    assert rc == 0
 
 
 def test_resim_of_a_killed_session_that_ended_in_a_model_fault(session, tmp_path, capsys):

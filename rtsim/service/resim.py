@@ -326,7 +326,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--without-user", action="store_true",
                    help="leave out the recorded commands of the user (rtsim view): what the session would have been")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.add_argument("--strict", action="store_true", help="exit 1 unless the rerun is bit-identical")
+    p.add_argument("--strict", action="store_true",
+                   help="exit 1 unless the rerun is bit-identical and the recording intact (closed, nothing lost)")
 
 
 def main(args) -> int:
@@ -358,4 +359,4 @@ def main(args) -> int:
                   f"{'bit-identical' if c['identical'] else 'max |diff|: ' + (diff or 'none, but samples missing')}")
         print(f"rtsim resim: {'IDENTICAL' if rep['identical'] else 'DIFFERENT'}"
               + (" (over what the damaged recording holds)" if rep["damage"]["damaged"] else ""))
-    return 1 if args.strict and not rep["identical"] else 0
+    return 1 if args.strict and (not rep["identical"] or rep["damage"]["damaged"]) else 0
