@@ -172,7 +172,12 @@ def _footer(buf) -> int | None:
 
 
 def _summary(buf, start: int, stop: int, scan: Scan, consumer) -> None:
-    """The summary section's channels (given to the consumer) and statistics (message count)."""
+    """The summary section's channels (given to the consumer) and statistics (message count), if the
+    footer's CRC of the section (when the writer stored one) matches: a damaged summary is not used."""
+    crc = _U32.unpack_from(buf, stop + 9 + 16)[0]
+    if crc and zlib.crc32(buf[start:stop + 9 + 16]) != crc:
+        scan.note("summary section damaged (CRC mismatch): not used, losses estimated")
+        return
     pos = start
     try:
         while pos + 9 <= stop:

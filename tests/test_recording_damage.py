@@ -95,10 +95,14 @@ def _rewrite(src: Path, dst: Path, *, chunk_size: int = 16 * 1024, close: bool =
 
 
 def _sprinkle(data: bytes, every: int, seed: int = 1, first: int | None = None) -> bytes:
-    """64 random bytes every ``every`` bytes (from ``first``, default ``every``)."""
+    """64 random bytes every ``every`` bytes (from ``first``, default ``every``) of the data section (up to
+    the summary of a closed file)."""
+    from bridge.mcap_scan import _footer
+
     rnd = random.Random(seed)
     b = bytearray(data)
-    for off in range(every if first is None else first, len(b) - 64, every):
+    end = _footer(data) or len(b)
+    for off in range(every if first is None else first, end - 64, every):
         b[off:off + 64] = rnd.randbytes(64)
     return bytes(b)
 
@@ -162,6 +166,7 @@ def test_random_bytes_every_few_kb_lose_only_their_chunks_and_are_counted(tmp_pa
     got, info = read_recording(bad)
     kept = _same_messages(got, want)                    # nothing made up, nothing altered
     hits = len(range(40_000, len(data) - 64, 40_000))
+    assert len(range(40_000, len(data) // 2, 40_000)) >= 4
     assert info.complete == closed and info.damaged and info.usable
     assert 0 < info.chunks_skipped <= hits and info.bytes_discarded >= 64 * info.chunks_skipped
     assert kept == info.messages and 0 < kept < n
@@ -179,6 +184,27 @@ def test_random_bytes_every_few_kb_lose_only_their_chunks_and_are_counted(tmp_pa
     tg, ti = read_topics(bad, [f"rtsim/{VID}/sensors"])
     assert [json.loads(b) for b in tg[f"rtsim/{VID}/sensors"].data] == [m.data for m in got[f"rtsim/{VID}/sensors"]]
     assert ti.damage == info.damage
+
+
+def test_a_damaged_summary_is_not_trusted(tmp_path):
+    """Bytes over the summary section's statistics: its CRC (in the footer) fails, the summary is not used
+    (no made-up count of messages): every message is still read from the chunks, the topics too."""
+    from bridge.mcap_scan import _footer
+
+    path = tmp_path / "ok.mcap"
+    n = _small_recording(path)
+    want, _ = read_recording(path)
+    data = bytearray(path.read_bytes())
+    start = _footer(bytes(data))
+    stats = start                                       # the statistics record of the summary
+    while data[stats] != 0x0B:
+        stats += 9 + int.from_bytes(data[stats + 1:stats + 9], "little")
+    data[stats + 9:stats + 17] = (10 ** 9).to_bytes(8, "little")      # its message count
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    got, info = read_recording(bad)
+    assert _same_messages(got, want) == n == info.messages and set(got) == set(want)
+    assert info.complete and info.messages_lost == 0 and "summary section damaged" in info.note
 
 
 def test_random_bytes_over_the_framing_are_stepped_over(tmp_path):
