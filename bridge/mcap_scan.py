@@ -45,15 +45,20 @@ def string(buf, pos: int) -> tuple[str, int]:
     return bytes(buf[pos + 4:pos + 4 + n]).decode(), pos + 4 + n
 
 
-def string_map(buf, pos: int) -> dict[str, str]:
-    """An MCAP map<string, string> at ``pos``."""
+def string_map(buf, pos: int, limit: int | None = None) -> dict[str, str]:
+    """An MCAP map<string, string> at ``pos`` (ValueError if it does not end exactly where its length says,
+    or runs past ``limit``)."""
     end = pos + 4 + _U32.unpack_from(buf, pos)[0]
+    if limit is not None and end > limit:
+        raise ValueError("map runs past its record")
     pos += 4
     out = {}
     while pos < end:
         k, pos = string(buf, pos)
         v, pos = string(buf, pos)
         out[k] = v
+    if pos != end:
+        raise ValueError("map entries overrun its length")
     return out
 
 
@@ -289,7 +294,8 @@ def scan(buf: bytes, consumer) -> Scan:
                 consumer.channel(buf, body)
             elif op == OP_METADATA:
                 name, p = string(buf, body)
-                consumer.metadata(name, string_map(buf, p))
+                values = string_map(buf, p, end)
+                consumer.metadata(name, values)
             elif op == OP_MESSAGE:
                 consumer.message(buf, pos, end)
                 sc.messages += 1
