@@ -164,6 +164,15 @@ def _resync(buf, start: int, limit: int):
         p += 1
 
 
+def _framed_at(buf, pos: int, limit: int) -> bool:
+    """A record (known opcode, length within ``limit``) starts at ``pos``, or the data ends there. (A file
+    cut inside the next record's first 9 bytes counts as framed: the cut is found there.)"""
+    if pos >= limit or pos + 9 > limit:
+        return True
+    op, length = _RECORD.unpack_from(buf, pos)
+    return op in _KNOWN_OPS and (pos + 9 + length <= limit or limit == len(buf))
+
+
 def _footer(buf) -> int | None:
     """The summary start of a closed file (0: no summary), or None when the file does not end in a footer."""
     size = len(buf)
@@ -256,6 +265,8 @@ def scan(buf: bytes, consumer) -> Scan:
         end = pos + 9 + length if length is not None else limit + 1
         head = _chunk_header(buf, pos, limit) if op == OP_CHUNK else None
         framed = op in _KNOWN_OPS and end <= limit and (op != OP_CHUNK or head is not None)
+        if framed and op != OP_CHUNK and not _framed_at(buf, end, limit):   # a length that leads nowhere
+            framed = False                    # (a chunk is checked by its header and CRC instead)
         if not framed:
             found = _resync(buf, pos + 1, limit)
             if found is None:                            # nothing readable follows
