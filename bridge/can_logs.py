@@ -60,10 +60,11 @@ class Frame(NamedTuple):
 class FrameLog(list):
     """A list of :class:`Frame` plus where it came from: ``path``, ``format`` (the suffix),
     ``skipped`` (``{"error_frames": n, "remote_frames": n}``), ``total`` (data frames in the file
-    before the direction filter), ``topics`` (MCAP: topics read) and ``note`` (recovery notes)."""
+    before the direction filter), ``topics`` (MCAP: topics read), ``note`` (recovery notes; for a
+    damaged MCAP its damage report) and ``recording`` (MCAP: the reader's RecordingInfo, else None)."""
 
     def __init__(self, frames=(), *, path: Path | None = None, format: str = "", skipped=None,
-                 total: int = 0, topics=(), note: str = ""):
+                 total: int = 0, topics=(), note: str = "", recording=None):
         super().__init__(frames)
         self.path = path
         self.format = format
@@ -71,6 +72,7 @@ class FrameLog(list):
         self.total = total
         self.topics = tuple(topics)
         self.note = note
+        self.recording = recording
 
     def span(self) -> float:
         """Time from the first to the last frame, s (0 for fewer than two frames)."""
@@ -116,8 +118,10 @@ def read_frames(path: str | Path, direction: str | None = None, *, vehicle: str 
         raise RtsimError(f"{path}: no such file")
     if path.stat().st_size == 0:
         raise RtsimError(f"{path}: empty file")
+    recording = None
     if kind == ".mcap":
-        raw, skipped, topics, note = _read_mcap(path, vehicle)
+        raw, skipped, topics, recording = _read_mcap(path, vehicle)
+        note = recording.health_line() if recording.damaged else recording.note
     else:
         raw, skipped, note = _read_log(path, kind, gz)
         topics = ()
@@ -129,7 +133,7 @@ def read_frames(path: str | Path, direction: str | None = None, *, vehicle: str 
     t0 = raw[0].time
     frames = [f._replace(time=f.time - t0) for f in raw if direction is None or f.direction == direction]
     return FrameLog(frames, path=path, format=kind, skipped=skipped, total=len(raw), topics=topics,
-                    note=note)
+                    note=note, recording=recording)
 
 
 def _read_mcap(path: Path, vehicle: str | None):
@@ -143,7 +147,8 @@ def _read_mcap(path: Path, vehicle: str | None):
             by_vid.setdefault(parts[1], {})[parts[3]] = msgs
     if not by_vid:
         raise RtsimError(f"{path}: no CAN topics (rtsim/<vehicle>/can/rx|tx) in the recording; topics: "
-                         f"{', '.join(sorted(messages)) or 'none'}")
+                         f"{', '.join(sorted(messages)) or 'none'}"
+                         + (f"; {info.health_line()}" if info.damaged else ""))
     if vehicle is None:
         if len(by_vid) > 1:
             raise RtsimError(f"{path}: CAN topics of several vehicles ({', '.join(sorted(by_vid))}); "
@@ -161,7 +166,7 @@ def _read_mcap(path: Path, vehicle: str | None):
         topics.append(topic)
         for k, m in enumerate(msgs):
             out.append(_mcap_frame(path, topic, k, m, d))
-    return out, {"error_frames": 0, "remote_frames": 0}, tuple(topics), info.note
+    return out, {"error_frames": 0, "remote_frames": 0}, tuple(topics), info
 
 
 def _mcap_frame(path: Path, topic: str, k: int, m, direction: str) -> Frame:

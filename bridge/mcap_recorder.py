@@ -43,21 +43,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
+from bridge.mcap_scan import MCAP_MAGIC, scan, string
 from bridge.payloads import TOPIC_KEYS, encode_json, schemas_for
 from rtsim.channels import CAR, ChannelDictionary
 from rtsim.errors import ConfigError
-
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 #: The MCAP metadata record holding the recorded vehicle's channel dictionary (``{"json": ...}``,
 #: rtsim.channels.ChannelDictionary.to_json), so a replay knows the channels it holds.
 CHANNELS_METADATA = "rtsim.channels"
-_FOOTER_OPCODE = 0x02
 
 CAN_KEYS = frozenset(("can/rx", "can/tx"))
 #: The 3D scene's topic keys (bridge.scene.SCENE_KEYS; not imported here, so that a recorder without a
@@ -272,6 +266,13 @@ class Recorder:
 
 
 # -------------------------------------------------------------------- reading
+# (the walk over a file's records, damaged or not, is bridge.mcap_scan; what it could not read is reported by
+# RecordingInfo.damage and .health_line)
+
+#: The MCAP metadata record a recorder closed cleanly writes last: ``how`` ("stopped", "model_fault") and, for
+#: a fault, ``reason_code``, ``reason``, ``message``, ``step``, ``sim_time``, ``coordinate`` (strings).
+SESSION_END_METADATA = "rtsim.session_end"
+_FAULT_KEYS = ("reason_code", "reason", "message", "step", "sim_time", "coordinate")
 
 
 class RecordedMessage(NamedTuple):
@@ -287,10 +288,16 @@ class RecordingInfo:
     messages: int                  # messages read (recovered, for a damaged file)
     chunks: int                    # complete chunks read
     topics: dict[str, int] = field(default_factory=dict)   # messages per topic
-    truncated_bytes: int = 0       # trailing bytes of an incomplete record that were discarded
-    note: str = ""                 # what stopped the recovery of a damaged file
+    truncated_bytes: int = 0       # trailing bytes of an incomplete record that were discarded (a cut)
+    note: str = ""                 # what the reader could not read, in words
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)   # MCAP metadata records by name
     channels: ChannelDictionary | None = None   # the recorded vehicle's channels (None: not recorded)
+    cut: bool = False              # the file ends inside a record: truncated mid-file
+    chunks_skipped: int = 0        # chunks that did not check out (bad CRC, compression or records)
+    messages_lost: int | None = 0  # messages in what could not be read (None: unknown, nothing to estimate from)
+    messages_lost_exact: bool = True   # False: messages_lost is an estimate (messages per byte of the chunks read)
+    bytes_discarded: int = 0       # bytes not read: skipped chunks, broken framing, the cut-off end
+    last_status: dict | None = None    # the last status message recorded (rtsim/<vehicle>/status), decoded
 
     def __post_init__(self):
         """The channel dictionary's record becomes ``channels``; ``metadata`` keeps the session's."""
@@ -301,174 +308,239 @@ class RecordingInfo:
             except ValueError as exc:
                 self.note = "; ".join(filter(None, (self.note, f"unreadable {CHANNELS_METADATA}: {exc}")))
 
+    @property
+    def damaged(self) -> bool:
+        """Anything of the file could not be read, or the file was not closed by its writer."""
+        return bool(not self.complete or self.cut or self.chunks_skipped or self.bytes_discarded
+                    or self.messages_lost)
 
-class _Bounded:
-    """A read-only view of a file limited to its first ``end`` bytes (for StreamReader)."""
+    @property
+    def usable(self) -> bool:
+        """At least one chunk (or message) could be read."""
+        return self.chunks > 0 or self.messages > 0
 
-    def __init__(self, fh, end: int):
-        self._fh, self._left = fh, end - fh.tell()
+    @property
+    def session_end(self) -> dict:
+        """How the recorded session ended: ``how`` from the rtsim.session_end record ("stopped",
+        "model_fault", with the fault's fields); without it "closed, end not recorded" (a file closed by an
+        rtsim that did not write it) or "not closed (killed or crashed)" with the last recorded status's
+        ``run_state`` and ``model_fault``."""
+        end = self.metadata.get(SESSION_END_METADATA)
+        if end is not None:
+            out = {"how": end.get("how", "unknown"), "recorded": True}
+            fault = {k: end[k] for k in _FAULT_KEYS if k in end}
+            if fault:
+                out["model_fault"] = fault
+            return out
+        out = {"how": "closed, end not recorded" if self.complete else "not closed (killed or crashed)",
+               "recorded": False}
+        if not self.complete and self.last_status is not None:
+            out["last_run_state"] = self.last_status.get("run_state")
+            if self.last_status.get("model_fault"):
+                out["model_fault"] = self.last_status["model_fault"]
+        return out
 
-    def read(self, n: int = -1) -> bytes:
-        if n < 0 or n > self._left:
-            n = self._left
-        data = self._fh.read(n)
-        self._left -= len(data)
-        return data
+    @property
+    def damage(self) -> dict:
+        """What a command reports of the file (``--json``): closed, cut, chunks read and skipped, messages
+        lost (exact or an estimate), bytes discarded, how the session ended, and the reader's notes."""
+        return {"damaged": self.damaged, "closed": self.complete, "cut": self.cut, "chunks_read": self.chunks,
+                "chunks_skipped": self.chunks_skipped, "messages_read": self.messages,
+                "messages_lost": self.messages_lost, "messages_lost_exact": self.messages_lost_exact,
+                "bytes_discarded": self.bytes_discarded, "session_end": self.session_end, "notes": self.note}
+
+    def health_line(self) -> str:
+        """The damage report in one line (the first line a command prints about the file)."""
+        parts = []
+        if self.chunks_skipped:
+            parts.append(f"{self.chunks_skipped} unreadable chunk{'s' * (self.chunks_skipped != 1)} skipped")
+        lost = self.messages_lost
+        if lost is None:
+            parts.append("an unknown number of messages lost")
+        elif lost:
+            parts.append(f"{'' if self.messages_lost_exact else 'about '}{lost} messages lost")
+        if self.bytes_discarded:
+            parts.append(f"{self.bytes_discarded} bytes discarded")
+        if self.cut:
+            parts.append(f"cut off mid-record ({self.truncated_bytes} bytes of the last record)")
+        if not self.complete:
+            parts.append("not closed (no summary: the writer was killed, crashed or is still writing)")
+        end = self.session_end
+        how = end["how"].replace("_", " ")
+        if not end["recorded"] and end.get("last_run_state"):
+            how += f", last status {end['last_run_state']}"
+        fault = end.get("model_fault")
+        if fault:
+            how += ": " + _fault_text(fault)
+        lost_any = self.chunks_skipped or lost is None or lost or self.bytes_discarded or self.cut
+        head = (("DAMAGED recording: " if lost_any else "UNCLOSED recording: ") + ", ".join(parts) if parts
+                else "recording intact, closed")
+        return (f"{head}; {self.chunks} chunks, {self.messages} messages read; session ended: {how}")
 
 
-def _decode(channel: Channel, data: bytes):
-    if channel.message_encoding == "json":
-        return json.loads(data)
+def _fault_text(fault: dict) -> str:
+    """A model fault's fields in words: "non_finite_force (code 3): <message> at step 2525, t = 2.525 s,
+    coordinate rack" (the fields present)."""
+    reason, code = fault.get("reason"), fault.get("reason_code")
+    head = " ".join(filter(None, (str(reason) if reason not in (None, "") else "",
+                                  f"(code {code})" if code not in (None, "") else "")))
+    where = ", ".join(filter(None, (f"step {fault['step']}" if fault.get("step") not in (None, "") else "",
+                                    f"t = {fault['sim_time']} s" if fault.get("sim_time") not in (None, "") else "",
+                                    f"coordinate {fault['coordinate']}" if fault.get("coordinate") else "")))
+    text = ": ".join(filter(None, (head, str(fault.get("message") or ""))))
+    return " at ".join(filter(None, (text or "model fault", where)))
+
+
+def _decode(encoding: str, data: bytes):
+    if encoding == "json":
+        return json.loads(bytes(data))
     return bytes(data)
 
 
-def _scan_complete_records(fh, size: int) -> int:
-    """Offset just after the last whole top-level record (framing: opcode u8, length u64)."""
-    pos = len(MCAP_MAGIC)
-    while pos + 9 <= size:
-        fh.seek(pos)
-        opcode, length = struct.unpack("<BQ", fh.read(9))
-        if pos + 9 + length > size:
-            break
-        pos += 9 + length
-        if opcode == _FOOTER_OPCODE:
-            break
-    return pos
+_U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
+_MESSAGE = struct.Struct("<HIQ")          # channel id, sequence, log time (publish time follows)
+_RECORD = struct.Struct("<BQ")
+_OP_CHANNEL, _OP_MESSAGE = 0x04, 0x05
+
+
+def _is_status(topic: str) -> bool:
+    return topic.startswith("rtsim/") and topic.endswith("/status") and topic.count("/") == 2
+
+
+class _Topics:
+    """A scan's consumer (bridge.mcap_scan): channels, metadata and the messages of the channels ``want``
+    selects, kept per chunk all or nothing; ``decode`` True decodes them (RecordedMessage), False keeps
+    their bytes and log times. The last status message of any vehicle is kept in every case."""
+
+    def __init__(self, want, decode: bool):
+        self.want, self.decode = want, decode
+        self.channels: dict[int, tuple[str, str]] = {}       # id -> (topic, message encoding)
+        self.wanted: dict[int, tuple[list, list]] = {}
+        self.counts: dict[str, int] = {}
+        self.meta: dict[str, dict[str, str]] = {}
+        self.status: tuple[int, bytes] | None = None         # (log time, bytes) of the last status message
+        self._status_ids: set[int] = set()
+
+    def channel(self, buf, body: int) -> None:
+        cid = _U16.unpack_from(buf, body)[0]
+        topic, p = string(buf, body + 4)
+        encoding, _ = string(buf, p)
+        if cid in self.channels:
+            return
+        self.channels[cid] = (topic, encoding)
+        self.counts.setdefault(topic, 0)
+        if self.want(topic):
+            self.wanted[cid] = ([], [])
+        if _is_status(topic):
+            self._status_ids.add(cid)
+
+    def metadata(self, name: str, values: dict) -> None:
+        self.meta[name] = values
+
+    def _records(self, rec, start: int, end: int) -> tuple[int, int]:
+        """Take the records of [start, end) of ``rec`` (a chunk's, or one record of the file) all or nothing:
+        ValueError (or struct.error) for records that do not parse or a message that does not decode, and
+        then nothing of them is kept. Returns (messages kept, orphans: messages on an unknown channel)."""
+        kept = orphans = 0
+        pos = start
+        per_cid: dict[int, int] = {}
+        rows: list = []
+        status = None
+        channels, wanted, status_ids, decode = self.channels, self.wanted, self._status_ids, self.decode
+        unpack_rec, unpack_msg = _RECORD.unpack_from, _MESSAGE.unpack_from
+        while pos + 9 <= end:
+            op, length = unpack_rec(rec, pos)
+            body = pos + 9
+            pos = body + length
+            if pos > end:
+                raise ValueError("record runs past its chunk")
+            if op == _OP_MESSAGE:
+                cid, seq, t = unpack_msg(rec, body)
+                if cid not in channels:
+                    orphans += 1
+                    continue
+                kept += 1
+                per_cid[cid] = per_cid.get(cid, 0) + 1
+                w = wanted.get(cid)
+                if w is not None:
+                    data = rec[body + 22:pos]
+                    rows.append((w, t, RecordedMessage(t, seq, _decode(channels[cid][1], data)) if decode
+                                 else bytes(data)))
+                if cid in status_ids:
+                    status = (t, bytes(rec[body + 22:pos]))
+            elif op == _OP_CHANNEL:
+                self.channel(rec, body)
+        if pos != end:
+            raise ValueError("chunk ends inside a record")
+        for cid, n in per_cid.items():
+            self.counts[channels[cid][0]] += n
+        for w, t, v in rows:
+            w[0].append(t)
+            w[1].append(v)
+        if status is not None:
+            self.status = status
+        return kept, orphans
+
+    def chunk(self, data: bytes) -> tuple[int, int]:
+        return self._records(memoryview(data), 0, len(data))
+
+    def message(self, buf, pos: int, end: int) -> None:
+        self._records(buf, pos, end)
+
+    def info(self, path: Path, sc) -> RecordingInfo:
+        lost, exact = sc.messages_lost
+        status = None
+        if self.status is not None:
+            try:
+                status = json.loads(self.status[1])
+            except ValueError:
+                status = None
+        return RecordingInfo(path, sc.closed, sc.messages, sc.chunks, dict(self.counts),
+                             truncated_bytes=sc.trailing_bytes, note=_notes(sc.notes), metadata=self.meta,
+                             cut=sc.cut, chunks_skipped=sc.chunks_skipped, messages_lost=lost,
+                             messages_lost_exact=exact, bytes_discarded=sc.bytes_discarded,
+                             last_status=status if isinstance(status, dict) else None)
+
+
+def _notes(notes: list[str], most: int = 6) -> str:
+    """The reader's notes in one string, the first ``most`` of them and how many more."""
+    text = "; ".join(notes[:most])
+    return text + (f"; and {len(notes) - most} more" if len(notes) > most else "")
+
+
+def _file_bytes(path: Path) -> bytes:
+    """The file's bytes once its magic is checked; ConfigError when it cannot be read or is not MCAP."""
+    try:
+        buf = path.read_bytes()
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot open recording: {e.strerror or e}") from e
+    if not buf:
+        raise ConfigError(f"{path}: empty file (not an MCAP recording)")
+    if not MCAP_MAGIC.startswith(buf[:len(MCAP_MAGIC)]):
+        raise ConfigError(f"{path}: not an MCAP file (magic {buf[:8]!r}, expected {MCAP_MAGIC!r})")
+    return buf
 
 
 def read_recording(path: str | Path):
     """Read a recording: ``(messages, info)`` with ``messages[topic]`` the list of
     :class:`RecordedMessage` in file (recording) order and ``info`` a :class:`RecordingInfo`.
 
-    A finished file is read through its summary. A damaged one (writer killed: no summary or
-    footer, last chunk truncated) is streamed record by record and every complete chunk's messages
-    are kept; it never raises for truncation. Raises ConfigError when the file is not MCAP."""
+    Any file that starts with the MCAP magic is read as far as it can be (bridge.mcap_scan): a file whose
+    writer was killed (no summary, last chunk cut), cut short, or with damaged chunks gives every chunk that
+    checks out (whole, CRC-verified), and ``info`` says what was lost (``damage``, ``health_line``); it
+    never raises for damage. Raises ConfigError when the file cannot be read, is empty or is not MCAP."""
     path = Path(path)
-    try:
-        size = path.stat().st_size
-        fh = open(path, "rb")
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot open recording: {e.strerror or e}") from e
-    with fh:
-        head = fh.read(len(MCAP_MAGIC))
-        if not head or not MCAP_MAGIC.startswith(head):
-            raise ConfigError(f"{path}: not an MCAP file (magic {head[:8]!r}, expected {MCAP_MAGIC!r})")
-        if len(head) < len(MCAP_MAGIC):
-            return {}, RecordingInfo(path, False, 0, 0, truncated_bytes=size, note="truncated magic")
-        fh.seek(size - len(MCAP_MAGIC))
-        if size >= 2 * len(MCAP_MAGIC) and fh.read(len(MCAP_MAGIC)) == MCAP_MAGIC:
-            fh.seek(0)
-            try:
-                return _read_complete(path, fh)
-            except (McapError, ValueError, struct.error, EOFError):
-                pass          # footer present but summary damaged: fall back to streaming
-        return _read_stream(path, fh, size)
-
-
-def _read_complete(path: Path, fh):
-    reader = make_reader(fh)
-    summary = reader.get_summary()
-    if summary is None:
-        raise McapError("no summary")
-    out: dict[str, list[RecordedMessage]] = {}
-    n = 0
-    for _schema, channel, msg in reader.iter_messages(log_time_order=False):
-        out.setdefault(channel.topic, []).append(
-            RecordedMessage(msg.log_time, msg.sequence, _decode(channel, msg.data)))
-        n += 1
-    for ch in summary.channels.values():
-        out.setdefault(ch.topic, [])
-    chunks = summary.statistics.chunk_count if summary.statistics else len(summary.chunk_indexes)
-    meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-    info = RecordingInfo(path, True, n, chunks, {t: len(v) for t, v in out.items()}, metadata=meta)
-    return out, info
-
-
-def _read_stream(path: Path, fh, size: int):
-    end = _scan_complete_records(fh, size)
-    fh.seek(len(MCAP_MAGIC))
-    channels: dict[int, Channel] = {}
-    out: dict[str, list[RecordedMessage]] = {}
-    meta: dict[str, dict[str, str]] = {}
-    n = chunks = 0
-    note = ""
-    complete = False
-
-    def take(records):
-        nonlocal n
-        got = []
-        for r in records:
-            if isinstance(r, (Schema,)):
-                continue
-            if isinstance(r, Channel):
-                channels[r.id] = r
-            elif isinstance(r, Metadata):
-                meta[r.name] = dict(r.metadata)
-            elif isinstance(r, Message):
-                ch = channels.get(r.channel_id)
-                if ch is None:
-                    raise McapError(f"message on unknown channel {r.channel_id}")
-                got.append((ch.topic, RecordedMessage(r.log_time, r.sequence, _decode(ch, r.data))))
-        for topic, m in got:       # all or nothing per chunk
-            out.setdefault(topic, []).append(m)
-        n += len(got)
-
-    reader = StreamReader(_Bounded(fh, end), skip_magic=True, emit_chunks=True)
-    it = iter(reader.records)
-    while True:
-        try:
-            rec = next(it)
-        except StopIteration:
-            break
-        except Exception as e:     # EndOfFile at the cut, or a damaged record
-            if not (type(e).__name__ == "EndOfFile"):
-                note = f"stopped at a damaged record: {type(e).__name__}: {e}"
-            break
-        try:
-            if isinstance(rec, Chunk):
-                take(breakup_chunk(rec, validate_crc=True))
-                chunks += 1
-            else:
-                take([rec])
-                if isinstance(rec, Footer):
-                    fh.seek(end)
-                    complete = end + len(MCAP_MAGIC) == size and fh.read(len(MCAP_MAGIC)) == MCAP_MAGIC
-                    break
-        except Exception as e:     # corrupt chunk (bad CRC, bad zstd frame, bad JSON): stop here
-            note = f"stopped at a damaged chunk: {type(e).__name__}: {e}"
-            break
-    discarded = size - end - (len(MCAP_MAGIC) if complete else 0)
-    if not note and discarded:
-        note = f"last record truncated ({discarded} bytes discarded)"
-    for ch in channels.values():
-        out.setdefault(ch.topic, [])
-    info = RecordingInfo(path, complete, n, chunks, {t: len(v) for t, v in out.items()},
-                         truncated_bytes=discarded, note=note, metadata=meta)
-    return out, info
+    buf = _file_bytes(path)
+    if len(buf) < len(MCAP_MAGIC):
+        return {}, RecordingInfo(path, False, 0, 0, truncated_bytes=len(buf), note="truncated magic", cut=True,
+                                 bytes_discarded=len(buf), messages_lost=None, messages_lost_exact=False)
+    reader = _Topics(lambda _t: True, decode=True)
+    sc = scan(buf, reader)
+    out = {reader.channels[cid][0]: w[1] for cid, w in reader.wanted.items()}
+    return out, reader.info(path, sc)
 
 
 # -------------------------------------------------------------------- reading a few topics fast
-
-_OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK, _OP_METADATA = 0x04, 0x05, 0x06, 0x0C
-_U16, _U32, _U64 = struct.Struct("<H"), struct.Struct("<I"), struct.Struct("<Q")
-_RECORD = struct.Struct("<BQ")
-_MESSAGE = struct.Struct("<HIQ")          # channel id, sequence, log time (publish time follows)
-
-
-def _string(buf, pos: int) -> tuple[str, int]:
-    n = _U32.unpack_from(buf, pos)[0]
-    return bytes(buf[pos + 4:pos + 4 + n]).decode(), pos + 4 + n
-
-
-def _string_map(buf, pos: int) -> dict[str, str]:
-    end = pos + 4 + _U32.unpack_from(buf, pos)[0]
-    pos += 4
-    out = {}
-    while pos < end:
-        k, pos = _string(buf, pos)
-        v, pos = _string(buf, pos)
-        out[k] = v
-    return out
 
 
 class TopicData(NamedTuple):
@@ -478,118 +550,23 @@ class TopicData(NamedTuple):
 
 def read_topics(path: str | Path, topics) -> tuple[dict[str, TopicData], RecordingInfo]:
     """The messages of a few ``topics`` of a recording (names, or a function of a name saying whether it is
-    wanted), undecoded: ``{topic: TopicData}`` and the recording's :class:`RecordingInfo` (metadata and
-    channel dictionary included).
+    wanted), undecoded: ``{topic: TopicData}`` and the recording's :class:`RecordingInfo` (metadata, channel
+    dictionary and damage report included).
 
-    What `read_recording` gives for those topics, about 20x faster on a session's recording (a 45 MB file
-    with every CAN frame, three topics of it: 8.3-8.8 s -> 0.35 s here): the file's records are walked with ``struct`` and each
-    chunk decompressed once; only the wanted channels' messages are cut out, and nothing is decoded
-    (a page that parses JSON itself gets the bytes as recorded). A file cut off by a kill gives its
-    complete chunks (chunk by chunk, all or nothing, CRC checked), as `read_recording` does. Raises
-    ConfigError when the file is not MCAP; a chunk compression other than zstd or none also raises it."""
-    import zlib
-
+    What `read_recording` gives for those topics, much faster on a session's recording (a 45 MB file with
+    every CAN frame, three topics of it: 8.3-8.8 s -> 0.35 s here): nothing is decoded (a page that parses
+    JSON itself gets the bytes as recorded). A damaged file gives what `read_recording` gives (the same walk,
+    bridge.mcap_scan). Raises ConfigError when the file cannot be read, is empty or is not MCAP."""
     import numpy as np
-    import zstandard
 
     path = Path(path)
-    try:
-        buf = memoryview(path.read_bytes())
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot open recording: {e.strerror or e}") from e
-    size = len(buf)
-    if not MCAP_MAGIC.startswith(bytes(buf[:len(MCAP_MAGIC)])) or size == 0:
-        raise ConfigError(f"{path}: not an MCAP file (magic {bytes(buf[:8])!r}, expected {MCAP_MAGIC!r})")
+    buf = _file_bytes(path)
     want = topics if callable(topics) else set(topics).__contains__
-    channels: dict[int, str] = {}
-    wanted: dict[int, tuple[list, list]] = {}
-    counts: dict[str, int] = {}
-    meta: dict[str, dict[str, str]] = {}
-    n = chunks = 0
-    note = ""
-    complete = False
-    dctx = zstandard.ZstdDecompressor()
-
-    def channel(rec, pos):
-        cid = _U16.unpack_from(rec, pos)[0]
-        topic, _ = _string(rec, pos + 4)
-        channels[cid] = topic
-        counts.setdefault(topic, 0)
-        if want(topic) and cid not in wanted:
-            wanted[cid] = ([], [])
-
-    def records(rec, start, end) -> int:
-        """The records of [start, end) of ``rec`` (a chunk's or the file's); returns messages seen."""
-        got = 0
-        pos = start
-        unpack_rec, unpack_msg = _RECORD.unpack_from, _MESSAGE.unpack_from
-        while pos + 9 <= end:
-            op, length = unpack_rec(rec, pos)
-            body = pos + 9
-            pos = body + length
-            if op == _OP_MESSAGE:
-                got += 1
-                cid, _seq, t = unpack_msg(rec, body)
-                w = wanted.get(cid)
-                if w is not None:
-                    w[0].append(t)
-                    w[1].append(bytes(rec[body + 22:pos]))
-                else:
-                    counts[channels[cid]] += 1
-            elif op == _OP_CHANNEL:
-                channel(rec, body)
-        return got
-
-    pos = len(MCAP_MAGIC)
-    while pos + 9 <= size:
-        op, length = _RECORD.unpack_from(buf, pos)
-        body, end = pos + 9, pos + 9 + length
-        if end > size:
-            break                                   # cut off by a kill: the record is incomplete
-        if op == _OP_CHUNK:
-            raw_size = _U64.unpack_from(buf, body + 16)[0]
-            crc = _U32.unpack_from(buf, body + 24)[0]
-            compression, p = _string(buf, body + 28)
-            nrec = _U64.unpack_from(buf, p)[0]
-            data = buf[p + 8:p + 8 + nrec]
-            try:
-                if compression == "zstd":
-                    data = dctx.decompress(data, max_output_size=raw_size)
-                elif compression != "":
-                    raise ConfigError(f"{path}: chunk compression {compression!r} (rtsim records zstd)")
-                if crc and zlib.crc32(data) != crc:
-                    raise ValueError("chunk CRC mismatch")
-                before = {cid: len(w[0]) for cid, w in wanted.items()}
-                try:
-                    n += records(data, 0, len(data))
-                except KeyError as e:
-                    raise ValueError(f"message on unknown channel {e}") from None
-            except (zstandard.ZstdError, ValueError, struct.error) as e:
-                note = f"stopped at a damaged chunk: {type(e).__name__}: {e}"
-                for cid, w in wanted.items():           # all or nothing per chunk
-                    del w[0][before.get(cid, 0):], w[1][before.get(cid, 0):]
-                break
-            chunks += 1
-        elif op == _OP_CHANNEL:
-            channel(buf, body)
-        elif op == _OP_MESSAGE:
-            n += records(buf, pos, end)
-        elif op == _OP_METADATA:
-            name, p = _string(buf, body)
-            meta[name] = _string_map(buf, p)
-        elif op == 0x02:                               # footer
-            complete = end + len(MCAP_MAGIC) == size and bytes(buf[end:]) == MCAP_MAGIC
-            pos = end
-            break
-        pos = end
-    out = {}
-    for cid, (times, data) in wanted.items():
-        topic = channels[cid]
-        out[topic] = TopicData(np.array(times, dtype=np.int64), data)
-        counts[topic] += len(data)
-    discarded = size - pos - (len(MCAP_MAGIC) if complete else 0)
-    if not note and discarded > 0:
-        note = f"last record truncated ({discarded} bytes discarded)"
-    info = RecordingInfo(path, complete, n, chunks, counts, truncated_bytes=max(0, discarded), note=note,
-                         metadata=meta)
-    return out, info
+    reader = _Topics(want, decode=False)
+    if len(buf) < len(MCAP_MAGIC):
+        return {}, RecordingInfo(path, False, 0, 0, truncated_bytes=len(buf), note="truncated magic", cut=True,
+                                 bytes_discarded=len(buf), messages_lost=None, messages_lost_exact=False)
+    sc = scan(buf, reader)
+    out = {reader.channels[cid][0]: TopicData(np.array(w[0], dtype=np.int64), w[1])
+           for cid, w in reader.wanted.items()}
+    return out, reader.info(path, sc)

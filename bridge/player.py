@@ -270,11 +270,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--can-interface", help="python-can interface (default: socketcan vcan0 if present, "
                                                 "else the embedded hub on 127.0.0.1)")
     parser.add_argument("--can-channel", help="python-can channel (e.g. vcan0, 127.0.0.1:54701)")
+    parser.add_argument("--json", action="store_true",
+                        help="print one JSON report at the end (the recording's damage report, the statistics) "
+                             "instead of the text lines")
 
 
 def main(args: argparse.Namespace, out=None) -> int:
     """``rtsim play``: read FILE, open the bus, send, print a summary. Returns 0, or 1 when frames
-    were dropped on bus errors. Raises RtsimError (printed by the CLI) for bad input or no bus."""
+    were dropped on bus errors. Raises RtsimError (printed by the CLI) for bad input or no bus, and
+    for a recording with nothing to play (no readable chunk, no frame of the direction). A recording's
+    first line is its damage report (bridge.mcap_recorder.RecordingInfo.health_line); ``--json`` prints
+    one report at the end instead, the recording's ``damage`` in it."""
     from bridge.can_bus import open_bus
 
     out = out or sys.stdout
@@ -286,12 +292,16 @@ def main(args: argparse.Namespace, out=None) -> int:
     direction = args.direction
     if direction is None:
         direction = "tx" if str(args.file).lower().endswith(".mcap") else "all"
+    as_json = bool(getattr(args, "json", False))
     log = read_frames(args.file, direction, vehicle=getattr(args, "vehicle", None))
-    if log.note:
+    rec = log.recording
+    if rec is not None and not as_json:          # a recording: its damage report first (intact: says so)
+        print(f"rtsim play: {args.file}: {rec.health_line()}", file=out, flush=True)
+    elif log.note and not as_json:
         print(f"rtsim play: note: {log.note}", file=out)
     if not log:
-        raise RtsimError(f"{args.file}: no {direction} frames (of {log.total} data frames); "
-                         f"try --direction all")
+        raise RtsimError(f"{args.file}: no {direction} frames (of {log.total} data frames); try --direction all"
+                         + (f"; {rec.health_line()}" if rec is not None and rec.damaged else ""))
     if args.can_interface is None and args.can_channel is not None:
         raise RtsimError("--can-channel needs --can-interface")
     try:
@@ -307,17 +317,26 @@ def main(args: argparse.Namespace, out=None) -> int:
         id_text = ", ".join(f"0x{i:X}" for i in sorted({f.can_id for f in sel}))
         where = getattr(bus, "channel_info", None) or f"{args.can_interface or 'default'} {args.can_channel or ''}"
         skipped = ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in log.skipped.items() if n)
-        print(f"rtsim play: {args.file}: sending {len(sel)} {direction} frames (ids {id_text}; "
-              f"span {player.span:.3f} s) to {where} at rate {args.rate:g}"
-              + (f", looping every {player.period / args.rate:.3f} s" if args.loop else "")
-              + (f", for {args.duration:g} s" if args.duration else "")
-              + (f"; skipped {skipped}" if skipped else ""), file=out, flush=True)
+        if not as_json:
+            print(f"rtsim play: {args.file}: sending {len(sel)} {direction} frames (ids {id_text}; "
+                  f"span {player.span:.3f} s) to {where} at rate {args.rate:g}"
+                  + (f", looping every {player.period / args.rate:.3f} s" if args.loop else "")
+                  + (f", for {args.duration:g} s" if args.duration else "")
+                  + (f"; skipped {skipped}" if skipped else ""), file=out, flush=True)
         try:
             stats = player.run(args.duration)
         except KeyboardInterrupt:
             player.stats.ended = "interrupted"
             stats = player.stats
-        print(f"rtsim play: {stats.summary()}", file=out, flush=True)
+        if as_json:
+            import dataclasses
+            import json
+            print(json.dumps({"file": str(args.file), "direction": direction, "frames": len(sel),
+                              "ids": sorted({f.can_id for f in sel}), "skipped": log.skipped,
+                              "recording": rec.damage if rec is not None else None, "note": log.note,
+                              "stats": dataclasses.asdict(stats)}, indent=2), file=out, flush=True)
+        else:
+            print(f"rtsim play: {stats.summary()}", file=out, flush=True)
         return 1 if stats.dropped else 0
     finally:
         try:

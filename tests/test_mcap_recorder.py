@@ -281,6 +281,9 @@ def test_sigkill_recovery(tmp_path):
 
     got, info = read_recording(path)
     assert not info.complete
+    # ... and reported as what it is: never closed, the session's end unknown
+    assert info.session_end["how"] == "not closed (killed or crashed)" and "not closed" in info.health_line()
+    assert info.chunks_skipped == 0 and info.damage["closed"] is False
     assert info.chunks >= len(flushed)       # every chunk reported complete is recovered ...
     assert info.messages >= on_disk          # ... with every message it holds
     # the recovered messages are exactly the first N recorded, with their contents

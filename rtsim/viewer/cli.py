@@ -90,6 +90,8 @@ def main(args: argparse.Namespace) -> int:
         from .recording import Recording
 
         recs = [Recording(f) for f in args.recordings]
+        for r in recs:                        # first: what each file lost and how its session ended
+            print(f"rtsim view: {r.path}: {r.health}", flush=True)
         server = ViewServer(None, args.bind, args.port, recordings=recs, token=token)
         what = " and ".join(f"{r.path.name} ({r.vehicle_id}, {r.duration:.1f} s)"
                             for r in recs)

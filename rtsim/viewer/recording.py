@@ -1,6 +1,7 @@
 """A recording as a source of the page (`rtsim view FILE.mcap [FILE2.mcap]`): the state, sensor and status
-samples of a service's MCAP (bridge.mcap_recorder.read_topics; a recording cut off by a kill gives
-its complete chunks) and the scene it needs, described from the session's metadata (the vehicle and
+samples of a service's MCAP (bridge.mcap_recorder.read_topics; a damaged recording, or one cut off by a
+kill, gives the chunks that check out, and ``health``/``damage`` say what was lost and how the session
+ended; a recording with no readable state sample is an error) and the scene it needs, described from the session's metadata (the vehicle and
 scenario files as they were when recorded; the files at those paths when they still exist).
 
 The page gets each recording whole (``payload``) and plays it with its own timeline; the sensor samples
@@ -29,15 +30,19 @@ class Recording:
         kinds = ("state", "sensors", "status")
         msgs, info = read_topics(self.path, lambda t: t.startswith("rtsim/") and t.rsplit("/", 1)[-1] in kinds
                                  and t.count("/") == 2)
+        self.health = info.health_line()     # what the file lost, how the session ended (one line)
+        self.damage = info.damage            # the same, as the page's ``recording`` message carries it
+        damage = f"; {self.health}" if info.damaged else ""
         session = info.metadata.get("rtsim.session", {})
         vid = session.get("vehicle_id") or next((t.split("/")[1] for t in msgs if t.endswith("/state")), None)
         topics = {k: f"rtsim/{vid}/{k}" for k in kinds}
         if vid is None or topics["state"] not in msgs:
-            raise RtsimError(f"{self.path}: no state topic (rtsim/<vehicle>/state): not a recording of rtsim serve")
+            raise RtsimError(f"{self.path}: no state topic (rtsim/<vehicle>/state): "
+                             + (f"nothing readable{damage}" if info.damaged else "not a recording of rtsim serve"))
         self.vehicle_id = vid
         state = msgs[topics["state"]]
         if not state.data:
-            raise RtsimError(f"{self.path}: the recording holds no state sample")
+            raise RtsimError(f"{self.path}: the recording holds no state sample{damage}")
         self.times = state.log_time_ns * 1e-9          # s, the state samples' simulation times
         self._state = state.data
         self.status = [json.loads(m) for m in msgs[topics["status"]].data] if topics["status"] in msgs else []
@@ -102,6 +107,7 @@ class Recording:
         """The page's ``recording`` message (JSON text): every sample, the file's name and completeness; the
         samples' text is spliced in as recorded."""
         head = json.dumps({"type": "recording", "index": index, "file": self.path.name, "complete": self.complete,
-                           "status": self.status}, separators=(",", ":"))
+                           "health": self.health, "damage": self.damage, "status": self.status},
+                          separators=(",", ":"), default=str)
         return "".join((head[:-1], ',"state":[', b",".join(self._state).decode(), '],"sensors":[',
                         b",".join(self._sensors).decode(), "]}"))

@@ -89,7 +89,12 @@ function start(i, source) {
 // ---- a replay ----------------------------------------------------------------------------------------
 function loaded(m) {
   const times = Float64Array.from(m.state, (s) => s.time);
-  replay.recs[m.index] = { state: m.state, sensors: m.sensors, status: m.status, times, file: m.file };
+  replay.recs[m.index] = { state: m.state, sensors: m.sensors, status: m.status, times, file: m.file,
+    damage: m.damage };
+  if (m.damage && m.damage.damaged) {        // what the file lost and how its session ended, in view
+    $('files').textContent += ` · ${m.index ? 'B' : 'A'}: ${m.health}`;
+    $('files').style.color = '#b00020';
+  }
   const all = replay.recs.filter(Boolean);
   replay.t0 = Math.min(...all.map((r) => r.times[0]));
   replay.t1 = Math.max(...all.map((r) => r.times[r.times.length - 1]));
