@@ -375,8 +375,8 @@ def test_resim_of_the_first_half_says_it_was_cut(session, tmp_path, capsys):
     half.write_bytes(data[:len(data) // 2])
     rc, out, _ = _cli(capsys, "resim", half)
     lines = out.splitlines()
-    assert rc == 0 and "cut off mid-record" in lines[0] and "not closed" in lines[0]
-    assert lines[-1] == "rtsim resim: IDENTICAL (over what the damaged recording holds)"
+    assert rc == 0 and "cut off mid-record" in lines[0] and "not closed" in lines[0], out
+    assert lines[-1] == "rtsim resim: IDENTICAL (over what the damaged recording holds)", out
     rc, out, _ = _cli(capsys, "resim", half, "--json")
     rep = json.loads(out)
     assert rep["identical"] and rep["damage"]["cut"] and not rep["damage"]["closed"]
