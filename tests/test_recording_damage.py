@@ -148,7 +148,8 @@ def test_an_intact_file_reads_whole_and_says_so(tmp_path):
     assert info.health_line().startswith("recording intact, closed")
     # the independent reference: the mcap library's reader gives the same messages
     with open(path, "rb") as fh:
-        ref = [(c.topic, m.sequence, json.loads(m.data)) for _s, c, m in make_reader(fh).iter_messages(log_time_order=False)]
+        ref = [(c.topic, m.sequence, json.loads(m.data))
+               for _s, c, m in make_reader(fh).iter_messages(log_time_order=False)]
     assert [(t, m.sequence, m.data) for t, ms in got.items() for m in ms] == \
         sorted(ref, key=lambda r: [t for t in got].index(r[0]))
 
