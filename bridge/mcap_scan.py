@@ -147,21 +147,49 @@ def _chunk_data(buf, head) -> bytes:
     return data
 
 
+def _metadata_at(buf, p: int, limit: int) -> bool:
+    """A metadata record that parses exactly (name, map ending at its record's end) and is followed by a
+    record starts at ``p``."""
+    if p + 9 + 8 > limit:
+        return False
+    end = p + 9 + _U64.unpack_from(buf, p + 1)[0]
+    if end > limit:
+        return False
+    try:
+        _name, q = string(buf, p + 9)
+        string_map(buf, q, end)
+        if q + 4 + _U32.unpack_from(buf, q)[0] != end:
+            return False
+    except (ValueError, struct.error, UnicodeDecodeError):
+        return False
+    return _framed_at(buf, end, limit)
+
+
 def _resync(buf, start: int, limit: int):
-    """The first position at or after ``start`` where a chunk that checks out (CRC included) starts:
-    (position, header, data), or None."""
+    """The first position at or after ``start`` where a chunk that checks out (CRC included) starts,
+    (position, header, data), or a metadata record that parses exactly, (position, None, None); or None."""
     p = start
-    while True:
-        p = buf.find(b"\x06", p, limit)
-        if p < 0:
+    nxt = {OP_CHUNK: -2, OP_METADATA: -2}        # the next position of each opcode byte (-1: none left)
+    while p < limit:
+        for op, q in nxt.items():
+            if -1 < q < p or q == -2:
+                nxt[op] = buf.find(bytes((op,)), p, limit)
+        found = [q for q in nxt.values() if q >= 0]
+        if not found:
             return None
-        head = _chunk_header(buf, p, limit)
-        if head is not None:
-            try:
-                return p, head, _chunk_data(buf, head)
-            except Exception:  # noqa: BLE001  (any codec error: not a chunk after all)
-                pass
+        p = min(found)
+        if buf[p] == OP_METADATA:
+            if _metadata_at(buf, p, limit):
+                return p, None, None
+        else:
+            head = _chunk_header(buf, p, limit)
+            if head is not None:
+                try:
+                    return p, head, _chunk_data(buf, head)
+                except Exception:  # noqa: BLE001  (any codec error: not a chunk after all)
+                    pass
         p += 1
+    return None
 
 
 def _framed_at(buf, pos: int, limit: int) -> bool:
@@ -290,6 +318,9 @@ def scan(buf: bytes, consumer) -> Scan:
             sc.bytes_discarded += nxt - pos
             sc._unknown_stored += nxt - pos
             sc.note(f"unreadable bytes {pos}..{nxt} stepped over")
+            if nhead is None:                            # a metadata record: read on as usual
+                pos = nxt
+                continue
             take_chunk(nxt, nhead, ndata)
             pos = nhead[0]
             continue

@@ -148,7 +148,8 @@ def test_an_intact_file_reads_whole_and_says_so(tmp_path):
     assert info.health_line().startswith("recording intact, closed")
     # the independent reference: the mcap library's reader gives the same messages
     with open(path, "rb") as fh:
-        ref = [(c.topic, m.sequence, json.loads(m.data)) for _s, c, m in make_reader(fh).iter_messages(log_time_order=False)]
+        ref = [(c.topic, m.sequence, json.loads(m.data))
+               for _s, c, m in make_reader(fh).iter_messages(log_time_order=False)]
     assert [(t, m.sequence, m.data) for t, ms in got.items() for m in ms] == \
         sorted(ref, key=lambda r: [t for t in got].index(r[0]))
 
@@ -375,8 +376,8 @@ def test_resim_of_the_first_half_says_it_was_cut(session, tmp_path, capsys):
     half.write_bytes(data[:len(data) // 2])
     rc, out, _ = _cli(capsys, "resim", half)
     lines = out.splitlines()
-    assert rc == 0 and "cut off mid-record" in lines[0] and "not closed" in lines[0]
-    assert lines[-1] == "rtsim resim: IDENTICAL (over what the damaged recording holds)"
+    assert rc == 0 and "cut off mid-record" in lines[0] and "not closed" in lines[0], out
+    assert lines[-1] == "rtsim resim: IDENTICAL (over what the damaged recording holds)", out
     rc, out, _ = _cli(capsys, "resim", half, "--json")
     rep = json.loads(out)
     assert rep["identical"] and rep["damage"]["cut"] and not rep["damage"]["closed"]

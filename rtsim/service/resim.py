@@ -226,8 +226,9 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
             break
     if mode == "lockstep":
         events.finish()
-    elif rec_sensors:
-        events.advance(int(round(rec_sensors[-1].data["time"] / dt)) - loop.k)
+    elif rec_sensors or rec_state:          # up to the last sample recorded (a cut file may end on either)
+        last = max(m[-1].data["time"] for m in (rec_sensors, rec_state) if m)
+        events.advance(int(round(last / dt)) - loop.k)
     report = {"recording": str(path), "mode": mode, "dt": dt, "files": notes, "frames_replayed": replayed,
               "user_changes": events.users, "user_changes_applied": events.applied["user"],
               "control_ops": len(events.events) - events.users, "control_ops_applied": events.applied["control"],

@@ -1,8 +1,9 @@
 """A recording as a source of the page (`rtsim view FILE.mcap [FILE2.mcap]`): the state, sensor and status
 samples of a service's MCAP (bridge.mcap_recorder.read_topics; a damaged recording, or one cut off by a
 kill, gives the chunks that check out, and ``health``/``damage`` say what was lost and how the session
-ended; a recording with no readable state sample is an error) and the scene it needs, described from the session's metadata (the vehicle and
-scenario files as they were when recorded; the files at those paths when they still exist).
+ended; a recording with no readable state sample is an error) and the scene it needs, described from the
+session's metadata (the vehicle and scenario files as they were when recorded; the files at those paths
+when they still exist).
 
 The page gets each recording whole (``payload``) and plays it with its own timeline; the sensor samples
 come at the state's rate (the last sensor sample at or before each state sample) to keep the page light.
