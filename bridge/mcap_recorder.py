@@ -63,6 +63,10 @@ CAN_KEYS = frozenset(("can/rx", "can/tx"))
 #: The 3D scene's topic keys (bridge.scene.SCENE_KEYS; not imported here, so that a recorder without a
 #: scene does not load the foxglove SDK).
 SCENE_KEYS = ("scene", "tf", "road")
+#: The MCAP metadata record a clean close writes when the service set ``Recorder.session_end``: how the
+#: session ended (``how``: "stopped", "model_fault", ...) and the details (string values).
+SESSION_END_METADATA = "rtsim.session_end"
+_FLUSH = object()          # queue item: push the chunk in progress to disk now (``flush_soon``)
 
 def _can_frame(payload, t_s: float) -> dict:
     if isinstance(payload, dict):
@@ -104,6 +108,7 @@ class Recorder:
         self.errors = 0         # payloads that could not be serialised (skipped)
         self.last_error: str | None = None
         self.error: BaseException | None = None   # fatal writer-thread error (I/O), re-raised by close()
+        self.session_end: dict[str, str] | None = None   # written at a clean close (SESSION_END_METADATA)
         self._closing = False
         self._closed = False
         self._close_lock = threading.Lock()
@@ -139,6 +144,10 @@ class Recorder:
             return False
         q.append((topic_key, log_time_ns, payload))
         return True
+
+    def flush_soon(self) -> None:
+        """Push the chunk in progress to disk once the messages queued so far are written (any thread)."""
+        self._queue.append((_FLUSH, 0, None))
 
     @property
     def queued(self) -> int:
@@ -238,9 +247,14 @@ class Recorder:
                     self._maybe_flush()
                     time.sleep(self._poll)
                     continue
+                if item[0] is _FLUSH:
+                    self._maybe_flush(force=True)
+                    continue
                 self._write(item)
                 self._maybe_flush()
             self._maybe_flush(force=True)   # the last chunk, counted and reported like the others
+            if self.session_end is not None:
+                self._writer.add_metadata(SESSION_END_METADATA, {str(k): str(v) for k, v in self.session_end.items()})
             self._writer.finish()
         except BaseException as e:  # I/O failure: stop; close() re-raises
             self.error = e

@@ -27,14 +27,14 @@ TOPIC_KEYS = ("sensors", "state", "status", "commands", "can/rx", "can/tx")
 EVENT_TOPIC_KEYS = ("user", "control")   # recorded by the service only (not published on Zenoh)
 OFFLINE_TOPIC_KEYS = ("energy",)    # recorded by offline runs only (rtsim.vehicle.car.energy)
 MODES = ("realtime", "lockstep", "fast")
-RUN_STATES = ("running", "paused", "stopped")
+RUN_STATES = ("running", "paused", "model_fault")    # model_fault: rtsim.service.loop's model-fault state
 COMMAND_SOURCES = ("can", "zenoh", "safe")
 FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error")
 REJECTIONS = ("dlc", "crc", "counter", "range", "unknown_id")
 USER_CAUSES = ("drive", "release", "lapse")
 CONTROL_OPS = ("pause", "resume", "step", "driver", "reset", "load_scenario")   # recorded (rtsim.service.loop)
 DRIVER_SOURCES = ("user", "ecu", "scenario", "rider", "safe", "none", "user+ecu", "rider+ecu", "none+ecu")
-STATUS_OPTIONAL = ("wall_time", "drivers", "user")
+STATUS_OPTIONAL = ("wall_time", "drivers", "user", "model_fault")
 
 # ----------------------------------------------------------------------------------------- schemas
 
@@ -105,6 +105,18 @@ def _status_props() -> dict:
         "zenoh_dropped": _count("Zenoh publications that failed (congestion control DROP)"),
         "scenario": {"type": ["string", "null"], "description": "loaded scenario, null if none"},
         "message": {"type": "string", "description": "last event, free text"},
+        "model_fault": {"type": ["object", "null"], "description": "the vehicle model's failure while run_state "
+                        "is model_fault (rtsim.model_fault.ModelFault), else null",
+                        "properties": {"reason_code": {"type": "integer", "description": "the failed step's status "
+                                                       "(SIM_DIAG.model_fault_reason)"},
+                                       "reason": {"type": "string", "description": "its name (the DBC's)"},
+                                       "message": {"type": "string", "description": "the model's message"},
+                                       "step": {"type": "integer", "description": "the failed step's number"},
+                                       "sim_time": _seconds("simulation time the failed step was to end at",
+                                                            nullable=False),
+                                       "coordinate": {"type": "string", "description": "the generalized "
+                                                      "coordinate the failure names, empty if none"}},
+                        "required": ["reason_code", "reason", "message", "step", "sim_time", "coordinate"]},
         # (optional: absent from recordings made before the user command source existed)
         "wall_time": _seconds("the service's wall clock (Unix time) when the status was made; with sim_time "
                               "it maps simulation to wall time in realtime mode (latency of observers)",

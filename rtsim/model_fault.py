@@ -57,23 +57,24 @@ class ModelFault:
                 f"(code {self.reason_code}){where}: {self.message}")
 
 
-def describe(sim, status: int, step: int) -> ModelFault:
+def describe(sim, status: int, step: int, names: dict[int, str] | None = None) -> ModelFault:
     """The ModelFault of vehicle sim ``sim`` (a car's VehicleSim, a two-wheeler's TwoWheelerHil or ride)
     whose step number ``step`` returned ``status``; ``sim.raise_status`` (or the multibody simulation's
-    own) supplies the message, its multibody data the coordinate."""
+    own) supplies the message, its multibody data the coordinate; ``names``: the reason codes' names as
+    the served DBC declares them (its SIM_DIAG.model_fault_reason values), else REASONS."""
     mbs = sim.sim
     try:
         (sim.raise_status if hasattr(sim, "raise_status") else mbs._raise)(status, step)
-        message, t = f"failed with status {status}", step * sim.dt
+        message = f"failed with status {status}"
     except SimulationError as exc:
-        message, t = str(exc), float(exc.time) if exc.time else step * sim.dt
+        message = str(exc)
     coordinate = ""
     if status in NAMED_COORDINATE:
         i = int(mbs.data.stats[ST_FAIL_INDEX])
         names = mbs.mech.coordinate_names
         coordinate = names[i] if 0 <= i < len(names) else ""
-    return ModelFault(int(status), REASONS.get(int(status), f"status_{int(status)}"), message, int(step),
-                      round(step * sim.dt, 9), coordinate)
+    reason = (names or {}).get(int(status)) or REASONS.get(int(status), f"status_{int(status)}")
+    return ModelFault(int(status), reason, message, int(step), round(step * sim.dt, 9), coordinate)
 
 
 def error_code(exc: SimulationError) -> int:

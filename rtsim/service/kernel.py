@@ -49,8 +49,8 @@ from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SEN
 NPI = 9
 # LoopState.li
 (LI_K, LI_MASK, LI_PENDING_STEPS, LI_PENDING_COUNTER, LI_STEP_COUNTER, LI_OVERRUNS, LI_BUS_ERROR,
- LI_SENT) = range(8)
-NLI = 8
+ LI_SENT, LI_MODEL_FAULT) = range(9)
+NLI = 9
 # the SIM_STATUS values (bridge.can_codec.STATUS_SOURCES order; a last slot stays 0)
 ST_MODE, ST_TIME, ST_OVERRUNS, ST_FAULT0 = 0, 1, 2, 3
 NO_STEP_COUNTER = -1
@@ -202,6 +202,27 @@ def _status_frame(lp, ls, rg, t):
     _send_logged(rg, lp.ints[PI_STATUS_ID], ls.frame_word[0], t)
 
 
+@inline_kernel
+def fault_step(lp, ls, rg, commands):
+    """One step of the model-fault state (``LI_MODEL_FAULT``: the failed step's status): the vehicle stays
+    frozen at its last good step while simulation time goes on, so the bus contract holds: the watchdog
+    keeps judging the commands (its time-outs flagged, its mask changes recorded), SIM_STATUS (with
+    ``fault_model``) and SIM_DIAG (with ``model_fault_reason``) go out at their period; no sensor frame is
+    sent (every shipped DBC's rule for its sensor frames: they stop) and no sample is published."""
+    li = ls.li
+    h = lp.dt[0]
+    k = li[LI_K]
+    mask = rx_watchdog(lp.rx, ls.rx, k * h, commands)
+    if mask != li[LI_MASK]:
+        li[LI_MASK] = mask
+        _command_event(rg, lp.rx, k * h, CMD_MASK, mask, commands, True)
+    k += 1
+    li[LI_K] = k
+    if k % lp.ints[PI_STATUS_EVERY] == 0:
+        _status_frame(lp, ls, rg, k * h)
+        li[LI_SENT] += 1
+
+
 @kernel
 def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
     """Step 2 of the module docstring, once. Returns the vehicle step's status."""
@@ -254,8 +275,10 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
 @kernel
 def loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter):
     """The module docstring's steps: frames in (if ``frames``), ``nsteps`` steps, the lockstep
-    acknowledgement (if ``ack_counter >= 0``). Returns OK or the failed step's status (the state is
-    then that of the last good step, ``LI_K`` its count). The call's own duration in processor cycles
+    acknowledgement (if ``ack_counter >= 0``). Returns OK or the failed step's status: the vehicle's state
+    is then that of the last good step, ``LI_MODEL_FAULT`` the status, the failed step's period run as the
+    first of the model-fault state (``fault_step``: ``LI_K`` counts it), and the call ends there; later
+    calls run their steps in that state until the caller clears it (a reset installs a new vehicle). The call's own duration in processor cycles
     goes to ``ls.cycles`` (how much of a loop period the compiled work takes)."""
     c0 = read_cycles()
     status = _loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter)
@@ -268,8 +291,13 @@ def _loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps
     if frames:
         take_frames(lp, ls, rg)
     for _ in range(nsteps):
+        if ls.li[LI_MODEL_FAULT] != 0:
+            fault_step(lp, ls, rg, io.commands)
+            continue
         status = one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg)
-        if status != OK:
+        if status != OK:                    # the model-fault state from this step's period on
+            ls.li[LI_MODEL_FAULT] = status
+            fault_step(lp, ls, rg, io.commands)
             return status
     if ack_counter >= 0:
         t = ls.li[LI_K] * lp.dt[0]
