@@ -31,10 +31,13 @@ RUN_STATES = ("running", "paused", "model_fault")    # model_fault: rtsim.servic
 COMMAND_SOURCES = ("can", "zenoh", "safe")
 FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error")
 REJECTIONS = ("dlc", "crc", "counter", "range", "unknown_id")
+#: the receiver's further outcomes (bridge.can_e2e; SIM_DIAG), optional: absent from older recordings
+E2E_REJECTIONS = ("repeated", "jump", "sync", "format")
+SIM_FAULTS = ("model", "second_sim")   # the simulator's own fault flags besides bus_error (SIM_STATUS)
 USER_CAUSES = ("drive", "release", "lapse")
 CONTROL_OPS = ("pause", "resume", "step", "driver", "reset", "load_scenario")   # recorded (rtsim.service.loop)
 DRIVER_SOURCES = ("user", "ecu", "scenario", "rider", "safe", "none", "user+ecu", "rider+ecu", "none+ecu")
-STATUS_OPTIONAL = ("wall_time", "drivers", "user", "model_fault")
+STATUS_OPTIONAL = ("wall_time", "drivers", "user", "foreign_frames", "model_fault")
 
 # ----------------------------------------------------------------------------------------- schemas
 
@@ -82,12 +85,28 @@ def _status_props() -> dict:
         "steal": _seconds("CPU time taken by the hypervisor (steal) over the run, null if unknown"),
         "faults": {"title": "active faults", "type": "object",
                    "description": "one flag per command's watchdog (<command>_timeout; the by-wire cars': "
-                                  f"{', '.join(FAULTS[:-1])}), bus_error, and for a car whose EPS is "
-                                  "commanded over CAN eps_safe_state (assist off, latched until a reset)",
-                   "properties": {"bus_error": {"type": "boolean", "description": "bus_error fault active"}},
+                                  f"{', '.join(FAULTS[:-1])}), bus_error, model, second_sim, and for a car whose "
+                                  "EPS is commanded over CAN eps_safe_state (assist off, latched until a reset)",
+                   "properties": {
+                       "bus_error": {"type": "boolean", "description": "bus_error fault active"},
+                       "model": {"type": "boolean", "description": "the vehicle model has failed and is frozen "
+                                                                   "until a reset (SIM_STATUS.fault_model)"},
+                       "second_sim": {"type": "boolean",
+                                      "description": "frames with this simulator's own ids that it did not send "
+                                                     "arrived within the last second of simulation time: a second "
+                                                     "simulator on the bus (SIM_STATUS.fault_second_sim)"}},
                    "required": ["bus_error"], "additionalProperties": {"type": "boolean"}},
         "rejected": _obj("rejected CAN frames by reason",
-                         {r: _count(f"frames rejected: {r}") for r in REJECTIONS}, REJECTIONS),
+                         {**{r: _count(f"frames rejected: {r}") for r in REJECTIONS},
+                          "repeated": _count("authentic command frames rejected: alive counter repeated (a frozen "
+                                             "sender), whatever the time since the last good frame (part of counter)"),
+                          "jump": _count("authentic command frames rejected: alive counter jumped beyond the allowed "
+                                         "step while in sequence; starts a re-synchronisation (part of counter)"),
+                          "sync": _count("authentic command frames in sequence not taken while the command "
+                                         "re-synchronises after a time-out or a jump (DBC attribute E2ESyncCounter)"),
+                          "format": _count("frames with a command's or SIM_STEP_REQ's id that are not classic "
+                                           "standard-id data frames (extended id, remote, CAN FD)")},
+                         REJECTIONS),
         "accepted_frames": _count("CAN frames accepted"),
         "bus_errors": _count("CAN bus errors"),
         "recorder": {
@@ -138,6 +157,9 @@ def _status_props() -> dict:
                      "accepted": {"type": "boolean", "description": "the service accepts user commands"}},
                  "required": ["channels", "takeover", "seq", "requests", "accepted"],
                  "additionalProperties": False},
+        # (optional: absent from recordings made before the second-simulator check)
+        "foreign_frames": _count("frames with one of this simulator's own ids (sensor, status, diagnostics, "
+                                 "acknowledgement) that it did not send (faults.second_sim)"),
     }
 
 

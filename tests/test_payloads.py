@@ -24,7 +24,8 @@ STATUS_FIELDS = ["time", "vehicle_id", "mode", "run_state", "sim_time", "steps",
                  "skipped_steps", "catch_up_steps", "stalls", "lateness_p50", "lateness_p99",
                  "lateness_max", "cpu_p50", "cpu_p99", "cpu_max", "steal", "faults", "rejected",
                  "accepted_frames", "bus_errors", "recorder", "zenoh_dropped", "scenario", "message"]
-STATUS_OPTIONAL = ["wall_time", "drivers", "user"]     # the user command source's (absent from older recordings)
+STATUS_OPTIONAL = ["wall_time", "drivers", "user",     # the user command source's (absent from older recordings)
+                   "foreign_frames"]                   # the second-simulator check's (likewise)
 
 
 def strict_loads(b: bytes):

@@ -31,8 +31,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bridge.can_codec import Codec, CommandReceiver
-from bridge.can_e2e import C_STEP_IGNORED, C_STEP_REJECTED, IV_HAS_VALUE, IV_TIMED_OUT
+from bridge.can_codec import DIAG_SOURCES, Codec, CommandReceiver
+from bridge.can_e2e import (C_STEP_IGNORED, C_STEP_REJECTED, G_FOREIGN_T, IV_HAS_VALUE, IV_TIMED_OUT,
+                            SECOND_SIM_HOLD)
 from bridge.payloads import CONTROL_OPS
 from drivers.base import INPUT_NAMES, INPUT_UNITS, LIMITS, NINPUT, NSTATE
 from drivers.driver import Driver
@@ -42,10 +43,11 @@ from rtsim.mbs.model import OK
 from rtsim.model_fault import ModelFault, describe, force_failure, test_fault_step
 from rtsim.realtime.health import LoopHealth
 
-from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_MODEL_FAULT, LI_OVERRUNS, LI_PENDING_COUNTER, LI_PENDING_STEPS,
-                     LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, PI_ACK_ID, PI_DRIVER, PI_LOCKSTEP,
-                     PI_MODE_CODE, PI_SENSOR_EVERY, PI_STATE_EVERY, PI_STATUS_EVERY, PI_STATUS_ID,
-                     PI_STEP_REQ_ID, ST_FAULT0, LoopParams, LoopState, loop_run)
+from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_MODEL_FAULT, LI_OVERRUNS, LI_PENDING_COUNTER,
+                     LI_PENDING_STEPS, LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, NST_AFTER_FAULTS, PI_ACK_ID,
+                     PI_DIAG_ID, PI_DRIVER, PI_LOCKSTEP, PI_MODE_CODE, PI_SENSOR_EVERY, PI_STATE_EVERY,
+                     PI_STATUS_EVERY, PI_STATUS_ID, PI_STEP_REQ_ID, ST_BUS_ERROR, ST_FAULT0, ST_RANGE, LoopParams,
+                     LoopState, loop_run)
 from .rings import Rings, RxWriter, make_rings
 from .user_input import NUSR, NWORK, TWO_WHEELER_BUS, USER_HOLD, check_value, user_channels
 
@@ -179,29 +181,31 @@ class HilLoop:
         self.state_every = max(1, int(round(1.0 / (self.state_rate * self.dt))))
         sim.seed_sensor_noise(0)          # reproducible sensor noise: a session replays bit for bit
         lay = c.sensor_layout()
-        status = c.frame_layout(c.status_frame.name, c.status_sources)
+        status = c.status_layout()                    # SIM_STATUS and SIM_DIAG
         ack = c.frame_layout(c.step_ack.name, ("lockstep_sim_time", "lockstep_ack_counter"))
         ints = np.zeros(NPI, dtype=np.int64)
         ints[PI_SENSOR_EVERY], ints[PI_STATE_EVERY], ints[PI_STATUS_EVERY] = \
             self.sensor_every, self.state_every, self.status_every
         ints[PI_LOCKSTEP] = self.mode == "lockstep"
         ints[PI_MODE_CODE] = c.modes[self.mode]
-        ints[PI_STEP_REQ_ID], ints[PI_STATUS_ID], ints[PI_ACK_ID] = \
-            c.step_request.frame_id, c.status_frame.frame_id, c.step_ack.frame_id
+        ints[PI_STEP_REQ_ID], ints[PI_STATUS_ID], ints[PI_ACK_ID], ints[PI_DIAG_ID] = \
+            c.step_request.frame_id, c.status_frame.frame_id, c.step_ack.frame_id, c.diag_frame.frame_id
         ints[PI_DRIVER] = bool(np.any(drv_slot >= 0)) if car else sim.rider_on
         usr_slot, usr_rx = self._user_slots(sim)
         faults = self.rx.fault_names
         sources = c.status_sources
-        assert sources[ST_FAULT0 + len(faults)] == "fault_bus_error"
+        assert sources[ST_FAULT0 + len(faults) + ST_BUS_ERROR] == "fault_bus_error"
+        assert sources[ST_FAULT0 + len(faults) + ST_RANGE] == "rejected_range"
+        assert len(sources) + len(DIAG_SOURCES) == ST_FAULT0 + len(faults) + NST_AFTER_FAULTS
         self.lp = LoopParams(self.rx.plan, ints, np.array([self.dt]), lay["frame_id"], lay["time_start"],
                              lay["time_mask"], lay["sig_int"], lay["sig_float"], status["sig_int"],
-                             status["sig_float"], ack["sig_int"], ack["sig_float"], np.zeros(1, dtype=np.int64),
+                             status["sig_float"], ack["sig_int"], ack["sig_float"], np.zeros(2, dtype=np.int64),
                              np.array([sources.index(f"fault_{f}") for f in faults], dtype=np.int64),
                              self.frame_every, self.driver.packed, self.driver.speed, self.driver.path,
                              self.driver.flags, drv_slot, usr_slot, usr_rx)
         self.ls = LoopState(self.rx.state, self.li, np.zeros(sim.nsensor), np.zeros(sim.nstate),
-                            np.zeros(len(sources) + 1), np.zeros(3),
-                            np.zeros(len(lay["frame_id"]), dtype=np.int64), np.zeros(1, dtype=np.int64),
+                            np.zeros(len(sources) + len(DIAG_SOURCES) + 1), np.zeros(3),
+                            np.zeros(len(lay["frame_id"]), dtype=np.int64), np.zeros(2, dtype=np.int64),
                             self.cycles, np.zeros(NSTATE), np.zeros(NINPUT), np.full(NINPUT, np.nan),
                             np.full(NUSR, np.nan), np.zeros(1, dtype=np.int64), np.zeros(NWORK))
         self._usr_deadline = None
@@ -367,6 +371,8 @@ class HilLoop:
         f = {name: False for name in self.codec.faults}
         f.update(self.rx.faults)
         f["bus_error"] = self._bus_error()
+        f["model"] = bool(self.li[LI_MODEL_FAULT])
+        f["second_sim"] = bool(self.sim_time - self.rx.state.g[G_FOREIGN_T] <= SECOND_SIM_HOLD)
         if self.external_eps:
             f["eps_safe_state"] = self.sim.eps_fault      # latched: assist off until a reset
         return f
@@ -621,7 +627,10 @@ class HilLoop:
             "cpu_max": h.max_cpu if h.samples else None,
             "steal": h.steal_seconds(),
             "faults": self.faults(),
-            "rejected": {k: counters[k] for k in ("dlc", "crc", "counter", "range", "unknown_id")},
+            "rejected": {**{k: counters[k] for k in ("dlc", "crc", "counter", "range", "unknown_id", "sync",
+                                                     "format")},
+                         "repeated": counters["counter_repeated"], "jump": counters["counter_jump"]},
+            "foreign_frames": counters["foreign_frames"],
             "accepted_frames": self.rx.accepted,
             "bus_errors": self.port.errors if self.port is not None else 0,
             "recorder": None if rec is None else {"path": str(rec.path), "written": rec.written,
