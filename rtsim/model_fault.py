@@ -68,13 +68,16 @@ def describe(sim, status: int, step: int, names: dict[int, str] | None = None) -
         message = f"failed with status {status}"
     except SimulationError as exc:
         message = str(exc)
-    coordinate = ""
-    if status in NAMED_COORDINATE:
-        i = int(mbs.data.stats[ST_FAIL_INDEX])
-        names = mbs.mech.coordinate_names
-        coordinate = names[i] if 0 <= i < len(names) else ""
+    coordinate = _coordinate(mbs) if status in NAMED_COORDINATE else ""
     reason = (names or {}).get(int(status)) or REASONS.get(int(status), f"status_{int(status)}")
     return ModelFault(int(status), reason, message, int(step), round(step * sim.dt, 9), coordinate)
+
+
+def _coordinate(mbs) -> str:
+    """The generalized coordinate a multibody simulation's last failure names (its fail index)."""
+    i = int(mbs.data.stats[ST_FAIL_INDEX])
+    coords = mbs.mech.coordinate_names
+    return coords[i] if 0 <= i < len(coords) else ""
 
 
 def error_code(exc: SimulationError) -> int:
@@ -96,11 +99,7 @@ def describe_error(sim, exc: SimulationError, step: int) -> ModelFault:
     """The ModelFault of an offline run whose step number ``step`` raised ``exc`` (``sim`` holds the
     multibody simulation as ``sim.sim``: the coordinate)."""
     code = error_code(exc)
-    coordinate = ""
-    if code in NAMED_COORDINATE:
-        i = int(sim.sim.data.stats[ST_FAIL_INDEX])
-        names = sim.sim.mech.coordinate_names
-        coordinate = names[i] if 0 <= i < len(names) else ""
+    coordinate = _coordinate(sim.sim) if code in NAMED_COORDINATE else ""
     return ModelFault(code, REASONS.get(code, f"status_{code}"), str(exc), int(step), round(step * sim.dt, 9),
                       coordinate)
 
