@@ -100,16 +100,17 @@ def test_model_fault_keeps_the_bus_contract_and_reset_recovers(segment, tmp_path
     monkeypatch.setenv(TEST_FAULT_ENV, repr(fault_at))
     iface, chan = segment
     rec = tmp_path / "fault.mcap"
-    svc = ServiceProcess(iface, chan, "--zenoh-listen", "tcp/127.0.0.1:0", "--record", str(rec),
-                         "--max-catch-up", "100000", "--json")
-    endpoint = re.search(r"Zenoh:\s+(tcp/127\.0\.0\.1:\d+)", svc.output).group(1)
-    status: list[dict] = []
-    client = ZenohClient("xbw", connect=(endpoint,))
-    client.subscribe("status", status.append)
-    bus = open_bus(iface, chan)
+    bus = open_bus(iface, chan)                         # listening before the service sends its first frame
     listener = Listener(bus, SENSOR_IDS)
+    svc = client = None
     ctr = [0]
+    status: list[dict] = []
     try:
+        svc = ServiceProcess(iface, chan, "--zenoh-listen", "tcp/127.0.0.1:0", "--record", str(rec),
+                             "--max-catch-up", "10000", "--json")
+        endpoint = re.search(r"Zenoh:\s+(tcp/127\.0\.0\.1:\d+)", svc.output).group(1)
+        client = ZenohClient("xbw", connect=(endpoint,))
+        client.subscribe("status", status.append)
         ecu = lambda: _send_command(bus, ctr)            # noqa: E731  (a command every tick: counted throughout)
         _wait(lambda: any(s["run_state"] == "model_fault" and s["sim_time"] >= fault_at + 2.0 for s in status),
               "2 s of simulated time in the model-fault state", ecu)
@@ -122,10 +123,12 @@ def test_model_fault_keeps_the_bus_contract_and_reset_recovers(segment, tmp_path
               "sensor frames and a running status after the reset", ecu)
         rc, _ = svc.stop(signal.SIGTERM)
     finally:
-        client.close()
+        if client is not None:
+            client.close()
         listener.close()
         bus.shutdown()
-        svc.close()
+        if svc is not None:
+            svc.close()
     assert rc == 0, svc.output
     frames = listener.frames
     st = _status_frames(frames, db)
@@ -142,8 +145,10 @@ def test_model_fault_keeps_the_bus_contract_and_reset_recovers(segment, tmp_path
     first_fault = next(j for j, t, flag, _ in before if flag)
     sensor_before = [int.from_bytes(d[0:2], "little") for _, i, d in frames[:first_fault] if i in SENSOR_IDS]
     assert max(sensor_before) == fault_step - 2
-    between = frames[first_fault:after[0][0]]
+    between = frames[first_fault:before[-1][0]]          # up to the last status before the reset
     assert not [i for _, i, _ in between if i in SENSOR_IDS]
+    resumed = next(d for _, i, d in frames[first_fault:] if i in SENSOR_IDS)
+    assert int.from_bytes(resumed[0:2], "little") == 2  # the first sensor frame after the failure: the reset's
     # after the reset: flags clear, sensor frames again from the new start
     assert all(flag == 0 and reason == 0 for _, _, flag, reason in after)
     sensor_after = [int.from_bytes(d[0:2], "little") for _, i, d in frames[after[0][0]:] if i in SENSOR_IDS]
