@@ -124,19 +124,6 @@ def _status_props() -> dict:
         "zenoh_dropped": _count("Zenoh publications that failed (congestion control DROP)"),
         "scenario": {"type": ["string", "null"], "description": "loaded scenario, null if none"},
         "message": {"type": "string", "description": "last event, free text"},
-        "model_fault": {"type": ["object", "null"], "description": "the vehicle model's failure while run_state "
-                        "is model_fault (rtsim.model_fault.ModelFault), else null",
-                        "properties": {"reason_code": {"type": "integer", "description": "the failed step's status "
-                                                       "(SIM_DIAG.model_fault_reason)"},
-                                       "reason": {"type": "string", "description": "its name (the DBC's)"},
-                                       "message": {"type": "string", "description": "the model's message"},
-                                       "step": {"type": "integer", "description": "the failed step's number"},
-                                       "sim_time": _seconds("simulation time the failed step was to end at",
-                                                            nullable=False),
-                                       "coordinate": {"type": "string", "description": "the generalized "
-                                                      "coordinate the failure names, empty if none"}},
-                        "required": ["reason_code", "reason", "message", "step", "sim_time", "coordinate"]},
-        # (optional: absent from recordings made before the user command source existed)
         "wall_time": _seconds("the service's wall clock (Unix time) when the status was made; with sim_time "
                               "it maps simulation to wall time in realtime mode (latency of observers)",
                               nullable=False),
@@ -160,6 +147,19 @@ def _status_props() -> dict:
         # (optional: absent from recordings made before the second-simulator check)
         "foreign_frames": _count("frames with one of this simulator's own ids (sensor, status, diagnostics, "
                                  "acknowledgement) that it did not send (faults.second_sim)"),
+        "model_fault": {"type": ["object", "null"], "description": "the vehicle model's failure while run_state "
+                        "is model_fault (rtsim.model_fault.ModelFault), else null",
+                        "properties": {"reason_code": {"type": "integer", "description": "the failed step's status "
+                                                       "(SIM_DIAG.model_fault_reason)"},
+                                       "reason": {"type": "string", "description": "its name (the DBC's)"},
+                                       "message": {"type": "string", "description": "the model's message"},
+                                       "step": {"type": "integer", "description": "the failed step's number"},
+                                       "sim_time": _seconds("simulation time the failed step was to end at",
+                                                            nullable=False),
+                                       "coordinate": {"type": "string", "description": "the generalized "
+                                                      "coordinate the failure names, empty if none"}},
+                        "required": ["reason_code", "reason", "message", "step", "sim_time", "coordinate"]},
+        # (optional: absent from recordings made before the user command source existed)
     }
 
 
