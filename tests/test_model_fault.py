@@ -238,12 +238,14 @@ def test_lockstep_model_fault_acknowledges_steps_and_the_recording_says_how_it_e
     assert rep["model_fault"]["step"] == 500 and rep["recorded_model_fault"]["step"] == 500
 
 
-def test_offline_run_writes_the_rows_up_to_the_failure_and_exits_non_zero(tmp_path):
+@pytest.mark.parametrize("scenario, coordinate", [("straight_line", "chassis.x"),        # the car
+                                                  ("motorcycle_steady_turn", "p.x")])     # the two-wheeler's ride
+def test_offline_run_writes_the_rows_up_to_the_failure_and_exits_non_zero(tmp_path, scenario, coordinate):
     """`rtsim run` with a forced failure at 0.5 s: the CSV holds every row up to it (rows at the scenario's
     output rate from 0 to the last good row), the failure's step, time, reason and coordinate beside it,
     one line on stderr, exit status 3."""
     out = tmp_path / "run.csv"
-    proc = subprocess.run([sys.executable, "-m", "rtsim.cli", "run", "--scenario", "configs/scenarios/straight_line.toml",
+    proc = subprocess.run([sys.executable, "-m", "rtsim.cli", "run", "--scenario", f"configs/scenarios/{scenario}.toml",
                            "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=PROCESS,
                           env={**__import__("os").environ, TEST_FAULT_ENV: "0.5"})
     assert proc.returncode == 3, proc.stderr
@@ -256,5 +258,5 @@ def test_offline_run_writes_the_rows_up_to_the_failure_and_exits_non_zero(tmp_pa
     assert t[0] == 0.0 and np.allclose(np.diff(t), dt_row)
     assert t[-1] < 0.5 <= t[-1] + dt_row + 1e-9          # every row before the failed step, none after
     fault = json.loads(out.with_suffix(".model_fault.json").read_text())
-    assert (fault["step"], fault["reason_code"], fault["coordinate"]) == (500, NONFINITE_FORCE, "chassis.x")
+    assert (fault["step"], fault["reason_code"], fault["coordinate"]) == (500, NONFINITE_FORCE, coordinate)
     assert fault["sim_time"] == pytest.approx(0.5)

@@ -19,6 +19,10 @@
    sending at its own period; the observer state; the SIM_STATUS frame;
 3. (``ack_counter >= 0``) the SIM_STEP_ACK frame.
 
+After a failed vehicle step (``LI_MODEL_FAULT`` holds its status) step 2 is ``fault_step``: the vehicle
+frozen, time going on, the watchdog, SIM_STATUS and SIM_DIAG at their period, no sensor frame or sample
+(the model-fault state, rtsim.service.loop).
+
 One call instead of several matters: each call from Python unboxes the model and state tuples (about
 a hundred arrays, several microseconds), more than the checks, the sensors and the packing cost.
 Times are simulation times: ``k`` steps of ``dt`` s. The vehicle is any the service can serve: its
