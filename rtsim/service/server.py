@@ -276,11 +276,12 @@ class Service:
             self.outbox.status_now(flush_recording=True)
 
     def session_end(self) -> dict[str, str]:
-        """How the session ended (the recording's ``rtsim.session_end`` metadata): ``how`` ("stopped", or
-        "model_fault" when the model was in the fault state at the close, then the fault's fields)."""
+        """How the session ended (the recording's ``rtsim.session_end`` metadata, string values): ``how``
+        ("stopped", or "model_fault" when the model was in the fault state at the close, then the fault's
+        fields: reason_code, reason, message, step, sim_time, coordinate) and ``end_sim_time`` (s)."""
         fault = self.loop.model_fault if hasattr(self, "loop") else None
         end = {"how": "model_fault" if fault is not None else "stopped",
-               "sim_time": repr(self.loop.sim_time) if hasattr(self, "loop") else "0.0"}
+               "end_sim_time": repr(self.loop.sim_time) if hasattr(self, "loop") else "0.0"}
         if fault is not None:
             end.update({k: str(v) if not isinstance(v, float) else repr(v) for k, v in fault.as_dict().items()})
         return end
