@@ -303,8 +303,9 @@ def loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps,
     acknowledgement (if ``ack_counter >= 0``). Returns OK or the failed step's status: the vehicle's state
     is then that of the last good step, ``LI_MODEL_FAULT`` the status, the failed step's period run as the
     first of the model-fault state (``fault_step``: ``LI_K`` counts it), and the call ends there; later
-    calls run their steps in that state until the caller clears it (a reset installs a new vehicle). The call's own duration in processor cycles
-    goes to ``ls.cycles`` (how much of a loop period the compiled work takes)."""
+    calls run their steps in that state until the caller clears it (a reset installs a new vehicle). The
+    call's own duration in processor cycles goes to ``ls.cycles`` (how much of a loop period the compiled
+    work takes)."""
     c0 = read_cycles()
     status = _loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter)
     ls.cycles[ls.li[LI_K] % ls.cycles.shape[0]] = read_cycles() - c0
