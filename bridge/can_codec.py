@@ -55,11 +55,18 @@ DEFAULT_DBC = Path(__file__).resolve().parent.parent / "configs" / "can" / "xbw.
 
 TIME_SIGNAL = "sim_time_ms"
 STATUS_FRAME = "SIM_STATUS"
+DIAG_FRAME = "SIM_DIAG"               # diagnostics, sent right after SIM_STATUS: model fault reason, E2E counters
 STEP_REQUEST_FRAME = "SIM_STEP_REQ"   # lockstep: ECU asks for n steps (event frame, E2E protected)
 STEP_ACK_FRAME = "SIM_STEP_ACK"       # lockstep: SIM answers with the time reached (event frame)
 EVENT_FRAMES = frozenset((STEP_REQUEST_FRAME, STEP_ACK_FRAME))
-FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error")   # the by-wire cars' (Codec.faults)
+#: the status frame's fault flags (the by-wire cars'; Codec.faults): each command's watchdog, the bus, the
+#: vehicle model (failed and frozen), a second simulator on the bus (frames with this simulator's ids)
+FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error", "model", "second_sim")
+SIM_FAULTS = ("bus_error", "model", "second_sim")   # after the commands' time-out flags, in every DBC
 REJECT_KINDS = ("dlc", "crc", "counter", "range")
+#: the SIM_DIAG signals, in the order the compiled step hands them to ``pack_frames`` (after the status values)
+DIAG_SOURCES = ("model_fault_reason", "rejected_repeated", "rejected_jump", "rejected_sync", "rejected_format",
+                "foreign_frames", "accepted_frames")
 #: What the watchdog applies when a command times out.
 SAFE_POLICY = {
     "throttle_angle_cmd": "zero",
@@ -260,7 +267,7 @@ class Codec:
                               f"expected {list(command_names)}")
         self._cmd_by_frame_name = {p[0].name: n for n, p in self._cmd_plans.items()}
         #: the status frame's fault flags: each command's watchdog (in the commands' order), the bus
-        self.faults = (*(f"{self._cmd_plans[n][5]}_timeout" for n in command_names), "bus_error")
+        self.faults = (*(f"{self._cmd_plans[n][5]}_timeout" for n in command_names), *SIM_FAULTS)
         #: the SIM_STATUS values in the order the compiled step hands them to ``pack_frames``
         self.status_sources = ("mode", "sim_time", "loop_overruns", *(f"fault_{f}" for f in self.faults),
                                *(f"rejected_{k}" for k in REJECT_KINDS))
@@ -268,6 +275,17 @@ class Codec:
         missing = [n for n in self.status_sources if n not in status_names]
         if missing:
             raise ConfigError(f"{where}: {STATUS_FRAME} lacks the signals {', '.join(missing)}")
+        if DIAG_FRAME not in self.frames:
+            raise ConfigError(f"{where}: no {DIAG_FRAME} frame")
+        self.diag_frame = self.frames[DIAG_FRAME]
+        missing = [n for n in DIAG_SOURCES if n not in {s_.name for s_ in self.diag_frame.signals}]
+        if missing:
+            raise ConfigError(f"{where}: {DIAG_FRAME} lacks the signals {', '.join(missing)}")
+        if self.diag_frame.period != self.status_frame.period:
+            raise ConfigError(f"{where}: {DIAG_FRAME} must have the cycle time of {STATUS_FRAME}")
+        reason_sig = self.db.get_message_by_name(DIAG_FRAME).get_signal_by_name("model_fault_reason")
+        #: model failure status code -> its name (the DBC's VAL_ table of model_fault_reason)
+        self.model_fault_reasons = {int(k): str(v) for k, v in (reason_sig.choices or {}).items()}
 
         # lockstep request/acknowledgement
         for name in EVENT_FRAMES:
@@ -282,6 +300,10 @@ class Codec:
         by = {s_.name: s_ for s_ in ack.signals}
         self.step_ack = ack
         self._step_ack_plan = (ack, by["lockstep_sim_time"], by["lockstep_ack_counter"])
+        #: every id this simulator sends (sensor frames, status, diagnostics, lockstep acknowledgement): one of
+        #: them received from the bus was sent by someone else (a second simulator: SIM_STATUS.fault_second_sim)
+        self.own_frame_ids = tuple(sorted({f.frame_id for f in self.sensor_frames} | {
+            self.status_frame.frame_id, self.diag_frame.frame_id, ack.frame_id}))
 
     # -- sensors ------------------------------------------------------------------------------------
     def encode_sensors(self, values: Mapping[str, float] | Sequence[float], sim_time: float
@@ -333,6 +355,19 @@ class Codec:
         for s in self.status_frame.signals:
             word |= _encode_raw(s, float(vals.get(s.name, 0))) << s.start
         return self.status_frame.frame_id, word.to_bytes(8, "little")
+
+    def encode_diag(self, model_fault_reason: int = 0, counts: Mapping[str, int] | None = None) -> tuple[int, bytes]:
+        """The SIM_DIAG frame: the model's failure status code (0: none) and ``counts`` by DIAG_SOURCES
+        name without the ``rejected_`` prefix (``repeated``, ``jump``, ``sync``, ``format``,
+        ``foreign_frames``, ``accepted_frames``), each sent modulo 2**length."""
+        counts = counts or {}
+        vals = {"model_fault_reason": model_fault_reason}
+        for name in DIAG_SOURCES[1:]:
+            vals[name] = counts.get(name.removeprefix("rejected_"), 0)
+        word = 0
+        for s in self.diag_frame.signals:
+            word |= _encode_raw(s, float(vals.get(s.name, 0))) << s.start
+        return self.diag_frame.frame_id, word.to_bytes(8, "little")
 
     # -- commands -----------------------------------------------------------------------------------
     def _cmd_name(self, name: str) -> str:
@@ -411,6 +446,16 @@ class Codec:
         index = {n: j for j, n in enumerate(sources)}
         return _layout([(f.frame_id, 0, 0)], [(0, index.get(s_.name, len(sources)), s_) for s_ in f.signals])
 
+    def status_layout(self) -> dict[str, np.ndarray]:
+        """SIM_STATUS (frame 0) and SIM_DIAG (frame 1) as arrays for ``pack_frames``, from one value
+        array: ``status_sources`` then ``DIAG_SOURCES``, then a last value that stays 0 (signals
+        named in neither)."""
+        sources = (*self.status_sources, *DIAG_SOURCES)
+        index = {n: j for j, n in enumerate(sources)}
+        sigs = [(0, index.get(s_.name, len(sources)), s_) for s_ in self.status_frame.signals]
+        sigs += [(1, index.get(s_.name, len(sources)), s_) for s_ in self.diag_frame.signals]
+        return _layout([(self.status_frame.frame_id, 0, 0), (self.diag_frame.frame_id, 0, 0)], sigs)
+
     def command_plan(self, name: str):
         """(FrameInfo, value signal, counter signal, crc signal, data id, fault prefix) of a command."""
         return self._cmd_plans[self._cmd_name(name)]
@@ -425,6 +470,9 @@ def _layout(frames, sigs) -> dict[str, np.ndarray]:
                                 dtype=np.int64).reshape(-1, 6),
             "sig_float": np.array([(s_.factor, s_.offset, s_.minimum, s_.maximum, 1.0 if s_.wrap else 0.0)
                                    for _, _, s_ in sigs], dtype=np.float64).reshape(-1, 5)}
+
+
+_NOT_REJECTIONS = ("accepted", "lockstep_rejected", "lockstep_ignored")
 
 
 class CommandReceiver:
@@ -521,9 +569,11 @@ class CommandReceiver:
     # -- reading --------------------------------------------------------------------------------------
     @property
     def counters(self) -> dict[str, int]:
-        """Rejections by kind (``unknown_id``, ``dlc``, ``crc``, ``counter``, ``range``,
-        ``counter_repeated``, ``counter_jump``, ``clamped``); a snapshot."""
-        return {k: int(v) for k, v in zip(e2e.COUNTER_NAMES[:e2e.C_ACCEPTED], self.state.counts)}
+        """Outcomes by kind but the accepted frames (``unknown_id``, ``dlc``, ``crc``, ``counter``,
+        ``range``, ``counter_repeated``, ``counter_jump``, ``clamped``, ``sync``, ``format``,
+        ``foreign_frames``); a snapshot."""
+        return {k: int(v) for k, v in zip(e2e.COUNTER_NAMES, self.state.counts)
+                if k not in _NOT_REJECTIONS}
 
     @property
     def accepted(self) -> int:

@@ -11,7 +11,8 @@ Arrays (built by ``bridge.can_codec.CommandReceiver`` from the DBC):
   CRC table, and ``step`` (``SP_*``: the SIM_STEP_REQ frame's layout);
 * ``RxState``: per command ``fv`` (value, time of the last valid frame, s) and ``iv`` (flags, last
   counter), ``counts`` (``C_*``: rejections by kind, accepted frames) and ``g`` (``G_*``: the session
-  start t0 in s, the brake hold pressure in kPa).
+  start t0 in s, the brake hold pressure in kPa, the time in s of the last frame with one of the
+  simulator's own ids that someone else sent, -inf for none).
 
 A frame's payload is a uint8 row and its length; nothing here allocates or raises.
 """
@@ -42,13 +43,18 @@ NSP = 9
 # state, per command
 FV_VALUE, FV_LAST_T = range(2)
 IV_HAS_VALUE, IV_HAS_T, IV_COUNTER, IV_HAS_COUNTER, IV_TIMED_OUT = range(5)
+NIV = 5
 # counters
 COUNTER_NAMES = ("unknown_id", "dlc", "crc", "counter", "range", "counter_repeated", "counter_jump", "clamped",
-                 "accepted", "lockstep_rejected", "lockstep_ignored")
+                 "accepted", "lockstep_rejected", "lockstep_ignored", "sync", "format", "foreign_frames")
 (C_UNKNOWN, C_DLC, C_CRC, C_COUNTER, C_RANGE, C_REPEATED, C_JUMP, C_CLAMPED, C_ACCEPTED, C_STEP_REJECTED,
- C_STEP_IGNORED) = range(len(COUNTER_NAMES))
+ C_STEP_IGNORED, C_SYNC, C_FORMAT, C_FOREIGN) = range(len(COUNTER_NAMES))
 # globals
-G_T0, G_HOLD_PRESSURE = range(2)
+G_T0, G_HOLD_PRESSURE, G_FOREIGN_T = range(3)
+NG = 3
+#: s of simulation time a frame with one of the simulator's own ids, sent by someone else, keeps the
+#: second-simulator fault set (SIM_STATUS.fault_second_sim)
+SECOND_SIM_HOLD = 1.0
 
 # results of rx_command
 RX_REJECTED = -1          # counted rejection (or an unknown id)
@@ -63,15 +69,16 @@ class RxPlan(NamedTuple):
 
 class RxState(NamedTuple):
     fv: np.ndarray        # (ncmd, 2) float64
-    iv: np.ndarray        # (ncmd, 5) int64
+    iv: np.ndarray        # (ncmd, NIV) int64
     counts: np.ndarray    # (len(COUNTER_NAMES),) int64
-    g: np.ndarray         # (2,) float64
+    g: np.ndarray         # (NG,) float64
 
 
 def make_state(ncmd: int, hold_pressure: float) -> RxState:
-    st = RxState(np.zeros((ncmd, 2)), np.zeros((ncmd, 5), dtype=np.int64),
-                 np.zeros(len(COUNTER_NAMES), dtype=np.int64), np.zeros(2))
+    st = RxState(np.zeros((ncmd, 2)), np.zeros((ncmd, NIV), dtype=np.int64),
+                 np.zeros(len(COUNTER_NAMES), dtype=np.int64), np.zeros(NG))
     st.g[G_HOLD_PRESSURE] = hold_pressure
+    st.g[G_FOREIGN_T] = -np.inf
     return st
 
 
@@ -186,6 +193,7 @@ def rx_reset(st, t0):
     st.fv[:] = 0.0
     st.iv[:] = 0
     st.g[G_T0] = t0
+    st.g[G_FOREIGN_T] = -np.inf
 
 
 @kernel

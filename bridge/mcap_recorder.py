@@ -57,6 +57,11 @@ CAN_KEYS = frozenset(("can/rx", "can/tx"))
 #: The 3D scene's topic keys (bridge.scene.SCENE_KEYS; not imported here, so that a recorder without a
 #: scene does not load the foxglove SDK).
 SCENE_KEYS = ("scene", "tf", "road")
+#: The MCAP metadata record a clean close writes when the service set ``Recorder.session_end``, last: ``how``
+#: ("stopped", "model_fault") and, for a fault, ``reason_code``, ``reason``, ``message``, ``step``,
+#: ``sim_time``, ``coordinate``, plus ``end_sim_time`` (string values).
+SESSION_END_METADATA = "rtsim.session_end"
+_FLUSH = object()          # queue item: push the chunk in progress to disk now (``flush_soon``)
 
 def _can_frame(payload, t_s: float) -> dict:
     if isinstance(payload, dict):
@@ -98,6 +103,7 @@ class Recorder:
         self.errors = 0         # payloads that could not be serialised (skipped)
         self.last_error: str | None = None
         self.error: BaseException | None = None   # fatal writer-thread error (I/O), re-raised by close()
+        self.session_end: dict[str, str] | None = None   # written at a clean close (SESSION_END_METADATA)
         self._closing = False
         self._closed = False
         self._close_lock = threading.Lock()
@@ -133,6 +139,10 @@ class Recorder:
             return False
         q.append((topic_key, log_time_ns, payload))
         return True
+
+    def flush_soon(self) -> None:
+        """Push the chunk in progress to disk once the messages queued so far are written (any thread)."""
+        self._queue.append((_FLUSH, 0, None))
 
     @property
     def queued(self) -> int:
@@ -232,9 +242,14 @@ class Recorder:
                     self._maybe_flush()
                     time.sleep(self._poll)
                     continue
+                if item[0] is _FLUSH:
+                    self._maybe_flush(force=True)
+                    continue
                 self._write(item)
                 self._maybe_flush()
             self._maybe_flush(force=True)   # the last chunk, counted and reported like the others
+            if self.session_end is not None:
+                self._writer.add_metadata(SESSION_END_METADATA, {str(k): str(v) for k, v in self.session_end.items()})
             self._writer.finish()
         except BaseException as e:  # I/O failure: stop; close() re-raises
             self.error = e
@@ -269,9 +284,6 @@ class Recorder:
 # (the walk over a file's records, damaged or not, is bridge.mcap_scan; what it could not read is reported by
 # RecordingInfo.damage and .health_line)
 
-#: The MCAP metadata record a recorder closed cleanly writes last: ``how`` ("stopped", "model_fault") and, for
-#: a fault, ``reason_code``, ``reason``, ``message``, ``step``, ``sim_time``, ``coordinate`` (strings).
-SESSION_END_METADATA = "rtsim.session_end"
 _FAULT_KEYS = ("reason_code", "reason", "message", "step", "sim_time", "coordinate")
 
 

@@ -27,14 +27,17 @@ TOPIC_KEYS = ("sensors", "state", "status", "commands", "can/rx", "can/tx")
 EVENT_TOPIC_KEYS = ("user", "control")   # recorded by the service only (not published on Zenoh)
 OFFLINE_TOPIC_KEYS = ("energy",)    # recorded by offline runs only (rtsim.vehicle.car.energy)
 MODES = ("realtime", "lockstep", "fast")
-RUN_STATES = ("running", "paused", "stopped")
+RUN_STATES = ("running", "paused", "model_fault")    # model_fault: rtsim.service.loop's model-fault state
 COMMAND_SOURCES = ("can", "zenoh", "safe")
 FAULTS = ("throttle_timeout", "brake_timeout", "steer_timeout", "bus_error")
 REJECTIONS = ("dlc", "crc", "counter", "range", "unknown_id")
+#: the receiver's further outcomes (bridge.can_e2e; SIM_DIAG), optional: absent from older recordings
+E2E_REJECTIONS = ("repeated", "jump", "sync", "format")
+SIM_FAULTS = ("model", "second_sim")   # the simulator's own fault flags besides bus_error (SIM_STATUS)
 USER_CAUSES = ("drive", "release", "lapse")
 CONTROL_OPS = ("pause", "resume", "step", "driver", "reset", "load_scenario")   # recorded (rtsim.service.loop)
 DRIVER_SOURCES = ("user", "ecu", "scenario", "rider", "safe", "none", "user+ecu", "rider+ecu", "none+ecu")
-STATUS_OPTIONAL = ("wall_time", "drivers", "user")
+STATUS_OPTIONAL = ("wall_time", "drivers", "user", "foreign_frames", "model_fault")
 
 # ----------------------------------------------------------------------------------------- schemas
 
@@ -82,12 +85,28 @@ def _status_props() -> dict:
         "steal": _seconds("CPU time taken by the hypervisor (steal) over the run, null if unknown"),
         "faults": {"title": "active faults", "type": "object",
                    "description": "one flag per command's watchdog (<command>_timeout; the by-wire cars': "
-                                  f"{', '.join(FAULTS[:-1])}), bus_error, and for a car whose EPS is "
-                                  "commanded over CAN eps_safe_state (assist off, latched until a reset)",
-                   "properties": {"bus_error": {"type": "boolean", "description": "bus_error fault active"}},
+                                  f"{', '.join(FAULTS[:-1])}), bus_error, model, second_sim, and for a car whose "
+                                  "EPS is commanded over CAN eps_safe_state (assist off, latched until a reset)",
+                   "properties": {
+                       "bus_error": {"type": "boolean", "description": "bus_error fault active"},
+                       "model": {"type": "boolean", "description": "the vehicle model has failed and is frozen "
+                                                                   "until a reset (SIM_STATUS.fault_model)"},
+                       "second_sim": {"type": "boolean",
+                                      "description": "frames with this simulator's own ids that it did not send "
+                                                     "arrived within the last second of simulation time: a second "
+                                                     "simulator on the bus (SIM_STATUS.fault_second_sim)"}},
                    "required": ["bus_error"], "additionalProperties": {"type": "boolean"}},
         "rejected": _obj("rejected CAN frames by reason",
-                         {r: _count(f"frames rejected: {r}") for r in REJECTIONS}, REJECTIONS),
+                         {**{r: _count(f"frames rejected: {r}") for r in REJECTIONS},
+                          "repeated": _count("authentic command frames rejected: alive counter repeated (a frozen "
+                                             "sender), whatever the time since the last good frame (part of counter)"),
+                          "jump": _count("authentic command frames rejected: alive counter jumped beyond the allowed "
+                                         "step while in sequence; starts a re-synchronisation (part of counter)"),
+                          "sync": _count("authentic command frames in sequence not taken while the command "
+                                         "re-synchronises after a time-out or a jump (DBC attribute E2ESyncCounter)"),
+                          "format": _count("frames with a command's or SIM_STEP_REQ's id that are not classic "
+                                           "standard-id data frames (extended id, remote, CAN FD)")},
+                         REJECTIONS),
         "accepted_frames": _count("CAN frames accepted"),
         "bus_errors": _count("CAN bus errors"),
         "recorder": {
@@ -105,7 +124,6 @@ def _status_props() -> dict:
         "zenoh_dropped": _count("Zenoh publications that failed (congestion control DROP)"),
         "scenario": {"type": ["string", "null"], "description": "loaded scenario, null if none"},
         "message": {"type": "string", "description": "last event, free text"},
-        # (optional: absent from recordings made before the user command source existed)
         "wall_time": _seconds("the service's wall clock (Unix time) when the status was made; with sim_time "
                               "it maps simulation to wall time in realtime mode (latency of observers)",
                               nullable=False),
@@ -126,6 +144,22 @@ def _status_props() -> dict:
                      "accepted": {"type": "boolean", "description": "the service accepts user commands"}},
                  "required": ["channels", "takeover", "seq", "requests", "accepted"],
                  "additionalProperties": False},
+        # (optional: absent from recordings made before the second-simulator check)
+        "foreign_frames": _count("frames with one of this simulator's own ids (sensor, status, diagnostics, "
+                                 "acknowledgement) that it did not send (faults.second_sim)"),
+        "model_fault": {"type": ["object", "null"], "description": "the vehicle model's failure while run_state "
+                        "is model_fault (rtsim.model_fault.ModelFault), else null",
+                        "properties": {"reason_code": {"type": "integer", "description": "the failed step's status "
+                                                       "(SIM_DIAG.model_fault_reason)"},
+                                       "reason": {"type": "string", "description": "its name (the DBC's)"},
+                                       "message": {"type": "string", "description": "the model's message"},
+                                       "step": {"type": "integer", "description": "the failed step's number"},
+                                       "sim_time": _seconds("simulation time the failed step was to end at",
+                                                            nullable=False),
+                                       "coordinate": {"type": "string", "description": "the generalized "
+                                                      "coordinate the failure names, empty if none"}},
+                        "required": ["reason_code", "reason", "message", "step", "sim_time", "coordinate"]},
+        # (optional: absent from recordings made before the user command source existed)
     }
 
 

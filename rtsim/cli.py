@@ -139,6 +139,8 @@ def _run(args) -> int:
     else:
         from bridge.mcap_log import write_run
         write_run(out, res.columns, res.data, sim.vm.config.id, sim.vm.channels, sim=sim)   # with the 3D scene
+    if res.fault is not None:
+        return _model_fault_exit(res.fault, len(res.data), out)
     dist = float(np.sum(np.hypot(np.diff(res.column("pos_x")), np.diff(res.column("pos_y")))))
     print(f"{'' if not sys.stderr.isatty() else chr(13)}{sc.name}: {sc.duration:g} s simulated in {res.wall_s:.2f} s "
           f"({res.wall_s / res.steps * 1e6:.1f} us/step), distance {dist:.1f} m, "
@@ -146,6 +148,22 @@ def _run(args) -> int:
     if args.plot is not None:
         _write_figures(res.columns, res.data, args.plot or None, out, sc.name)
     return 0
+
+
+MODEL_FAULT_EXIT = 3      # `rtsim run`: the model failed (a two-wheeler: or fell); the rows up to it are written
+
+
+def _model_fault_exit(fault, rows: int, out) -> int:
+    """An offline run that a model failure ended: the failure beside the output (``<out>.model_fault.json``:
+    step, time, reason, coordinate), one line on stderr, exit status MODEL_FAULT_EXIT."""
+    from pathlib import Path
+
+    side = Path(out).with_suffix(".model_fault.json")
+    side.write_text(json.dumps(fault.as_dict(), indent=2) + "\n")
+    if sys.stderr.isatty():
+        print("\r", end="", file=sys.stderr)
+    print(f"rtsim run: {fault.line()}; {rows} rows up to it -> {out} (the failure: {side})", file=sys.stderr)
+    return MODEL_FAULT_EXIT
 
 
 def _run_two_wheeler(args, sc, kind) -> int:
@@ -168,7 +186,9 @@ def _run_two_wheeler(args, sc, kind) -> int:
           f"-> {args.out}; status {res.status}{': ' + res.message if res.message else ''}")
     if args.plot is not None:
         _write_figures(res.columns, res.data, args.plot or None, args.out, sc.name)
-    return 0 if res.status == "ok" else 3
+    if res.fault is not None:
+        return _model_fault_exit(res.fault, len(res.data), args.out)
+    return 0 if res.status == "ok" else MODEL_FAULT_EXIT
 
 
 def _energy(args) -> int:
@@ -286,7 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="service suite: command-only ECU (default) or the demo ECU decoding every frame")
     b.set_defaults(func=_bench)
     r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV (a motorcycle's "
-                       "scenario: also its summary; exit status 3 if it fell)")
+                       "scenario: also its summary); exit status 3 if the model failed (the rows up to the failure written, "
+                       "the failure beside them in <out>.model_fault.json) or the motorcycle fell")
     r.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")
     r.add_argument("--scenario", required=True, help="scenario TOML (configs/scenarios/)")
     r.add_argument("--out", required=True, help="output file: .csv or .mcap")

@@ -135,8 +135,9 @@ def render(snap: dict, vehicle_id: str, endpoint: str):
         head.append(f"mode {status.get('mode', '?')}  {status.get('run_state', '?')}  "
                     f"sim {_num(status.get('sim_time'), '.3f')} s  steps {_num(status.get('steps'))}  "
                     f"scenario {status.get('scenario') or '-'}")
-        if status.get("message"):
-            head.append(f"\n{status['message']}", style="italic")
+        if status.get("message"):       # the model-fault state's line (time, step, reason, coordinate) in red
+            head.append(f"\n{status['message']}",
+                        style="bold red" if status.get("run_state") == "model_fault" else "italic")
     else:
         head.append("no status yet", style="yellow")
 

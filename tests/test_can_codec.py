@@ -33,7 +33,7 @@ def codec():
 
 
 def sensor_messages(db):
-    return [m for m in db.messages if m.senders == ["SIM"] and m.name not in ("SIM_STATUS", "SIM_STEP_ACK")]
+    return [m for m in db.messages if m.senders == ["SIM"] and m.name not in ("SIM_STATUS", "SIM_DIAG", "SIM_STEP_ACK")]
 
 
 def crc8_bitwise(data: bytes) -> int:
@@ -50,7 +50,7 @@ def crc8_bitwise(data: bytes) -> int:
 
 def test_dbc_loads_and_is_classic_intel_8_byte(db):
     assert {n.name for n in db.nodes} == {"ECU", "SIM"}
-    assert len(db.messages) == 3 + 8 + 1 + 2   # commands, sensor frames, status, lockstep request/ack
+    assert len(db.messages) == 3 + 8 + 2 + 2   # commands, sensor frames, status and diagnostics, lockstep req/ack
     for m in db.messages:
         assert m.length == 8 and not m.is_extended_frame, m.name
         for s in m.signals:
@@ -108,7 +108,7 @@ def test_cycle_times(db):
     for m in db.messages:
         if m.name in CMD_FRAMES:
             assert m.cycle_time == 10, m.name
-        elif m.name == "SIM_STATUS":
+        elif m.name in ("SIM_STATUS", "SIM_DIAG"):
             assert m.cycle_time == 100
         elif m.name in ("SIM_STEP_REQ", "SIM_STEP_ACK"):
             assert m.cycle_time is None, m.name   # event frames
@@ -123,6 +123,56 @@ def test_status_frame(db):
     assert {"rejected_dlc", "rejected_crc", "rejected_counter", "rejected_range", "loop_overruns",
             "sim_time", "mode"} <= names
     assert {str(v) for v in m.get_signal_by_name("mode").choices.values()} == {"realtime", "lockstep", "fast"}
+    # the simulator's own flags in byte 0, bits 6 and 7
+    assert [(m.get_signal_by_name(n).start, m.get_signal_by_name(n).length)
+            for n in ("fault_model", "fault_second_sim")] == [(6, 1), (7, 1)]
+
+
+def test_diag_frame_reasons_are_the_model_status_codes(db):
+    """SIM_DIAG: byte 0 the model's failure status, one VAL_ entry per status code of rtsim.mbs.model
+    (1:1), then the rolling E2E outcome counters."""
+    from rtsim.mbs import model
+
+    m = db.get_message_by_name("SIM_DIAG")
+    assert (m.frame_id, m.length, m.cycle_time) == (274, 8, 100)
+    reason = m.get_signal_by_name("model_fault_reason")
+    assert (reason.start, reason.length, reason.is_signed) == (0, 8, False)
+    codes = {getattr(model, n): n for n in dir(model) if n == "OK" or n.startswith("ERR_")}
+    assert set(reason.choices) == set(codes)
+    names = {0: "none", model.ERR_NEWTON: "newton_not_converged", model.ERR_NONFINITE_FORCE: "nonfinite_force",
+             model.ERR_NONFINITE_STATE: "nonfinite_state", model.ERR_FACTOR: "tangent_not_positive_definite",
+             model.ERR_PROJECTION: "projection_not_converged"}
+    assert {k: str(v) for k, v in reason.choices.items()} == names
+    wrap = {s.name for s in m.signals if s.dbc is not None and s.dbc.attributes.get("SigWrap")
+            and s.dbc.attributes["SigWrap"].value}
+    assert wrap == {s.name for s in m.signals} - {"model_fault_reason"}      # every counter rolls
+
+
+@pytest.mark.parametrize("name", ["xbw", "xbw_fwd", "eps_car", "motorcycle"])
+def test_every_dbc_has_the_simulator_flags_and_diag(name):
+    """The four DBCs declare the same SIM_DIAG frame and the model and second-simulator flags; the codec
+    derives the status layout (both frames from one value array) from each."""
+    path = DEFAULT_DBC.parent / f"{name}.dbc"
+    db = cantools.database.load_file(str(path), strict=True)
+    ref = cantools.database.load_file(str(DEFAULT_DBC), strict=True).get_message_by_name("SIM_DIAG")
+    diag = db.get_message_by_name("SIM_DIAG")
+    assert [(s.name, s.start, s.length) for s in diag.signals] == [(s.name, s.start, s.length) for s in ref.signals]
+    status = db.get_message_by_name("SIM_STATUS")
+    used = set()
+    for s in status.signals:                                  # no two signals share a bit
+        bits = set(range(s.start, s.start + s.length))
+        assert not bits & used, s.name
+        used |= bits
+    assert {"fault_model", "fault_second_sim"} <= {s.name for s in status.signals}
+    from rtsim.channels import car_channels, two_wheeler_channels
+
+    channels = {"xbw": car_channels(), "xbw_fwd": car_channels(("fl", "fr")), "eps_car": car_channels(("fl", "fr"), eps=True),
+                "motorcycle": two_wheeler_channels()}[name]
+    codec = Codec(path, channels)
+    assert codec.faults[-3:] == ("bus_error", "model", "second_sim")
+    lay = codec.status_layout()
+    assert list(lay["frame_id"]) == [272, 274]
+    assert set(codec.own_frame_ids) == ({f.frame_id for f in codec.sensor_frames} | {272, 273, 274})
 
 
 def test_broken_dbc_is_a_config_error(tmp_path):

@@ -108,3 +108,26 @@ def test_step_ack_packs_like_encode_step_ack(codec):
         pack_frames(np.array([t, counter, 0.0]), 0.0, lay["time_start"], lay["time_mask"], lay["sig_int"],
                     lay["sig_float"], words)
         assert words.tobytes() == ref, (t, counter)
+
+
+def test_status_and_diag_frames_pack_like_their_encoders(codec):
+    """Codec.status_layout: SIM_STATUS and SIM_DIAG packed from one value array (status_sources, then
+    DIAG_SOURCES) are bit-identical to encode_status and encode_diag, counters rolling."""
+    from bridge.can_codec import DIAG_SOURCES
+
+    lay = codec.status_layout()
+    assert list(lay["frame_id"]) == [codec.status_frame.frame_id, codec.diag_frame.frame_id]
+    rng = np.random.default_rng(5)
+    words = np.zeros(2, dtype=np.int64)
+    for _ in range(300):
+        faults = {f: bool(rng.integers(0, 2)) for f in FAULTS}
+        rejected = {k: int(rng.integers(0, 100)) for k in REJECT_KINDS}
+        reason = int(rng.integers(0, 6))
+        diag = {n: int(rng.integers(0, 70000)) for n in DIAG_SOURCES[1:]}
+        _, ref_status = codec.encode_status("lockstep", 1.5, 7, faults, rejected)
+        _, ref_diag = codec.encode_diag(reason, {n.removeprefix("rejected_"): v for n, v in diag.items()})
+        vals = np.array([codec.modes["lockstep"], 1.5, 7, *(float(faults[f]) for f in FAULTS),
+                         *(rejected[k] for k in REJECT_KINDS), reason, *diag.values(), 0.0])
+        pack_frames(vals, 0.0, lay["time_start"], lay["time_mask"], lay["sig_int"], lay["sig_float"], words)
+        assert words[:1].tobytes() == ref_status and words[1:].tobytes() == ref_diag
+        assert words[1] & 0xFF == reason and (int(words[1]) >> 48) & 0xFFFF == diag["accepted_frames"] % 65536

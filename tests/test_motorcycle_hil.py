@@ -151,8 +151,8 @@ def test_ecu_commands_replace_the_riders_demand_and_time_out_to_it():
 def test_without_a_rider_it_falls_and_the_session_stops_with_a_status(tmp_path):
     """`--rider off` at 4 m/s (below the weave speed: a riderless motorcycle is unstable there; at the
     scenario's 12 m/s it rights itself), a controller on the bus that pushes the handlebars (2 N m for
-    0.2 s) and goes silent: the motorcycle falls; the loop stops with a fall status (a message, no NaN,
-    the state of the last good step), as a model failure does."""
+    0.2 s) and goes silent: the motorcycle falls; the loop enters the model-fault state with the fall's
+    reason (a message, no NaN, the state of the last good step), as a model failure does."""
     text = (ROOT / "configs" / "scenarios" / "motorcycle_hil.toml").read_text()
     path = ROOT / "configs" / "scenarios" / "motorcycle_hil.toml"
     slow = tmp_path / "slow.toml"
@@ -164,8 +164,9 @@ def test_without_a_rider_it_falls_and_the_session_stops_with_a_status(tmp_path):
         loop.take_frames()
         loop.advance(2)
     loop.advance(20000)
-    assert loop.run_state == "stopped" and "fell" in loop.message
-    assert loop.sim_time < 20.0 and np.all(np.isfinite(sim.data.q))
+    assert loop.run_state == "model_fault" and "fell" in loop.message
+    assert loop.model_fault.reason == "fell" and loop.model_fault.reason_code == 64
+    assert loop.model_fault.sim_time < 20.0 and np.all(np.isfinite(sim.data.q))
     assert abs(_value(loop, "state", "roll_angle")) > 1.0
 
 

@@ -24,7 +24,9 @@ STATUS_FIELDS = ["time", "vehicle_id", "mode", "run_state", "sim_time", "steps",
                  "skipped_steps", "catch_up_steps", "stalls", "lateness_p50", "lateness_p99",
                  "lateness_max", "cpu_p50", "cpu_p99", "cpu_max", "steal", "faults", "rejected",
                  "accepted_frames", "bus_errors", "recorder", "zenoh_dropped", "scenario", "message"]
-STATUS_OPTIONAL = ["wall_time", "drivers", "user"]     # the user command source's (absent from older recordings)
+STATUS_OPTIONAL = ["wall_time", "drivers", "user",     # the user command source's (absent from older recordings)
+                   "foreign_frames",                   # the second-simulator check's (likewise)
+                   "model_fault"]                      # the model-fault state's details
 
 
 def strict_loads(b: bytes):
@@ -69,7 +71,7 @@ def test_schema_fields_come_from_the_channel_dictionary():
     status = P.SCHEMAS["status"][1]
     assert list(status["properties"]) == STATUS_FIELDS + STATUS_OPTIONAL and status["required"] == STATUS_FIELDS
     assert status["properties"]["mode"]["enum"] == ["realtime", "lockstep", "fast"]
-    assert status["properties"]["run_state"]["enum"] == ["running", "paused", "stopped"]
+    assert status["properties"]["run_state"]["enum"] == ["running", "paused", "model_fault"]
     for key in P.TOPIC_KEYS:
         assert P.SCHEMAS[key][1]["properties"]["time"]["type"] == "number"
 

@@ -292,8 +292,8 @@ def _report_two_wheeler(args, svc: Service, summary: dict, result: dict) -> int:
           f"peak roll {math.degrees(rec.get('peak_roll', 0)):.1f} deg, path offset RMS "
           f"{rec.get('path_offset_rms', 0):.2f} m (max {rec.get('path_offset_max', 0):.2f} m), peak assist "
           f"torque {rec.get('peak_assist', 0):.2f} N m (recorded state)")
-    if summary.get("run_state") == "stopped":
-        print(f"rtsim demo: the session stopped: {summary.get('message')}")
+    if summary.get("run_state") == "model_fault":
+        print(f"rtsim demo: the session ended in the model-fault state: {summary.get('message')}")
     print(f"rtsim demo: recording written to {args.record}")
     if result.get("samples", 0) <= 0 or rec.get("state_messages", 0) <= 0:
         return _fail("no sensor sample was exchanged")

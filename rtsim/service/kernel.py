@@ -19,6 +19,10 @@
    sending at its own period; the observer state; the SIM_STATUS frame;
 3. (``ack_counter >= 0``) the SIM_STEP_ACK frame.
 
+After a failed vehicle step (``LI_MODEL_FAULT`` holds its status) step 2 is ``fault_step``: the vehicle
+frozen, time going on, the watchdog, SIM_STATUS and SIM_DIAG at their period, no sensor frame or sample
+(the model-fault state, rtsim.service.loop).
+
 One call instead of several matters: each call from Python unboxes the model and state tuples (about
 a hundred arrays, several microseconds), more than the checks, the sensors and the packing cost.
 Times are simulation times: ``k`` steps of ``dt`` s. The vehicle is any the service can serve: its
@@ -30,8 +34,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from bridge.can_e2e import (C_COUNTER, C_CRC, C_DLC, C_RANGE, C_STEP_IGNORED, C_STEP_REJECTED,
-                            C_UNKNOWN, FV_VALUE, IV_TIMED_OUT, RP_SLOT, RxPlan, RxState, pack_frames, rx_command,
+from bridge.can_e2e import (C_ACCEPTED, C_COUNTER, C_CRC, C_DLC, C_FOREIGN, C_FORMAT, C_JUMP, C_RANGE,
+                            C_REPEATED, C_STEP_IGNORED, C_STEP_REJECTED, C_SYNC, C_UNKNOWN, FV_VALUE, G_FOREIGN_T,
+                            IV_TIMED_OUT, RP_SLOT, SECOND_SIM_HOLD, RxPlan, RxState, pack_frames, rx_command,
                             rx_find, rx_watchdog, step_request)
 from rtsim.jit import inline_kernel, kernel, read_cycles
 from rtsim.mbs.model import OK
@@ -45,14 +50,22 @@ from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SEN
 
 # LoopParams.ints
 (PI_SENSOR_EVERY, PI_STATE_EVERY, PI_STATUS_EVERY, PI_LOCKSTEP, PI_MODE_CODE, PI_STEP_REQ_ID, PI_STATUS_ID,
- PI_ACK_ID, PI_DRIVER) = range(9)
-NPI = 9
+ PI_ACK_ID, PI_DRIVER, PI_DIAG_ID) = range(10)
+NPI = 10
 # LoopState.li
+# LI_MODEL_FAULT: the vehicle model's failure status (rtsim.mbs.model ERR_*, 0 = none); SIM_STATUS.fault_model
+# and SIM_DIAG.model_fault_reason report it
 (LI_K, LI_MASK, LI_PENDING_STEPS, LI_PENDING_COUNTER, LI_STEP_COUNTER, LI_OVERRUNS, LI_BUS_ERROR,
- LI_SENT) = range(8)
-NLI = 8
-# the SIM_STATUS values (bridge.can_codec.STATUS_SOURCES order; a last slot stays 0)
+ LI_SENT, LI_MODEL_FAULT) = range(9)
+NLI = 9
+# the SIM_STATUS then SIM_DIAG values (Codec.status_layout: Codec.status_sources, then DIAG_SOURCES; a last
+# slot stays 0): mode, time, overruns, one time-out flag per command from ST_FAULT0 on, then (ST_*
+# offsets from the first value after the commands' flags) the simulator's flags, the status frame's
+# rejection counters and the diagnostics
 ST_MODE, ST_TIME, ST_OVERRUNS, ST_FAULT0 = 0, 1, 2, 3
+(ST_BUS_ERROR, ST_MODEL, ST_SECOND_SIM, ST_DLC, ST_CRC, ST_COUNTER, ST_RANGE, ST_MODEL_REASON, ST_REPEATED,
+ ST_JUMP, ST_SYNC, ST_FORMAT, ST_FOREIGN, ST_ACCEPTED) = range(14)
+NST_AFTER_FAULTS = 14
 NO_STEP_COUNTER = -1
 
 
@@ -70,7 +83,7 @@ class LoopParams(NamedTuple):
     status_sig_float: np.ndarray
     ack_sig_int: np.ndarray
     ack_sig_float: np.ndarray
-    no_stamp: np.ndarray         # (1,) int64 zero: the status and ack frames carry no ms stamp
+    no_stamp: np.ndarray         # (2,) int64 zeros: the status, diagnostics and ack frames carry no ms stamp
     fault_slot: np.ndarray       # per command: its fault flag's index in the status values
     frame_every: np.ndarray      # per sensor frame: its period in steps (a multiple of PI_SENSOR_EVERY)
     drv_packed: Packed           # the in-loop driver (PI_DRIVER): the scenario's profiles,
@@ -91,7 +104,7 @@ class LoopState(NamedTuple):
     status_values: np.ndarray
     ack_values: np.ndarray       # (3,) time, counter, 0
     words: np.ndarray            # sensor frame payloads (int64, one per frame)
-    frame_word: np.ndarray       # (1,) int64: the status or ack frame
+    frame_word: np.ndarray       # (2,) int64: the status and diagnostics frames, or the ack frame ([0])
     cycles: np.ndarray           # int64 ring: processor cycles of each call, at [k % size] (k after it)
     drv_state: np.ndarray        # (drivers.base.NSTATE,) what the in-loop driver reads
     drv_out: np.ndarray          # (drivers.base.NINPUT,) its outputs
@@ -186,20 +199,53 @@ def take_frames(lp, ls, rg):
 
 @inline_kernel
 def _status_frame(lp, ls, rg, t):
+    """SIM_STATUS and, right after it, SIM_DIAG at time t (s)."""
     sv, li, rx = ls.status_values, ls.li, ls.rx
+    cnt = rx.counts
     sv[ST_MODE] = lp.ints[PI_MODE_CODE]
     sv[ST_TIME] = t
     sv[ST_OVERRUNS] = li[LI_OVERRUNS]
     for i in range(lp.fault_slot.shape[0]):
         sv[lp.fault_slot[i]] = rx.iv[i, IV_TIMED_OUT]
     nf = ST_FAULT0 + lp.fault_slot.shape[0]
-    sv[nf] = li[LI_BUS_ERROR]
-    sv[nf + 1] = rx.counts[C_DLC]
-    sv[nf + 2] = rx.counts[C_CRC]
-    sv[nf + 3] = rx.counts[C_COUNTER]
-    sv[nf + 4] = rx.counts[C_RANGE]
+    sv[nf + ST_BUS_ERROR] = li[LI_BUS_ERROR]
+    sv[nf + ST_MODEL] = 1.0 if li[LI_MODEL_FAULT] != 0 else 0.0
+    sv[nf + ST_SECOND_SIM] = 1.0 if t - rx.g[G_FOREIGN_T] <= SECOND_SIM_HOLD else 0.0
+    sv[nf + ST_DLC] = cnt[C_DLC]
+    sv[nf + ST_CRC] = cnt[C_CRC]
+    sv[nf + ST_COUNTER] = cnt[C_COUNTER]
+    sv[nf + ST_RANGE] = cnt[C_RANGE]
+    sv[nf + ST_MODEL_REASON] = li[LI_MODEL_FAULT]
+    sv[nf + ST_REPEATED] = cnt[C_REPEATED]
+    sv[nf + ST_JUMP] = cnt[C_JUMP]
+    sv[nf + ST_SYNC] = cnt[C_SYNC]
+    sv[nf + ST_FORMAT] = cnt[C_FORMAT]
+    sv[nf + ST_FOREIGN] = cnt[C_FOREIGN]
+    sv[nf + ST_ACCEPTED] = cnt[C_ACCEPTED]
     pack_frames(sv, 0.0, lp.no_stamp, lp.no_stamp, lp.status_sig_int, lp.status_sig_float, ls.frame_word)
     _send_logged(rg, lp.ints[PI_STATUS_ID], ls.frame_word[0], t)
+    _send_logged(rg, lp.ints[PI_DIAG_ID], ls.frame_word[1], t)
+
+
+@inline_kernel
+def fault_step(lp, ls, rg, commands):
+    """One step of the model-fault state (``LI_MODEL_FAULT``: the failed step's status): the vehicle stays
+    frozen at its last good step while simulation time goes on, so the bus contract holds: the watchdog
+    keeps judging the commands (its time-outs flagged, its mask changes recorded), SIM_STATUS (with
+    ``fault_model``) and SIM_DIAG (with ``model_fault_reason``) go out at their period; no sensor frame is
+    sent (every shipped DBC's rule for its sensor frames: they stop) and no sample is published."""
+    li = ls.li
+    h = lp.dt[0]
+    k = li[LI_K]
+    mask = rx_watchdog(lp.rx, ls.rx, k * h, commands)
+    if mask != li[LI_MASK]:
+        li[LI_MASK] = mask
+        _command_event(rg, lp.rx, k * h, CMD_MASK, mask, commands, True)
+    k += 1
+    li[LI_K] = k
+    if k % lp.ints[PI_STATUS_EVERY] == 0:
+        _status_frame(lp, ls, rg, k * h)
+        li[LI_SENT] += 1
 
 
 @kernel
@@ -254,9 +300,12 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
 @kernel
 def loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter):
     """The module docstring's steps: frames in (if ``frames``), ``nsteps`` steps, the lockstep
-    acknowledgement (if ``ack_counter >= 0``). Returns OK or the failed step's status (the state is
-    then that of the last good step, ``LI_K`` its count). The call's own duration in processor cycles
-    goes to ``ls.cycles`` (how much of a loop period the compiled work takes)."""
+    acknowledgement (if ``ack_counter >= 0``). Returns OK or the failed step's status: the vehicle's state
+    is then that of the last good step, ``LI_MODEL_FAULT`` the status, the failed step's period run as the
+    first of the model-fault state (``fault_step``: ``LI_K`` counts it), and the call ends there; later
+    calls run their steps in that state until the caller clears it (a reset installs a new vehicle). The
+    call's own duration in processor cycles goes to ``ls.cycles`` (how much of a loop period the compiled
+    work takes)."""
     c0 = read_cycles()
     status = _loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter)
     ls.cycles[ls.li[LI_K] % ls.cycles.shape[0]] = read_cycles() - c0
@@ -268,15 +317,20 @@ def _loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps
     if frames:
         take_frames(lp, ls, rg)
     for _ in range(nsteps):
+        if ls.li[LI_MODEL_FAULT] != 0:
+            fault_step(lp, ls, rg, io.commands)
+            continue
         status = one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg)
-        if status != OK:
+        if status != OK:                    # the model-fault state from this step's period on
+            ls.li[LI_MODEL_FAULT] = status
+            fault_step(lp, ls, rg, io.commands)
             return status
     if ack_counter >= 0:
         t = ls.li[LI_K] * lp.dt[0]
         ls.ack_values[0] = t
         ls.ack_values[1] = ack_counter
         pack_frames(ls.ack_values, 0.0, lp.no_stamp, lp.no_stamp, lp.ack_sig_int, lp.ack_sig_float,
-                    ls.frame_word)
+                    ls.frame_word[:1])
         _send_logged(rg, lp.ints[PI_ACK_ID], ls.frame_word[0], t)
         ls.li[LI_SENT] += 1
     return OK

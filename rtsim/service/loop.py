@@ -12,9 +12,14 @@ it on the wall clock in realtime mode. Lockstep mode runs ``run_lockstep``: the 
 frames or control requests and takes them in order; a SIM_STEP_REQ runs its steps and is acknowledged,
 commands received before it apply to its steps; the run is deterministic (replayable bit for bit).
 
-Failures: a model failure (SimulationError) stops stepping (``run_state = "stopped"``, the error in
-``message``), the service keeps taking frames and publishing status until a ``reset`` or
-``load_scenario``. Bus errors are counted by the BusPort and flagged in the status frame.
+Failures: a model failure (a failed vehicle step) puts the loop in the model-fault state
+(``run_state = "model_fault"``, ``model_fault`` the rtsim.model_fault.ModelFault: reason, step, time,
+coordinate; ``message`` its line): the vehicle stays frozen at its last good step, simulation time and
+the pace go on, the E2E receiver and the watchdog keep judging frames, SIM_STATUS (``fault_model``) and
+SIM_DIAG (``model_fault_reason``) keep their period, the sensor frames stop (the DBCs' rule), and a
+lockstep SIM_STEP_REQ is still run (time advances by its steps) and acknowledged, until a ``reset`` or
+``load_scenario``. ``on_model_fault`` (optional) is called once with the ModelFault, on the loop thread.
+Bus errors are counted by the BusPort and flagged in the status frame.
 """
 from __future__ import annotations
 
@@ -26,29 +31,60 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bridge.can_codec import Codec, CommandReceiver
-from bridge.can_e2e import C_STEP_IGNORED, C_STEP_REJECTED, IV_HAS_VALUE, IV_TIMED_OUT
+from bridge.can_codec import DIAG_SOURCES, Codec, CommandReceiver
+from bridge.can_e2e import (C_STEP_IGNORED, C_STEP_REJECTED, G_FOREIGN_T, IV_HAS_VALUE, IV_TIMED_OUT,
+                            SECOND_SIM_HOLD)
 from bridge.payloads import CONTROL_OPS
 from drivers.base import INPUT_NAMES, INPUT_UNITS, LIMITS, NINPUT, NSTATE
 from drivers.driver import Driver
 from rtsim.boundcall import bind
-from rtsim.errors import RtsimError, SimulationError
+from rtsim.errors import RtsimError
 from rtsim.mbs.model import OK
+from rtsim.model_fault import ModelFault, describe, force_failure, test_fault_step
 from rtsim.realtime.health import LoopHealth
 
-from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_OVERRUNS, LI_PENDING_COUNTER, LI_PENDING_STEPS,
-                     LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, PI_ACK_ID, PI_DRIVER, PI_LOCKSTEP,
-                     PI_MODE_CODE, PI_SENSOR_EVERY, PI_STATE_EVERY, PI_STATUS_EVERY, PI_STATUS_ID,
-                     PI_STEP_REQ_ID, ST_FAULT0, LoopParams, LoopState, loop_run)
+from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_MODEL_FAULT, LI_OVERRUNS, LI_PENDING_COUNTER,
+                     LI_PENDING_STEPS, LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, NST_AFTER_FAULTS, PI_ACK_ID,
+                     PI_DIAG_ID, PI_DRIVER, PI_LOCKSTEP, PI_MODE_CODE, PI_SENSOR_EVERY, PI_STATE_EVERY,
+                     PI_STATUS_EVERY, PI_STATUS_ID, PI_STEP_REQ_ID, ST_BUS_ERROR, ST_FAULT0, ST_RANGE, LoopParams,
+                     LoopState, loop_run)
 from .rings import Rings, RxWriter, make_rings
 from .user_input import NUSR, NWORK, TWO_WHEELER_BUS, USER_HOLD, check_value, user_channels
 
-RUN_STATES = ("running", "paused", "stopped")
+RUN_STATES = ("running", "paused", "model_fault")
+STEPPING = ("running", "model_fault")     # the states whose steps advance simulation time
 CYCLE_WINDOW = 65536   # steps of compiled-call durations kept (as LoopHealth's window)
 CHUNK = 256            # steps per compiled call when many run back to back (lockstep, re-simulation)
 EVENT_LOG = 4096       # recorded events waiting for the publisher (it takes them every few ms)
 #: the control ops that change what the simulation does (bridge.payloads.CONTROL_OPS) are recorded on the
 #: ``control`` topic with the step they acted at, so that `rtsim resim` repeats them; ``drive`` has ``user``
+
+
+MODEL_FAULT_TX = "SimModelFaultTx"      # the DBC's message attribute: what a frame does in the model-fault state
+
+
+def check_model_fault_rule(codec: Codec) -> None:
+    """The DBC must declare (attribute SimModelFaultTx, ENUM "stop","continue") what this loop does with
+    the frames it sends while the model has failed: every sensor frame "stop", SIM_STATUS, its diagnostics
+    and the lockstep acknowledgement "continue"; a DBC that declares otherwise is refused (one line)."""
+    dbc = codec.db.dbc
+    defn = dbc.attribute_definitions.get(MODEL_FAULT_TX) if dbc is not None else None
+    if defn is None:
+        raise RtsimError(f"{codec.path}: no {MODEL_FAULT_TX} message attribute (ENUM \"stop\",\"continue\"): the "
+                         f"DBC must declare what its frames do while the model has failed")
+
+    def rule(name: str) -> str:
+        attr = codec.db.get_message_by_name(name).dbc.attributes.get(MODEL_FAULT_TX)
+        v = attr.value if attr is not None else defn.default_value
+        return defn.choices[v] if isinstance(v, int) and defn.choices else str(v)
+    want = {f.name: "stop" for f in codec.sensor_frames}
+    for f in (codec.status_frame, getattr(codec, "diag_frame", None), codec.step_ack):
+        if f is not None:
+            want[f.name] = "continue"
+    wrong = [f"{n} {rule(n)!r}" for n, w in want.items() if rule(n) != w]
+    if wrong:
+        raise RtsimError(f"{codec.path}: {MODEL_FAULT_TX}: {', '.join(wrong)}; this simulator stops every sensor "
+                         f"frame and continues SIM_STATUS, SIM_DIAG and SIM_STEP_ACK while the model has failed")
 
 
 @dataclass
@@ -71,7 +107,7 @@ class HilLoop:
     def __init__(self, sim, codec: Codec, rings: Rings | None = None, *, mode: str = "realtime",
                  state_rate: float = 100.0, hold_pressure: float | None = None, inbox=None,
                  health: LoopHealth | None = None, scenario_name: str | None = None, on_chunk=None,
-                 driver: Driver | None = None, user_input: bool = True):
+                 driver: Driver | None = None, user_input: bool = True, test_fault_at: float | None = None):
         self.codec = codec
         self.port = None                 # set by the service: bus state for the status, writer wake-up
         self.outbox = None               # set by the service: recorder/Zenoh figures for the status
@@ -103,10 +139,15 @@ class HilLoop:
         self.state_rate = state_rate
         self.run_state = "running"
         self.message = ""
+        self.model_fault: ModelFault | None = None
+        self.on_model_fault = None        # called once per failure with the ModelFault (loop thread)
+        self.test_fault_at = test_fault_at       # rtsim.model_fault's test-only hook: s, once per loop
+        self._forced_step = None
         self.stop_event = threading.Event()
         self.li = np.zeros(NLI, dtype=np.int64)
         self.li[LI_STEP_COUNTER] = NO_STEP_COUNTER
         self.cycles = np.zeros(CYCLE_WINDOW, dtype=np.int64)
+        check_model_fault_rule(codec)
         self._install(sim, driver)
 
     # -- set-up ------------------------------------------------------------------------------------
@@ -140,29 +181,31 @@ class HilLoop:
         self.state_every = max(1, int(round(1.0 / (self.state_rate * self.dt))))
         sim.seed_sensor_noise(0)          # reproducible sensor noise: a session replays bit for bit
         lay = c.sensor_layout()
-        status = c.frame_layout(c.status_frame.name, c.status_sources)
+        status = c.status_layout()                    # SIM_STATUS and SIM_DIAG
         ack = c.frame_layout(c.step_ack.name, ("lockstep_sim_time", "lockstep_ack_counter"))
         ints = np.zeros(NPI, dtype=np.int64)
         ints[PI_SENSOR_EVERY], ints[PI_STATE_EVERY], ints[PI_STATUS_EVERY] = \
             self.sensor_every, self.state_every, self.status_every
         ints[PI_LOCKSTEP] = self.mode == "lockstep"
         ints[PI_MODE_CODE] = c.modes[self.mode]
-        ints[PI_STEP_REQ_ID], ints[PI_STATUS_ID], ints[PI_ACK_ID] = \
-            c.step_request.frame_id, c.status_frame.frame_id, c.step_ack.frame_id
+        ints[PI_STEP_REQ_ID], ints[PI_STATUS_ID], ints[PI_ACK_ID], ints[PI_DIAG_ID] = \
+            c.step_request.frame_id, c.status_frame.frame_id, c.step_ack.frame_id, c.diag_frame.frame_id
         ints[PI_DRIVER] = bool(np.any(drv_slot >= 0)) if car else sim.rider_on
         usr_slot, usr_rx = self._user_slots(sim)
         faults = self.rx.fault_names
         sources = c.status_sources
-        assert sources[ST_FAULT0 + len(faults)] == "fault_bus_error"
+        assert sources[ST_FAULT0 + len(faults) + ST_BUS_ERROR] == "fault_bus_error"
+        assert sources[ST_FAULT0 + len(faults) + ST_RANGE] == "rejected_range"
+        assert len(sources) + len(DIAG_SOURCES) == ST_FAULT0 + len(faults) + NST_AFTER_FAULTS
         self.lp = LoopParams(self.rx.plan, ints, np.array([self.dt]), lay["frame_id"], lay["time_start"],
                              lay["time_mask"], lay["sig_int"], lay["sig_float"], status["sig_int"],
-                             status["sig_float"], ack["sig_int"], ack["sig_float"], np.zeros(1, dtype=np.int64),
+                             status["sig_float"], ack["sig_int"], ack["sig_float"], np.zeros(2, dtype=np.int64),
                              np.array([sources.index(f"fault_{f}") for f in faults], dtype=np.int64),
                              self.frame_every, self.driver.packed, self.driver.speed, self.driver.path,
                              self.driver.flags, drv_slot, usr_slot, usr_rx)
         self.ls = LoopState(self.rx.state, self.li, np.zeros(sim.nsensor), np.zeros(sim.nstate),
-                            np.zeros(len(sources) + 1), np.zeros(3),
-                            np.zeros(len(lay["frame_id"]), dtype=np.int64), np.zeros(1, dtype=np.int64),
+                            np.zeros(len(sources) + len(DIAG_SOURCES) + 1), np.zeros(3),
+                            np.zeros(len(lay["frame_id"]), dtype=np.int64), np.zeros(2, dtype=np.int64),
                             self.cycles, np.zeros(NSTATE), np.zeros(NINPUT), np.full(NINPUT, np.nan),
                             np.full(NUSR, np.nan), np.zeros(1, dtype=np.int64), np.zeros(NWORK))
         self._usr_deadline = None
@@ -171,6 +214,11 @@ class HilLoop:
         li[LI_K] = 0
         li[LI_MASK] = -1
         li[LI_PENDING_STEPS] = 0
+        li[LI_MODEL_FAULT] = 0
+        self.model_fault = None
+        if self.test_fault_at is not None:
+            self._forced_step = test_fault_step(self.test_fault_at, self.dt)
+            self.test_fault_at = None         # once: a reset after the forced failure runs clean
         self.rx.reset(0.0)                    # a new session: no command received yet
         self._bus_errors_at_status = self.port.errors if self.port is not None else 0
         # one compiled call per step, its fixed arguments (model, state, loop arrays) bound once: passed
@@ -227,27 +275,38 @@ class HilLoop:
 
     # -- compiled calls --------------------------------------------------------------------------------
     def _call(self, frames: bool, nsteps: int, ack_counter: int = -1) -> bool:
-        """One compiled call; False (and the loop stopped, the reason in ``message``) on a model failure."""
+        """One compiled call; False on a model failure (the loop then in the model-fault state)."""
+        if nsteps and self._forced_step == self.k + 1 and self.run_state == "running":
+            self._forced_step = None
+            force_failure(self.sim)           # the test-only hook (rtsim.model_fault)
         status = self._loop_run(frames, nsteps, ack_counter)
         self.k = int(self.li[LI_K])
         if self.on_chunk is not None:
             self.on_chunk()
         if status != OK:
-            t = self.k * self.dt
-            try:
-                self.sim.raise_status(status, self.k + 1)
-            except SimulationError as exc:
-                self.run_state = "stopped"
-                self.message = f"model stopped at t = {t:.3f} s: {exc}"
+            self._model_failed(int(status))
             return False
         return True
+
+    def _model_failed(self, status: int) -> None:
+        """The step numbered ``k`` (the kernel ran its period in the fault state) returned ``status``."""
+        names = self.codec.model_fault_reasons if hasattr(self.codec, "model_fault_reasons") else {}
+        fault = describe(self.sim, status, self.k, names)
+        self.model_fault = fault
+        self.run_state = "model_fault"
+        self.message = fault.line()
+        if self.on_model_fault is not None:
+            try:
+                self.on_model_fault(fault)
+            except Exception as exc:  # noqa: BLE001  (reporting must never stop the loop)
+                self.message += f" (reporting it failed: {type(exc).__name__}: {exc})"
 
     def step_once(self) -> None:
         """One paced step (realtime and fast modes): control requests, received frames, one step."""
         if not self.inbox.empty():
             self.drain_inbox()
         k = self.k + 1
-        if self.run_state != "running":
+        if self.run_state not in STEPPING:
             self._call(True, 0)              # frames are still checked and counted
             return
         if k % self.status_every == 0:
@@ -263,16 +322,21 @@ class HilLoop:
 
     def advance(self, n: int) -> None:
         """``n`` steps back to back without taking frames (lockstep requests, the ``step`` control,
-        re-simulation), in compiled chunks; a paused or stopped loop does not step."""
+        re-simulation), in compiled chunks; a paused loop does not step, one in the model-fault state
+        steps in it (time advances, the vehicle stays frozen)."""
         n = int(n)
-        while n > 0 and self.run_state == "running":
+        while n > 0 and self.run_state in STEPPING:
             c = min(n, CHUNK)
             k0 = self.k
+            f = self._forced_step
+            if f is not None and k0 + 1 < f <= k0 + c:
+                c = f - 1 - k0                # the test-only hook acts before the call whose first step is f
             if (k0 // self.status_every) != ((k0 + c) // self.status_every):
                 self._status_inputs()
-            if not self._call(False, c):
+            self._call(False, c)
+            if self.k == k0:
                 break
-            n -= c
+            n -= self.k - k0
             if self.port is not None:
                 self.port.wake()
 
@@ -307,6 +371,8 @@ class HilLoop:
         f = {name: False for name in self.codec.faults}
         f.update(self.rx.faults)
         f["bus_error"] = self._bus_error()
+        f["model"] = bool(self.li[LI_MODEL_FAULT])
+        f["second_sim"] = bool(self.sim_time - self.rx.state.g[G_FOREIGN_T] <= SECOND_SIM_HOLD)
         if self.external_eps:
             f["eps_safe_state"] = self.sim.eps_fault      # latched: assist off until a reset
         return f
@@ -363,8 +429,8 @@ class HilLoop:
         if op == "resume":
             if self.run_state == "paused":
                 self.run_state = "running"
-            elif self.run_state == "stopped":
-                return {"ok": False, "error": f"resume: the model stopped ({self.message}); send reset"}
+            elif self.run_state == "model_fault":
+                return {"ok": False, "error": f"resume: {self.message}; send reset"}
             return {"ok": True, "run_state": self.run_state, "sim_time": self.sim_time}
         if op == "step":
             if self.mode != "lockstep":
@@ -372,7 +438,7 @@ class HilLoop:
             n = int(args.get("n", 1))
             if not 1 <= n <= 1_000_000:
                 return {"ok": False, "error": f"step: n = {n} outside 1..1000000"}
-            if self.run_state != "running":
+            if self.run_state not in STEPPING:
                 return {"ok": False, "error": f"step: the simulation is {self.run_state}"}
             self.advance(n)
             return {"ok": True, "sim_time": self.sim_time, "steps": self.k}
@@ -561,7 +627,10 @@ class HilLoop:
             "cpu_max": h.max_cpu if h.samples else None,
             "steal": h.steal_seconds(),
             "faults": self.faults(),
-            "rejected": {k: counters[k] for k in ("dlc", "crc", "counter", "range", "unknown_id")},
+            "rejected": {**{k: counters[k] for k in ("dlc", "crc", "counter", "range", "unknown_id", "sync",
+                                                     "format")},
+                         "repeated": counters["counter_repeated"], "jump": counters["counter_jump"]},
+            "foreign_frames": counters["foreign_frames"],
             "accepted_frames": self.rx.accepted,
             "bus_errors": self.port.errors if self.port is not None else 0,
             "recorder": None if rec is None else {"path": str(rec.path), "written": rec.written,
@@ -570,6 +639,7 @@ class HilLoop:
             "zenoh_dropped": getattr(zen, "dropped", 0) if zen is not None else 0,
             "scenario": self.scenario_name,
             "message": self.message,
+            "model_fault": None if self.model_fault is None else self.model_fault.as_dict(),
             "wall_time": time.time(),
             "drivers": self.drivers(),
             "user": self.user_status(),

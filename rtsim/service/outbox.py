@@ -170,6 +170,7 @@ class Outbox:
                                 frame_periods=frame_periods, raw=self._sample if self.scene is not None else None)
         self._stop = threading.Event()
         self._status_due = 0.0
+        self._flush_after_status = False
         self._thread = threading.Thread(target=self._run, name="rtsim-publisher", daemon=True)
         self._thread.start()
 
@@ -242,12 +243,22 @@ class Outbox:
             fox.road_wanted.clear()
             fox.publish("road", self._last_t, self.road)
 
+    def status_now(self, flush_recording: bool = False) -> None:
+        """Publish a status at the publisher's next turn (any thread); ``flush_recording``: then push the
+        recording's chunk in progress to disk (a model failure: kept even if the process is killed later)."""
+        self._flush_after_status = self._flush_after_status or flush_recording
+        self._status_due = 0.0
+
     def _maybe_status(self, now: float) -> None:
         if self.status_fn is None or now < self._status_due:
             return
         self._status_due = now + self.status_period
+        flush, self._flush_after_status = self._flush_after_status, False
+        self.flush()                          # what the loop logged before this status goes first
         status = self.status_fn()
         self._emit("status", float(status["time"]), payloads.encode_json(status))
+        if flush and self.recorder is not None:
+            self.recorder.flush_soon()
 
     def flush(self) -> None:
         """Publish everything pending now (publisher thread, or after it stopped)."""

@@ -37,6 +37,9 @@ from bridge import payloads
 from bridge.can_codec import Codec
 from rtsim.errors import ConfigError
 
+from bridge.mcap_recorder import SESSION_END_METADATA
+from rtsim.model_fault import TEST_FAULT_METADATA
+
 from .loop import HilLoop
 from .outbox import RingDrain
 from .server import build_sim, resolve_scenario
@@ -201,8 +204,10 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         diff = _channel_difference(info.channels, sim.vm.channels)
         notes.append(f"the recorded channels differ from the vehicle's: {diff}")
     mode = session["mode"]
+    forced = session.get(TEST_FAULT_METADATA)         # rtsim.model_fault's test-only hook, as recorded
     loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode=mode, state_rate=float(session.get("state_rate", 100.0)),
-                   hold_pressure=float(session["hold_pressure"]), driver=sc.driver())
+                   hold_pressure=float(session["hold_pressure"]), driver=sc.driver(),
+                   test_fault_at=None if forced is None else float(forced))
     col = Collector(loop)
     rx = messages.get(f"rtsim/{vid}/can/rx", [])
     rec_sensors = messages.get(f"rtsim/{vid}/sensors", [])
@@ -222,13 +227,18 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         loop.rx_writer.put(int(m.data["id"]), bytes.fromhex(m.data["data"]))
         loop.take_frames()
         replayed += 1
-        if loop.run_state == "stopped":
+        if loop.run_state == "model_fault":
             break
+    faults = _model_faults(messages.get(f"rtsim/{vid}/status", []), meta.get(SESSION_END_METADATA), loop)
     if mode == "lockstep":
         events.finish()
-    elif rec_sensors or rec_state:          # up to the last sample recorded (a cut file may end on either)
-        last = max(m[-1].data["time"] for m in (rec_sensors, rec_state) if m)
-        events.advance(int(round(last / dt)) - loop.k)
+    elif rec_sensors or rec_state or faults["recorded_model_fault"] is not None:
+        # up to the last sample recorded (a cut file may end on either), or the recorded failed step
+        end = int(round(max(m[-1].data["time"] for m in (rec_sensors, rec_state) if m) / dt)) \
+            if rec_sensors or rec_state else 0
+        if faults["recorded_model_fault"] is not None:      # the sensors end before the failed step
+            end = max(end, int(faults["recorded_model_fault"]["step"]))
+        events.advance(end - loop.k)
     report = {"recording": str(path), "mode": mode, "dt": dt, "files": notes, "frames_replayed": replayed,
               "user_changes": events.users, "user_changes_applied": events.applied["user"],
               "control_ops": len(events.events) - events.users, "control_ops_applied": events.applied["control"],
@@ -239,7 +249,38 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
     report["identical"] = bool(report["sensors"]["identical"] and report["state"]["identical"])
     report["health"] = info.health_line()
     report["damage"] = info.damage
+    report.update(_model_faults(messages.get(f"rtsim/{vid}/status", []), meta.get(SESSION_END_METADATA), loop))
     return report
+
+
+def _model_faults(status: list, end: dict | None, loop) -> dict:
+    """The recorded model failure (the first status that carries one, else the session-end record) and the
+    rerun's: ``recorded_model_fault``, ``model_fault`` (None for none) and ``model_fault_reproduced``
+    (both failed at the same step with the same reason code; None when neither failed)."""
+    rec = next((m.data["model_fault"] for m in status if m.data.get("model_fault")), None)
+    if rec is None and end is not None and end.get("how") == "model_fault":
+        rec = {"reason_code": int(end["reason_code"]), "reason": end.get("reason", ""),
+               "message": end.get("message", ""), "step": int(end["step"]), "sim_time": float(end["sim_time"]),
+               "coordinate": end.get("coordinate", "")}
+    got = None if loop.model_fault is None else loop.model_fault.as_dict()
+    same = None
+    if rec is not None or got is not None:
+        same = bool(rec is not None and got is not None and int(rec["step"]) == got["step"]
+                    and int(rec["reason_code"]) == got["reason_code"])
+    return {"recorded_model_fault": rec, "model_fault": got, "model_fault_reproduced": same}
+
+
+def _fault_line(rep: dict) -> str | None:
+    """The report's model-failure line (None when neither the recording nor the rerun failed)."""
+    rec, got = rep.get("recorded_model_fault"), rep.get("model_fault")
+    if rec is None and got is None:
+        return None
+    if rep.get("model_fault_reproduced"):
+        return (f"  model fault reproduced: step {got['step']} (t = {got['sim_time']:.3f} s), {got['reason']} "
+                f"(code {got['reason_code']}){' at ' + repr(got['coordinate']) if got['coordinate'] else ''}")
+    recorded = "none" if rec is None else f"step {rec['step']}, {rec['reason']} (code {rec['reason_code']})"
+    rerun = "none" if got is None else f"step {got['step']}, {got['reason']} (code {got['reason_code']})"
+    return f"  model fault NOT reproduced: recorded {recorded}; rerun {rerun}"
 
 
 def _before_restart(messages: list) -> list:
@@ -282,7 +323,7 @@ def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | N
         loop.advance(int(round((f.time - t_first) / sim.dt)) - loop.k)
         loop.rx_writer.put(f.can_id, bytes(f.data))
         loop.take_frames()
-        if loop.run_state == "stopped":
+        if loop.run_state == "model_fault":
             break
     loop.advance(int(round(0.5 / sim.dt)))       # half a second after the last frame
     ch = sim.vm.channels
@@ -358,6 +399,11 @@ def main(args) -> int:
             diff = ", ".join(f"{n} {d:.3g}" for n, d in sorted(c["max_abs_diff"].items(), key=lambda x: -x[1])[:6])
             print(f"  {part}: {c['matched']} of {c['recorded']} recorded samples matched, "
                   f"{'bit-identical' if c['identical'] else 'max |diff|: ' + (diff or 'none, but samples missing')}")
+        if _fault_line(rep) is not None:
+            print(_fault_line(rep))
+        fault = rep.get("model_fault") if rep.get("model_fault_reproduced") else None
         print(f"rtsim resim: {'IDENTICAL' if rep['identical'] else 'DIFFERENT'}"
-              + (" (over what the damaged recording holds)" if rep["damage"]["damaged"] else ""))
+              + (" (over what the damaged recording holds)" if rep["damage"]["damaged"] else "")
+              + (f", model fault reproduced at step {fault['step']} ({fault['reason']})" if fault else
+                 ", model fault NOT reproduced" if rep.get("model_fault_reproduced") is False else ""))
     return 1 if args.strict and (not rep["identical"] or rep["damage"]["damaged"]) else 0

@@ -26,6 +26,7 @@ from pathlib import Path
 from bridge.can_bus import HUB_HOST, LoopbackHub, default_hub_port, socketcan_available
 from bridge.can_codec import Codec
 from rtsim.errors import ConfigError
+from rtsim.model_fault import TEST_FAULT_METADATA
 from rtsim.realtime.health import LoopHealth
 from rtsim.realtime.pacer import Pacer
 
@@ -160,6 +161,8 @@ class Service:
         o = self.opts
         self.scenario_path = resolve_scenario(o.scenario) if o.scenario is not None else default_scenario(o.vehicle)
         self.models: dict = {}
+        from rtsim.model_fault import test_fault_time
+        self.test_fault_at = test_fault_time()      # the test-only hook (rtsim.model_fault), from the environment
         self.sim, self.sc = build_sim(self.scenario_path, o.vehicle, o.dt, self.models, o.rider == "on")
         self.model = self.sim.vm
         self.vehicle_id = o.vehicle_id or self.model.config.id
@@ -181,8 +184,10 @@ class Service:
         self.health = LoopHealth(period=self.sim.dt)
         self.loop = HilLoop(self.sim, self.codec, self.rings, mode=o.mode, state_rate=o.state_rate,
                             hold_pressure=o.hold_pressure, inbox=self.inbox, health=self.health,
-                            scenario_name=self.sc.name, driver=self.sc.driver(), user_input=o.user_input)
+                            scenario_name=self.sc.name, driver=self.sc.driver(), user_input=o.user_input,
+                            test_fault_at=self.test_fault_at)
         self.loop.port = self.port
+        self.loop.on_model_fault = self._on_model_fault
         scene, road = self._foxglove()
         from .outbox import Outbox
         self.outbox = Outbox(self.rings, self.loop.lp.sensor_ids, zenoh=self.zenoh, recorder=self.recorder,
@@ -254,11 +259,32 @@ class Service:
             "rtsim.session": {"mode": self.opts.mode, "dt": repr(self.sim.dt), "vehicle_id": self.vehicle_id,
                               "scenario": self.sc.name, "hold_pressure": repr(self.loop_hold_pressure()),
                               "state_rate": repr(self.opts.state_rate), "rider": self.opts.rider,
-                              "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
+                              "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                              **({} if self.test_fault_at is None else
+                                 {TEST_FAULT_METADATA: repr(self.test_fault_at)})},
             "rtsim.scenario": {"path": str(self.scenario_path.resolve()), "toml": self.scenario_path.read_text()},
             "rtsim.vehicle": {"path": str(vpath.resolve()), "toml": vpath.read_text()},
             "rtsim.dbc": {"path": str(self.codec.path.resolve()), "text": self.codec.path.read_text()},
         }
+
+    def _on_model_fault(self, fault) -> None:
+        """The loop entered the model-fault state (loop thread, once per failure): one console line; a
+        status carrying the fault published at once, and the recording's chunk with it pushed to disk."""
+        self.out(f"rtsim serve: {fault.line()}; SIM_STATUS goes on with fault_model = 1, the sensor frames "
+                 f"stopped; send the reset control op to restart")
+        if self.outbox is not None:
+            self.outbox.status_now(flush_recording=True)
+
+    def session_end(self) -> dict[str, str]:
+        """How the session ended (the recording's ``rtsim.session_end`` metadata, string values): ``how``
+        ("stopped", or "model_fault" when the model was in the fault state at the close, then the fault's
+        fields: reason_code, reason, message, step, sim_time, coordinate) and ``end_sim_time`` (s)."""
+        fault = self.loop.model_fault if hasattr(self, "loop") else None
+        end = {"how": "model_fault" if fault is not None else "stopped",
+               "end_sim_time": repr(self.loop.sim_time) if hasattr(self, "loop") else "0.0"}
+        if fault is not None:
+            end.update({k: str(v) if not isinstance(v, float) else repr(v) for k, v in fault.as_dict().items()})
+        return end
 
     def loop_hold_pressure(self) -> float:
         from bridge.can_codec import DEFAULT_HOLD_PRESSURE
@@ -415,7 +441,10 @@ class Service:
         if hasattr(self, "loop"):
             summary = {"sim_time": self.loop.sim_time, "steps": self.loop.k, "health": self.health.summary(),
                        "run_state": self.loop.run_state, "message": self.loop.message,
-                       "rejected": dict(self.loop.rx.counters), "accepted_frames": self.loop.rx.accepted}
+                       "rejected": dict(self.loop.rx.counters), "accepted_frames": self.loop.rx.accepted,
+                       "model_fault": None if self.loop.model_fault is None else self.loop.model_fault.as_dict()}
+            if self.recorder is not None:
+                self.recorder.session_end = self.session_end()
         for part in ("outbox", "foxglove", "zenoh", "recorder", "port", "hub"):
             obj = getattr(self, part)
             if obj is None:

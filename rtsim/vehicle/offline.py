@@ -15,7 +15,8 @@ import numpy as np
 from drivers.base import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, NSTATE
 from drivers.scenario import Scenario, load_scenario
 from rtsim.channels import CAR, ChannelDictionary
-from rtsim.errors import ConfigError
+from rtsim.errors import ConfigError, SimulationError
+from rtsim.model_fault import ModelFault, describe_error, force_failure, test_fault_step, test_fault_time
 from rtsim.road.config import load_road
 
 from .car.build import build_vehicle
@@ -48,6 +49,7 @@ class RunResult:
     data: np.ndarray          # (n, len(columns))
     wall_s: float
     steps: int
+    fault: ModelFault | None = None   # the model failure that ended the run early (rows up to it)
 
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.columns.index(name)]
@@ -82,8 +84,10 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
         seed: int = 0) -> RunResult:
     """Run the scenario to its duration; rows at the scenario's output rate. Sensor channels are what the
     sensors report (the vehicle's sensor model: the config's [sensors.channels] and sensor effects);
-    `seed` seeds its noise."""
+    `seed` seeds its noise. A model failure ends the run: the rows up to the failure, and ``fault``
+    (its step, time, reason and coordinate; rtsim.model_fault, whose test-only hook can force one)."""
     dt = sc.dt
+    forced = test_fault_step(test_fault_time(), dt)
     nsteps = int(round(sc.duration / dt))
     every = max(1, int(round(1.0 / (sc.spec.output_rate * dt))))
     columns = columns_of(sim.vm.channels)
@@ -113,7 +117,13 @@ def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None 
         io.commands[CMD_STEER] = cmd[I_STEER]
         io.extra[EX_TORQUE_LEFT] = cmd[I_TORQUE_RL]
         io.extra[EX_TORQUE_RIGHT] = cmd[I_TORQUE_RR]
-        sim.step(1)
+        if forced == n + 1:
+            force_failure(sim)
+        try:
+            sim.step(1)
+        except SimulationError as exc:
+            wall = time.perf_counter() - t0
+            return RunResult(columns, rows[:nrow], wall, n, describe_error(sim, exc, n + 1))
     wall = time.perf_counter() - t0
     return RunResult(columns, rows[:nrow], wall, nsteps)
 

@@ -32,6 +32,7 @@ from drivers.rider import ST_N, ST_PHI_REF
 from drivers.scenario import Scenario, load_scenario
 from rtsim.channels import TWO_WHEELER_STATE, Channel, ChannelDictionary
 from rtsim.errors import ConfigError, SimulationError
+from rtsim.model_fault import ModelFault, describe_error, force_failure, test_fault_step, test_fault_time
 from rtsim.configfile import problem
 
 from .build import build_motorcycle, combine
@@ -73,6 +74,7 @@ class MotorcycleRun:
     message: str = ""
     fall_time: float | None = None
     summary: dict = field(default_factory=dict)
+    fault: ModelFault | None = None     # a model failure (not a fall) that ended the run: step, time, coordinate
 
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.columns.index(name)]
@@ -160,6 +162,8 @@ def run(ride: Ride, sc: Scenario, progress=None) -> MotorcycleRun:
     rows = np.zeros((nsteps // every + 2, len(COLUMNS)))
     nrow = 0
     status, message, t_fall = "ok", "", None
+    forced = test_fault_step(test_fault_time(), dt)     # rtsim.model_fault's test-only hook
+    fault = None
     t0 = time.perf_counter()
     n = 0
     try:
@@ -171,17 +175,21 @@ def run(ride: Ride, sc: Scenario, progress=None) -> MotorcycleRun:
                     progress(n / nsteps)
             if n == nsteps:
                 break
+            if forced == n + 1:
+                force_failure(ride.sim)
             ride.step()
             if abs(_pitch(ride.sim) - ride.pitch0) > PITCH_OVER:
                 raise Fall(f"{ride.sim.mm.config.id}: pitched over at t = {ride.sim.time:.3f} s", ride.sim.time)
     except SimulationError as exc:
         status = "fall" if isinstance(exc, Fall) else "failed"
         message, t_fall = str(exc), ride.sim.time
+        if status == "failed":
+            fault = describe_error(ride.sim, exc, n + 1)
         if np.all(np.isfinite(ride.sim.data.q)):
             _row(ride, rows[nrow])
             nrow += 1
     wall = time.perf_counter() - t0
-    res = MotorcycleRun(COLUMNS, rows[:nrow], wall, n, status, message, t_fall)
+    res = MotorcycleRun(COLUMNS, rows[:nrow], wall, n, status, message, t_fall, fault=fault)
     res.summary = summarise(res, ride, sc)
     return res
 
@@ -210,6 +218,8 @@ def summarise(res: MotorcycleRun, ride: Ride, sc: Scenario) -> dict:
     out: dict = {"scenario": sc.name, "status": res.status, "simulated_s": _f(t[-1] if t.size else 0.0, 3)}
     if res.status != "ok":
         out["message"], out["fall_time_s"] = res.message, _f(res.fall_time, 3)
+    if res.fault is not None:
+        out["model_fault"] = res.fault.as_dict()
     if t.size < 2:
         return out
     out["distance_m"] = _f(float(np.sum(np.hypot(np.diff(c("pos_x")), np.diff(c("pos_y"))))), 2)
