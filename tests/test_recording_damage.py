@@ -53,14 +53,14 @@ def _small_recording(path: Path, n: int = 6000, status=None) -> int:
 
 def _rewrite(src: Path, dst: Path, *, chunk_size: int = 16 * 1024, close: bool = True,
              session_end: dict | None = None, last_status: dict | None = None) -> int:
-    """``src`` written again with the mcap writer: every schema, channel, message and metadata record, in
-    small chunks; ``last_status`` (fields) added to a copy of the last status message, appended; then
+    """``src`` written again with the mcap writer: every schema, channel, message and metadata record (but
+    its rtsim.session_end, which only this function's ``session_end`` sets), in small chunks; ``last_status`` (fields) added to a copy of the last status message, appended; then
     ``session_end`` as the rtsim.session_end record and a clean finish (``close``), or no finish at all: the
     file ends after its last complete chunk, as a writer killed between two chunks leaves it. Returns the
     messages written."""
     with open(src, "rb") as fh:
         reader = make_reader(fh)
-        meta = [(m.name, dict(m.metadata)) for m in reader.iter_metadata()]
+        meta = [(m.name, dict(m.metadata)) for m in reader.iter_metadata() if m.name != SESSION_END_METADATA]
         msgs = list(reader.iter_messages(log_time_order=False))
     out = open(dst, "wb")
     w = Writer(out, chunk_size=chunk_size, compression=CompressionType.ZSTD)
