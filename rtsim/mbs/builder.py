@@ -130,10 +130,10 @@ class Settings:
     #                                   coordinates grow without bound (distance travelled, wheel spin angles)
     #                                   the relative test loosens as they grow, while the increments that matter
     #                                   (a wheel's spin, hence its tyre's slip) need the same tolerance all along
-    stall_rate: float = 0.8           # Newton step control: an increment >= stall_rate x the last one (no
-    #                                   contraction: a cycle across a kink of the forces, or divergence) halves
-    #                                   the fraction of the increment applied next, down to min_step; it doubles
-    #                                   back (to 1) while the increments halve. Convergence is always tested on
+    stall_rate: float = 0.8           # Newton step control: an increment that turns back on the last one and is
+    #                                   >= stall_rate x its size (a cycle across a kink of the forces) halves
+    #                                   the fraction of the increment applied next, down to min_step; any other
+    #                                   iteration doubles it back (to 1). Convergence is always tested on
     #                                   the full increment, so the solution accepted is the same.
     min_step: float = 1.0 / 16.0
     extrapolate: bool = False         # Newton starts from the trapezoidal rule with the end-of-step qdd

@@ -205,6 +205,8 @@ NW_AGE = 1      # iterations done on the current factor
 NW_NRM = 2      # last increment norm
 NW_IT = 3       # iterations done in this step
 NW_STEP = 4     # fraction of the increment the next iteration applies (step control; 1: a full Newton step)
+NW_JMAX = 5     # coordinate of the last increment's largest component
+NW_YMAX = 6     # that component
 CONVERGED = 1
 CONTINUE = 0
 
@@ -269,6 +271,8 @@ def step_begin(m, d, h):
     d.newton[NW_NRM] = np.inf
     d.newton[NW_IT] = 0.0
     d.newton[NW_STEP] = 1.0
+    d.newton[NW_JMAX] = 0.0
+    d.newton[NW_YMAX] = 0.0
 
 
 @kernel
@@ -369,20 +373,29 @@ def newton_update(m, d, h):
 
 @inline_kernel
 def _step_control(m, d, nrm):
-    """The fraction of the next increment to apply. An iteration that stops contracting (|dq| at least
-    FS_STALL_RATE of the last one) is cycling across a kink of the forces (a friction band, a tyre past its
-    peak, a transmission switching between driving and driven) or diverging: the next increments are
-    halved (down to FS_MIN_STEP), which puts a two-point cycle's iterate between its two points, where the
-    full increment shrinks. While the increments halve the fraction doubles back to 1. The convergence
+    """The fraction of the next increment to apply. An iteration whose increment turns back on the last
+    one (its largest component reverses) without contracting (|dq| at least FS_STALL_RATE of the last
+    one) is cycling across a kink of the forces (a friction band, a tyre past its peak, a transmission
+    switching between driving and driven): the next increments are halved (down to FS_MIN_STEP), which
+    puts a two-point cycle's iterate between its two points, where the full increment shrinks. Otherwise
+    the fraction doubles back to 1 (a slow but monotone iteration keeps full steps). The convergence
     test is always on the full increment, so a damped step accepts the same solution as a full one."""
+    j = int(d.newton[NW_JMAX])
+    turned = d.y[j] * d.newton[NW_YMAX] < 0.0
+    jn = 0
+    for i in range(m.nq):
+        if abs(d.y[i]) > abs(d.y[jn]):
+            jn = i
+    d.newton[NW_JMAX] = jn
+    d.newton[NW_YMAX] = d.y[jn]
     if d.newton[NW_IT] < 2.0:
         return
     lam_s = d.newton[NW_STEP]
-    if nrm >= m.fset[FS_STALL_RATE] * d.newton[NW_PREV]:
+    if turned and nrm >= m.fset[FS_STALL_RATE] * d.newton[NW_PREV]:
         lam_s *= 0.5
         if lam_s < m.fset[FS_MIN_STEP]:
             lam_s = m.fset[FS_MIN_STEP]
-    elif nrm < 0.5 * d.newton[NW_PREV] and lam_s < 1.0:
+    elif lam_s < 1.0:
         lam_s *= 2.0
         if lam_s > 1.0:
             lam_s = 1.0

@@ -142,7 +142,7 @@ Data = namedtuple("Data", [
     #                   step, and its predictor base (during a step) or Newton's correction to it (after)
     "qhd", "qhdd", "r", "x", "y", "z", "work", "sig", "g", "sp", "mu",
     "flags",          # int64 [have_factor, need_factor]
-    "newton",         # float64 (5,) Newton bookkeeping between the stages of a step
+    "newton",         # float64 (7,) Newton bookkeeping between the stages of a step
     "poly_cache",     # float64 (npoly, 3, 6) polynomial paths and derivatives shared by a poly point's rows
     "stats",          # float64 (NSTATS,)
 ])
@@ -164,7 +164,7 @@ def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: f
         force=z(nq), w_env=model.m_env.copy(), a_env=z(nfac), l_env=z(nfac),
         pred=np.full(3 * nq, np.nan), qhd=z(nq), qhdd=z(nq), r=z(nq), x=z(nq), y=z(nq), z=z(max(nq, nc)), work=z(nq), sig=z(nc), g=z(nc), sp=z(nc), mu=z(nc),
         flags=np.zeros(2, dtype=np.int64),
-        newton=np.zeros(5),
+        newton=np.zeros(7),
         poly_cache=np.zeros((model.poly_coef.shape[0], 3, 6)),
         stats=np.zeros(NSTATS),
     )
