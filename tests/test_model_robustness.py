@@ -139,6 +139,16 @@ def test_standing_steps_to_the_locks(vehicle, sign):
     _check_rack(run, vehicle)
 
 
+def test_braked_at_standstill_steering_to_the_lock():
+    """Standing on the brakes (3 MPa) and steering to the lock: the wheels turn about their kingpins on
+    locked spin (it failed at 0.2 s, Newton crawling on the locked wheels' brake band)."""
+    run = Run("xbw", 0.0)
+    run.hold(0.1, 0.0, brake=3000.0)
+    run.hold(1.5, 11.0, brake=3000.0)
+    run.hold(1.0, -11.0, brake=3000.0)
+    _check_rack(run, "xbw")
+
+
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_held_against_its_stop_the_rack_deflects_it_statically(sign):
     """At standstill in neutral (no creep), commanded past the lock: once the motion has died out the
@@ -159,12 +169,10 @@ def test_lock_to_lock_chatter(vehicle):
     _check_rack(run, vehicle)
 
 
-@pytest.mark.xfail(strict=True, raises=Exception, reason=(
-    "known open failure: with 12 MPa the front wheels lock (spin rate ~0) and Newton contracts only ~7 % per "
-    "iteration on the locked wheel's spin (the brake's stiction band puts a tangent ~14x the true slope in W), "
-    "so 30 iterations are not enough at t = 0.39 s; the fix belongs in the brake's locked-wheel tangent"))
 @pytest.mark.parametrize("vehicle", ["xbw", "xbw_fwd"])
 def test_full_throttle_and_full_brake_at_once_in_a_turn(vehicle):
+    """12 MPa and wide-open throttle at 20 m/s in a turn: the front wheels lock (it failed at 0.39 s,
+    Newton crawling ~7 % an iteration onto the locked wheels' brake band)."""
     run = Run(vehicle, 20.0)
     run.hold(0.2, 0.0)
     run.hold(2.0, 8.0, THROTTLE_MAX, BRAKE_MAX)
