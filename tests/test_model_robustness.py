@@ -197,3 +197,22 @@ def test_eps_car_six_radian_steps_at_20_mps(first):
     run.hold(0.7, -first)
     travel = _model("eps_car").config.eps.rack_travel_m
     assert np.abs(np.array(run.rack)).max() < travel, "6 rad is inside the EPS rack's travel"
+
+
+@pytest.mark.parametrize("throttle", [0.0, THROTTLE_MAX])
+def test_eps_car_past_the_lock_and_back_at_20_mps(throttle):
+    """The driver's hands impose +11 rad, past the EPS rack's lock (7.2 rad), then -11 rad: the rack sits
+    on its stop under the twisted torsion bar and the assist (it failed at 1.2 s: Newton jumping across
+    the transmission's driving/driven switch, a ~9 kN step over 0.2 mm/s at the stalled rack)."""
+    run = Run("eps_car", 20.0)
+    run.hold(0.5, 0.0, throttle)
+    run.hold(1.0, 11.0, throttle)
+    run.hold(1.0, -11.0, throttle)
+    assert np.abs(np.array(run.rack)).max() > _model("eps_car").config.eps.rack_travel_m, "the rack reached its stop"
+
+
+def test_eps_car_lock_to_lock_chatter():
+    """Full lock to full lock every 0.15 s at 10 m/s."""
+    run = Run("eps_car", 10.0)
+    for k in range(12):
+        run.hold(0.15, 11.0 if k % 2 == 0 else -11.0, 0.7)
