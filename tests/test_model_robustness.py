@@ -7,7 +7,11 @@ Each case drives a car with commands inside its DBC's ranges (steering-wheel ang
 - no model failure (the step raises nothing) and a finite state;
 - bounded energy: the kinetic energy 1/2 qd^T M qd (M: the model's constant mass matrix in its
   natural coordinates) never exceeds the initial kinetic energy plus what the actuators could have put
-  in since the start, (P_engine + P_steer) t, plus the potential energy released, m g (z_0 - z):
+  in since the start, (P_engine + P_steer) t, plus the potential energy released, m g (z_0 - z), plus
+  the elastic energy the tyres and springs hold at the static loads W_i (the car is placed near, not
+  at, its equilibrium and may release it), sum W_i^2 / (2 C_z) + (W_i / 0.6)^2 / (2 k_i) (C_z the
+  tyre's vertical stiffness, k_i the spring's, 0.6 the smallest installation ratio of the shipped
+  linkages);
   P_engine the engine map's full-load peak power (rtsim.vehicle.kit.powertrain.default_engine_map),
   P_steer a bound on the steering actuator's power (the steer-by-wire motor: its torque limit at its
   no-load speed is far below 2 kW; the EPS motor: supply voltage x current limit, ~1 kW);
@@ -35,6 +39,7 @@ from rtsim.vehicle.car.sim import VehicleSim
 from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_SELECTOR
 from rtsim.vehicle.kit.powertrain import default_engine_map
 from rtsim.vehicle.kit.steering import steering_config
+from rtsim.vehicle.kit.tyre.tir import P_VERTICAL_STIFFNESS
 
 ROOT = Path(__file__).resolve().parents[1]
 DT = 1e-3
@@ -59,6 +64,15 @@ def _engine_peak_power() -> float:
     return max(t * w for t, w in zip(wot, speed))
 
 
+def _spring_rate(spring) -> float:
+    """N/m: a linear spring's rate, or a spring table's smallest positive slope (more energy)."""
+    if spring.stiffness_n_per_m is not None:
+        return spring.stiffness_n_per_m
+    x, f = np.asarray(spring.spring_table.x), np.asarray(spring.spring_table.force_n)
+    slopes = np.diff(f) / np.diff(x)
+    return float(slopes[slopes > 0].min())
+
+
 class Run:
     """A car on a road, stepped with held commands, checking energy and recording the rack."""
 
@@ -72,9 +86,16 @@ class Run:
         self.p_in = _engine_peak_power() + 2000.0
         self.ir = int(vm.vehicle.steer_idx[1])
         self.iz = int(vm.vehicle.chassis_idx[2])
-        self.e0 = self.kinetic()
+        self.e0 = self.kinetic() + self._elastic_at_static_loads()
         self.z0 = float(self.sim.data.q[self.iz])
         self.rack = []
+
+    def _elastic_at_static_loads(self) -> float:
+        vm = self.sim.vm
+        loads = np.asarray(vm.static_loads, dtype=float)
+        cz = float(self.sim.tp[P_VERTICAL_STIFFNESS])
+        k = np.array([_spring_rate(vm.config.front.spring)] * 2 + [_spring_rate(vm.config.rear.spring)] * 2)
+        return float(np.sum(loads ** 2 / (2.0 * cz) + (loads / 0.6) ** 2 / (2.0 * k)))
 
     def kinetic(self) -> float:
         qd = self.sim.data.qd
