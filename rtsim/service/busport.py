@@ -1,7 +1,8 @@
 """The service's CAN port: one python-can bus, a reader thread, a writer thread, error counting and
 reconnection.
 
-The reader thread puts every received frame (id and payload bytes) into the receive ring of
+The reader thread puts every received frame (id, payload bytes and its format: extended id, remote,
+CAN FD) into the receive ring of
 ``rtsim.service.rings``, which the compiled step empties at its next step, so the real-time thread never
 blocks on the bus; ``notify`` (lockstep mode) is called after each frame to wake a waiting loop. The
 step queues the frames it sends (id, payload, time stamp) in the transmit ring and calls ``wake()``; the
@@ -21,6 +22,7 @@ import time
 
 from bridge.can_batch import frame_sender
 from bridge.can_bus import open_bus
+from bridge.can_e2e import FLAG_EXTENDED, FLAG_FD, FLAG_REMOTE
 from rtsim.errors import RtsimError
 
 from .rings import H_RX_DROPPED, H_TX, RingReader, Rings, RxWriter
@@ -43,6 +45,7 @@ class BusPort:
         self.send_errors = 0
         self.recv_errors = 0
         self.error_frames = 0
+        self.own_echoes = 0
         self.dropped_while_down = 0
         self.reconnects = 0
         self.last_error = ""
@@ -141,8 +144,12 @@ class BusPort:
             if msg.is_error_frame:
                 self.error_frames += 1
                 continue
+            if not msg.is_rx:                   # this port's own frame echoed back (receive_own_messages):
+                self.own_echoes += 1            # not a frame from the bus
+                continue
             self.received += 1
-            put(msg.arbitration_id, msg.data)
+            put(msg.arbitration_id, msg.data, (FLAG_EXTENDED if msg.is_extended_id else 0)
+                | (FLAG_REMOTE if msg.is_remote_frame else 0) | (FLAG_FD if msg.is_fd else 0))
             if notify is not None:
                 notify()
 
@@ -180,7 +187,8 @@ class BusPort:
     def stats(self) -> dict:
         return {"interface": self.description, "up": self._up, "sent": self.sent, "received": self.received,
                 "send_errors": self.send_errors, "recv_errors": self.recv_errors,
-                "error_frames": self.error_frames, "dropped_while_down": self.dropped_while_down,
+                "error_frames": self.error_frames, "own_echoes": self.own_echoes,
+                "dropped_while_down": self.dropped_while_down,
                 "reconnects": self.reconnects, "tx_dropped": self.tx_dropped, "rx_dropped": self.rx_dropped,
                 "tx_cpu_s": self.tx_cpu,
                 "last_error": self.last_error}

@@ -31,9 +31,9 @@ from typing import NamedTuple
 import numpy as np
 
 from bridge.can_e2e import (C_ACCEPTED, C_COUNTER, C_CRC, C_DLC, C_FOREIGN, C_FORMAT, C_JUMP, C_RANGE,
-                            C_REPEATED, C_STEP_IGNORED, C_STEP_REJECTED, C_SYNC, C_UNKNOWN, FV_VALUE, G_FOREIGN_T,
-                            IV_TIMED_OUT, RP_SLOT, SECOND_SIM_HOLD, RxPlan, RxState, pack_frames, rx_command,
-                            rx_find, rx_watchdog, step_request)
+                            C_REPEATED, C_STEP_IGNORED, C_STEP_REJECTED, C_SYNC, FLAG_EXTENDED, FLAG_REMOTE,
+                            FV_VALUE, G_FOREIGN_T, IV_TIMED_OUT, NOT_CLASSIC, RP_SLOT, SECOND_SIM_HOLD,
+                            TIME_EPS, RxPlan, RxState, pack_frames, rx_frame, rx_watchdog, step_request)
 from rtsim.jit import inline_kernel, kernel, read_cycles
 from rtsim.mbs.model import OK
 from drivers.path_follower import PathFollower
@@ -158,9 +158,24 @@ def _command_event(rg, plan, t, kind, arg, commands, by_slot):
     rg.heads[H_CMD] += 1
 
 
+@inline_kernel
+def _own_id(lp, fid):
+    """Whether ``fid`` is one of the ids this simulator sends (sensor frames, status, diagnostics, ack)."""
+    ints = lp.ints
+    if fid == ints[PI_STATUS_ID] or fid == ints[PI_DIAG_ID] or fid == ints[PI_ACK_ID]:
+        return True
+    for f in range(lp.sensor_ids.shape[0]):
+        if lp.sensor_ids[f] == fid:
+            return True
+    return False
+
+
 @kernel
 def take_frames(lp, ls, rg):
-    """Step 1 of the module docstring."""
+    """Step 1 of the module docstring. A frame with a command's or SIM_STEP_REQ's id that is not a classic
+    standard-id data frame is counted (``format``) and never applied; a standard-id data frame with one of
+    the simulator's own ids is another sender's (the CAN port never hands the simulator its own frames):
+    counted (``foreign_frames``), and its time sets the second-simulator fault for SECOND_SIM_HOLD s."""
     li, rx = ls.li, ls.rx
     t = li[LI_K] * lp.dt[0]
     cap = rg.rx_meta.shape[0]
@@ -170,10 +185,14 @@ def take_frames(lp, ls, rg):
         j = tail % cap
         fid = rg.rx_meta[j, 0]
         dlc = rg.rx_meta[j, 1]
+        flags = rg.rx_meta[j, 2]
         data = rg.rx_data[j]
         tail += 1
         _log(rg, t, fid, dlc, LOG_RX, data)
         if fid == lp.ints[PI_STEP_REQ_ID]:
+            if flags & NOT_CLASSIC:
+                rx.counts[C_FORMAT] += 1
+                continue
             steps, counter = step_request(lp.rx, data, dlc)
             if steps < 0 or counter == li[LI_STEP_COUNTER]:
                 rx.counts[C_STEP_REJECTED] += 1        # bad DLC/CRC/count, or a repeated request
@@ -185,10 +204,12 @@ def take_frames(lp, ls, rg):
             li[LI_PENDING_STEPS] = steps
             li[LI_PENDING_COUNTER] = counter
             break
-        i = rx_find(lp.rx, fid)
-        if i < 0:
-            rx.counts[C_UNKNOWN] += 1
-        elif rx_command(lp.rx, rx, i, data, dlc, t):
+        if (flags & (FLAG_EXTENDED | FLAG_REMOTE)) == 0 and _own_id(lp, fid):
+            rx.counts[C_FOREIGN] += 1
+            rx.g[G_FOREIGN_T] = t
+            continue
+        i = rx_frame(lp.rx, rx, fid, flags, data, dlc, t)
+        if i >= 0:
             _command_event(rg, lp.rx, t, CMD_ACCEPTED, i, rx.fv[:, FV_VALUE], False)     # (only value i is new)
     rg.heads[H_RX_TAIL] = tail
 
@@ -206,7 +227,7 @@ def _status_frame(lp, ls, rg, t):
     nf = ST_FAULT0 + lp.fault_slot.shape[0]
     sv[nf + ST_BUS_ERROR] = li[LI_BUS_ERROR]
     sv[nf + ST_MODEL] = 1.0 if li[LI_MODEL_FAULT] != 0 else 0.0
-    sv[nf + ST_SECOND_SIM] = 1.0 if t - rx.g[G_FOREIGN_T] <= SECOND_SIM_HOLD else 0.0
+    sv[nf + ST_SECOND_SIM] = 1.0 if t - rx.g[G_FOREIGN_T] <= SECOND_SIM_HOLD + TIME_EPS else 0.0
     sv[nf + ST_DLC] = cnt[C_DLC]
     sv[nf + ST_CRC] = cnt[C_CRC]
     sv[nf + ST_COUNTER] = cnt[C_COUNTER]

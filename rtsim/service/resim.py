@@ -29,6 +29,7 @@ import numpy as np
 
 from bridge import payloads
 from bridge.can_codec import Codec
+from bridge.can_e2e import FLAG_EXTENDED, FLAG_FD
 from rtsim.errors import ConfigError
 
 from .loop import HilLoop
@@ -262,7 +263,8 @@ def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | N
     t_first = frames[0].time if frames else 0.0
     for f in frames:
         loop.advance(int(round((f.time - t_first) / sim.dt)) - loop.k)
-        loop.rx_writer.put(f.can_id, bytes(f.data))
+        loop.rx_writer.put(f.can_id, bytes(f.data),
+                           (FLAG_EXTENDED if f.is_extended else 0) | (FLAG_FD if f.is_fd else 0))
         loop.take_frames()
         if loop.run_state == "stopped":
             break
