@@ -4,9 +4,11 @@
 
 1. (``take_frames``) every frame the CAN reader put in the receive ring since the last call, at time
    ``t = k dt``: logged for the recording, then the E2E checks and counters of the command frames
-   (``bridge.can_e2e``), accepted values as command events; a SIM_STEP_REQ is checked (CRC, count,
-   repeated counter) and, in lockstep mode, stops the intake and is left in ``LI_PENDING_STEPS`` for the
-   caller, otherwise counted as ignored;
+   (``bridge.can_e2e``: format, DLC, CRC, alive counter and re-synchronisation, range), accepted values
+   as command events; a frame with one of the simulator's own ids is another simulator's (counted, the
+   second-simulator fault); a SIM_STEP_REQ is checked (format, CRC, count, repeated counter) and, in
+   lockstep mode, stops the intake and is left in ``LI_PENDING_STEPS`` for the caller, otherwise counted
+   as ignored;
 2. ``nsteps`` times: the in-loop driver (a car whose DBC does not carry the driver's commands, such
    as the EPS car whose controller under test commands only the motor: the scenario's profiles and
    followers, ``drivers.driver.driver_step``; a two-wheeler's rider) writes its commands, the watchdog writes the CAN command
@@ -16,7 +18,7 @@
    command or the user took over, the bus's, one vehicle step, and at the DBC's periods: every
    sensor channel (with the vehicle's sensor effects and the config's sensor model) packed into the
    sensor frames and handed to the publisher at the fastest frame's period, each frame queued for
-   sending at its own period; the observer state; the SIM_STATUS frame;
+   sending at its own period; the observer state; the SIM_STATUS frame and, right after it, SIM_DIAG;
 3. (``ack_counter >= 0``) the SIM_STEP_ACK frame.
 
 One call instead of several matters: each call from Python unboxes the model and state tuples (about
