@@ -329,3 +329,31 @@ def test_a_second_simulator_on_the_bus_is_counted_and_flagged(car):
     from bridge.payloads import validate
 
     validate("status", st)
+
+
+def test_the_recording_keeps_a_received_frame_s_format():
+    """A received extended-id, remote or CAN FD frame is recorded with its format (``can/rx``), which
+    the schema allows and the log reader and re-simulation read back; a classic frame's record is as
+    before (no extra keys)."""
+    from bridge.can_logs import _mcap_frame
+    from bridge.mcap_recorder import _can_frame
+    from bridge.payloads import validation_errors
+
+    classic = _can_frame((0x81, bytes(8)), 0.01)
+    assert classic == {"id": 0x81, "dlc": 8, "data": "00" * 8, "time": 0.01}
+    ext = _can_frame((0x81, bytes(8), 8, FLAG_EXTENDED), 0.02)
+    remote = _can_frame((0x81, b"", 0, FLAG_REMOTE), 0.03)
+    fd = _can_frame((0x81, bytes(12), 12, FLAG_FD | FLAG_EXTENDED), 0.04)
+    assert ext["extended"] and remote["remote"] and fd["fd"] and fd["extended"] and "fd" not in ext
+    for f in (classic, ext, remote, fd):
+        assert validation_errors("can/rx", f) == []
+
+    class M:
+        def __init__(self, data):
+            self.data, self.log_time_ns = data, 0
+
+    assert _mcap_frame(None, "t", 0, M(ext), "rx").is_extended
+    assert _mcap_frame(None, "t", 0, M(fd), "rx").is_fd and not _mcap_frame(None, "t", 0, M(classic), "rx").is_extended
+    from rtsim.service.resim import _flags
+
+    assert [_flags(f) for f in (classic, ext, remote, fd)] == [0, FLAG_EXTENDED, FLAG_REMOTE, FLAG_FD | FLAG_EXTENDED]

@@ -664,17 +664,20 @@ def test_lockstep_brake_latency_and_watchdog_over_can(segment, db):
 
 
 @pytest.mark.can_e2e
-def test_lockstep_hostile_senders_over_can(segment, db):
+def test_lockstep_hostile_senders_over_can(segment, db, tmp_path):
     """The issue's hostile senders over the bus, in lockstep: the identical BRAKE_CMD frame (counter 7,
     8000 kPa) every 10 ms for 3 s, 50 extended-id and 50 remote frames with BRAKE_CMD's and
     SIM_STEP_REQ's ids, and frames with one of the simulator's own sensor ids. The first frozen frame is
     taken and nothing else; the hold pressure acts from 31 ms after it and every SIM_STATUS frame sets
-    fault_brake_timeout; the sensor-id frames raise fault_second_sim; SIM_DIAG counts each kind."""
+    fault_brake_timeout; the sensor-id frames raise fault_second_sim; SIM_DIAG counts each kind. The
+    recording keeps each frame's format, so the session re-simulates bit for bit."""
     from rtsim.channels import SENSOR_NAMES
+    from rtsim.service.resim import resim
 
     iface, chan = segment
     codec = Codec()
-    svc = ServiceProcess(iface, chan, "--no-zenoh", "--mode", "lockstep")
+    rec = tmp_path / "hostile.mcap"
+    svc = ServiceProcess(iface, chan, "--no-zenoh", "--mode", "lockstep", "--record", str(rec))
     bus = open_bus(iface, chan)
     fid, frozen = codec.encode_command("brake_pressure_cmd", 8000.0, 7)
     step_id = codec.step_request.frame_id
@@ -713,3 +716,8 @@ def test_lockstep_hostile_senders_over_can(segment, db):
         second = [(_ms(st["sim_time"]), st["fault_second_sim"]) for st in ecu.status]
         # frames at 1000 .. 1090 ms: flagged from the status frame after the first until 1 s after the last
         assert second == [(t, 1000 < t <= 2090) for t, _ in second], second
+    messages, _ = read_recording(rec)
+    rx = [m.data for m in messages["rtsim/xbw/can/rx"]]
+    assert sum(bool(f.get("extended")) for f in rx) == 100 and sum(bool(f.get("remote")) for f in rx) == 50
+    rep = resim(rec)
+    assert rep["identical"], (rep["sensors"], rep["state"])

@@ -113,12 +113,13 @@ class LoopState(NamedTuple):
 
 
 @inline_kernel
-def _log(rg, t, fid, dlc, direction, data):
+def _log(rg, t, fid, dlc, direction, data, flags):
     j = rg.heads[H_LOG] % rg.log_t.shape[0]
     rg.log_t[j] = t
     rg.log_meta[j, 0] = fid
     rg.log_meta[j, 1] = dlc
     rg.log_meta[j, 2] = direction
+    rg.log_meta[j, 3] = flags
     for b in range(min(dlc, RX_DATA)):
         rg.log_data[j, b] = data[b]
     rg.heads[H_LOG] += 1
@@ -142,6 +143,7 @@ def _send_logged(rg, fid, word, t):
     rg.log_meta[j, 0] = fid
     rg.log_meta[j, 1] = 8
     rg.log_meta[j, 2] = LOG_TX
+    rg.log_meta[j, 3] = 0
     for b in range(8):
         rg.log_data[j, b] = (word >> (8 * b)) & 0xFF
     rg.heads[H_LOG] += 1
@@ -190,7 +192,7 @@ def take_frames(lp, ls, rg):
         flags = rg.rx_meta[j, 2]
         data = rg.rx_data[j]
         tail += 1
-        _log(rg, t, fid, dlc, LOG_RX, data)
+        _log(rg, t, fid, dlc, LOG_RX, data, flags)
         if fid == lp.ints[PI_STEP_REQ_ID]:
             if flags & NOT_CLASSIC:
                 rx.counts[C_FORMAT] += 1

@@ -48,7 +48,7 @@ class Rings(NamedTuple):
     state_t: np.ndarray      # (cap,) float64, s
     state_v: np.ndarray      # (cap, nstate) float64
     log_t: np.ndarray        # (cap,) float64, s
-    log_meta: np.ndarray     # (cap, 3) int64: id, length, direction
+    log_meta: np.ndarray     # (cap, 4) int64: id, length, direction, flags (bridge.can_e2e.FLAG_*)
     log_data: np.ndarray     # (cap, RX_DATA) uint8
     cmd_t: np.ndarray        # (cap,) float64, s
     cmd_meta: np.ndarray     # (cap, 2) int64: kind, arg
@@ -63,7 +63,7 @@ def make_rings(nsensor: int, nframes: int, nstate: int, ncmd: int, *, rx: int = 
                  z(tx, dtype=np.int64), z(tx, dtype=np.int64), z(tx),
                  z(samples), z((samples, nsensor)), z((samples, nframes), dtype=np.int64),
                  z(samples), z((samples, nstate)),
-                 z(log), z((log, 3), dtype=np.int64), z((log, RX_DATA), dtype=np.uint8),
+                 z(log), z((log, 4), dtype=np.int64), z((log, RX_DATA), dtype=np.uint8),
                  z(cmd), z((cmd, 2), dtype=np.int64), z((cmd, ncmd)))
 
 
