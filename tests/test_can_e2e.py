@@ -210,7 +210,7 @@ class _Sent:
         assert head - self.n <= cap
         for n in range(self.n, head):
             j = n % cap
-            fid, dlc, direction = (int(v) for v in rg.log_meta[j])
+            fid, dlc, direction = (int(v) for v in rg.log_meta[j, :3])
             if direction != self.LOG_TX or fid not in (272, 274):
                 continue
             d = self.db.decode_message(fid, bytes(rg.log_data[j, :8]), decode_choices=False)
