@@ -63,7 +63,7 @@ def test_every_command_times_out_exactly_three_periods_after_its_last_frame(vehi
             first_safe = None
             for k in range(k_last, k_last + 3 * period + 5):
                 out = rx.check_timeouts(k * DT)[name]
-                flag = rx.faults[rx._fault_name[name]]
+                flag = rx.faults[rx.fault_names[codec.channels.command_names.index(name)]]
                 if flag and first_safe is None:
                     first_safe = k
                 if k < k_last + 3 * period + 1:
