@@ -14,6 +14,9 @@ interface, hub gone) is counted, the port is marked down and the reader thread r
 ``retry_interval`` seconds until it is back. Meanwhile frames are dropped and counted (the simulation
 keeps its pace), as are frames the writer fell a ring's length behind on and frames received while the
 receive ring is full. Error frames on the bus are counted as bus errors too.
+The bus is opened without ``receive_own_messages``, so the reader never gets this port's own frames
+back: a frame with one of the simulator's own ids is another sender's (the step counts it; python-can's
+``is_rx`` cannot tell, SocketCAN marks every frame sent on this host, vcan0's included, as not received).
 """
 from __future__ import annotations
 
@@ -45,7 +48,6 @@ class BusPort:
         self.send_errors = 0
         self.recv_errors = 0
         self.error_frames = 0
-        self.own_echoes = 0
         self.dropped_while_down = 0
         self.reconnects = 0
         self.last_error = ""
@@ -144,9 +146,6 @@ class BusPort:
             if msg.is_error_frame:
                 self.error_frames += 1
                 continue
-            if not msg.is_rx:                   # this port's own frame echoed back (receive_own_messages):
-                self.own_echoes += 1            # not a frame from the bus
-                continue
             self.received += 1
             put(msg.arbitration_id, msg.data, (FLAG_EXTENDED if msg.is_extended_id else 0)
                 | (FLAG_REMOTE if msg.is_remote_frame else 0) | (FLAG_FD if msg.is_fd else 0))
@@ -187,8 +186,7 @@ class BusPort:
     def stats(self) -> dict:
         return {"interface": self.description, "up": self._up, "sent": self.sent, "received": self.received,
                 "send_errors": self.send_errors, "recv_errors": self.recv_errors,
-                "error_frames": self.error_frames, "own_echoes": self.own_echoes,
-                "dropped_while_down": self.dropped_while_down,
+                "error_frames": self.error_frames, "dropped_while_down": self.dropped_while_down,
                 "reconnects": self.reconnects, "tx_dropped": self.tx_dropped, "rx_dropped": self.rx_dropped,
                 "tx_cpu_s": self.tx_cpu,
                 "last_error": self.last_error}
