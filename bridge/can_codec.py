@@ -20,19 +20,33 @@ Command frames (``CommandReceiver``), end-to-end checks in this order, each fail
 2. DLC different from the DBC length: ``"dlc"``;
 3. CRC-8 SAE J1850 (poly 0x1D, init 0xFF, final xor 0xFF) over the frame's E2EDataID byte followed
    by every byte except the CRC byte (bytes 0-6) != byte 7: ``"crc"``;
-4. alive counter (4 bit): with d = (counter - last accepted counter) mod 16, d == 1 or d == 2 is
-   accepted (at most one frame lost, ``max_counter_step``); d == 0 (repeated) and d > 2 (jump) are
-   rejected, ``"counter"`` (``counters["counter_repeated"]`` / ``["counter_jump"]`` split them). After
-   a jump the receiver re-synchronises on the received counter, so the next frame in sequence is
-   accepted again. The first frame ever, and the first one after a timeout (no valid frame for more
-   than the timeout), are accepted with any counter;
+4. the alive counter (4 bit), as the receiver of AUTOSAR E2E profiles 1 and 2 checks it. With d =
+   (counter - reference counter) mod 16, d == 1 or d == 2 is in sequence (at most one frame lost,
+   ``max_counter_step``). A repeated counter (d == 0) is never taken, whatever the time since the last
+   good frame: ``"counter"`` and ``"counter_repeated"`` (a frozen sender sending the same frame forever
+   gets nothing after its first frame). A jump (d > 2) is ``"counter"`` and ``"counter_jump"``. A jump,
+   and the first frame after a time-out (no value taken for more than the time-out, whatever its
+   counter), set the reference counter and start a re-synchronisation: the next ``E2ESyncCounter``
+   frames in sequence (a DBC attribute per command frame) are checked but not taken, counted as
+   ``"sync"``, and the frame after them is taken (a repeat within them restarts the count, a jump or a
+   gap longer than the time-out restarts the re-synchronisation). So after a time-out the sender's
+   first frame and the next E2ESyncCounter ones in sequence are not taken. The session's first frame
+   (and, until a value has been taken, any frame that does not repeat the counter) is taken at once;
 5. value outside the DBC [minimum, maximum]: ``"range"`` (the frame is authentic, so its counter is
-   still taken as the last one). Signals named in ``clamp`` (empty by default) are clamped to the
+   still taken as the reference). Signals named in ``clamp`` (empty by default) are clamped to the
    range and accepted instead, counted in ``counters["clamped"]``.
+
+Before these, the frame's format: a frame with a command's (or SIM_STEP_REQ's) id that is not a classic
+data frame with a standard id (extended id, remote frame, CAN FD) is never applied, counted as
+``"format"``. A standard-id data frame with one of the simulator's own ids (``Codec.own_frame_ids``)
+that it did not send is counted as ``"foreign_frames"`` (a second simulator on the bus) by the service's
+step (``rtsim.service.kernel``).
 
 ``receive`` never raises, whatever the id, length or bytes. The watchdog ``check_timeouts(t)`` flags
 a command whose last valid frame is older than its timeout (3 DBC cycle times by default; before
-the first frame, counted from ``t0``) and returns the values to apply: the latest valid value, or
+the first frame, counted from ``t0``): with frames taken at t_last and a 30 ms time-out, the value
+at t_last + 30 ms is still the command's, from the first step after it the safe value applies. It
+returns the values to apply: the latest valid value, or
 when timed out (or never received) the safe value: throttle 0, brake ``hold_pressure``, steering
 held at its last valid value (0 if none). Flags clear on the next valid frame.
 
@@ -242,17 +256,21 @@ class Codec:
         # command frames: ECU frames with an E2EDataID; the value signal is the one named in COMMAND_NAMES
         self.command_frames: dict[str, FrameInfo] = {}
         self._cmd_plans: dict[str, tuple] = {}
+        #: per command, the frames in sequence to pass before values are taken again after a time-out or a
+        #: counter jump (the DBC attribute E2ESyncCounter of its frame)
+        self.sync_counter: dict[str, int] = {}
         for msg in self.db.messages:
             if "ECU" not in (msg.senders or []) or msg.name in EVENT_FRAMES:
                 continue
             f = self.frames[msg.name]
             data_id = _attr(msg, "E2EDataID", None)
+            sync = _attr(msg, "E2ESyncCounter", None)
             vals = [s for s in f.signals if s.name in command_names]
             ctr = [s for s in f.signals if s.name.endswith("_counter")]
             crc = [s for s in f.signals if s.name.endswith("_crc")]
-            if data_id is None or len(vals) != 1 or len(ctr) != 1 or len(crc) != 1:
-                raise ConfigError(f"{where}: command frame {f.name} needs E2EDataID, one command signal, "
-                                  f"one *_counter and one *_crc signal")
+            if data_id is None or sync is None or len(vals) != 1 or len(ctr) != 1 or len(crc) != 1:
+                raise ConfigError(f"{where}: command frame {f.name} needs E2EDataID, E2ESyncCounter, one "
+                                  f"command signal, one *_counter and one *_crc signal")
             if crc[0].start != 8 * (f.length - 1) or crc[0].length != 8:
                 raise ConfigError(f"{where}: {f.name}: the CRC must be the last byte")
             cmd_unit = next(c.unit for c in channels.commands if c.name == vals[0].name)
@@ -262,6 +280,7 @@ class Codec:
             prefix = ctr[0].name[: -len("_counter")]
             self.command_frames[vals[0].name] = f
             self._cmd_plans[vals[0].name] = (f, vals[0], ctr[0], crc[0], int(data_id), prefix)
+            self.sync_counter[vals[0].name] = int(sync)
         if set(self.command_frames) != set(command_names):
             raise ConfigError(f"{where}: command frames carry {sorted(self.command_frames)}, "
                               f"expected {list(command_names)}")
@@ -512,7 +531,7 @@ class CommandReceiver:
                      (1 << (vs.length - 1)) if vs.signed else 0, 1 << vs.length, vs.raw_min, vs.raw_max,
                      name in self.clamp, cs.start, cs.mask, e2e.POLICIES[SAFE_POLICY.get(name, "zero")],
                      self.max_counter_step, i if slots is None else slots[name],
-                     (invalid_slots or {}).get(name, -1))
+                     (invalid_slots or {}).get(name, -1), codec.sync_counter[name])
             fp[i] = (vs.factor, vs.offset, vs.minimum, vs.maximum, self.timeout[name])
         req, steps, ctr, _, data_id = codec._step_req_plan
         step = np.array((req.frame_id, req.length, CRC8_TABLE[0xFF ^ data_id], steps.start, steps.mask,
@@ -534,12 +553,16 @@ class CommandReceiver:
         return int(e2e.rx_find(self.plan, int(arbitration_id)))
 
     # -- one frame --------------------------------------------------------------------------------
-    def receive(self, arbitration_id: int, data: bytes, t: float) -> bool:
-        """Check and take one frame; True if accepted. Never raises (``data`` that is not bytes-like
-        is counted as a wrong DLC)."""
+    def receive(self, arbitration_id: int, data: bytes, t: float, *, is_extended_id: bool = False,
+                is_remote_frame: bool = False, is_fd: bool = False) -> bool:
+        """Check and take one frame (its python-can flags as keywords); True if accepted. Never raises
+        (``data`` that is not bytes-like is counted as a wrong DLC)."""
         i = self.command_index(arbitration_id)
         if i < 0:
             self.state.counts[e2e.C_UNKNOWN] += 1
+            return False
+        if is_extended_id or is_remote_frame or is_fd:
+            self.state.counts[e2e.C_FORMAT] += 1
             return False
         try:
             if isinstance(data, (int, str)):

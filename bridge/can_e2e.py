@@ -28,9 +28,11 @@ from rtsim.jit import inline_kernel, kernel
 # plan, int columns
 # RP_SLOT: where the watchdog writes the command's value in the output array; RP_INVALID_SLOT: where it
 # writes 1.0 while the command has no valid value (none yet, or timed out), else 0.0 (-1: nowhere)
+# RP_SYNC: frames in sequence a command must pass after a time-out or a counter jump before its values are
+# taken again (the DBC attribute E2ESyncCounter)
 (RP_ID, RP_DLC, RP_CRC_POS, RP_CRC0, RP_VSTART, RP_VMASK, RP_SIGN_BIT, RP_SPAN, RP_RAW_MIN, RP_RAW_MAX,
- RP_CLAMP, RP_CSTART, RP_CMASK, RP_POLICY, RP_MAX_STEP, RP_SLOT, RP_INVALID_SLOT) = range(17)
-NRP = 17
+ RP_CLAMP, RP_CSTART, RP_CMASK, RP_POLICY, RP_MAX_STEP, RP_SLOT, RP_INVALID_SLOT, RP_SYNC) = range(18)
+NRP = 18
 # plan, float columns
 RF_FACTOR, RF_OFFSET, RF_LO, RF_HI, RF_TIMEOUT = range(5)
 NRF = 5
@@ -40,10 +42,19 @@ POLICIES = {"zero": POLICY_ZERO, "hold_pressure": POLICY_HOLD_PRESSURE, "hold_la
 # SIM_STEP_REQ layout
 SP_ID, SP_DLC, SP_CRC0, SP_SSTART, SP_SMASK, SP_SMIN, SP_SMAX, SP_CSTART, SP_CMASK = range(9)
 NSP = 9
-# state, per command
-FV_VALUE, FV_LAST_T = range(2)
-IV_HAS_VALUE, IV_HAS_T, IV_COUNTER, IV_HAS_COUNTER, IV_TIMED_OUT = range(5)
-NIV = 5
+# state, per command: FV_LAST_T the time of the last frame taken, FV_SEQ_T of the last authentic frame that
+# set the reference counter; IV_SYNC: 0 in sequence, n > 0 re-synchronising (n - 1 frames in sequence still
+# to pass before the next one is taken)
+FV_VALUE, FV_LAST_T, FV_SEQ_T = range(3)
+NFV = 3
+IV_HAS_VALUE, IV_HAS_T, IV_COUNTER, IV_HAS_COUNTER, IV_TIMED_OUT, IV_SYNC = range(6)
+NIV = 6
+#: s: times closer than this count as equal (t = k dt in floating point: 30 steps of 1 ms may come out
+#: 1e-17 s longer than the 30 ms time-out); far below any step
+TIME_EPS = 1e-9
+# flags of a received frame (the receive ring's third column; python-can's Message flags)
+FLAG_EXTENDED, FLAG_REMOTE, FLAG_FD = 1, 2, 4
+NOT_CLASSIC = FLAG_EXTENDED | FLAG_REMOTE | FLAG_FD
 # counters
 COUNTER_NAMES = ("unknown_id", "dlc", "crc", "counter", "range", "counter_repeated", "counter_jump", "clamped",
                  "accepted", "lockstep_rejected", "lockstep_ignored", "sync", "format", "foreign_frames")
@@ -68,14 +79,14 @@ class RxPlan(NamedTuple):
 
 
 class RxState(NamedTuple):
-    fv: np.ndarray        # (ncmd, 2) float64
+    fv: np.ndarray        # (ncmd, NFV) float64
     iv: np.ndarray        # (ncmd, NIV) int64
     counts: np.ndarray    # (len(COUNTER_NAMES),) int64
     g: np.ndarray         # (NG,) float64
 
 
 def make_state(ncmd: int, hold_pressure: float) -> RxState:
-    st = RxState(np.zeros((ncmd, 2)), np.zeros((ncmd, NIV), dtype=np.int64),
+    st = RxState(np.zeros((ncmd, NFV)), np.zeros((ncmd, NIV), dtype=np.int64),
                  np.zeros(len(COUNTER_NAMES), dtype=np.int64), np.zeros(NG))
     st.g[G_HOLD_PRESSURE] = hold_pressure
     st.g[G_FOREIGN_T] = -np.inf
@@ -110,8 +121,13 @@ def rx_find(plan, fid):
 
 @kernel
 def rx_command(plan, st, i, data, dlc, t):
-    """Check and take one frame of command ``i`` (``rx_find``) received at time t (s); True if
-    accepted. Every rejection is counted once, by kind."""
+    """Check and take one classic data frame of command ``i`` (``rx_find``) received at time t (s); True if
+    its value was taken. Every other outcome is counted once, by kind (``bridge.can_codec`` has the
+    rules): DLC, CRC, then the alive counter as AUTOSAR E2E profiles 1 and 2 check it: a repeated counter
+    is never taken; the first frame after a time-out (no value taken for more than the time-out) and a
+    counter jump (a step beyond ``RP_MAX_STEP``) set the reference counter and start a re-synchronisation:
+    the next ``RP_SYNC`` frames in sequence (each 1..``RP_MAX_STEP`` after the previous one, no gap longer
+    than the time-out) are counted as ``sync`` and not taken, the one after them is; then the range."""
     ip, fp, cnt = plan.ip, plan.fp, st.counts
     if dlc != ip[i, RP_DLC]:
         cnt[C_DLC] += 1
@@ -124,22 +140,44 @@ def rx_command(plan, st, i, data, dlc, t):
     cmask = ip[i, RP_CMASK]
     ctr = (word >> ip[i, RP_CSTART]) & cmask
     iv, fv = st.iv, st.fv
-    if iv[i, IV_HAS_COUNTER] and iv[i, IV_HAS_T] and t - fv[i, FV_LAST_T] <= fp[i, RF_TIMEOUT]:
+    timeout = fp[i, RF_TIMEOUT] + TIME_EPS
+    if iv[i, IV_HAS_COUNTER]:
         d = (ctr - iv[i, IV_COUNTER]) & cmask
-        if d == 0:
+        if d == 0:                                  # repeated: never taken, whatever the time since
             cnt[C_COUNTER] += 1
             cnt[C_REPEATED] += 1
+            if iv[i, IV_SYNC] > 0:                  # the sequence being re-synchronised is broken
+                iv[i, IV_SYNC] = ip[i, RP_SYNC] + 1
             return False
-        if d > ip[i, RP_MAX_STEP]:
-            iv[i, IV_COUNTER] = ctr            # re-synchronise on the sender
-            cnt[C_COUNTER] += 1
-            cnt[C_JUMP] += 1
-            return False
+        if iv[i, IV_HAS_T]:         # (before the session's first value any counter but a repeat is taken)
+            sync = iv[i, IV_SYNC]
+            if sync > 0:
+                restart = t - fv[i, FV_SEQ_T] > timeout           # a gap within the re-synchronisation
+            else:
+                restart = t - fv[i, FV_LAST_T] > timeout          # the first frame after a time-out
+            if restart or d > ip[i, RP_MAX_STEP]:
+                iv[i, IV_COUNTER] = ctr             # re-synchronise on the sender
+                fv[i, FV_SEQ_T] = t
+                iv[i, IV_SYNC] = ip[i, RP_SYNC] + 1
+                if restart:
+                    cnt[C_SYNC] += 1
+                else:
+                    cnt[C_COUNTER] += 1
+                    cnt[C_JUMP] += 1
+                return False
+            if sync > 1:
+                iv[i, IV_COUNTER] = ctr
+                fv[i, FV_SEQ_T] = t
+                iv[i, IV_SYNC] = sync - 1
+                cnt[C_SYNC] += 1
+                return False
+            iv[i, IV_SYNC] = 0
     raw = (word >> ip[i, RP_VSTART]) & ip[i, RP_VMASK]
     if raw & ip[i, RP_SIGN_BIT]:
         raw -= ip[i, RP_SPAN]
     iv[i, IV_COUNTER] = ctr
     iv[i, IV_HAS_COUNTER] = 1
+    fv[i, FV_SEQ_T] = t
     if raw < ip[i, RP_RAW_MIN] or raw > ip[i, RP_RAW_MAX]:
         if not ip[i, RP_CLAMP]:
             cnt[C_RANGE] += 1
@@ -158,6 +196,22 @@ def rx_command(plan, st, i, data, dlc, t):
 
 
 @kernel
+def rx_frame(plan, st, fid, flags, data, dlc, t):
+    """Check one received frame (id ``fid``, ``FLAG_*`` ``flags``, payload, DLC) at time t (s) that is not
+    a SIM_STEP_REQ: a command's classic data frame goes to ``rx_command``; any other format with a
+    command's id is counted as ``format`` and never applied; other ids as ``unknown_id``. Returns the
+    command's index if its value was taken, else -1."""
+    i = rx_find(plan, fid)
+    if i < 0:
+        st.counts[C_UNKNOWN] += 1
+        return -1
+    if flags & NOT_CLASSIC:
+        st.counts[C_FORMAT] += 1
+        return -1
+    return i if rx_command(plan, st, i, data, dlc, t) else -1
+
+
+@kernel
 def rx_watchdog(plan, st, t, out):
     """Time-out flags at time t (s) and the command values to apply into out[RP_SLOT]: the latest valid
     value, or the safe value of a timed-out (or never received) command; 1.0 into out[RP_INVALID_SLOT]
@@ -167,7 +221,7 @@ def rx_watchdog(plan, st, t, out):
     ip, fp, iv, fv = plan.ip, plan.fp, st.iv, st.fv
     for i in range(ip.shape[0]):
         ref = fv[i, FV_LAST_T] if iv[i, IV_HAS_T] else st.g[G_T0]
-        timed_out = t - ref > fp[i, RF_TIMEOUT]
+        timed_out = t - ref > fp[i, RF_TIMEOUT] + TIME_EPS
         iv[i, IV_TIMED_OUT] = 1 if timed_out else 0
         slot = ip[i, RP_SLOT]
         valid = iv[i, IV_HAS_VALUE] and not timed_out

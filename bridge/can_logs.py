@@ -181,7 +181,8 @@ def _mcap_frame(path: Path, topic: str, k: int, m, direction: str) -> Frame:
             raise ValueError(f"id {can_id} or time {t} out of range")
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise RtsimError(f"{path}: {topic} message {k}: not a CAN frame ({type(exc).__name__}: {exc})") from None
-    return Frame(t, can_id, data, direction, can_id > 0x7FF, len(data) > 8)
+    return Frame(t, can_id, data, direction, bool(msg.get("extended")) or can_id > 0x7FF,
+                 bool(msg.get("fd")) or len(data) > 8)
 
 
 class _Lines:

@@ -14,7 +14,8 @@ are bridge.payloads.SCHEMAS, names and units from the channel dictionary, rtsim.
 * ``status``   → ``rtsim/<vehicle_id>/status``   service status (mode, loop health, faults, ...)
 * ``commands`` → ``rtsim/<vehicle_id>/commands`` the actuator commands applied + their ``source``
 * ``can/rx``, ``can/tx`` → ``rtsim/<vehicle_id>/can/rx|tx`` raw frames as
-  ``{"id": int, "dlc": int, "data": "hex", "time": s}``
+  ``{"id": int, "dlc": int, "data": "hex", "time": s}``, plus ``"extended"``, ``"remote"``, ``"fd"``:
+  true for a received frame of that format (absent otherwise)
 * ``scene``, ``tf``, ``road`` → ``rtsim/<vehicle_id>/scene|tf|road`` the 3D scene (bridge.scene):
   protobuf messages (``foxglove.SceneUpdate``, ``foxglove.FrameTransforms``) with the foxglove SDK's own
   schemas (schema encoding ``protobuf``: a FileDescriptorSet), given as encoded bytes, so Foxglove's 3D
@@ -72,8 +73,12 @@ def _can_frame(payload, t_s: float) -> dict:
                 "time": float(payload.get("time", t_s))}
     can_id, data, *rest = payload
     data = bytes(data)
-    return {"id": int(can_id), "dlc": int(rest[0]) if rest else len(data), "data": data.hex(),
-            "time": t_s}
+    frame = {"id": int(can_id), "dlc": int(rest[0]) if rest else len(data), "data": data.hex(), "time": t_s}
+    flags = int(rest[1]) if len(rest) > 1 else 0      # bridge.can_e2e.FLAG_*: only set ones are written
+    for bit, name in ((1, "extended"), (2, "remote"), (4, "fd")):
+        if flags & bit:
+            frame[name] = True
+    return frame
 
 
 class Recorder:

@@ -177,6 +177,10 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
         "dlc": {"type": "integer", "minimum": 0, "description": "data length code (bytes)"},
         "data": {"type": "string", "description": "frame payload, hexadecimal, 2 digits per byte"},
         "time": _TIME,
+        # (optional: written only when true; absent from recordings made before they existed)
+        "extended": {"type": "boolean", "description": "an extended (29-bit) id frame"},
+        "remote": {"type": "boolean", "description": "a remote frame (no data)"},
+        "fd": {"type": "boolean", "description": "a CAN FD frame"},
     }
     energy = {"time": _TIME, **{c.name: _signal(c.unit, c.description) for c in ENERGY}}
     order = {"type": "integer", "minimum": 0, "description": "the service's count of recorded events (user and "

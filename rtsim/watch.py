@@ -171,6 +171,8 @@ def render(snap: dict, vehicle_id: str, endpoint: str):
     for name, n in (status.get("rejected") or {}).items():
         faults.add_row(f"rejected {name}", _num(n), "")
     faults.add_row("accepted frames", _num(status.get("accepted_frames")), "")
+    if "foreign_frames" in status:      # frames with the service's own ids it did not send (second simulator)
+        faults.add_row("foreign frames", _num(status.get("foreign_frames")), "")
     faults.add_row("bus errors", _num(status.get("bus_errors")), "")
 
     topics = _table("Topics", ("topic", "rate", "messages"))

@@ -153,7 +153,9 @@ def test_end_to_end_child_process_commands_over_can(can_bus_factory):
             if msg.arbitration_id == 0x7FF:
                 marker = bytes(msg.data)
                 continue
-            if rx.receive(msg.arbitration_id, bytes(msg.data), time.monotonic()):
+            # every frame at one time, not its arrival time: a late delivery on a loaded machine must not
+            # time the command out and make the receiver re-synchronise (time-outs: tests/test_can_e2e.py)
+            if rx.receive(msg.arbitration_id, bytes(msg.data), 0.0):
                 values.append(rx.value[rx.names.index("throttle_angle_cmd")])
     finally:
         if child.poll() is None:

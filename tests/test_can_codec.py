@@ -295,10 +295,17 @@ def test_counter_sequence_wraps_and_rejects_repeats_and_jumps(codec):
     assert not feed(rx, codec, n, 0.4, 7, t + 0.02)  # two frames lost: jump rejected
     assert rx.counters["counter"] == 2 and rx.counters["counter_jump"] == 1
     assert rx.latest[n] == pytest.approx(0.3)
-    assert feed(rx, codec, n, 0.5, 8, t + 0.03)  # re-synchronised on 7
-    assert not feed(rx, codec, n, 0.5, 11, t + 0.04)  # a step of 3: jump
-    assert rx.counters["counter"] == 3
-    assert feed(rx, codec, n, 0.6, 12, t + 0.05)  # 12 follows the re-synchronised 11
+    # re-synchronising on 7 (E2ESyncCounter = 2 in the DBC): 8 and 9 in sequence are checked, not taken
+    assert not feed(rx, codec, n, 0.5, 8, t + 0.03) and not feed(rx, codec, n, 0.5, 9, t + 0.04)
+    assert rx.counters["sync"] == 2 and rx.latest[n] == pytest.approx(0.3)
+    assert feed(rx, codec, n, 0.5, 10, t + 0.05)                      # ... 10 is taken
+    assert not feed(rx, codec, n, 0.5, 13, t + 0.06)  # a step of 3: jump
+    assert rx.counters["counter"] == 3 and rx.counters["counter_jump"] == 2
+    # 14 and 15 follow 13 (sync), 0 is taken; a repeat among them restarts the count
+    assert not feed(rx, codec, n, 0.6, 14, t + 0.07) and not feed(rx, codec, n, 0.6, 14, t + 0.08)
+    assert not feed(rx, codec, n, 0.6, 15, t + 0.09) and not feed(rx, codec, n, 0.6, 0, t + 0.10)
+    assert feed(rx, codec, n, 0.6, 1, t + 0.11) and rx.latest[n] == pytest.approx(0.6)
+    assert rx.counters["sync"] == 5 and rx.counters["counter_repeated"] == 2
     # counters are per command
     assert feed(rx, codec, "brake_pressure_cmd", 100.0, 9, t)
     assert feed(rx, codec, "brake_pressure_cmd", 100.0, 10, t + 0.01)
@@ -372,10 +379,10 @@ def test_fuzz_random_frames(codec, db):
     rx = CommandReceiver(codec)
     cmd_msgs = {db.get_message_by_name(f).frame_id: db.get_message_by_name(f) for f in CMD_FRAMES}
     ids = list(cmd_msgs)
-    # oracle state
-    last_ctr: dict[int, int] = {}
-    last_t: dict[int, float] = {}
-    expect = {"unknown_id": 0, "dlc": 0, "crc": 0, "counter": 0, "range": 0}
+    # oracle state (AUTOSAR E2E profile 1/2 receiver, as the DBC's comments state it), per frame id
+    state = {fid: {"ctr": None, "taken_t": None, "seq_t": None, "sync": 0} for fid in ids}
+    nsync = {fid: codec.sync_counter[CMD_FRAMES[m.name]] for fid, m in cmd_msgs.items()}
+    expect = {"unknown_id": 0, "dlc": 0, "crc": 0, "counter": 0, "range": 0, "sync": 0}
     expect_accepted = 0
     latest = {}
     sender_ctr = dict.fromkeys(ids, 0)
@@ -411,19 +418,35 @@ def test_fuzz_random_frames(codec, db):
             dec = m.decode(data, decode_choices=False)
             name = CMD_FRAMES[m.name]
             ctr = dec[[s.name for s in m.signals][1]]
-            fresh = fid not in last_t or t - last_t[fid] > 0.03
-            d = (ctr - last_ctr[fid]) % 16 if fid in last_ctr else 1
-            if not fresh and d == 0:
+            st = state[fid]
+            d = (ctr - st["ctr"]) % 16 if st["ctr"] is not None else 1
+            take = False
+            if d == 0:                                       # repeated: never
                 expect["counter"] += 1
-            elif not fresh and d > 2:
-                expect["counter"] += 1
-                last_ctr[fid] = ctr
+                if st["sync"]:
+                    st["sync"] = nsync[fid] + 1              # the sync count starts again
+            elif st["taken_t"] is None:                      # before the first value: any other counter
+                take = True
             else:
-                last_ctr[fid] = ctr
+                # re-synchronising (sync > 0): sync - 1 frames in sequence still to pass, then one is taken
+                ref = st["seq_t"] if st["sync"] else st["taken_t"]
+                timed_out = t - ref > 0.03 + 1e-9            # after a time-out (or a gap in the sync)
+                if timed_out or d > 2:
+                    st["ctr"], st["seq_t"], st["sync"] = ctr, t, nsync[fid] + 1
+                    expect["sync" if timed_out else "counter"] += 1
+                elif st["sync"] > 1:
+                    st["ctr"], st["seq_t"] = ctr, t
+                    st["sync"] -= 1
+                    expect["sync"] += 1
+                else:
+                    st["sync"] = 0
+                    take = True
+            if take:
+                st["ctr"], st["seq_t"] = ctr, t
                 s = m.get_signal_by_name(name)
                 if s.minimum - s.scale * 1e-3 <= dec[name] <= s.maximum + s.scale * 1e-3:
                     ok = True
-                    last_t[fid] = t
+                    st["taken_t"] = t
                     latest[name] = dec[name]
                 else:
                     expect["range"] += 1
@@ -435,7 +458,7 @@ def test_fuzz_random_frames(codec, db):
     assert {k: rx.counters[k] for k in expect} == expect
     assert rx.accepted + sum(expect.values()) == n  # every frame counted exactly once
     assert rx.counters["counter"] == rx.counters["counter_repeated"] + rx.counters["counter_jump"]
-    assert constructed_ok > 0.8 * constructed  # the valid frames are honoured despite the noise
+    assert constructed_ok > 0.7 * constructed  # the valid frames are honoured despite the noise
     assert min(expect.values()) > 0 and expect["crc"] > 0.25 * n
     for name, v in latest.items():
         assert rx.latest[name] == pytest.approx(v, abs=1e-9)
@@ -469,18 +492,27 @@ def test_watchdog_timeouts_safe_values_and_recovery(codec):
     assert all(rx.faults.values())
     assert out == pytest.approx({"throttle_angle_cmd": 0.0, "brake_pressure_cmd": 2500.0,
                                  "steering_wheel_angle_cmd": 1.25})
-    # a fresh valid frame (any counter after a timeout) clears its flag at once
+    # after a timeout the sender's first frame (any counter) and the next E2ESyncCounter (2) frames in
+    # sequence are checked but not taken; the one after them clears the flag at once
     t2 = t + 0.2
-    assert feed(rx, codec, "throttle_angle_cmd", 0.2, 13, t2)
+    for j, c in enumerate((13, 14, 15)):
+        assert not feed(rx, codec, "throttle_angle_cmd", 0.2, c, t2 + 0.01 * j)
+        assert rx.check_timeouts(t2 + 0.01 * j)["throttle_angle_cmd"] == 0.0 and rx.faults["throttle_timeout"]
+    assert rx.counters["sync"] == 3
+    t3 = t2 + 0.03
+    assert feed(rx, codec, "throttle_angle_cmd", 0.2, 0, t3)
     assert rx.faults == {"throttle_timeout": False, "brake_timeout": True, "steer_timeout": True}
-    out = rx.check_timeouts(t2 + 0.001)
+    out = rx.check_timeouts(t3 + 0.001)
     assert out["throttle_angle_cmd"] == pytest.approx(0.2) and out["brake_pressure_cmd"] == 2500.0
-    assert feed(rx, codec, "brake_pressure_cmd", 900.0, 3, t2)
-    assert feed(rx, codec, "steering_wheel_angle_cmd", -0.5, 3, t2)
-    out = rx.check_timeouts(t2 + 0.001)
+    for j, c in enumerate((3, 4, 5, 6)):
+        ok = j == 3
+        assert feed(rx, codec, "brake_pressure_cmd", 900.0, c, t3 - 0.03 + 0.01 * j) == ok
+        assert feed(rx, codec, "steering_wheel_angle_cmd", -0.5, c, t3 - 0.03 + 0.01 * j) == ok
+    out = rx.check_timeouts(t3 + 0.001)
     assert not any(rx.faults.values())
     assert out == pytest.approx({"throttle_angle_cmd": 0.2, "brake_pressure_cmd": 900.0,
                                  "steering_wheel_angle_cmd": -0.5})
+    t2 = t3
     # the flags go straight into the status frame
     fid, data = codec.encode_status("realtime", t2, faults=rx.faults, rejected=rx.counters)
     assert data[0] >> 2 & 0xF == 0

@@ -89,7 +89,7 @@ def _recorded_tx(messages, fid):
 def test_demo_ecu_drives_the_car_and_every_sensor_frame_keeps_its_period(segment, tmp_path):
     iface, chan = segment
     rec = tmp_path / "demo.mcap"
-    svc = ServiceProcess(iface, chan, "--no-zenoh", "--record", str(rec), "--max-catch-up", "1000")
+    svc = ServiceProcess(iface, chan, "--no-zenoh", "--record", str(rec), "--max-catch-up", "1000", "--json")
     ecu = None
     bus = open_bus(iface, chan)
     listener = Listener(bus)
@@ -106,6 +106,7 @@ def test_demo_ecu_drives_the_car_and_every_sensor_frame_keeps_its_period(segment
     result = json.loads(ecu.stdout.strip().splitlines()[-1])
     print(f"\nECU: {result}\nservice stopped {stop_s * 1e3:.0f} ms after SIGTERM\n{svc.output}")
     assert rc == 0, svc.output                 # a clean stop (how long it took is printed above)
+    summary = json.loads(svc.output[svc.output.index("\n{") + 1:])
 
     # the demo ECU's commands moved the car (the seed's straight line peaks near 23 km/h = 6.4 m/s when
     # every command arrives in time; on a loaded machine a late ECU trips the watchdog, which brakes)
@@ -118,10 +119,13 @@ def test_demo_ecu_drives_the_car_and_every_sensor_frame_keeps_its_period(segment
     print(f"recorded peak speed {max(speed):.2f} m/s, watchdog engaged {safe} times")
     assert result["peak_speed_estimate"] > 2.0 and max(speed) > 2.0
     # the ECU decoded every sample of its 12 s (simulated), and the service accepted every command frame
-    # it sent (one `commands` record per accepted frame; the watchdog's changes carry all three values)
+    # it sent but the ones a late ECU's time-out made the service re-synchronise on (counted as sync; one
+    # `commands` record per accepted frame; the watchdog's changes carry all three values)
     assert result["samples"] > 5000 and result["samples"] == round(result["ecu_time"] / 0.002) + 1, result
     accepted = [c for c in cmds if c["source"] == "can" and len(set(COMMAND_NAMES) & set(c)) == 1]
-    assert len(accepted) == result["frames_sent"], (len(accepted), result["frames_sent"])
+    assert len(accepted) == summary["accepted_frames"]
+    assert len(accepted) + summary["rejected"]["sync"] == result["frames_sent"], (len(accepted), summary)
+    assert summary["rejected"]["counter"] == 0 and summary["rejected"]["foreign_frames"] == 0
 
     # every sample recorded, at 500 Hz in simulated time (sensors) and 100 Hz (state), none missing
     for topic, period_ms in (("sensors", 2), ("state", 10)):
@@ -294,6 +298,7 @@ def test_fuzz_100k_frames_at_full_rate(segment):
     codec = Codec()
     cmd_ids = {f.frame_id: name for name, f in codec.command_frames.items()}
     avoid = set(cmd_ids) | {codec.step_request.frame_id}
+    own = set(codec.own_frame_ids)           # (another sender's frame with one of these ids: foreign)
     svc = ServiceProcess(iface, chan, "--zenoh-listen", "tcp/127.0.0.1:0", "--json")
     endpoint = re.search(r"Zenoh:\s+(tcp/127\.0\.0\.1:\d+)", svc.output).group(1)
     from bridge.zenoh_link import ZenohClient
@@ -304,7 +309,7 @@ def test_fuzz_100k_frames_at_full_rate(segment):
     bus = open_bus(iface, chan)
     listener = Listener(bus, SENSOR_IDS)
     rng = random.Random(2026)
-    expect = {"unknown_id": 0, "dlc": 0, "crc": 0}
+    expect = {"unknown_id": 0, "dlc": 0, "crc": 0, "foreign_frames": 0}
     valid = 0
     ctr = 0
     assert listener.wait_sim_ms(0), "no sensor frame from the service"
@@ -338,15 +343,19 @@ def test_fuzz_100k_frames_at_full_rate(segment):
                 else:
                     expect["dlc"] += 1
             else:
-                expect["unknown_id"] += 1
+                expect["foreign_frames" if fid in own else "unknown_id"] += 1
             bus.send(can.Message(arbitration_id=fid, data=bytes(data), is_extended_id=False, dlc=dlc))
         # the hub may still be delivering a backlog, behind which the valid commands reach the service
         # late (in simulated time) and the watchdog rightly closes the throttle meanwhile: the ECU keeps
         # commanding until the service has counted every frame, then for 1 s (simulated) more
         def counted_all():
             st = status[-1] if status else None
-            return st is not None and st["accepted_frames"] + sum(st["rejected"].values()) >= valid + sum(
-                expect.values())
+            if st is None:
+                return False
+            r = st["rejected"]
+            counted = st["accepted_frames"] + st["foreign_frames"] + sum(
+                r[k] for k in ("dlc", "crc", "counter", "range", "unknown_id", "sync", "format"))
+            return counted >= valid + sum(expect.values())
 
         deadline = time.monotonic() + 2 * PROCESS    # bounds on the waits only
         settle_from = None
@@ -373,7 +382,8 @@ def test_fuzz_100k_frames_at_full_rate(segment):
     for kind, n in expect.items():
         assert summary["rejected"][kind] == n, (kind, summary["rejected"])
     assert summary["rejected"]["counter"] == 0 and summary["rejected"]["range"] == 0
-    assert summary["accepted_frames"] == valid
+    # every valid command taken, but those a late delivery made the service re-synchronise on
+    assert summary["accepted_frames"] + summary["rejected"]["sync"] == valid
     # no stall: the sensor stream stayed complete during the fuzz (every sample, stamps exactly 2 ms
     # apart; the capture spans the whole fuzz), and the valid throttle command acted (at the latest once
     # the backlog was through)
@@ -510,7 +520,9 @@ def test_vanished_bus_is_reported_retried_and_the_loop_keeps_its_pace(tmp_path):
 
 
 class _LockstepEcu:
-    """The test as a lockstep ECU: commands, then SIM_STEP_REQ, then everything up to SIM_STEP_ACK."""
+    """The test as a lockstep ECU: commands, then SIM_STEP_REQ, then everything up to SIM_STEP_ACK. It keeps
+    the simulation time at which the service takes each cycle's commands (``taken_at``: the time before
+    the cycle's steps), the decoded sensor samples, SIM_STATUS and SIM_DIAG frames."""
 
     def __init__(self, bus, codec, db):
         from bridge.can_pack import SensorDecoder
@@ -519,10 +531,19 @@ class _LockstepEcu:
         self.dec = SensorDecoder(codec)
         self.samples: list[tuple[float, np.ndarray]] = []
         self.status: list[dict] = []
+        self.diag: list[dict] = []
         self.ctr = [0, 0, 0, 0]
         self.status_id = db.get_message_by_name("SIM_STATUS").frame_id
+        self.diag_id = db.get_message_by_name("SIM_DIAG").frame_id
+        self.t = 0.0                                   # simulation time reached (the last SIM_STEP_ACK)
+        self.command_ms: list[int] = []                # when each cycle with commands had them taken (ms)
 
-    def cycle(self, cmd, steps=10):
+    def cycle(self, cmd, steps=10, extra=()):
+        """One cycle: the commands ``cmd`` (None: none), the frames ``extra`` (can.Message), the request."""
+        if cmd is not None:
+            self.command_ms.append(_ms(self.t))
+        for msg in extra:
+            self.bus.send(msg)
         send_lockstep_cycle(self.bus, self.codec, self.ctr, cmd, steps)
         deadline = time.monotonic() + EVENT
         while time.monotonic() < deadline:
@@ -532,38 +553,88 @@ class _LockstepEcu:
             if msg.arbitration_id == self.codec.step_ack.frame_id:
                 t, c = self.codec.decode_step_ack(msg.data)
                 if c == self.ctr[3]:
+                    self.t = t
                     return t
             elif msg.arbitration_id == self.status_id:
-                self.status.append(self.db.decode_message(msg.arbitration_id, msg.data))
+                self.status.append(self.db.decode_message(msg.arbitration_id, msg.data, decode_choices=False))
+            elif msg.arbitration_id == self.diag_id:
+                self.diag.append(self.db.decode_message(msg.arbitration_id, msg.data, decode_choices=False))
             elif self.dec.receive(msg.arbitration_id, msg.data):
                 self.samples.append((self.dec.time, self.dec.values.copy()))
         raise AssertionError(f"no SIM_STEP_ACK within {EVENT:g} s")
 
+    def sample(self, ms: int) -> np.ndarray:
+        return next(v for ts, v in self.samples if _ms(ts) == ms)
+
+
+def _taken_ms(command_ms, sync=2, period=10, timeout=30):
+    """When the service takes values from a sender whose frames it received at ``command_ms`` (ms, every
+    command of a cycle together, counters in sequence), by the DBC's rule: after a time-out the first
+    frame and the next ``sync`` ones are checked, not taken."""
+    taken, left, last = [], 0, None
+    for k in command_ms:
+        if last is not None and left == 0 and k - last > timeout:
+            left = sync + 1                            # the first frame after the time-out: not taken
+            continue
+        if left > 1:
+            left -= 1
+            continue
+        left = 0
+        taken.append(k)
+        last = k
+    return taken
+
+
+def _status_flag_expected(taken, t_ms):
+    """Whether SIM_STATUS at ``t_ms`` flags the time-outs: it reports the step that started 1 ms before,
+    when no value had been taken for more than 30 ms (before any: since the start)."""
+    before = [k for k in taken if k <= t_ms - 1]
+    return (t_ms - 1) - (before[-1] if before else 0) > 30
+
 
 @pytest.mark.can_e2e
 def test_lockstep_brake_latency_and_watchdog_over_can(segment, db):
-    """The same bars as the realtime test, in lockstep over the bus: exact in simulation time."""
+    """The same bars as the realtime test, in lockstep over the bus, exact in simulation time: the brake
+    step's latency; each time-out: the last frames taken at t_last, the safe values act from the step at
+    t_last + 31 ms (the brake pressure sample at t_last + 32 ms shows exactly one step of the actuator's
+    rate limit) and every SIM_STATUS frame flags them exactly when that rule says (a status frame at
+    t_last + 32 ms flagged, one at t_last + 31 ms not); after a time-out the sender's first frame and the
+    next 2 (E2ESyncCounter) are not taken, then the flags clear; SIM_DIAG counts it."""
+    import tomllib
+
     from rtsim.channels import SENSOR_NAMES
 
+    rate = tomllib.loads((ROOT / "configs" / "vehicles" / "xbw.toml").read_text())["brakes"]["actuator"]["rate_limit"]
     iface, chan = segment
     codec = Codec()
     svc = ServiceProcess(iface, chan, "--no-zenoh", "--mode", "lockstep")
     bus = open_bus(iface, chan)
+    go = (0.1, 0.0, 0.5)
     try:
         ecu = _LockstepEcu(bus, codec, db)
         for _ in range(30):
-            t = ecu.cycle((0.1, 0.0, 0.5))
+            t = ecu.cycle(go)                                 # commands taken at 0 .. 290 ms
         t_step = t                                            # the brake step applies from here
         for _ in range(10):
             ecu.cycle((0.1, STEP_KPA, 0.5))
-        n_before = len(ecu.status)
-        t_quiet = ecu.cycle(None)                             # the ECU goes quiet...
-        for _ in range(40):
+        for _ in range(50):                                   # brakes released until they are still
+            ecu.cycle(go)
+        ecu.cycle(go, steps=8)                                # (phase: a status frame at t_last + 32 ms)
+        for _ in range(7):
+            ecu.cycle(go)
+        t_last1 = ecu.command_ms[-1]
+        assert t_last1 % 100 == 68, t_last1
+        ecu.cycle(None, steps=10)                             # the ECU goes quiet ...
+        ecu.cycle(None, steps=12)
+        ecu.cycle(go, steps=9)                                # ... and comes back (re-synchronising)
+        for _ in range(7):
+            ecu.cycle(go)
+        t_last2 = ecu.command_ms[-1]
+        assert t_last2 % 100 == 69, t_last2                   # (a status frame at t_last + 31 ms)
+        for _ in range(45):                                   # quiet long enough for the hold pressure
             ecu.cycle(None)
-        quiet_status = ecu.status[n_before:]
-        for _ in range(5):                                    # ... and comes back
-            ecu.cycle((0.0, 0.0, 0.5))
-        for _ in range(10):
+        t_quiet_end = _ms(ecu.t)
+        for _ in range(15):                                   # back for good
             ecu.cycle((0.0, 0.0, 0.5))
         rc, _ = svc.stop(signal.SIGTERM)
     finally:
@@ -574,12 +645,93 @@ def test_lockstep_brake_latency_and_watchdog_over_can(segment, db):
     t63 = next(ts for ts, v in ecu.samples if ts > t_step and v[ib] >= 0.632 * STEP_KPA)
     print(f"\nlockstep brake step: 63 % after {(t63 - t_step) * 1e3:.0f} ms")
     assert t63 - t_step <= 0.045 + 0.002 + 1e-9
-    # watchdog: the last command frames were taken at t_quiet - 0.01; 30 ms later the safe values act
-    after = [(ts, v) for ts, v in ecu.samples if t_quiet + 0.2 <= ts <= t_quiet + 0.4]
-    assert after and all(v[ib] > 2900 for _, v in after)                   # brake to the hold pressure
+
+    # the first time-out, to the step: still at t_last + 30 ms (the brakes released: 0), one step of the
+    # hold pressure's rise (rate limit x 1 ms) at t_last + 32 ms, the throttle closing from there
+    k = t_last1
+    assert ecu.sample(k + 30)[ib] == 0.0 and ecu.sample(k + 28)[ib] == 0.0
+    assert ecu.sample(k + 32)[ib] == pytest.approx(rate * 0.001, abs=0.5)
+    assert ecu.sample(k + 30)[it] == pytest.approx(0.1, abs=2e-4) and ecu.sample(k + 32)[it] < 0.099
+    # the second: after the quiet, the hold pressure, steering held, throttle closed
+    after = [(ts, v) for ts, v in ecu.samples if t_last2 + 300 <= _ms(ts) <= t_quiet_end]
+    assert after and all(abs(v[ib] - 3000.0) < 50.0 for _, v in after)      # brake to the hold pressure
     assert all(abs(v[isw] - 0.5) < 0.01 for _, v in after)                 # steering held
     assert after[-1][1][it] < 0.01                                         # throttle closed
-    flagged = [s for s in quiet_status if s["fault_throttle_timeout"] and s["fault_brake_timeout"]
-               and s["fault_steer_timeout"]]
-    assert len(flagged) >= 3 and quiet_status[-1] in flagged
+
+    # every status frame flags the time-outs exactly when the rule says; among them the one at
+    # t_last1 + 32 ms (flagged) and the one at t_last2 + 31 ms (not yet)
+    taken = _taken_ms(ecu.command_ms)
+    assert len(ecu.command_ms) - len(taken) == 6                           # two re-synchronisations
+    flags = ("fault_throttle_timeout", "fault_brake_timeout", "fault_steer_timeout")
+    by_ms = {}
+    for st in ecu.status:
+        t_ms = _ms(st["sim_time"])
+        by_ms[t_ms] = st
+        expect = _status_flag_expected(taken, t_ms)
+        assert all(st[f] == expect for f in flags), (t_ms, st, expect)
+        assert not st["fault_second_sim"] and not st["fault_model"]
+    assert by_ms[t_last1 + 32]["fault_brake_timeout"] and not by_ms[t_last2 + 31]["fault_brake_timeout"]
     assert not ecu.status[-1]["fault_brake_timeout"]                       # cleared by fresh frames
+    assert len(ecu.status) == len(ecu.diag) and ecu.diag[-1]["rejected_sync"] == 18  # 2 x 3 frames x 3 commands
+    t_end = _ms(ecu.status[-1]["sim_time"])                                # (counts up to the step before)
+    assert ecu.diag[-1]["accepted_frames"] == 3 * sum(k <= t_end - 1 for k in taken)
+
+
+@pytest.mark.can_e2e
+def test_lockstep_hostile_senders_over_can(segment, db, tmp_path):
+    """The issue's hostile senders over the bus, in lockstep: the identical BRAKE_CMD frame (counter 7,
+    8000 kPa) every 10 ms for 3 s, 50 extended-id and 50 remote frames with BRAKE_CMD's and
+    SIM_STEP_REQ's ids, and frames with one of the simulator's own sensor ids. The first frozen frame is
+    taken and nothing else; the hold pressure acts from 31 ms after it and every SIM_STATUS frame sets
+    fault_brake_timeout; the sensor-id frames raise fault_second_sim; SIM_DIAG counts each kind. The
+    recording keeps each frame's format, so the session re-simulates bit for bit."""
+    from rtsim.channels import SENSOR_NAMES
+    from rtsim.service.resim import resim
+
+    iface, chan = segment
+    codec = Codec()
+    rec = tmp_path / "hostile.mcap"
+    svc = ServiceProcess(iface, chan, "--no-zenoh", "--mode", "lockstep", "--record", str(rec))
+    bus = open_bus(iface, chan)
+    fid, frozen = codec.encode_command("brake_pressure_cmd", 8000.0, 7)
+    step_id = codec.step_request.frame_id
+    sensor_id = SENSOR_IDS[0]
+    cycles = 60 if os.environ.get("RTSIM_IN_VM") else 300
+    try:
+        ecu = _LockstepEcu(bus, codec, db)
+        for p in range(cycles):
+            extra = [can.Message(arbitration_id=fid, data=frozen, is_extended_id=False)]
+            if p < 50:
+                ext = codec.encode_command("brake_pressure_cmd", 8000.0, p)[1]
+                extra += [can.Message(arbitration_id=fid, data=ext, is_extended_id=True),
+                          can.Message(arbitration_id=fid, is_remote_frame=True, dlc=8, is_extended_id=False),
+                          can.Message(arbitration_id=step_id, data=codec.encode_step_request(1, p)[1],
+                                      is_extended_id=True)]
+            if 100 <= p < 110:                                 # another simulator's sensor frame
+                extra.append(can.Message(arbitration_id=sensor_id, data=bytes(8), is_extended_id=False))
+            ecu.cycle(None, extra=extra)
+        rc, _ = svc.stop(signal.SIGTERM)
+    finally:
+        bus.shutdown()
+        svc.close()
+    assert rc == 0, svc.output
+    ib = SENSOR_NAMES.index("brake_pressure")
+    assert len(ecu.status) == cycles // 10 and len(ecu.diag) == len(ecu.status)
+    assert all(st["fault_brake_timeout"] for st in ecu.status)             # every status frame
+    diag = ecu.diag[-1]
+    assert diag["accepted_frames"] == 1                                   # the first frozen frame only
+    assert diag["rejected_repeated"] == (cycles - 1) % 256
+    assert diag["rejected_format"] == 150 and diag["foreign_frames"] == (10 if cycles > 100 else 0)
+    # the brake: one frame of 8000 kPa taken at 0, the hold pressure from step 31 on (rising 40 kPa/ms
+    # until then): never near 8 MPa, at 3 MPa from 0.3 s on
+    assert max(v[ib] for _, v in ecu.samples) < 3050.0
+    assert all(abs(v[ib] - 3000.0) < 50.0 for ts, v in ecu.samples if ts >= 0.3)
+    if cycles > 100:
+        second = [(_ms(st["sim_time"]), st["fault_second_sim"]) for st in ecu.status]
+        # frames at 1000 .. 1090 ms: flagged from the status frame after the first until 1 s after the last
+        assert second == [(t, 1000 < t <= 2090) for t, _ in second], second
+    messages, _ = read_recording(rec)
+    rx = [m.data for m in messages["rtsim/xbw/can/rx"]]
+    assert sum(bool(f.get("extended")) for f in rx) == 100 and sum(bool(f.get("remote")) for f in rx) == 50
+    rep = resim(rec)
+    assert rep["identical"], (rep["sensors"], rep["state"])

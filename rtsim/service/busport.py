@@ -1,7 +1,8 @@
 """The service's CAN port: one python-can bus, a reader thread, a writer thread, error counting and
 reconnection.
 
-The reader thread puts every received frame (id and payload bytes) into the receive ring of
+The reader thread puts every received frame (id, payload bytes and its format: extended id, remote,
+CAN FD) into the receive ring of
 ``rtsim.service.rings``, which the compiled step empties at its next step, so the real-time thread never
 blocks on the bus; ``notify`` (lockstep mode) is called after each frame to wake a waiting loop. The
 step queues the frames it sends (id, payload, time stamp) in the transmit ring and calls ``wake()``; the
@@ -13,6 +14,9 @@ interface, hub gone) is counted, the port is marked down and the reader thread r
 ``retry_interval`` seconds until it is back. Meanwhile frames are dropped and counted (the simulation
 keeps its pace), as are frames the writer fell a ring's length behind on and frames received while the
 receive ring is full. Error frames on the bus are counted as bus errors too.
+The bus is opened without ``receive_own_messages``, so the reader never gets this port's own frames
+back: a frame with one of the simulator's own ids is another sender's (the step counts it; python-can's
+``is_rx`` cannot tell, SocketCAN marks every frame sent on this host, vcan0's included, as not received).
 """
 from __future__ import annotations
 
@@ -21,6 +25,7 @@ import time
 
 from bridge.can_batch import frame_sender
 from bridge.can_bus import open_bus
+from bridge.can_e2e import FLAG_EXTENDED, FLAG_FD, FLAG_REMOTE
 from rtsim.errors import RtsimError
 
 from .rings import H_RX_DROPPED, H_TX, RingReader, Rings, RxWriter
@@ -142,7 +147,8 @@ class BusPort:
                 self.error_frames += 1
                 continue
             self.received += 1
-            put(msg.arbitration_id, msg.data)
+            put(msg.arbitration_id, msg.data, (FLAG_EXTENDED if msg.is_extended_id else 0)
+                | (FLAG_REMOTE if msg.is_remote_frame else 0) | (FLAG_FD if msg.is_fd else 0))
             if notify is not None:
                 notify()
 

@@ -4,9 +4,11 @@
 
 1. (``take_frames``) every frame the CAN reader put in the receive ring since the last call, at time
    ``t = k dt``: logged for the recording, then the E2E checks and counters of the command frames
-   (``bridge.can_e2e``), accepted values as command events; a SIM_STEP_REQ is checked (CRC, count,
-   repeated counter) and, in lockstep mode, stops the intake and is left in ``LI_PENDING_STEPS`` for the
-   caller, otherwise counted as ignored;
+   (``bridge.can_e2e``: format, DLC, CRC, alive counter and re-synchronisation, range), accepted values
+   as command events; a frame with one of the simulator's own ids is another simulator's (counted, the
+   second-simulator fault); a SIM_STEP_REQ is checked (format, CRC, count, repeated counter) and, in
+   lockstep mode, stops the intake and is left in ``LI_PENDING_STEPS`` for the caller, otherwise counted
+   as ignored;
 2. ``nsteps`` times: the in-loop driver (a car whose DBC does not carry the driver's commands, such
    as the EPS car whose controller under test commands only the motor: the scenario's profiles and
    followers, ``drivers.driver.driver_step``; a two-wheeler's rider) writes its commands, the watchdog writes the CAN command
@@ -16,7 +18,7 @@
    command or the user took over, the bus's, one vehicle step, and at the DBC's periods: every
    sensor channel (with the vehicle's sensor effects and the config's sensor model) packed into the
    sensor frames and handed to the publisher at the fastest frame's period, each frame queued for
-   sending at its own period; the observer state; the SIM_STATUS frame;
+   sending at its own period; the observer state; the SIM_STATUS frame and, right after it, SIM_DIAG;
 3. (``ack_counter >= 0``) the SIM_STEP_ACK frame.
 
 After a failed vehicle step (``LI_MODEL_FAULT`` holds its status) step 2 is ``fault_step``: the vehicle
@@ -35,9 +37,9 @@ from typing import NamedTuple
 import numpy as np
 
 from bridge.can_e2e import (C_ACCEPTED, C_COUNTER, C_CRC, C_DLC, C_FOREIGN, C_FORMAT, C_JUMP, C_RANGE,
-                            C_REPEATED, C_STEP_IGNORED, C_STEP_REJECTED, C_SYNC, C_UNKNOWN, FV_VALUE, G_FOREIGN_T,
-                            IV_TIMED_OUT, RP_SLOT, SECOND_SIM_HOLD, RxPlan, RxState, pack_frames, rx_command,
-                            rx_find, rx_watchdog, step_request)
+                            C_REPEATED, C_STEP_IGNORED, C_STEP_REJECTED, C_SYNC, FLAG_EXTENDED, FLAG_REMOTE,
+                            FV_VALUE, G_FOREIGN_T, IV_TIMED_OUT, NOT_CLASSIC, RP_SLOT, SECOND_SIM_HOLD,
+                            TIME_EPS, RxPlan, RxState, pack_frames, rx_frame, rx_watchdog, step_request)
 from rtsim.jit import inline_kernel, kernel, read_cycles
 from rtsim.mbs.model import OK
 from drivers.path_follower import PathFollower
@@ -115,12 +117,13 @@ class LoopState(NamedTuple):
 
 
 @inline_kernel
-def _log(rg, t, fid, dlc, direction, data):
+def _log(rg, t, fid, dlc, direction, data, flags):
     j = rg.heads[H_LOG] % rg.log_t.shape[0]
     rg.log_t[j] = t
     rg.log_meta[j, 0] = fid
     rg.log_meta[j, 1] = dlc
     rg.log_meta[j, 2] = direction
+    rg.log_meta[j, 3] = flags
     for b in range(min(dlc, RX_DATA)):
         rg.log_data[j, b] = data[b]
     rg.heads[H_LOG] += 1
@@ -144,6 +147,7 @@ def _send_logged(rg, fid, word, t):
     rg.log_meta[j, 0] = fid
     rg.log_meta[j, 1] = 8
     rg.log_meta[j, 2] = LOG_TX
+    rg.log_meta[j, 3] = 0
     for b in range(8):
         rg.log_data[j, b] = (word >> (8 * b)) & 0xFF
     rg.heads[H_LOG] += 1
@@ -162,9 +166,24 @@ def _command_event(rg, plan, t, kind, arg, commands, by_slot):
     rg.heads[H_CMD] += 1
 
 
+@inline_kernel
+def _own_id(lp, fid):
+    """Whether ``fid`` is one of the ids this simulator sends (sensor frames, status, diagnostics, ack)."""
+    ints = lp.ints
+    if fid == ints[PI_STATUS_ID] or fid == ints[PI_DIAG_ID] or fid == ints[PI_ACK_ID]:
+        return True
+    for f in range(lp.sensor_ids.shape[0]):
+        if lp.sensor_ids[f] == fid:
+            return True
+    return False
+
+
 @kernel
 def take_frames(lp, ls, rg):
-    """Step 1 of the module docstring."""
+    """Step 1 of the module docstring. A frame with a command's or SIM_STEP_REQ's id that is not a classic
+    standard-id data frame is counted (``format``) and never applied; a standard-id data frame with one of
+    the simulator's own ids is another sender's (the CAN port never hands the simulator its own frames):
+    counted (``foreign_frames``), and its time sets the second-simulator fault for SECOND_SIM_HOLD s."""
     li, rx = ls.li, ls.rx
     t = li[LI_K] * lp.dt[0]
     cap = rg.rx_meta.shape[0]
@@ -174,10 +193,14 @@ def take_frames(lp, ls, rg):
         j = tail % cap
         fid = rg.rx_meta[j, 0]
         dlc = rg.rx_meta[j, 1]
+        flags = rg.rx_meta[j, 2]
         data = rg.rx_data[j]
         tail += 1
-        _log(rg, t, fid, dlc, LOG_RX, data)
+        _log(rg, t, fid, dlc, LOG_RX, data, flags)
         if fid == lp.ints[PI_STEP_REQ_ID]:
+            if flags & NOT_CLASSIC:
+                rx.counts[C_FORMAT] += 1
+                continue
             steps, counter = step_request(lp.rx, data, dlc)
             if steps < 0 or counter == li[LI_STEP_COUNTER]:
                 rx.counts[C_STEP_REJECTED] += 1        # bad DLC/CRC/count, or a repeated request
@@ -189,10 +212,12 @@ def take_frames(lp, ls, rg):
             li[LI_PENDING_STEPS] = steps
             li[LI_PENDING_COUNTER] = counter
             break
-        i = rx_find(lp.rx, fid)
-        if i < 0:
-            rx.counts[C_UNKNOWN] += 1
-        elif rx_command(lp.rx, rx, i, data, dlc, t):
+        if (flags & (FLAG_EXTENDED | FLAG_REMOTE)) == 0 and _own_id(lp, fid):
+            rx.counts[C_FOREIGN] += 1
+            rx.g[G_FOREIGN_T] = t
+            continue
+        i = rx_frame(lp.rx, rx, fid, flags, data, dlc, t)
+        if i >= 0:
             _command_event(rg, lp.rx, t, CMD_ACCEPTED, i, rx.fv[:, FV_VALUE], False)     # (only value i is new)
     rg.heads[H_RX_TAIL] = tail
 
@@ -210,7 +235,7 @@ def _status_frame(lp, ls, rg, t):
     nf = ST_FAULT0 + lp.fault_slot.shape[0]
     sv[nf + ST_BUS_ERROR] = li[LI_BUS_ERROR]
     sv[nf + ST_MODEL] = 1.0 if li[LI_MODEL_FAULT] != 0 else 0.0
-    sv[nf + ST_SECOND_SIM] = 1.0 if t - rx.g[G_FOREIGN_T] <= SECOND_SIM_HOLD else 0.0
+    sv[nf + ST_SECOND_SIM] = 1.0 if t - rx.g[G_FOREIGN_T] <= SECOND_SIM_HOLD + TIME_EPS else 0.0
     sv[nf + ST_DLC] = cnt[C_DLC]
     sv[nf + ST_CRC] = cnt[C_CRC]
     sv[nf + ST_COUNTER] = cnt[C_COUNTER]

@@ -33,7 +33,7 @@ import numpy as np
 
 from bridge.can_codec import DIAG_SOURCES, Codec, CommandReceiver
 from bridge.can_e2e import (C_STEP_IGNORED, C_STEP_REJECTED, G_FOREIGN_T, IV_HAS_VALUE, IV_TIMED_OUT,
-                            SECOND_SIM_HOLD)
+                            SECOND_SIM_HOLD, TIME_EPS)
 from bridge.payloads import CONTROL_OPS
 from drivers.base import INPUT_NAMES, INPUT_UNITS, LIMITS, NINPUT, NSTATE
 from drivers.driver import Driver
@@ -372,7 +372,7 @@ class HilLoop:
         f.update(self.rx.faults)
         f["bus_error"] = self._bus_error()
         f["model"] = bool(self.li[LI_MODEL_FAULT])
-        f["second_sim"] = bool(self.sim_time - self.rx.state.g[G_FOREIGN_T] <= SECOND_SIM_HOLD)
+        f["second_sim"] = bool(self.sim_time - self.rx.state.g[G_FOREIGN_T] <= SECOND_SIM_HOLD + TIME_EPS)
         if self.external_eps:
             f["eps_safe_state"] = self.sim.eps_fault      # latched: assist off until a reset
         return f

@@ -47,7 +47,8 @@ def _multiple(t: float, period: float) -> bool:
 
 class RingDrain:
     """Reads the publisher's rings in order and calls ``emit(key, t, payload)`` per message: ``key``
-    'sensors', 'state' or 'commands' with JSON bytes; 'can/rx' or 'can/tx' with (id, payload bytes).
+    'sensors', 'state' or 'commands' with JSON bytes; 'can/rx' or 'can/tx' with (id, payload bytes), or
+    (id, payload bytes, length, bridge.can_e2e.FLAG_* flags) for an extended-id, remote or CAN FD frame.
     ``raw`` (optional) receives each sensor and state sample as (key, t, values array) without JSON:
     re-simulation compares numbers."""
 
@@ -87,9 +88,10 @@ class RingDrain:
             return 0
         for n in todo:
             j = n % cap
-            fid, size, direction = (int(x) for x in r.log_meta[j])
+            fid, size, direction, flags = (int(x) for x in r.log_meta[j])
+            data = r.log_data[j, :min(size, r.log_data.shape[1])].tobytes()
             emit("can/rx" if direction == LOG_RX else "can/tx", float(r.log_t[j]),
-                 (fid, r.log_data[j, :min(size, r.log_data.shape[1])].tobytes()))
+                 (fid, data, size, flags) if flags else (fid, data))
         return len(todo)
 
     def _commands(self) -> int:

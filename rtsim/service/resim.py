@@ -35,6 +35,7 @@ import numpy as np
 
 from bridge import payloads
 from bridge.can_codec import Codec
+from bridge.can_e2e import FLAG_EXTENDED, FLAG_FD, FLAG_REMOTE
 from rtsim.errors import ConfigError
 
 from bridge.mcap_recorder import SESSION_END_METADATA
@@ -59,6 +60,12 @@ class Collector:
     def _raw(self, key, t, values):
         (self.sensors if key == "sensors" else self.state).append((t, values))
 
+
+
+def _flags(frame: dict) -> int:
+    """The receive ring's format flags (bridge.can_e2e.FLAG_*) of a recorded ``can/rx`` frame."""
+    return ((FLAG_EXTENDED if frame.get("extended") else 0) | (FLAG_REMOTE if frame.get("remote") else 0)
+            | (FLAG_FD if frame.get("fd") else 0))
 
 def _file_for(meta: dict, key: str, override: Path | None, tmp: Path) -> tuple[Path, str]:
     """The config file to use and a note: the override, the recorded path (recorded in another checkout:
@@ -224,7 +231,7 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         if mode != "lockstep":
             events.advance(kf - loop.k)
         events.apply_due(kf if mode == "lockstep" else None)
-        loop.rx_writer.put(int(m.data["id"]), bytes.fromhex(m.data["data"]))
+        loop.rx_writer.put(int(m.data["id"]), bytes.fromhex(m.data["data"]), _flags(m.data))
         loop.take_frames()
         replayed += 1
         if loop.run_state == "model_fault":
@@ -321,7 +328,8 @@ def replay_log(path: str | Path, scenario: Path | None = None, vehicle: Path | N
     t_first = frames[0].time if frames else 0.0
     for f in frames:
         loop.advance(int(round((f.time - t_first) / sim.dt)) - loop.k)
-        loop.rx_writer.put(f.can_id, bytes(f.data))
+        loop.rx_writer.put(f.can_id, bytes(f.data),
+                           (FLAG_EXTENDED if f.is_extended else 0) | (FLAG_FD if f.is_fd else 0))
         loop.take_frames()
         if loop.run_state == "model_fault":
             break

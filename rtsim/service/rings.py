@@ -9,7 +9,8 @@ real-time thread.
 
 Writers and readers:
 
-* ``rx_*``: CAN frames received (id, length, up to 64 payload bytes); the CAN reader thread writes, the
+* ``rx_*``: CAN frames received (id, length, flags ``bridge.can_e2e.FLAG_*``: extended id, remote, CAN FD;
+  up to 64 payload bytes); the CAN reader thread writes, the
   step reads (``H_RX_TAIL``). A full ring drops new frames (counted in ``H_RX_DROPPED``).
 * ``tx_*``: frames to send (id, 8-byte payload as a little-endian word, time stamp s); the step writes,
   the CAN writer thread reads.
@@ -36,7 +37,7 @@ CMD_ACCEPTED, CMD_MASK = 0, 1  # cmd_meta[:, 0]: kind
 
 class Rings(NamedTuple):
     heads: np.ndarray        # (NHEADS,) int64
-    rx_meta: np.ndarray      # (cap, 2) int64: id, length (bytes)
+    rx_meta: np.ndarray      # (cap, 3) int64: id, length (bytes), flags (bridge.can_e2e.FLAG_*)
     rx_data: np.ndarray      # (cap, RX_DATA) uint8
     tx_id: np.ndarray        # (cap,) int64
     tx_word: np.ndarray      # (cap,) int64, payload bytes 0-7 little-endian
@@ -47,7 +48,7 @@ class Rings(NamedTuple):
     state_t: np.ndarray      # (cap,) float64, s
     state_v: np.ndarray      # (cap, nstate) float64
     log_t: np.ndarray        # (cap,) float64, s
-    log_meta: np.ndarray     # (cap, 3) int64: id, length, direction
+    log_meta: np.ndarray     # (cap, 4) int64: id, length, direction, flags (bridge.can_e2e.FLAG_*)
     log_data: np.ndarray     # (cap, RX_DATA) uint8
     cmd_t: np.ndarray        # (cap,) float64, s
     cmd_meta: np.ndarray     # (cap, 2) int64: kind, arg
@@ -58,11 +59,11 @@ def make_rings(nsensor: int, nframes: int, nstate: int, ncmd: int, *, rx: int = 
                samples: int = 8192, log: int = 16384, cmd: int = 4096) -> Rings:
     """Rings of the given capacities (items); the defaults hold seconds of traffic at 1 kHz."""
     z = np.zeros
-    return Rings(z(NHEADS, dtype=np.int64), z((rx, 2), dtype=np.int64), z((rx, RX_DATA), dtype=np.uint8),
+    return Rings(z(NHEADS, dtype=np.int64), z((rx, 3), dtype=np.int64), z((rx, RX_DATA), dtype=np.uint8),
                  z(tx, dtype=np.int64), z(tx, dtype=np.int64), z(tx),
                  z(samples), z((samples, nsensor)), z((samples, nframes), dtype=np.int64),
                  z(samples), z((samples, nstate)),
-                 z(log), z((log, 3), dtype=np.int64), z((log, RX_DATA), dtype=np.uint8),
+                 z(log), z((log, 4), dtype=np.int64), z((log, RX_DATA), dtype=np.uint8),
                  z(cmd), z((cmd, 2), dtype=np.int64), z((cmd, ncmd)))
 
 
@@ -72,8 +73,9 @@ class RxWriter:
     def __init__(self, rings: Rings):
         self.r = rings
 
-    def put(self, can_id: int, data) -> bool:
-        """Queue one received frame; False (counted) when the ring is full."""
+    def put(self, can_id: int, data, flags: int = 0) -> bool:
+        """Queue one received frame (``flags``: bridge.can_e2e.FLAG_* of an extended-id, remote or CAN FD
+        frame, 0 for a classic standard-id data frame); False (counted) when the ring is full."""
         r = self.r
         heads = r.heads
         n = int(heads[H_RX])
@@ -86,6 +88,7 @@ class RxWriter:
         m = min(size, RX_DATA)
         r.rx_meta[j, 0] = can_id
         r.rx_meta[j, 1] = size
+        r.rx_meta[j, 2] = flags
         if m:
             r.rx_data[j, :m] = np.frombuffer(bytes(data[:m]), dtype=np.uint8)
         heads[H_RX] = n + 1
