@@ -178,11 +178,14 @@ def segment_strategy(space: CommandSpace, max_frames: int):
                      period=st.integers(1, 10))
 
 
-def ride_strategy(space: CommandSpace, roads: tuple[str, ...], top_speed: float, max_frames: int = 200,
-                  max_segments: int = 6, two_wheeler: bool = False, eps: bool = False):
+def ride_strategy(space: CommandSpace, roads: tuple[str, ...], top_speed: float, max_segment_s: float = 1.0,
+                  max_segments: int = 5, two_wheeler: bool = False, eps: bool = False):
     """Rides (``Ride``) on ``roads`` from standstill to ``top_speed`` (m/s) with at most ``max_segments``
-    segments of at most ``max_frames`` command periods each; the kind's options drawn where they apply."""
+    segments of at most ``max_segment_s`` seconds each (in command periods of the space); the kind's
+    options drawn where they apply."""
     from hypothesis import strategies as st
+
+    max_frames = max(1, int(round(max_segment_s / space.frame_s)))
 
     speed = st.one_of(st.sampled_from((0.0, top_speed)), st.floats(0.0, top_speed, allow_nan=False))
     segs = st.lists(segment_strategy(space, max_frames), min_size=1, max_size=max_segments).map(tuple)
