@@ -30,7 +30,9 @@ springs (suspension, tyres, bump stops) give back at most what they held. So at 
 
 with W_drive(t) = P_max t for an engine (its peak power at the crank, which no gearbox or converter
 multiplies; the two-wheeler's ideal drive of a vehicle without an engine: the sum of
-``MAX_WHEEL_TORQUE`` |omega_rear| dt, what its drive can do at the wheel speed it had), and E_store the
+``MAX_WHEEL_TORQUE`` |omega_rear| dt, what its drive can do at the wheel speed it had), plus for a
+two-wheeler the steering torques' work, the sum of (|rider's torque| + |assist torque|) |steer rate| dt
+(each command period's torques with the mean of the steer rate's magnitude at its start and end), and E_store the
 energy the vehicle can release besides: the engine's flywheel spun down from its rev limit (J w^2 / 2,
 a car's), the springs and actuators relaxing (the vehicle's weight through 0.25 m: more than all its
 suspension and tyre travel) and 1 % of the start's kinetic energy for the integrator's tolerances.
@@ -175,7 +177,8 @@ class FuzzTarget:
         else:
             self.top_speed = NO_ENGINE_TOP_SPEED
             self.p_max = 0.0
-            self.wheel_torque = MAX_WHEEL_TORQUE
+            # the ideal drive acts through the chain; a vehicle without one (the Whipple bicycle) has no drive
+            self.wheel_torque = MAX_WHEEL_TORQUE if cfg.chain is not None else 0.0
         self.e_flywheel = 0.0       # the engine's rotating inertia is not modelled (engine.py)
         roads = []
         for p in shipped_roads():
@@ -253,15 +256,17 @@ class FuzzTarget:
         outcome, failure, etype = "ok", "", ""
         two = self.kind == "two_wheeler"
         if two:
-            from rtsim.vehicle.motorcycle.layout import K_PHI_R, K_THETA
+            from rtsim.vehicle.motorcycle.layout import K_DELTA, K_PHI_R, K_THETA
+            from rtsim.vehicle.motorcycle.plant import IN_ASSIST, IN_RIDER_TORQUE
             from rtsim.vehicle.motorcycle.plant import FELL
             args = sim.loop_args()
             m, veh, vd, rider, parts, io = args[0], args[2], args[3], args[4], args[5], args[7]
-            k_rear, k_arm = parts.idx[K_PHI_R], parts.idx[K_THETA]
+            k_rear, k_arm, k_steer = parts.idx[K_PHI_R], parts.idx[K_THETA], parts.idx[K_DELTA]
         for row in table:
             sim.io.commands[slots] = row
             if two:
                 w_before = abs(d.qd[k_rear] - (d.qd[k_arm] if k_arm >= 0 else 0.0))
+                s_before = abs(d.qd[k_steer])
                 status, done = two_wheeler_advance(m, d, veh, vd, rider, parts, io, self.dt, n, ride.rider)
                 steps += int(done)
                 if status == FELL:
@@ -275,6 +280,8 @@ class FuzzTarget:
                     break
                 w_after = abs(d.qd[k_rear] - (d.qd[k_arm] if k_arm >= 0 else 0.0))
                 w_drive += self.wheel_torque * 0.5 * (w_before + w_after) * n * self.dt
+                torque = abs(vd.inp[IN_RIDER_TORQUE]) + abs(vd.inp[IN_ASSIST])
+                w_drive += torque * 0.5 * (s_before + abs(d.qd[k_steer])) * n * self.dt
             else:
                 try:
                     sim.step(n)
