@@ -196,7 +196,10 @@ def two_wheeler_forces(m, d, idx, par, tab, u, tp, slip, tyre, tangent, bq, hc):
     f[kt] += tb
     if tangent:
         add_entry(d.w_env, m.first, m.ptr, m.pinv, kpf, kpf, hc * u[U_BRAKE_FRONT] / eps_f)
-        add_entry(d.w_env, m.first, m.ptr, m.pinv, kpr, kpr, hc * u[U_BRAKE_REAR] / eps_r)
+        c_r = hc * u[U_BRAKE_REAR] / eps_r           # on the relative rate: the 2 x 2 block of (kpr, kt)
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kpr, kpr, c_r)
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kt, kt, c_r)
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kpr, kt, -c_r)
     # ---- chain: drive torque at the rear wheel as tension along the chain line -------------------------------
     if par[MP_HAS_CHAIN] > 0.5 and u[U_DRIVE_TORQUE] != 0.0:
         _chain(f, q, idx, par, u[U_DRIVE_TORQUE])
