@@ -27,7 +27,7 @@ from . import envelope, sparse
 from .model import (
     CON_ANGLE2D, CON_ANGLE3D, CON_CRANK_ROD, CON_DISC_CONTACT, CON_DISC_ROLL, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
     FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
-    FS_TOL_VEL_FAIL, IS_ERROR_TEST, IS_MAX_ITER, IS_PREDICTOR, IS_ABSOLUTE_DQ, NISET, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
+    FS_TOL_VEL_FAIL, FS_STALL_RATE, FS_MIN_STEP, NFSET, IS_ERROR_TEST, IS_MAX_ITER, IS_PREDICTOR, IS_ABSOLUTE_DQ, NISET, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
 )
 
 
@@ -130,6 +130,12 @@ class Settings:
     #                                   coordinates grow without bound (distance travelled, wheel spin angles)
     #                                   the relative test loosens as they grow, while the increments that matter
     #                                   (a wheel's spin, hence its tyre's slip) need the same tolerance all along
+    stall_rate: float = 0.8           # Newton step control: an increment that turns back on the last one and is
+    #                                   >= stall_rate x its size (a cycle across a kink of the forces) halves
+    #                                   the fraction of the increment applied next, down to min_step; any other
+    #                                   iteration doubles it back (to 1). Convergence is always tested on
+    #                                   the full increment, so the solution accepted is the same.
+    min_step: float = 1.0 / 16.0
     extrapolate: bool = False         # Newton starts from the trapezoidal rule with the end-of-step qdd
     #                                   extrapolated from the last two steps (error O(h^4 d4q/dt4) instead of the
     #                                   Taylor predictor's O(h^3 d3q/dt3)): fewer iterations where bodies spin fast
@@ -641,10 +647,11 @@ class MechanismBuilder:
         iset[IS_ERROR_TEST] = int(s.error_test)
         iset[IS_PREDICTOR] = int(s.extrapolate)
         iset[IS_ABSOLUTE_DQ] = int(s.absolute_tol_dq)
-        fset = np.zeros(7)
+        fset = np.zeros(NFSET)
         fset[FS_TOL_DQ], fset[FS_TOL_PHI], fset[FS_TOL_VEL], fset[FS_TOL_ACC] = s.tol_dq, s.tol_phi, s.tol_vel, s.tol_acc
         fset[FS_TOL_VEL_FAIL], fset[FS_TOL_ACC_FAIL] = s.tol_vel_fail, s.tol_acc_fail
         fset[FS_REUSE_RATE] = s.reuse_rate
+        fset[FS_STALL_RATE], fset[FS_MIN_STEP] = s.stall_rate, s.min_step
         con_act = np.zeros((nc, NSLOT), dtype=np.int64)
         con_nact = np.zeros(nc, dtype=np.int64)
         for i in range(nc):

@@ -32,7 +32,7 @@ from .forces import eval_forces
 from .sparse import cholesky, solve
 from .model import (
     ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION,
-    FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
+    FS_MIN_STEP, FS_REUSE_RATE, FS_STALL_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
     IS_ABSOLUTE_DQ, IS_ERROR_TEST, IS_PREDICTOR, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
     ST_LAST_RESIDUAL, ST_MAX_PHI, ST_MAX_PHID, ST_MAX_PHIDD, ST_PROJ_ITER, ST_STEPS,
 )
@@ -204,6 +204,9 @@ NW_PREV = 0     # previous increment norm
 NW_AGE = 1      # iterations done on the current factor
 NW_NRM = 2      # last increment norm
 NW_IT = 3       # iterations done in this step
+NW_STEP = 4     # fraction of the increment the next iteration applies (step control; 1: a full Newton step)
+NW_JMAX = 5     # coordinate of the last increment's largest component
+NW_YMAX = 6     # that component
 CONVERGED = 1
 CONTINUE = 0
 
@@ -267,6 +270,9 @@ def step_begin(m, d, h):
     d.newton[NW_AGE] = 0.0
     d.newton[NW_NRM] = np.inf
     d.newton[NW_IT] = 0.0
+    d.newton[NW_STEP] = 1.0
+    d.newton[NW_JMAX] = 0.0
+    d.newton[NW_YMAX] = 0.0
 
 
 @kernel
@@ -313,12 +319,14 @@ def newton_update(m, d, h):
             return ERR_FACTOR
         d.newton[NW_AGE] = 0.0
     solve_constrained(m, d, r, d.phi, bq, d.y, 0.1 * m.fset[FS_TOL_PHI], np.inf)
+    # step control: a fraction lam_s of the increment (1 unless the iteration stopped contracting)
+    lam_s = d.newton[NW_STEP]
     for i in range(nc):
-        d.lam[i] += d.mu[i]
+        d.lam[i] += lam_s * d.mu[i]
     nrm = 0.0
     qmax = 1.0
     for i in range(nq):
-        d.q[i] += d.y[i]
+        d.q[i] += lam_s * d.y[i]
         a = abs(d.y[i])
         if a > nrm:
             nrm = a
@@ -358,8 +366,40 @@ def newton_update(m, d, h):
     d.newton[NW_AGE] += 1.0
     if d.newton[NW_AGE] >= 2 and d.newton[NW_IT] >= 2 and nrm > m.fset[FS_REUSE_RATE] * d.newton[NW_PREV]:
         d.flags[NEED_FACTOR] = 1
+    _step_control(m, d, nrm)
     d.newton[NW_PREV] = nrm
     return CONTINUE
+
+
+@inline_kernel
+def _step_control(m, d, nrm):
+    """The fraction of the next increment to apply. An iteration whose increment turns back on the last
+    one (its largest component reverses) without contracting (|dq| at least FS_STALL_RATE of the last
+    one) is cycling across a kink of the forces (a friction band, a tyre past its peak, a transmission
+    switching between driving and driven): the next increments are halved (down to FS_MIN_STEP), which
+    puts a two-point cycle's iterate between its two points, where the full increment shrinks. Otherwise
+    the fraction doubles back to 1 (a slow but monotone iteration keeps full steps). The convergence
+    test is always on the full increment, so a damped step accepts the same solution as a full one."""
+    j = int(d.newton[NW_JMAX])
+    turned = d.y[j] * d.newton[NW_YMAX] < 0.0
+    jn = 0
+    for i in range(m.nq):
+        if abs(d.y[i]) > abs(d.y[jn]):
+            jn = i
+    d.newton[NW_JMAX] = jn
+    d.newton[NW_YMAX] = d.y[jn]
+    if d.newton[NW_IT] < 2.0:
+        return
+    lam_s = d.newton[NW_STEP]
+    if turned and nrm >= m.fset[FS_STALL_RATE] * d.newton[NW_PREV]:
+        lam_s *= 0.5
+        if lam_s < m.fset[FS_MIN_STEP]:
+            lam_s = m.fset[FS_MIN_STEP]
+    elif lam_s < 1.0:
+        lam_s *= 2.0
+        if lam_s > 1.0:
+            lam_s = 1.0
+    d.newton[NW_STEP] = lam_s
 
 
 @kernel

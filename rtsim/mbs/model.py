@@ -74,6 +74,9 @@ FS_TOL_ACC = 3         # acceleration constraint tolerance
 FS_REUSE_RATE = 4      # Newton contraction rate above which the factorization is refreshed
 FS_TOL_VEL_FAIL = 5    # velocity constraint residual above which a projection fails
 FS_TOL_ACC_FAIL = 6    # acceleration constraint residual above which a projection fails
+FS_STALL_RATE = 7      # Newton: an increment at least this fraction of the last one (no contraction) halves the step
+FS_MIN_STEP = 8        # Newton: the smallest fraction of the increment a damped iteration applies
+NFSET = 9
 
 # Status codes returned by kernels (mapped to typed exceptions by rtsim.mbs.simulation).
 OK = 0
@@ -139,7 +142,7 @@ Data = namedtuple("Data", [
     #                   step, and its predictor base (during a step) or Newton's correction to it (after)
     "qhd", "qhdd", "r", "x", "y", "z", "work", "sig", "g", "sp", "mu",
     "flags",          # int64 [have_factor, need_factor]
-    "newton",         # float64 (4,) Newton bookkeeping between the stages of a step
+    "newton",         # float64 (7,) Newton bookkeeping between the stages of a step
     "poly_cache",     # float64 (npoly, 3, 6) polynomial paths and derivatives shared by a poly point's rows
     "stats",          # float64 (NSTATS,)
 ])
@@ -161,7 +164,7 @@ def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: f
         force=z(nq), w_env=model.m_env.copy(), a_env=z(nfac), l_env=z(nfac),
         pred=np.full(3 * nq, np.nan), qhd=z(nq), qhdd=z(nq), r=z(nq), x=z(nq), y=z(nq), z=z(max(nq, nc)), work=z(nq), sig=z(nc), g=z(nc), sp=z(nc), mu=z(nc),
         flags=np.zeros(2, dtype=np.int64),
-        newton=np.zeros(4),
+        newton=np.zeros(7),
         poly_cache=np.zeros((model.poly_coef.shape[0], 3, 6)),
         stats=np.zeros(NSTATS),
     )

@@ -22,6 +22,7 @@ import numpy as np
 
 from rtsim.channels import ChannelDictionary, car_channels
 from rtsim.mbs import Mechanism, MechanismBuilder, Settings
+from rtsim.errors import ConfigError
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import VehicleConfig
@@ -82,8 +83,60 @@ def corner_kinematics(cfg: VehicleConfig) -> list[CornerKinematics]:
     return out
 
 
+def _knuckle_angle(c: dict, x: float) -> float:
+    """Steer angle (rad) of a crank-rod knuckle (crank_rod_constants) at rack travel x (m), on the
+    assembled branch (bisection from 0 outwards; nan where the tie rod cannot reach)."""
+    piv, arm, end = np.asarray(c["pivot"]), np.asarray(c["arm"]), np.asarray(c["rod_end"])
+
+    def gap(phi):
+        cs, sn = np.cos(phi), np.sin(phi)
+        tip = piv + np.array([cs * arm[0] - sn * arm[1], sn * arm[0] + cs * arm[1]])
+        return np.linalg.norm(tip - (end + np.array([0.0, x * c["direction"]]))) - c["length"]
+    g0 = gap(0.0)
+    for phi in np.linspace(0.0, 1.5, 301)[1:] * (1.0 if x >= 0 else -1.0):
+        if np.sign(gap(phi)) != np.sign(g0):
+            lo, hi = 0.0, phi
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if np.sign(gap(mid)) == np.sign(g0) else (lo, mid)
+            return 0.5 * (lo + hi)
+    return float("nan")
+
+
+def _check_rack_travel(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics]) -> None:
+    """The rack's end stops must hold the linkage inside its fitted kinematics: the rack travel plus
+    the stops' static deflection under the steering's largest rack force (steer-by-wire: the motor's
+    full column torque; EPS: the assist motor's stall torque at the current limit plus the torsion bar
+    twisted by one radian) within the fit's rack range, or (EPS) the knuckle's steer-angle range."""
+    where = Path(base).name if base else "vehicle"
+    if cfg.eps is None:
+        st = steering_config(cfg.steering or None, "steering")
+        f_max = st.motor_torque_limit * st.reduction_ratio * st.reduction_efficiency / st.rack_travel_per_rad
+        reach = st.rack_travel + f_max / st.rack_stop_stiffness
+        limit = min(max(abs(a) for a in k.s_range) for k in corners if k.steered)
+        if reach > limit:
+            raise ConfigError(f"steering.rack_travel = {st.rack_travel:g} m: with the end stops' static deflection "
+                              f"({f_max / st.rack_stop_stiffness * 1e3:.1f} mm at {f_max:.0f} N) the rack reaches "
+                              f"{reach:g} m, beyond the suspension fit's rack range +-{limit:g} m")
+        return
+    e = cfg.eps
+    f_max = ((e.current_limit_a * e.motor_torque_constant_nm_per_a * e.gear_ratio + e.torsion_bar_nm_per_rad)
+             / e.rack_travel_per_rad_m)
+    reach = e.rack_travel_m + f_max / e.rack_stop_stiffness_n_per_m
+    for i in (0, 1):
+        for x in (reach, -reach):
+            phi = _knuckle_angle(crank_rod_constants(_geometry(cfg.front, i == 1)), x)
+            if not abs(phi) < PIVOT_RANGE[1]:
+                raise ConfigError(f"eps.rack_travel_m = {e.rack_travel_m:g} m: with the end stops' static deflection "
+                                  f"({f_max / e.rack_stop_stiffness_n_per_m * 1e3:.1f} mm at {f_max:.0f} N) the rack "
+                                  f"reaches {reach:g} m, which steers a front knuckle to {phi:.3f} rad, beyond the "
+                                  f"fitted range +-{PIVOT_RANGE[1]:g} rad")
+
+
 def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics] | None = None) -> VehicleModel:
     corners = corners or cached_corner_kinematics(cfg, corner_kinematics)
+    if any(k.steered for k in corners):
+        _check_rack_travel(cfg, base, corners)
     # no singular positions in a car's suspension: the projections reuse the Newton factor; the
     # position tolerance is 5x under the 1e-8 bar (a tighter one costs a second Newton iteration on
     # most steps on a mesh road, for no visible change of the motion)

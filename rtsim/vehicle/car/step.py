@@ -44,8 +44,8 @@ from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_MOTOR_ANGL
                       SG_MOTOR_SPEED, SG_POWER_STAGE, SG_STEERING_TORQUE, SG_SW_ANGLE, SG_THROTTLE, SG_TORQUE_LEFT,
                       SG_TORQUE_RIGHT, SG_VEHICLE_SPEED)
 from ..kit.sensor_model import ST_SLOTS as SM_ST_SLOTS
-from ..kit.steering import SO_SIZE, SO_SW_ANGLE, SO_TORQUE, steering_control, steering_forces, steering_outputs, \
-    steering_tangent
+from ..kit.steering import SO_SIZE, SO_SW_ANGLE, SO_TORQUE, rack_stop_tangent, steering_control, steering_forces, \
+    steering_outputs, steering_tangent
 from ..kit.eps import (EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_SIZE, EO_SW_ANGLE, EO_TB_TORQUE, EP_DRIVER,
                        EP_K_TB, EP_N, EP_RP, ES_EXT, ES_STAGE, ES_T_DRIVER, DRIVER_TORQUE, eps_commit, eps_control,
                        eps_forces, eps_outputs, external_command, hands_step)
@@ -338,6 +338,7 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
             pf[PORT_STEER_BY_WIRE, ir] += f[ir] - fr0
         if tangent:
             steering_tangent(m, d.w_env, stp, ic, ir, bq, hc)
+            rack_stop_tangent(m, d.w_env, stp, q, qd, ir, bq, hc)
     # ---- aerodynamic drag at the centre of mass -------------------------------------------------
     ci = veh.chassis_idx
     vx, vy, vz = qd[ci[0]], qd[ci[1]], qd[ci[2]]

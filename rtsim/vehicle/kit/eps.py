@@ -11,7 +11,9 @@ law, a table of motor current against torsion-bar torque and vehicle speed (or a
 controller's command over CAN).
 Transmission: pinion (inertia, dry friction) to rack (mass, viscous and dry friction) with a
 direction-dependent efficiency; the rack to the front wheels' pivots through tie rods (crank-rod
-constraints of the assembly; the pivots' inertias are the assembly's).
+constraints of the assembly; the pivots' inertias are the assembly's). The rack's travel ends at two
+end stops (rtsim.vehicle.kit.end_stop: rack_travel_m, their stiffness and damping); their force is in
+the rack-friction port of the audit.
 
 Coordinates (the assembly's multibody model): the column angle theta_c (rad, = steering-wheel angle)
 and the rack travel x (m, positive steers left). The pinion is geared rigidly to the rack, theta_p =
@@ -41,6 +43,7 @@ from rtsim.configfile import Strict
 from rtsim.jit import inline_kernel, kernel
 from rtsim.mbs.envelope import add_entry
 
+from .end_stop import end_stop
 from .layout import offsets
 from .tables import map_2d, map_eval
 
@@ -74,8 +77,11 @@ from .tables import map_2d, map_eval
  EP_DRIVER,          # 0: the driver imposes the angle, 1: a torque
  EP_J_M,             # kg m^2, rotor inertia (outputs)
  EP_W_HAND,          # rad/s, natural frequency of the driver's hands (imposed angle mode)
+ EP_RACK_TRAVEL,     # m, rack travel from centre to either end stop
+ EP_STOP_K,          # N/m, end-stop stiffness
+ EP_STOP_C,          # N s/m, end-stop damping
  EP_ASSIST,          # the assistance map (rtsim.vehicle.kit.tables.map_2d), EP_ASSIST_SIZE floats
- EP_SIZE) = offsets(*(1,) * 29, 0)
+ EP_SIZE) = offsets(*(1,) * 32, 0)
 DRIVER_ANGLE, DRIVER_TORQUE = 0.0, 1.0
 
 # ------------------------------------------------------------------------------------- state layout
@@ -106,7 +112,7 @@ DRIVER_ANGLE, DRIVER_TORQUE = 0.0, 1.0
  PORT_GEAR_LOSS,      # assist gear loss
  PORT_PINION_FRICTION,
  PORT_RACK_LOSS,      # rack and pinion loss
- PORT_RACK_FRICTION,  # rack viscous and dry friction
+ PORT_RACK_FRICTION,  # rack viscous and dry friction, and the rack's end stops (their work while in contact)
  NPORT_EPS) = range(10)
 
 # ------------------------------------------------------------------------------------------ outputs
@@ -202,6 +208,12 @@ class EpsConfig(Strict):
     hands_bandwidth_hz: float = Field(default=8.0, ge=1, le=100, description=(
         "angle mode: the steering-wheel angle follows the driver's command through the hands, a "
         "critically damped second-order lag of this natural frequency (no impulsive torques)"))
+    rack_travel_m: float = Field(default=0.065, ge=0.005, le=0.2, description=(
+        "rack travel from centre to either end stop (rtsim.vehicle.kit.end_stop)"))
+    rack_stop_stiffness_n_per_m: float = Field(default=5.0e6, ge=1e5, le=1e8, description=(
+        "the rack end stops' contact stiffness (steel stop with a polyurethane ring)"))
+    rack_stop_damping_ns_per_m: float = Field(default=2.0e4, ge=0, le=1e6, description=(
+        "the rack end stops' damping (fades in over the first 0.5 mm of contact)"))
     assist: AssistLaw = Field(default_factory=_default_assist)
 
 
@@ -240,6 +252,9 @@ def eps_params(c: EpsConfig) -> np.ndarray:
     p[EP_DRIVER] = DRIVER_ANGLE if c.driver_input == "angle" else DRIVER_TORQUE
     p[EP_J_M] = c.motor_inertia_kgm2
     p[EP_W_HAND] = 2.0 * math.pi * c.hands_bandwidth_hz
+    p[EP_RACK_TRAVEL] = c.rack_travel_m
+    p[EP_STOP_K] = c.rack_stop_stiffness_n_per_m
+    p[EP_STOP_C] = c.rack_stop_damping_ns_per_m
     p[EP_ASSIST:] = assist
     return p
 
@@ -389,8 +404,9 @@ def eps_forces(m, d, p, s, ic, ir, h, tangent, bq, hc, pf, audit):
     e_rp, de_rp = _efficiency(t_p, wp, p[EP_W_FP], p[EP_ETA_RP], p[EP_ETA_RPB])
     sf_r, dsf_r = _sat(xd, p[EP_V_FR])
     f_rf = -p[EP_C_RACK] * xd - p[EP_F_FR] * sf_r
+    f_stop, k_stop, c_stop = end_stop(q[ir], xd, p[EP_RACK_TRAVEL], p[EP_STOP_K], p[EP_STOP_C])
     f[ic] += t_drv - t_el - t_damp - t_col
-    f[ir] += e_rp * t_p / rp + f_rf
+    f[ir] += e_rp * t_p / rp + f_rf + f_stop
     if audit:
         pf[PORT_DRIVER_TORQUE, ic] += t_drv
         pf[PORT_TORSION_BAR, ic] -= t_el
@@ -402,7 +418,7 @@ def eps_forces(m, d, p, s, ic, ir, h, tangent, bq, hc, pf, audit):
         pf[PORT_GEAR_LOSS, ir] += (e_g - 1.0) * n * t_m / rp
         pf[PORT_PINION_FRICTION, ir] += t_pf / rp
         pf[PORT_RACK_LOSS, ir] += (e_rp - 1.0) * t_p / rp
-        pf[PORT_RACK_FRICTION, ir] += f_rf
+        pf[PORT_RACK_FRICTION, ir] += f_rf + f_stop
     if tangent:
         k_tb = bq * p[EP_K_TB] + hc * p[EP_C_TB]
         # rack damping: back-emf (d i1 / d w_m), frictions' bands, viscous terms, through the gears
@@ -412,7 +428,7 @@ def eps_forces(m, d, p, s, ic, ir, h, tangent, bq, hc, pf, audit):
         c_r = (e_rp * (e_g * n * n * c_m + p[EP_T_FP] * dsf_p) / (rp * rp) + p[EP_C_RACK]
                + p[EP_F_FR] * dsf_r - de_rp / (rp * rp))
         add_entry(d.w_env, m.first, m.ptr, m.pinv, ic, ic, k_tb + hc * p[EP_C_COL])
-        add_entry(d.w_env, m.first, m.ptr, m.pinv, ir, ir, k_tb / (rp * rp) + hc * c_r)
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, ir, ir, k_tb / (rp * rp) + hc * c_r + bq * k_stop + hc * c_stop)
         add_entry(d.w_env, m.first, m.ptr, m.pinv, ic, ir, -k_tb / rp)
 
 

@@ -9,6 +9,10 @@ reduction (ratio N, efficiency eta) -> motor torque lag block (current-loop time
 +-torque limit) -> column. The controller and the motor are discrete at the step (the motor torque is
 held over it, as a digital drive does); the mechanics are inside the multibody step.
 
+End stops: the rack's travel ends at two stops (rtsim.vehicle.kit.end_stop: contact stiffness and
+damping, the config's rack_travel, rack_stop_stiffness, rack_stop_damping); a command past the lock
+(the DBC allows +-11 rad at the steering wheel) leaves the motor holding the rack on its stop.
+
 Mechanics: two coordinates of the multibody model, the column angle theta_c (rad, the steering-wheel
 angle) and the rack travel x (m, positive steering left). The pinion is geared rigidly to the rack,
 theta_p = x / r_p (r_p: rack travel per pinion radian, m/rad), so its inertia sits on the rack:
@@ -36,6 +40,7 @@ import numpy as np
 from rtsim.jit import inline_kernel, kernel
 from rtsim.mbs.envelope import add_entry
 
+from .end_stop import end_stop
 from .actuators import LAG_NPAR, LagConfig, check, part_config, pydantic_config, lag_init, lag_state_size, lag_step
 from .layout import offsets
 
@@ -56,7 +61,10 @@ from .layout import offsets
  SP_TM_MAX,          # N m, motor torque limit
  SP_MOTOR,           # lag block: motor torque (N m at the motor)
  SP_CMD,             # lag block: steering-wheel angle command (rad)
- SP_SIZE) = offsets(*(1,) * 14, LAG_NPAR, LAG_NPAR)
+ SP_RACK_TRAVEL,     # m, rack travel from centre to either end stop
+ SP_STOP_K,          # N/m, end-stop stiffness
+ SP_STOP_C,          # N s/m, end-stop damping
+ SP_SIZE) = offsets(*(1,) * 14, LAG_NPAR, LAG_NPAR, 1, 1, 1)
 
 # State layout (the command lag block last: its delay buffer has a variable length).
 (SS_I,               # N m, controller integral
@@ -104,6 +112,12 @@ class SteeringConfig:
     kd: float = 5.0                            # N m s/rad
     integral_limit: float = 40.0               # N m
     command: LagConfig = field(default_factory=_default_command)   # rad, rad/s
+    # Rack end stops (rtsim.vehicle.kit.end_stop): the rack's travel either side of centre and the
+    # stops' contact stiffness and damping (steel stop with a polyurethane ring). At the motor's full
+    # column torque the rack force is ~6.8 kN: 1.4 mm of static deflection at 5 MN/m.
+    rack_travel: float = 0.062                 # m, 0.005 .. 0.2 (inside the linkage fit's rack range)
+    rack_stop_stiffness: float = 5.0e6         # N/m, 1e5 .. 1e8
+    rack_stop_damping: float = 2.0e4           # N s/m, 0 .. 1e6
 
     def __post_init__(self) -> None:
         for key in ("steering_wheel_inertia", "column_inertia", "pinion_inertia", "rack_mass",
@@ -117,6 +131,11 @@ class SteeringConfig:
             check(v >= 0.0 and math.isfinite(v), key, v, "expected a finite value >= 0")
         check(0.0 < self.reduction_efficiency <= 1.0, "reduction_efficiency",
               self.reduction_efficiency, "expected 0 < eta <= 1")
+        check(0.005 <= self.rack_travel <= 0.2, "rack_travel", self.rack_travel, "expected 0.005 .. 0.2 m")
+        check(1e5 <= self.rack_stop_stiffness <= 1e8, "rack_stop_stiffness", self.rack_stop_stiffness,
+              "expected 1e5 .. 1e8 N/m")
+        check(0.0 <= self.rack_stop_damping <= 1e6, "rack_stop_damping", self.rack_stop_damping,
+              "expected 0 .. 1e6 N s/m")
         check(self.rack_travel_per_rad < 0.1, "rack_travel_per_rad", self.rack_travel_per_rad,
               "expected metres of rack per pinion radian (< 0.1)")
 
@@ -148,6 +167,9 @@ def steering_params(cfg: SteeringConfig | None = None) -> np.ndarray:
         time_constant=c.motor_time_constant, rate_limit=c.motor_torque_rate,
         min=-c.motor_torque_limit, max=c.motor_torque_limit).params()
     p[SP_CMD:SP_CMD + LAG_NPAR] = c.command.params()
+    p[SP_RACK_TRAVEL] = c.rack_travel
+    p[SP_STOP_K] = c.rack_stop_stiffness
+    p[SP_STOP_C] = c.rack_stop_damping
     return p
 
 
@@ -214,17 +236,27 @@ def steering_forces(p, s, q, qd, f, ic, ir):
     rp = p[SP_RP]
     t_tb = p[SP_K_TB] * (q[ic] - q[ir] / rp) + p[SP_C_TB] * (qd[ic] - qd[ir] / rp)
     f[ic] += s[SS_T_COL] - t_tb - p[SP_C_COL] * qd[ic]
-    f[ir] += t_tb / rp - p[SP_C_RACK] * qd[ir]
+    f_stop, _k, _c = end_stop(q[ir], qd[ir], p[SP_RACK_TRAVEL], p[SP_STOP_K], p[SP_STOP_C])
+    f[ir] += t_tb / rp - p[SP_C_RACK] * qd[ir] + f_stop
 
 
 @inline_kernel
 def steering_tangent(m, w_env, p, ic, ir, bq, hc):
-    """Stiffness (scaled by bq) and damping (by hc) of steering_forces into the tangent W."""
+    """Stiffness (scaled by bq) and damping (by hc) of steering_forces into the tangent W (the end
+    stops' in rack_stop_tangent, which needs the state)."""
     rp = p[SP_RP]
     kc = bq * p[SP_K_TB] + hc * p[SP_C_TB]
     add_entry(w_env, m.first, m.ptr, m.pinv, ic, ic, kc + hc * p[SP_C_COL])
     add_entry(w_env, m.first, m.ptr, m.pinv, ir, ir, kc / (rp * rp) + hc * p[SP_C_RACK])
     add_entry(w_env, m.first, m.ptr, m.pinv, ic, ir, -kc / rp)
+
+
+@inline_kernel
+def rack_stop_tangent(m, w_env, p, q, qd, ir, bq, hc):
+    """The rack end stops' stiffness (scaled by bq) and damping (by hc) at (q, qd) into the tangent W."""
+    _f, k_stop, c_stop = end_stop(q[ir], qd[ir], p[SP_RACK_TRAVEL], p[SP_STOP_K], p[SP_STOP_C])
+    if k_stop != 0.0:
+        add_entry(w_env, m.first, m.ptr, m.pinv, ir, ir, bq * k_stop + hc * c_stop)
 
 
 @inline_kernel

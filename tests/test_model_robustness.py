@@ -1,0 +1,191 @@
+"""Valid commands never break a car model (issue: a steering-wheel step inside the DBC's range made the
+X-by-wire car fail, a +-6 rad step the EPS car).
+
+Each case drives a car with commands inside its DBC's ranges (steering-wheel angle +-11 rad, throttle
+0 .. 1.4 rad, brake 0 .. 12 000 kPa) and asserts:
+
+- no model failure (the step raises nothing) and a finite state;
+- bounded energy: the kinetic energy 1/2 qd^T M qd (M: the model's constant mass matrix in its
+  natural coordinates) never exceeds the initial kinetic energy plus what the actuators could have put
+  in since the start, (P_engine + P_steer) t, plus the potential energy released, m g (z_0 - z):
+  P_engine the engine map's full-load peak power (rtsim.vehicle.kit.powertrain.default_engine_map),
+  P_steer a bound on the steering actuator's power (the steer-by-wire motor: its torque limit at its
+  no-load speed is far below 2 kW; the EPS motor: supply voltage x current limit, ~1 kW);
+- the rack end stop as a stop: the rack never leaves the range the suspension's kinematics are fitted
+  over, and held against a stop it sits there with at most the stop's static deflection under the
+  steering's largest force (motor torque limit through the reduction, over the rack travel per pinion
+  radian), F_max / k_stop, plus 10 % and 0.2 mm for the tyres' share.
+
+The cases are the issue's (steps to +-9 and +-11 rad at 10 and 36 m/s with full throttle, the standing
++-11 rad steps, the EPS car's +-6 rad step at 20 m/s) and chatter from lock to lock, full throttle and
+full brake at once, a step on the 5 % grade. Simulated times are short (1.5 .. 3 s).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtsim.road.config import load_road
+from rtsim.vehicle.car.build import build_vehicle
+from rtsim.vehicle.car.config import load_vehicle
+from rtsim.vehicle.car.layout import G
+from rtsim.vehicle.car.sim import VehicleSim
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_SELECTOR
+from rtsim.vehicle.kit.powertrain import default_engine_map
+from rtsim.vehicle.kit.steering import steering_config
+
+ROOT = Path(__file__).resolve().parents[1]
+DT = 1e-3
+THROTTLE_MAX = 1.4      # rad, DBC range of throttle_angle_cmd
+BRAKE_MAX = 12000.0     # kPa, DBC range of brake_pressure_cmd
+FIT_RACK = 0.07         # m, the rack range the steer-by-wire cars' corner kinematics are fitted over
+
+_models: dict = {}
+
+
+def _model(vehicle: str):
+    if vehicle not in _models:
+        cfg, base = load_vehicle(ROOT / "configs" / "vehicles" / f"{vehicle}.toml")
+        _models[vehicle] = build_vehicle(cfg, base)
+    return _models[vehicle]
+
+
+def _engine_peak_power() -> float:
+    """W: the full-load curve's peak of torque x speed."""
+    throttle, speed, table = default_engine_map()
+    wot = table[-1]
+    return max(t * w for t, w in zip(wot, speed))
+
+
+class Run:
+    """A car on a road, stepped with held commands, checking energy and recording the rack."""
+
+    def __init__(self, vehicle: str, speed: float, road: str = "flat"):
+        self.sim = VehicleSim(_model(vehicle), load_road(ROOT / "configs" / "roads" / f"{road}.toml"), DT,
+                              speed=speed)
+        vm = self.sim.vm
+        self.mass = vm.mech.mass_dense
+        self.m_total = vm.config.chassis.mass_kg + 2 * vm.config.front.unsprung_mass_kg \
+            + 2 * vm.config.rear.unsprung_mass_kg
+        self.p_in = _engine_peak_power() + 2000.0
+        self.ir = int(vm.vehicle.steer_idx[1])
+        self.iz = int(vm.vehicle.chassis_idx[2])
+        self.e0 = self.kinetic()
+        self.z0 = float(self.sim.data.q[self.iz])
+        self.rack = []
+
+    def kinetic(self) -> float:
+        qd = self.sim.data.qd
+        return 0.5 * float(qd @ self.mass @ qd)
+
+    def hold(self, seconds: float, steer: float, throttle: float = 0.0, brake: float = 0.0) -> None:
+        io = self.sim.io
+        io.commands[CMD_STEER] = steer
+        io.commands[CMD_THROTTLE] = throttle
+        io.commands[CMD_BRAKE] = brake
+        for _ in range(int(round(seconds / DT / 10))):
+            self.sim.step(10)      # raises a typed SimulationError on a model failure
+            d = self.sim.data
+            assert np.all(np.isfinite(d.q)) and np.all(np.isfinite(d.qd)), f"non-finite state at t = {d.t[0]:.3f} s"
+            t = float(d.t[0])
+            released = self.m_total * G * max(0.0, self.z0 - float(d.q[self.iz]))
+            bound = self.e0 + self.p_in * t + released
+            ke = self.kinetic()
+            assert ke <= bound, f"kinetic energy {ke:.0f} J above {bound:.0f} J at t = {t:.3f} s"
+            self.rack.append(float(d.q[self.ir]))
+
+
+def _stop_deflection(vehicle: str) -> tuple[float, float]:
+    """(rack travel, static deflection F_max / k) of a steer-by-wire car's end stops (m)."""
+    st = steering_config(_model(vehicle).config.steering or None)
+    f_max = st.motor_torque_limit * st.reduction_ratio * st.reduction_efficiency / st.rack_travel_per_rad
+    return st.rack_travel, f_max / st.rack_stop_stiffness
+
+
+def _check_rack(run: Run, vehicle: str, settled: int = 0) -> None:
+    travel, defl = _stop_deflection(vehicle)
+    rack = np.abs(np.array(run.rack))
+    assert rack.max() < FIT_RACK, f"rack at {rack.max():.4f} m, beyond the fitted +-{FIT_RACK} m"
+    if settled:
+        held = rack[-settled:]
+        assert held.max() - travel <= 1.1 * defl + 2e-4, (
+            f"held on its stop the rack passes its travel by {(held.max() - travel) * 1e3:.2f} mm, "
+            f"the static deflection is {defl * 1e3:.2f} mm")
+        assert held.min() > travel - 1e-3, "a command past the lock holds the rack on its stop"
+
+
+@pytest.mark.parametrize("vehicle", ["xbw", "xbw_fwd"])
+@pytest.mark.parametrize("speed", [10.0, 36.0])
+@pytest.mark.parametrize("angle", [9.0, -9.0, 11.0, -11.0])
+def test_steering_wheel_step_with_full_throttle(vehicle, speed, angle):
+    """The issue's steps: 0 -> +-9 and +-11 rad at 10 and 36 m/s with full throttle."""
+    run = Run(vehicle, speed)
+    run.hold(0.2, 0.0, THROTTLE_MAX)
+    run.hold(1.8, angle, THROTTLE_MAX)
+    _check_rack(run, vehicle)
+
+
+@pytest.mark.parametrize("vehicle", ["xbw", "xbw_fwd"])
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_standing_steps_to_the_locks(vehicle, sign):
+    """The issue's standing case: no throttle, no brake (the automatic creeps), +-11 rad and then the
+    other lock."""
+    run = Run(vehicle, 0.0)
+    run.hold(0.1, 0.0)
+    run.hold(1.4, 11.0 * sign)
+    run.hold(1.6, -11.0 * sign)
+    _check_rack(run, vehicle)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_held_against_its_stop_the_rack_deflects_it_statically(sign):
+    """At standstill in neutral (no creep), commanded past the lock: once the motion has died out the
+    rack sits on its stop pressed by the motor's full force, F_max / k_stop past its travel."""
+    run = Run("xbw", 0.0)
+    run.sim.io.extra[EX_SELECTOR] = 0.0
+    run.hold(0.1, 0.0)
+    run.hold(2.5, 11.0 * sign)
+    _check_rack(run, "xbw", settled=30)         # the last 0.3 s
+
+
+@pytest.mark.parametrize("vehicle", ["xbw", "xbw_fwd"])
+def test_lock_to_lock_chatter(vehicle):
+    """Full lock to full lock every 0.1 s at 15 m/s with half throttle."""
+    run = Run(vehicle, 15.0)
+    for k in range(20):
+        run.hold(0.1, 11.0 if k % 2 == 0 else -11.0, 0.7)
+    _check_rack(run, vehicle)
+
+
+@pytest.mark.xfail(strict=True, raises=Exception, reason=(
+    "known open failure: with 12 MPa the front wheels lock (spin rate ~0) and Newton contracts only ~7 % per "
+    "iteration on the locked wheel's spin (the brake's stiction band puts a tangent ~14x the true slope in W), "
+    "so 30 iterations are not enough at t = 0.39 s; the fix belongs in the brake's locked-wheel tangent"))
+@pytest.mark.parametrize("vehicle", ["xbw", "xbw_fwd"])
+def test_full_throttle_and_full_brake_at_once_in_a_turn(vehicle):
+    run = Run(vehicle, 20.0)
+    run.hold(0.2, 0.0)
+    run.hold(2.0, 8.0, THROTTLE_MAX, BRAKE_MAX)
+    speed = float(np.linalg.norm(run.sim.data.qd[run.sim.vm.vehicle.chassis_idx[:3]]))
+    assert speed < 20.0, "full brake wins over full throttle"
+
+
+def test_step_to_the_lock_on_the_grade():
+    run = Run("xbw", 10.0, road="grade_5pct")
+    run.hold(0.2, 0.0, THROTTLE_MAX)
+    run.hold(1.5, -11.0, THROTTLE_MAX)
+    _check_rack(run, "xbw")
+
+
+@pytest.mark.parametrize("first", [6.0, -6.0])
+def test_eps_car_six_radian_steps_at_20_mps(first):
+    """The issue's EPS case: +-6 rad at 20 m/s (the driver imposes the angle), the reversal at 2 s; it
+    failed at 2.43 s (Newton cycling across the steering's friction and efficiency kinks)."""
+    run = Run("eps_car", 20.0)
+    run.hold(1.0, 0.0)
+    run.hold(1.0, first)
+    run.hold(0.7, -first)
+    travel = _model("eps_car").config.eps.rack_travel_m
+    assert np.abs(np.array(run.rack)).max() < travel, "6 rad is inside the EPS rack's travel"
