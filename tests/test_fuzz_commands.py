@@ -6,14 +6,16 @@ A two-wheeler's fall is a defined end of a ride, not a failure.
 
 CI runs a reduced draw (``CI_RIDES`` rides per vehicle of at most 1.5 s, derandomized: the same rides on
 every run); ``rtsim bench --suite fuzz`` runs the full count. Every failing ride ever found, and the
-cases the issue reported, are kept in tests/data/fuzz_regressions.json and replayed here as drawn."""
+cases the issue reported, are kept in tests/data/fuzz_regressions.json and replayed here as drawn; a
+case whose root cause is still open carries an ``open`` note and is a strict expected failure (it must
+keep failing until fixed; then the note goes)."""
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, Phase, given, settings
 
 from rtsim.robustness.commands import Ride, Segment, command_space, expand, ride_strategy
 from rtsim.robustness.harness import FuzzTarget, shipped_vehicles
@@ -114,8 +116,9 @@ def test_drawn_command_sequences_never_break_the_model(vehicle):
     strategy = ride_strategy(t.space, t.roads, t.top_speed, max_segment_s=0.5, max_segments=3,
                              two_wheeler=t.kind == "two_wheeler", eps=t.eps)
 
+    # no shrinking: a failure is reported as drawn (its ride JSON replays it), in bounded time
     @settings(max_examples=CI_RIDES, derandomize=True, deadline=None, database=None,
-              suppress_health_check=list(HealthCheck))
+              phases=[Phase.explicit, Phase.generate], suppress_health_check=list(HealthCheck))
     @given(strategy)
     def check(ride):
         _assert_survives(vehicle, ride)
