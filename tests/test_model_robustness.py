@@ -7,7 +7,11 @@ Each case drives a car with commands inside its DBC's ranges (steering-wheel ang
 - no model failure (the step raises nothing) and a finite state;
 - bounded energy: the kinetic energy 1/2 qd^T M qd (M: the model's constant mass matrix in its
   natural coordinates) never exceeds the initial kinetic energy plus what the actuators could have put
-  in since the start, (P_engine + P_steer) t, plus the potential energy released, m g (z_0 - z):
+  in since the start, (P_engine + P_steer) t, plus the potential energy released, m g (z_0 - z), plus
+  the elastic energy the tyres and springs hold at the static loads W_i (the car is placed near, not
+  at, its equilibrium and may release it), sum W_i^2 / (2 C_z) + (W_i / 0.6)^2 / (2 k_i) (C_z the
+  tyre's vertical stiffness, k_i the spring's, 0.6 the smallest installation ratio of the shipped
+  linkages);
   P_engine the engine map's full-load peak power (rtsim.vehicle.kit.powertrain.default_engine_map),
   P_steer a bound on the steering actuator's power (the steer-by-wire motor: its torque limit at its
   no-load speed is far below 2 kW; the EPS motor: supply voltage x current limit, ~1 kW);
@@ -35,6 +39,7 @@ from rtsim.vehicle.car.sim import VehicleSim
 from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_SELECTOR
 from rtsim.vehicle.kit.powertrain import default_engine_map
 from rtsim.vehicle.kit.steering import steering_config
+from rtsim.vehicle.kit.tyre.tir import P_VERTICAL_STIFFNESS
 
 ROOT = Path(__file__).resolve().parents[1]
 DT = 1e-3
@@ -59,6 +64,15 @@ def _engine_peak_power() -> float:
     return max(t * w for t, w in zip(wot, speed))
 
 
+def _spring_rate(spring) -> float:
+    """N/m: a linear spring's rate, or a spring table's smallest positive slope (more energy)."""
+    if spring.stiffness_n_per_m is not None:
+        return spring.stiffness_n_per_m
+    x, f = np.asarray(spring.spring_table.x), np.asarray(spring.spring_table.force_n)
+    slopes = np.diff(f) / np.diff(x)
+    return float(slopes[slopes > 0].min())
+
+
 class Run:
     """A car on a road, stepped with held commands, checking energy and recording the rack."""
 
@@ -72,9 +86,16 @@ class Run:
         self.p_in = _engine_peak_power() + 2000.0
         self.ir = int(vm.vehicle.steer_idx[1])
         self.iz = int(vm.vehicle.chassis_idx[2])
-        self.e0 = self.kinetic()
+        self.e0 = self.kinetic() + self._elastic_at_static_loads()
         self.z0 = float(self.sim.data.q[self.iz])
         self.rack = []
+
+    def _elastic_at_static_loads(self) -> float:
+        vm = self.sim.vm
+        loads = np.asarray(vm.static_loads, dtype=float)
+        cz = float(self.sim.tp[P_VERTICAL_STIFFNESS])
+        k = np.array([_spring_rate(vm.config.front.spring)] * 2 + [_spring_rate(vm.config.rear.spring)] * 2)
+        return float(np.sum(loads ** 2 / (2.0 * cz) + (loads / 0.6) ** 2 / (2.0 * k)))
 
     def kinetic(self) -> float:
         qd = self.sim.data.qd
@@ -139,6 +160,16 @@ def test_standing_steps_to_the_locks(vehicle, sign):
     _check_rack(run, vehicle)
 
 
+def test_braked_at_standstill_steering_to_the_lock():
+    """Standing on the brakes (3 MPa) and steering to the lock: the wheels turn about their kingpins on
+    locked spin (it failed at 0.2 s, Newton crawling on the locked wheels' brake band)."""
+    run = Run("xbw", 0.0)
+    run.hold(0.1, 0.0, brake=3000.0)
+    run.hold(1.5, 11.0, brake=3000.0)
+    run.hold(1.0, -11.0, brake=3000.0)
+    _check_rack(run, "xbw")
+
+
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_held_against_its_stop_the_rack_deflects_it_statically(sign):
     """At standstill in neutral (no creep), commanded past the lock: once the motion has died out the
@@ -159,12 +190,10 @@ def test_lock_to_lock_chatter(vehicle):
     _check_rack(run, vehicle)
 
 
-@pytest.mark.xfail(strict=True, raises=Exception, reason=(
-    "known open failure: with 12 MPa the front wheels lock (spin rate ~0) and Newton contracts only ~7 % per "
-    "iteration on the locked wheel's spin (the brake's stiction band puts a tangent ~14x the true slope in W), "
-    "so 30 iterations are not enough at t = 0.39 s; the fix belongs in the brake's locked-wheel tangent"))
 @pytest.mark.parametrize("vehicle", ["xbw", "xbw_fwd"])
 def test_full_throttle_and_full_brake_at_once_in_a_turn(vehicle):
+    """12 MPa and wide-open throttle at 20 m/s in a turn: the front wheels lock (it failed at 0.39 s,
+    Newton crawling ~7 % an iteration onto the locked wheels' brake band)."""
     run = Run(vehicle, 20.0)
     run.hold(0.2, 0.0)
     run.hold(2.0, 8.0, THROTTLE_MAX, BRAKE_MAX)
@@ -189,3 +218,22 @@ def test_eps_car_six_radian_steps_at_20_mps(first):
     run.hold(0.7, -first)
     travel = _model("eps_car").config.eps.rack_travel_m
     assert np.abs(np.array(run.rack)).max() < travel, "6 rad is inside the EPS rack's travel"
+
+
+@pytest.mark.parametrize("throttle", [0.0, THROTTLE_MAX])
+def test_eps_car_past_the_lock_and_back_at_20_mps(throttle):
+    """The driver's hands impose +11 rad, past the EPS rack's lock (7.2 rad), then -11 rad: the rack sits
+    on its stop under the twisted torsion bar and the assist (it failed at 1.2 s: Newton jumping across
+    the transmission's driving/driven switch, a ~9 kN step over 0.2 mm/s at the stalled rack)."""
+    run = Run("eps_car", 20.0)
+    run.hold(0.5, 0.0, throttle)
+    run.hold(1.0, 11.0, throttle)
+    run.hold(1.0, -11.0, throttle)
+    assert np.abs(np.array(run.rack)).max() > _model("eps_car").config.eps.rack_travel_m, "the rack reached its stop"
+
+
+def test_eps_car_lock_to_lock_chatter():
+    """Full lock to full lock every 0.15 s at 10 m/s."""
+    run = Run("eps_car", 10.0)
+    for k in range(12):
+        run.hold(0.15, 11.0 if k % 2 == 0 else -11.0, 0.7)

@@ -377,8 +377,9 @@ def _step_control(m, d, nrm):
     one (its largest component reverses) without contracting (|dq| at least FS_STALL_RATE of the last
     one) is cycling across a kink of the forces (a friction band, a tyre past its peak, a transmission
     switching between driving and driven): the next increments are halved (down to FS_MIN_STEP), which
-    puts a two-point cycle's iterate between its two points, where the full increment shrinks. Otherwise
-    the fraction doubles back to 1 (a slow but monotone iteration keeps full steps). The convergence
+    puts a two-point cycle's iterate between its two points, where the full increment shrinks. The
+    fraction doubles back to 1 when the increment keeps its direction (a slow but monotone iteration
+    keeps full steps) or halves in size; a cycle that merely shrinks slowly keeps its damping. The convergence
     test is always on the full increment, so a damped step accepts the same solution as a full one."""
     j = int(d.newton[NW_JMAX])
     turned = d.y[j] * d.newton[NW_YMAX] < 0.0
@@ -395,7 +396,7 @@ def _step_control(m, d, nrm):
         lam_s *= 0.5
         if lam_s < m.fset[FS_MIN_STEP]:
             lam_s = m.fset[FS_MIN_STEP]
-    elif lam_s < 1.0:
+    elif lam_s < 1.0 and (not turned or nrm < 0.5 * d.newton[NW_PREV]):
         lam_s *= 2.0
         if lam_s > 1.0:
             lam_s = 1.0

@@ -220,12 +220,15 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
             pf[PORT_DRIVE, kz] += drive * (ax * tzx + ay * tzy + az * tzz)
         if tangent:
             # Near a locked wheel the sliding law's slope is -tau_s/omega_eps inside the band and 0
-            # outside: a tangent of 0 lets Newton jump across the band and back forever. Use the band's
-            # slope within 20 bands of zero speed: an over-estimated tangent only damps the iteration.
+            # outside: a tangent of 0 lets Newton jump across the band and back forever. Within 20 bands
+            # of zero speed use the secant to the band's far edge, tau_s / (|omega| + omega_eps): Newton
+            # then reaches the band in one or two iterations without jumping across it (the band's own
+            # slope there, 20 times too stiff at the edge, made it crawl ~7 % an iteration towards a
+            # locking wheel and run out of iterations under full brake).
             c_b = -dtdw
             w_band = bp[BP_EPS]
             if c_b == 0.0 and abs(qd[kp]) < 20.0 * w_band and w_band > 0.0:
-                c_b = bs[BS_TAU_SLIDE + i] / w_band
+                c_b = bs[BS_TAU_SLIDE + i] / (abs(qd[kp]) + w_band)
             add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, -bq * dtdth + hc * c_b)
             if k_fx != 0.0 or c_fx != 0.0:
                 add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, bq * k_fx + hc * c_fx)

@@ -284,9 +284,11 @@ def add_eps(b, p: np.ndarray, rack, angle: float = 0.0):
 @inline_kernel
 def _sat(v, band):
     """Saturated-linear sign: v / band within the band, +-1 outside; and the slope the tangent uses:
-    the band's within 20 bands of zero (a tangent of 0 just outside would let Newton jump across the
-    band and back; an over-estimated tangent only damps the iteration)."""
-    slope = 1.0 / band if abs(v) < 20.0 * band else 0.0
+    the band's within it, the secant across it, 1 / (|v| + band), out to 20 bands (a tangent of 0 just
+    outside would let Newton jump across the band and back; the band's own slope there, up to 20 times
+    too stiff, made it crawl)."""
+    av = abs(v)
+    slope = 1.0 / band if av <= band else (1.0 / (av + band) if av < 20.0 * band else 0.0)
     if v > band:
         return 1.0, slope
     if v < -band:
@@ -304,7 +306,15 @@ def _efficiency(torque, speed, band, eta, eta_back):
     th = math.tanh(speed / band)
     sg = th if torque >= 0.0 else -th
     k = (1.0 - eta) if sg >= 0.0 else (1.0 / eta_back - 1.0)
-    return 1.0 - k * sg, -k * abs(torque) * (1.0 - th * th) / band
+    # the slope for the tangent: the switch's own within the band; outside it (where tanh is flat) the
+    # secant to zero speed, k |T| |th| / (|speed| + band): under a large torque at rest (a rack held on
+    # its end stop) the switch is a force step of ~(1/eta_back - eta) T over a tiny band, and with a
+    # slope of 0 outside it Newton jumped across the band and back for ever
+    slope = (1.0 - th * th) / band
+    sec = abs(th) / (abs(speed) + band)
+    if sec > slope:
+        slope = sec
+    return 1.0 - k * sg, -k * abs(torque) * slope
 
 
 @kernel
