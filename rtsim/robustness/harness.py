@@ -37,7 +37,10 @@ two-wheeler the steering torques' work, the sum of (|rider's torque| + |assist t
 energy the vehicle can release besides: the engine's flywheel spun down from its rev limit (J w^2 / 2,
 a car's), the springs and actuators relaxing (the vehicle's weight through 0.25 m: more than all its
 suspension and tyre travel) and 1 % of the start's kinetic energy for the integrator's tolerances.
-``energy_ratio`` is max over the ride of (E(t) - E(0)) / (W_drive(t) + E_store): at most 1 holds the bound.
+A car's steering actuator (the steer-by-wire or EPS motor) is not summed on its own: its work over a
+ride, of the order of a kilowatt for a few seconds, lies well inside the flywheel's share of E_store
+(about 35 kJ for the shipped cars). ``energy_ratio`` is max over the ride of
+(E(t) - E(0)) / (W_drive(t) + E_store): at most 1 holds the bound.
 """
 from __future__ import annotations
 
