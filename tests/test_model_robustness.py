@@ -237,3 +237,22 @@ def test_eps_car_lock_to_lock_chatter():
     run = Run("eps_car", 10.0)
     for k in range(12):
         run.hold(0.15, 11.0 if k % 2 == 0 else -11.0, 0.7)
+
+
+def test_off_the_campus_mesh_the_wheels_hang_on_their_rebound_stops():
+    """10 m/s, full throttle, +11 rad then -11 rad on the campus lane: the car leaves the surveyed mesh
+    at about 1.5 s and falls with its wheels in the air (it failed at 2.0 s: the front travel drooped to
+    -0.14 m, outside the linkage fit, and the extrapolated kinematics threw the rack between its stops).
+    The hanging wheels rest on their rebound stops, inside the fitted travel."""
+    run = Run("xbw", 10.0, road="campus")
+    run.hold(0.5, 0.0, THROTTLE_MAX)
+    run.hold(1.0, 11.0, THROTTLE_MAX)
+    run.hold(1.1, -11.0, THROTTLE_MAX)
+    sim = run.sim
+    cfg = sim.vm.config
+    assert np.all(sim.vd.tyre[:, 2] == 0.0), "the car has left the road: every wheel in the air"
+    for i in range(4):
+        lo = (cfg.front if i < 2 else cfg.rear).travel_m[0]
+        z = float(sim.data.q[sim.vm.vehicle.corner_idx[i, 3]])
+        assert lo < z, f"wheel {i} hangs at {z:.3f} m, beyond the fitted rebound travel {lo} m"
+    _check_rack(run, "xbw")

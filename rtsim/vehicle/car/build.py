@@ -26,7 +26,7 @@ from rtsim.errors import ConfigError
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import VehicleConfig
-from .layout import (NSP, SP_ARB, SP_BX, SP_BY, SP_CFY, SP_CMZ, SP_L0, SP_PARTNER, STEER_BY_WIRE, STEER_EPS,
+from .layout import (NSP, SP_ARB, SP_BX, SP_BY, SP_CFY, SP_CMZ, SP_L0, SP_PARTNER, SP_STOP_C, SP_STOP_K, SP_Z_HI, SP_Z_LO, STEER_BY_WIRE, STEER_EPS,
                      TYRE_LINEAR, TYRE_MAGIC_FORMULA, G, Vehicle, FRONT_AXLE, REAR_AXLE, WHEELS)
 from ..kit.eps import add_eps, eps_params
 from ..kit.steering import add_steering, steering_config, steering_params
@@ -219,6 +219,10 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         susp[i, SP_BY] = r_wheel / axle.anti_roll_arm_m if axle.anti_roll_arm_m else 0.0
         susp[i, SP_CFY] = axle.compliance_steer_rad_per_n
         susp[i, SP_CMZ] = axle.compliance_steer_rad_per_nm
+        susp[i, SP_Z_LO] = axle.travel_m[0] + axle.travel_stop_margin_m
+        susp[i, SP_Z_HI] = axle.travel_m[1] - axle.travel_stop_margin_m
+        susp[i, SP_STOP_K] = axle.travel_stop_stiffness_n_per_m
+        susp[i, SP_STOP_C] = axle.travel_stop_damping_ns_per_m
     driven = list(FRONT_AXLE if cfg.driven_axle == "front" else REAR_AXLE)
     veh = Vehicle(
         chassis_idx=np.array([*r.idx, *u.idx, *v.idx, *w.idx], dtype=np.int64),

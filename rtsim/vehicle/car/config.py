@@ -151,6 +151,13 @@ class Axle(Strict):
     anti_roll_bar_n_per_m: float = Field(default=0.0, ge=0, le=1e6,
                                          description="force per metre of left-right travel difference")
     travel_m: tuple[float, float] = Field(default=(-0.08, 0.08), description="rebound, bump limits of the fit")
+    travel_stop_margin_m: float = Field(default=0.008, ge=0.0, le=0.05, description=(
+        "the rebound and bump stops (rtsim.vehicle.kit.end_stop) engage this far inside travel_m, so a "
+        "wheel hanging in the air or slammed into bump stays within the fitted kinematics"))
+    travel_stop_stiffness_n_per_m: float = Field(default=1.0e6, ge=1e4, le=1e8, description=(
+        "the travel stops' stiffness at the wheel (rebound strap / hydraulic stop, bump stop solid)"))
+    travel_stop_damping_ns_per_m: float = Field(default=5.0e3, ge=0.0, le=1e6, description=(
+        "the travel stops' damping at the wheel"))
     pivot_inertia_kgm2: float = Field(default=0.0, ge=0, le=20, description=(
         "wheel, hub and knuckle about the kingpin (a car with [eps]: each front wheel steers freely "
         "about its kingpin, tied to the rack by its tie rod)"))

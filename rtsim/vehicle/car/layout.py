@@ -19,8 +19,8 @@ CI_WX, CI_WY, CI_WZ, CI_Z, CI_PHI, CI_S = range(6)
 # ride height (m; the tables' compression is measured from it), anti-roll bar (N/m of travel difference)
 # and the other wheel of the axle, the axle reactions (Brouilhet effects: 1/m, force on the travel per
 # N m of Fx r and of Fy r), the compliance steer (rad/N of Fy, rad/(N m) of Mz).
-SP_L0, SP_ARB, SP_PARTNER, SP_BX, SP_BY, SP_CFY, SP_CMZ = range(7)
-NSP = 7
+SP_L0, SP_ARB, SP_PARTNER, SP_BX, SP_BY, SP_CFY, SP_CMZ, SP_Z_LO, SP_Z_HI, SP_STOP_K, SP_STOP_C = range(11)
+NSP = 11   # SP_Z_LO, SP_Z_HI: the travel stops (m); SP_STOP_K, SP_STOP_C: their stiffness, damping at the wheel
 
 Vehicle = namedtuple("Vehicle", [
     "chassis_idx",     # (12,) int

@@ -49,12 +49,13 @@ from ..kit.steering import SO_SIZE, SO_SW_ANGLE, SO_TORQUE, rack_stop_tangent, s
 from ..kit.eps import (EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_SIZE, EO_SW_ANGLE, EO_TB_TORQUE, EP_DRIVER,
                        EP_K_TB, EP_N, EP_RP, ES_EXT, ES_STAGE, ES_T_DRIVER, DRIVER_TORQUE, eps_commit, eps_control,
                        eps_forces, eps_outputs, external_command, hands_step)
+from ..kit.end_stop import travel_stops
 from ..kit.rigid import add_moment, angular_velocity, cross, vec3
 from ..kit.tables import table_eval
 from .energy_kernels import audit_commit
 from .layout import (
     G, TYRE_LINEAR, CI_PHI, CI_S, CI_WX, CI_Z, STEER_COLUMN, STEER_EPS, STEER_RACK, SP_ARB, SP_BX, SP_BY, SP_CFY,
-    SP_CMZ, SP_L0, SP_PARTNER, PORT_AERO, PORT_ARB, PORT_AXLE_REACTION, PORT_BRAKE, PORT_DAMPER, PORT_DRIVE,
+    SP_CMZ, SP_L0, SP_PARTNER, SP_STOP_C, SP_STOP_K, SP_Z_HI, SP_Z_LO, PORT_AERO, PORT_ARB, PORT_AXLE_REACTION, PORT_BRAKE, PORT_DAMPER, PORT_DRIVE,
     PORT_EFFECTS, PORT_EPS, PORT_SPRING, PORT_STEER_BY_WIRE, PORT_TYRE, NPORT,
 )
 from ..kit.tyre.magic_formula import (advance_deflections, advance_deflections_relaxed, effective_rolling_radius,
@@ -165,6 +166,15 @@ def vehicle_forces(m, d, veh, vd, road, tp, bp, bs, stp, sts, fx, fs, tangent, b
         f[kz] += fsp * lz
         if ks >= 0:
             f[ks] += fsp * ls
+        # rebound and bump stops at the ends of the travel (a hanging wheel, a slammed one); their work
+        # is booked with the dampers' (a non-storing port)
+        f_ts, k_ts, c_ts = travel_stops(z, zd, sp[SP_Z_LO], sp[SP_Z_HI], sp[SP_STOP_K], sp[SP_STOP_C])
+        if k_ts != 0.0:
+            f[kz] += f_ts
+            if audit:
+                pf[PORT_DAMPER, kz] += f_ts
+            if tangent:
+                add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * k_ts + hc * c_ts)
         # anti-roll bar on the travel difference with the other wheel of the axle
         partner = veh.corner_idx[int(sp[SP_PARTNER]), CI_Z]
         f_arb = -sp[SP_ARB] * (z - q[partner])

@@ -1,4 +1,5 @@
-"""A travel end stop: the force a linkage's hard stop puts on a coordinate driven past its travel.
+"""A travel end stop: the force a linkage's hard stop puts on a coordinate driven past its travel (the
+steering rack's end stops, a suspension's rebound and bump stops).
 
 Past the travel limit x_max (|x| > x_max, penetration p = |x| - x_max, m or rad) the stop pushes back with
 
@@ -22,14 +23,20 @@ P_RAMP = 5.0e-4      # m (or rad): penetration over which the stop's damping fad
 
 @inline_kernel
 def end_stop(x, xd, travel, k, c):
-    """(F, K, C): the stop's generalized force on x (N, or N m), its stiffness -dF/dx and damping
+    """(F, K, C): the force of two stops at +-travel on x (N, or N m), its stiffness -dF/dx and damping
     -dF/dxd for the tangent (0, 0, 0 within the travel)."""
-    if x > travel:
-        p = x - travel
+    return travel_stops(x, xd, -travel, travel, k, c)
+
+
+@inline_kernel
+def travel_stops(x, xd, lo, hi, k, c):
+    """(F, K, C) of two stops at lo < hi (end_stop with the limits apart)."""
+    if x > hi:
+        p = x - hi
         pd = xd
         sgn = 1.0
-    elif x < -travel:
-        p = -travel - x
+    elif x < lo:
+        p = lo - x
         pd = -xd
         sgn = -1.0
     else:
