@@ -68,6 +68,21 @@ def _bench(args) -> int:
         res = dispatch_costs()
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
+    if args.suite == "fuzz":
+        from pathlib import Path
+
+        from rtsim.robustness.bench import run_fuzz_bench
+        if args.count < 1:
+            raise RtsimError(f"--count must be at least 1, got {args.count}")
+        vehicles = [Path(v) for v in args.vehicle] if args.vehicle else None
+        for v in vehicles or ():
+            if not v.is_file():
+                raise RtsimError(f"--vehicle {v}: no such file")
+        res = run_fuzz_bench(vehicles, args.count, args.seed, Path(args.failures) if args.failures else None,
+                             out=(lambda line: None) if args.json else (lambda line: print(line, flush=True)))
+        if args.json:
+            print(json.dumps(res, indent=2))
+        return 1 if any(r["failures"] for r in res) else 0
     if args.suite == "vehicle":
         from rtsim.benchmarks.vehicle import suite
         results = suite()
@@ -276,10 +291,18 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--t-end", type=float, help="end time, s (default: the problem's)")
     b.add_argument("--json", action="store_true", help="print a JSON list, one object per problem")
     b.add_argument("--scaling", action="store_true", help="also time the N-four-bar for N = 1, 2, 10, 40, 100")
-    b.add_argument("--suite", choices=["mbs", "vehicle", "service", "dispatch"], default="mbs",
+    b.add_argument("--suite", choices=["mbs", "vehicle", "service", "dispatch", "fuzz"], default="mbs",
                    help="mbs: the IFToMM benchmark problems (default); vehicle: the vehicle model's cost per "
                         "step; service: the HIL service's real-time budget under load (CAN, Zenoh, MCAP, ECU); "
-                        "dispatch: the cost of a call into a kernel, direct and bound (rtsim.boundcall)")
+                        "dispatch: the cost of a call into a kernel, direct and bound (rtsim.boundcall); "
+                        "fuzz: command sequences drawn in each vehicle's DBC ranges (rtsim.robustness)")
+    b.add_argument("--count", type=int, default=2000,
+                   help="fuzz suite: rides drawn per vehicle (2000)")
+    b.add_argument("--vehicle", action="append", metavar="FILE",
+                   help="fuzz suite: a vehicle TOML to fuzz (repeatable; default: every shipped vehicle)")
+    b.add_argument("--seed", type=int, default=0, help="fuzz suite: the draw's seed (0)")
+    b.add_argument("--failures", metavar="FILE",
+                   help="fuzz suite: append each failing ride, as drawn, as a JSON line to FILE")
     b.add_argument("--duration", type=float, default=60.0, help="service suite: wall seconds to run (60)")
     b.add_argument("--no-record", action="store_true", help="service suite: without the MCAP recording")
     b.add_argument("--no-zenoh", action="store_true", help="service suite: without Zenoh")

@@ -281,3 +281,17 @@ def test_spec_packs_and_validates():
             TwoWheelTyreSpec.model_validate(bad)
     assert peak_slip(1.0, 0.0) >= 1e3 and peak_slip(1.6, 0.0) == pytest.approx(1.6 * math.tan(math.pi / 3.2))
     assert TW_SIGMA_A != TW_SIGMA_K and TW_S_U != TW_S_V
+
+
+def test_vertical_force_is_continuous_at_touch_down():
+    """A tyre landing fast: the force starts from zero at first contact (the damping builds up over the
+    first DAMPING_ONSET of deflection) and is the full law beyond it."""
+    from rtsim.vehicle.kit.tyre.two_wheel import DAMPING_ONSET
+
+    p = FRONT.copy()
+    rate = 3.0                                                          # m/s into the road
+    assert two_wheel_vertical_force(p, 1e-9, rate) < 1e-3 * p[TW_CZ] * rate
+    d = 0.5 * DAMPING_ONSET
+    assert two_wheel_vertical_force(p, d, rate) == pytest.approx(p[TW_KZ] * d + p[TW_KZ2] * d * d + 0.5 * p[TW_CZ] * rate)
+    d = DAMPING_ONSET
+    assert two_wheel_vertical_force(p, d, rate) == pytest.approx(p[TW_KZ] * d + p[TW_KZ2] * d * d + p[TW_CZ] * rate)

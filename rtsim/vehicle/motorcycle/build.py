@@ -154,6 +154,8 @@ def build_motorcycle(cfg: MotorcycleConfig, base: Path, gravity=(0.0, 0.0, -G)) 
         b.rolling_disc(w_r, v, b_r, c_r, cfg.rear_wheel.radius_m, name="rear wheel")
         b.rolling_disc(w_f, e_u, b_f, c_f, cfg.front_wheel.radius_m, name="front wheel")
     b.gravity(tuple(float(g) for g in gravity))
+    # the rear brake acts on the wheel's spin relative to the swingarm: its damping couples the two
+    b.couple(refs["PHI_R"], refs["THETA"])
     mech = b.compile()
     # the step's own forces (rtsim.vehicle.motorcycle.step) add stiffness and damping: the finishing stage
     # rebuilds W = M before they add theirs for the projections (otherwise they would be added twice)

@@ -12,7 +12,7 @@ from .build import MotorcycleModel
 from .config import Damper, Spring
 from .step import (MP_BRAKE_EPS, MP_CDA, MP_CHAIN_CX, MP_CHAIN_CZ, MP_CHAIN_RF, MP_CHAIN_RR, MP_CLA, MP_CP_X,
                    MP_CP_Z, MP_FREE_SUSPENSION, MP_HAS_CHAIN, MP_LOCK, MP_MU, MP_RHO, MP_SHOCK_C0, MP_SHOCK_FX,
-                   MP_SHOCK_FZ, MP_SHOCK_L0, MP_SHOCK_SX, MP_SHOCK_SZ, MP_SIZE, MP_SLIP_TYRES, MP_STEER_DAMP,
+                   MP_SHOCK_FZ, MP_SHOCK_L0, MP_SHOCK_SX, MP_SHOCK_SZ, MP_SIZE, MP_SLIP_TYRES, MP_SPIN_F, MP_SPIN_R, MP_STEER_DAMP,
                    MP_STOP_K, MP_THETA0, T_FORK_DAMPER, T_FORK_SPRING, T_SHOCK_DAMPER, T_SHOCK_SPRING, TO_SIZE, U_SIZE)
 
 TwoWheelerParts = namedtuple("TwoWheelerParts", ["idx", "par", "tab", "u", "tp", "slip", "tyre"])
@@ -70,6 +70,9 @@ def make_parts(mm: MotorcycleModel, mu: float = 1.0) -> TwoWheelerParts:
     par[MP_CDA], par[MP_CLA], par[MP_RHO] = a.drag_area_m2, a.lift_area_m2, a.air_density_kg_m3
     par[MP_CP_X], par[MP_CP_Z] = frame_coordinates(mm, a.centre_of_pressure_m)
     par[MP_BRAKE_EPS] = cfg.brakes.slip_speed_rad_s if cfg.brakes is not None else 0.5
+    # the brakes' regularisation (step.py) scales with 1 / spin inertia; none: the config's slip speed alone
+    par[MP_SPIN_F] = cfg.front_wheel.spin_inertia_kgm2 if cfg.front_wheel.spin_inertia_kgm2 > 0 else np.inf
+    par[MP_SPIN_R] = cfg.rear_wheel.spin_inertia_kgm2 if cfg.rear_wheel.spin_inertia_kgm2 > 0 else np.inf
     par[MP_SLIP_TYRES] = 0.0 if mm.knife_edge else 1.0
     par[MP_MU] = mu
     tp = np.zeros((2, pack_two_wheel_tyre(cfg.tyres.front).size))

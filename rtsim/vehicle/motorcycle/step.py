@@ -42,7 +42,8 @@ from .layout import (K_B_F, K_B_R, K_C_F, K_C_R, K_DELTA, K_E1, K_E_U, K_H, K_P,
 # Scalar parameters (TwoWheelerParts.par), positions in the rear frame's axes (e1, h) from the pivot, m.
 (MP_SHOCK_FX, MP_SHOCK_FZ, MP_SHOCK_SX, MP_SHOCK_SZ, MP_THETA0, MP_SHOCK_L0, MP_SHOCK_C0, MP_STEER_DAMP,
  MP_LOCK, MP_STOP_K, MP_CHAIN_CX, MP_CHAIN_CZ, MP_CHAIN_RF, MP_CHAIN_RR, MP_CDA, MP_CLA, MP_RHO, MP_CP_X,
- MP_CP_Z, MP_BRAKE_EPS, MP_SLIP_TYRES, MP_FREE_SUSPENSION, MP_MU, MP_HAS_CHAIN, MP_SIZE) = offsets(*(1,) * 24)
+ MP_CP_Z, MP_BRAKE_EPS, MP_SLIP_TYRES, MP_FREE_SUSPENSION, MP_MU, MP_HAS_CHAIN, MP_SPIN_F, MP_SPIN_R,
+ MP_SIZE) = offsets(*(1,) * 26)
 # Tables (TwoWheelerParts.tab rows): force (N, compression positive) against compression (m) and rate (m/s).
 T_FORK_SPRING, T_FORK_DAMPER, T_SHOCK_SPRING, T_SHOCK_DAMPER = range(4)
 # Inputs (TwoWheelerParts.u), held over a step.
@@ -174,19 +175,31 @@ def two_wheeler_forces(m, d, idx, par, tab, u, tp, slip, tyre, tangent, bq, hc):
     if tangent:
         add_entry(d.w_env, m.first, m.ptr, m.pinv, kd, kd, bq * k_stop + hc * par[MP_STEER_DAMP])
     # ---- brakes: smooth Coulomb torque against the wheel's spin relative to its carrier ----------------------
+    # The regularisation speed is the config's slip speed, but never below the change of spin rate the
+    # brake's torque T can make on its wheel in one step, T h / I_spin (h = 2 hc): below it the step cannot
+    # resolve the lock anyway, and with it the brake's damping T / eps stays at most I_spin / h, so Newton
+    # (whose tangent holds that damping) contracts by at least 2/3 per iteration however hard the brake
+    # is applied. A brake that locks its wheel within a step (full pressure at walking speed) made the
+    # damping up to 30 times the wheel's inertia term and Newton ran out of iterations at the first step.
     eps = par[MP_BRAKE_EPS]
+    h = 2.0 * hc
+    eps_f = max(eps, u[U_BRAKE_FRONT] * h / par[MP_SPIN_F])
+    eps_r = max(eps, u[U_BRAKE_REAR] * h / par[MP_SPIN_R])
     kpf = idx[K_PHI_F]
-    tb = u[U_BRAKE_FRONT] * tanh(qd[kpf] / eps)
+    tb = u[U_BRAKE_FRONT] * tanh(qd[kpf] / eps_f)
     f[kpf] -= tb
     kpr = idx[K_PHI_R]
     kt = idx[K_THETA]
     rel = qd[kpr] - qd[kt]
-    tb = u[U_BRAKE_REAR] * tanh(rel / eps)
+    tb = u[U_BRAKE_REAR] * tanh(rel / eps_r)
     f[kpr] -= tb
     f[kt] += tb
     if tangent:
-        add_entry(d.w_env, m.first, m.ptr, m.pinv, kpf, kpf, hc * u[U_BRAKE_FRONT] / eps)
-        add_entry(d.w_env, m.first, m.ptr, m.pinv, kpr, kpr, hc * u[U_BRAKE_REAR] / eps)
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kpf, kpf, hc * u[U_BRAKE_FRONT] / eps_f)
+        c_r = hc * u[U_BRAKE_REAR] / eps_r           # on the relative rate: the 2 x 2 block of (kpr, kt)
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kpr, kpr, c_r)
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kt, kt, c_r)
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kpr, kt, -c_r)
     # ---- chain: drive torque at the rear wheel as tension along the chain line -------------------------------
     if par[MP_HAS_CHAIN] > 0.5 and u[U_DRIVE_TORQUE] != 0.0:
         _chain(f, q, idx, par, u[U_DRIVE_TORQUE])

@@ -26,8 +26,12 @@ Effective rolling radius (`two_wheel_rolling_radius`): Re = (R - rho) + (rho - d
 distance from the axle to the contact with a third of the deflection (MF's FREFF = 1/3); it falls
 with camber as the contact moves onto the shoulder.
 
-Vertical force (`two_wheel_vertical_force`): Fz = kz d + kz2 d^2 + cz d_dot for d > 0, else 0;
-never negative (a tyre does not pull the wheel down).
+Vertical force (`two_wheel_vertical_force`): Fz = kz d + kz2 d^2 + cz w d_dot for d > 0, else 0;
+never negative (a tyre does not pull the wheel down). The damping builds up over the first
+``DAMPING_ONSET`` of deflection, w = min(1, d / DAMPING_ONSET), as contact damping does (Hunt and
+Crossley): the force is then continuous at touch-down. Without it a tyre landing at d_dot jumped from 0
+to cz d_dot as d crossed 0, and Newton's iterates, crossing it, stalled (a lightly loaded tyre in a
+crash or a fall, bouncing on its contact).
 
 Steady force law (`two_wheel_forces`; Pacejka, Tyre and Vehicle Dynamics, 3rd ed., ch. 4.3 and 11)
 ----------------------------------------------------------------------------------------------------
@@ -349,12 +353,17 @@ def two_wheel_rolling_radius(p, d, gamma):
     return p[TW_R0] - p[TW_RHO] + (p[TW_RHO] - d / 3.0) * cos(gamma)
 
 
+DAMPING_ONSET = 0.002       # m: the deflection over which the radial damping builds up (module docstring)
+
+
 @kernel
 def two_wheel_vertical_force(p, d, d_rate):
-    """Fz = kz d + kz2 d^2 + cz d_rate [N] for d > 0 (penetration [m], its rate [m/s]), else 0; >= 0."""
+    """Fz = kz d + kz2 d^2 + cz w d_rate [N] for d > 0 (penetration [m], its rate [m/s]), else 0; >= 0;
+    w = min(1, d / DAMPING_ONSET) (module docstring)."""
     if not d > 0.0:
         return 0.0
-    f = (p[TW_KZ] + p[TW_KZ2] * d) * d + p[TW_CZ] * d_rate
+    w = d / DAMPING_ONSET if d < DAMPING_ONSET else 1.0
+    f = (p[TW_KZ] + p[TW_KZ2] * d) * d + p[TW_CZ] * w * d_rate
     return f if f > 0.0 else 0.0
 
 
