@@ -10,6 +10,7 @@ import subprocess
 import sys
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from waits import EVENT
@@ -24,6 +25,24 @@ def segment_from_env() -> tuple[str, str] | None:
     if not iface:
         return None
     return iface, os.environ.get("RTSIM_CAN_CHANNEL", "vcan0")
+
+
+@contextmanager
+def can_segment():
+    """The CAN segment a service test runs on, as (interface, channel): the bus the environment names
+    (``segment_from_env``), else a loopback hub of its own, closed when the block ends."""
+    env = segment_from_env()
+    if env is not None:
+        yield env
+        return
+    from bridge.can_bus import LoopbackHub
+    from waits import HUB_START
+
+    hub = LoopbackHub(0, start_timeout=HUB_START)
+    try:
+        yield "remote", hub.channel
+    finally:
+        hub.close()
 
 
 class ServiceProcess:

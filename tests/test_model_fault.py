@@ -23,12 +23,12 @@ import cantools
 import numpy as np
 import pytest
 
-from bridge.can_bus import LoopbackHub, open_bus
+from bridge.can_bus import open_bus
 from bridge.can_codec import DEFAULT_DBC, Codec
 from bridge.mcap_recorder import SESSION_END_METADATA, read_recording
 from rtsim.model_fault import TEST_FAULT_ENV
-from service_harness import ROOT, Listener, ServiceProcess, segment_from_env, send_lockstep_cycle
-from waits import EVENT, HUB_START, PROCESS
+from service_harness import ROOT, Listener, ServiceProcess, can_segment, send_lockstep_cycle
+from waits import EVENT, PROCESS
 
 realtime = pytest.mark.realtime_e2e
 CODEC = Codec()
@@ -40,15 +40,8 @@ NONFINITE_FORCE = 2          # rtsim.mbs.model.ERR_NONFINITE_FORCE, the DBC's mo
 
 @pytest.fixture
 def segment():
-    env = segment_from_env()
-    if env is not None:
-        yield env
-        return
-    hub = LoopbackHub(0, start_timeout=HUB_START)
-    try:
-        yield "remote", hub.channel
-    finally:
-        hub.close()
+    with can_segment() as seg:
+        yield seg
 
 
 @pytest.fixture(scope="module")

@@ -33,7 +33,8 @@ from bridge.can_bus import LoopbackHub, open_bus
 from bridge.can_codec import DEFAULT_DBC, Codec
 from bridge.mcap_recorder import read_recording
 from rtsim.channels import COMMAND_NAMES
-from service_harness import ROOT, Listener, ServiceProcess, segment_from_env, send_lockstep_cycle
+from service_harness import (ROOT, Listener, ServiceProcess, can_segment, segment_from_env,
+                             send_lockstep_cycle)
 from waits import EVENT, HUB_START, PROCESS
 
 # can_e2e: also run over vcan0 inside the qemu VM (tests/test_vcan.py), where the emulated CPU is far too
@@ -49,15 +50,8 @@ ALL_TOPICS = ("sensors", "state", "status", "commands", "can/rx", "can/tx")
 
 @pytest.fixture
 def segment():
-    env = segment_from_env()
-    if env is not None:
-        yield env
-        return
-    hub = LoopbackHub(0, start_timeout=HUB_START)
-    try:
-        yield "remote", hub.channel
-    finally:
-        hub.close()
+    with can_segment() as seg:
+        yield seg
 
 
 @pytest.fixture(scope="module")
