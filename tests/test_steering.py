@@ -189,7 +189,7 @@ def test_a_steering_step_reaches_the_wheels_with_the_actuators_bandwidth():
     from rtsim.vehicle.car.sensors import S_STEER_FL, S_STEER_FR
     from rtsim.vehicle.car.sim import VehicleSim
     from rtsim.vehicle.car.step import CMD_STEER
-    from rtsim.vehicle.kit.linkages import OUT_CENTRE
+    from rtsim.vehicle.kit.linkages import OUT_AXIS, OUT_CENTRE, OUT_ROT_S
     from rtsim.vehicle.offline import default_vehicle_path
 
     cfg, base = load_vehicle(default_vehicle_path())
@@ -202,11 +202,17 @@ def test_a_steering_step_reaches_the_wheels_with_the_actuators_bandwidth():
     for k in range(steer.shape[0]):
         sim.step(1)
         steer[k] = sim.sensors()[[S_STEER_FL, S_STEER_FR]] - start
-    # the unsprung masses the rack moves: sum of m |dW/ds|^2 over the steered wheels
+    # the masses the rack moves: the unsprung masses, sum of m |dW/ds|^2 over the steered wheels, and
+    # the wheels' own inertia about a diameter I_d turned at the knuckle's rotation per rack travel R_s
+    # (across the spin axis a), sum of I_d (|R_s|^2 - (R_s . a)^2), both at design
     m_link = 0.0
     for corner in vm.corners[:2]:
-        j = [tuple(e) for e in corner.exponents].index((0, 1))
+        terms = [tuple(e) for e in corner.exponents]
+        j, j0 = terms.index((0, 1)), terms.index((0, 0))
         m_link += cfg.front.unsprung_mass_kg * float(np.sum(corner.vec_coef[OUT_CENTRE][:, j] ** 2))
+        r_s = corner.vec_coef[OUT_ROT_S][:, j0]
+        a = corner.vec_coef[OUT_AXIS][:, j0] / np.linalg.norm(corner.vec_coef[OUT_AXIS][:, j0])
+        m_link += cfg.front.pivot_inertia_kgm2 * float(r_s @ r_s - (r_s @ a) ** 2)
     rack = Rig(linkage_mass=m_link, **dataclasses.asdict(cfg.steering)).run(np.full(steer.shape[0], 0.5))[:, S.SO_RACK_POS]
 
     def rise(y):

@@ -133,6 +133,26 @@ def _check_rack_travel(cfg: VehicleConfig, base: Path, corners: list[CornerKinem
                                   f"fitted range +-{PIVOT_RANGE[1]:g} rad")
 
 
+def steered_inertia_at_rack(cfg: VehicleConfig, corners: list[CornerKinematics]) -> float:
+    """kg: the steered wheels' own inertia about their steering axes, reflected to the rack of a
+    steer-by-wire car. Turning the rack at s' turns each steered knuckle at omega = R_s s' (R_s: the
+    linkage's rotation per rack travel, OUT_ROT_S, at design position); the wheel centre's motion is the
+    unsprung point mass's, and the wheel, tyre, disc and hub add their inertia about a diameter,
+    ``front.pivot_inertia_kgm2`` (I_d), for omega's part across the spin axis a:
+    m = sum I_d (|R_s|^2 - (R_s . a)^2). The rate is taken at design (it varies by some per cent over the
+    travel and the rack's range: the mass matrix stays constant)."""
+    m = 0.0
+    for i, kin in enumerate(corners):
+        if not kin.steered:
+            continue
+        axle = cfg.front if i < 2 else cfg.rear
+        rs = kin.evaluate(OUT_ROT_S, 0.0, 0.0)
+        a = kin.evaluate(OUT_AXIS, 0.0, 0.0)
+        a = a / np.linalg.norm(a)
+        m += axle.pivot_inertia_kgm2 * (float(rs @ rs) - float(rs @ a) ** 2)
+    return m
+
+
 def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics] | None = None) -> VehicleModel:
     corners = corners or cached_corner_kinematics(cfg, corner_kinematics)
     if any(k.steered for k in corners):
@@ -153,6 +173,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     driver_row = -1
     if cfg.eps is None:
         column = add_steering(b, steering_params(steering_config(cfg.steering or None, "steering")), rack)
+        b.scalar_inertia(rack, steered_inertia_at_rack(cfg, corners))
     else:
         column, drv = add_eps(b, eps_params(cfg.eps), rack)
         if drv >= 0:

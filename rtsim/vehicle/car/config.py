@@ -164,7 +164,9 @@ class Axle(Strict):
         "the travel stops' damping at the wheel"))
     pivot_inertia_kgm2: float = Field(default=0.0, ge=0, le=20, description=(
         "wheel, hub and knuckle about the kingpin (a car with [eps]: each front wheel steers freely "
-        "about its kingpin, tied to the rack by its tie rod)"))
+        "about its kingpin, tied to the rack by its tie rod; steer-by-wire: their own inertia about a "
+        "diameter through the wheel centre, reflected to the rack through the linkage, the wheel "
+        "centre's motion being the unsprung mass's)"))
     compliance_steer_rad_per_n: float = Field(default=0.0, ge=-1e-4, le=1e-4, description=(
         "elastokinematic steer induced by the lateral tyre force (positive: towards the force)"))
     compliance_steer_rad_per_nm: float = Field(default=0.0, ge=-1e-3, le=1e-3, description=(
