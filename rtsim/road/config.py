@@ -23,7 +23,7 @@ off_survey_friction = 0.6     # friction scale of the ground beyond the survey's
 off_survey_rolling_resistance = 0.02   # its rolling resistance, [0, 0.1]
 ```
 The world does not end where the survey does: beyond the outline the ground continues at the height
-of the nearest outline point, levelling out and taking the off-survey friction within 1 m
+of the nearest outline points, levelling out and taking the off-survey friction within 1 m
 (rtsim.road.model, "Off the survey"), so a tyre that rolls off the mesh keeps its load.
 Every error is a ConfigError naming the file, the key, the value and what is allowed.
 """

@@ -16,12 +16,16 @@ Kinds (`ipar[IP_KIND]`):
   ground continues beyond the survey's outline (below).
 
 Off the survey (IP_GROUND = 1): the world does not end where the survey does. At a point outside every
-triangle, at horizontal distance r from the nearest point B of the mesh's boundary edges, the ground has
-the height of B (linear along that edge: continuous with the mesh at the outline), the unit normal
-normalize((1 - w) n_B + w e_z) and friction scale and rolling resistance (1 - w) v_B + w v_off, where
-n_B and v_B are the mesh's values at B (its smooth or facet normal, its triangle's mu and rr), v_off
-the declared off-survey values (FP_OFF_MU, FP_OFF_RR) and w = smoothstep(r / OFF_SURVEY_BLEND). The
-query still reports face -1 there (off the survey), with these finite values. The nearest boundary
+triangle, at horizontal distance r from the nearest point of the mesh's boundary edges, each boundary
+edge j offers its nearest point B_j (distance r_j) with the mesh's height z_j, normal n_j (smooth or
+facet) and triangle's mu_j, rr_j there. The edges within a relative band of the nearest one are
+averaged with weights w_j = (1 - (r_j - r) / (OFF_SURVEY_BAND r))^2 (0 beyond the band, 1 for the
+nearest), so the ground is continuous even where the nearest edge changes (a concave outline): height
+z_B = sum w_j z_j / sum w_j (at the outline, r -> 0, the mesh's own height), unit normal
+normalize((1 - w) n_B + w e_z) and friction scale and rolling resistance (1 - w) v_B + w v_off, with
+n_B, v_B the same weighted means, v_off the declared off-survey values (FP_OFF_MU, FP_OFF_RR) and
+w = smoothstep(r / OFF_SURVEY_BLEND). The query still reports face -1 there (off the survey), with
+these finite values. The nearest boundary
 point is found by a scan of the boundary edges (cost linear in the outline's length, paid only off
 the survey).
 
@@ -120,6 +124,10 @@ Road = namedtuple("Road", [
 #: resistance blend from the mesh's values at the nearest boundary point to a level surface with the
 #: off-survey values (a C1 smoothstep of the distance), so a tyre rolling off the edge sees none jump.
 OFF_SURVEY_BLEND = 1.0
+
+#: Relative width of the band of boundary edges averaged for the ground beyond the survey: edges
+#: whose nearest point is at most (1 + OFF_SURVEY_BAND) times the nearest distance away.
+OFF_SURVEY_BAND = 0.5
 
 #: Friction scale and rolling resistance accepted anywhere (configs and survey columns).
 MU_RANGE = (0.0, 2.0)        # exclusive lower bound, inclusive upper bound

@@ -36,7 +36,7 @@ from rtsim.jit import inline_kernel, kernel
 from rtsim.road.model import (
     FP_GRID_X0, FP_GRID_X1, FP_GRID_Y0, FP_GRID_Y1, FP_GX, FP_GY, FP_INV_H, FP_MU, FP_NX, FP_NY,
     FP_NZ, FP_OFF_MU, FP_OFF_RR, FP_RR, FP_X0, FP_Y0, FP_Z0, INSIDE_TOL, IP_GROUND, IP_KIND, IP_NCX,
-    IP_NCY, IP_SMOOTH, OFF_SURVEY_BLEND, ROAD_PLANE, TG_B11, TG_B12,
+    IP_NCY, IP_SMOOTH, OFF_SURVEY_BAND, OFF_SURVEY_BLEND, ROAD_PLANE, TG_B11, TG_B12,
     TG_B21, TG_B22, TG_GX, TG_GY, TG_NX, TG_NY, TG_NZ, TG_X0, TG_Y0, TG_Z0,
 )
 
@@ -64,6 +64,24 @@ MAX_CONTACT_PLANES = 3
 
 
 @inline_kernel
+def _edge_point(road, j, x, y):
+    """(squared horizontal distance, parameter s in [0, 1]) of the point of boundary edge j nearest (x, y)."""
+    v = road.vert
+    a = road.bnd_vert[j, 0]
+    b = road.bnd_vert[j, 1]
+    ex = v[b, 0] - v[a, 0]
+    ey = v[b, 1] - v[a, 1]
+    dx = x - v[a, 0]
+    dy = y - v[a, 1]
+    ee = ex * ex + ey * ey
+    s = (dx * ex + dy * ey) / ee if ee > 0.0 else 0.0
+    s = min(max(s, 0.0), 1.0)
+    rx = dx - s * ex
+    ry = dy - s * ey
+    return rx * rx + ry * ry, s
+
+
+@inline_kernel
 def off_survey(road, x, y):
     """(face, z, nx, ny, nz, mu, rr) of the ground beyond a mesh's survey at (x, y), the rule of
     "Off the survey" in rtsim.road.model: face -1; z = -inf (no ground) when the mesh declares none,
@@ -71,48 +89,59 @@ def off_survey(road, x, y):
     nb = road.bnd_vert.shape[0]
     if road.ipar[IP_GROUND] == 0 or nb == 0 or not (math.isfinite(x) and math.isfinite(y)):
         return -1, -math.inf, 0.0, 0.0, 1.0, 0.0, 0.0
-    v = road.vert
     best = math.inf
-    jb = 0
-    sb = 0.0
     for j in range(nb):
+        r2, s = _edge_point(road, j, x, y)
+        best = min(best, r2)
+    rmin = math.sqrt(best)
+    band = OFF_SURVEY_BAND * rmin
+    v = road.vert
+    smooth = road.ipar[IP_SMOOTH] != 0
+    wsum = 0.0
+    z = 0.0
+    bx = 0.0
+    by = 0.0
+    bz = 0.0
+    mub = 0.0
+    rrb = 0.0
+    for j in range(nb):
+        r2, s = _edge_point(road, j, x, y)
+        if r2 > best:
+            if not band > 0.0:
+                continue
+            u = (math.sqrt(r2) - rmin) / band
+            if u >= 1.0:
+                continue
+            wj = (1.0 - u) * (1.0 - u)
+        else:
+            wj = 1.0
         a = road.bnd_vert[j, 0]
         b = road.bnd_vert[j, 1]
-        ex = v[b, 0] - v[a, 0]
-        ey = v[b, 1] - v[a, 1]
-        dx = x - v[a, 0]
-        dy = y - v[a, 1]
-        ee = ex * ex + ey * ey
-        s = (dx * ex + dy * ey) / ee if ee > 0.0 else 0.0
-        s = min(max(s, 0.0), 1.0)
-        rx = dx - s * ex
-        ry = dy - s * ey
-        r2 = rx * rx + ry * ry
-        if r2 < best:
-            best = r2
-            jb = j
-            sb = s
-    a = road.bnd_vert[jb, 0]
-    b = road.bnd_vert[jb, 1]
-    t = road.bnd_tri[jb]
-    z = (1.0 - sb) * v[a, 2] + sb * v[b, 2]
-    if road.ipar[IP_SMOOTH] == 0:
-        g = road.tri_geom
-        bx, by, bz = g[t, TG_NX], g[t, TG_NY], g[t, TG_NZ]
-    else:
-        vn = road.vert_n
-        bx = (1.0 - sb) * vn[a, 0] + sb * vn[b, 0]
-        by = (1.0 - sb) * vn[a, 1] + sb * vn[b, 1]
-        bz = (1.0 - sb) * vn[a, 2] + sb * vn[b, 2]
-    r = min(math.sqrt(best) / OFF_SURVEY_BLEND, 1.0)
+        t = road.bnd_tri[j]
+        wsum += wj
+        z += wj * ((1.0 - s) * v[a, 2] + s * v[b, 2])
+        if smooth:
+            vn = road.vert_n
+            bx += wj * ((1.0 - s) * vn[a, 0] + s * vn[b, 0])
+            by += wj * ((1.0 - s) * vn[a, 1] + s * vn[b, 1])
+            bz += wj * ((1.0 - s) * vn[a, 2] + s * vn[b, 2])
+        else:
+            g = road.tri_geom
+            bx += wj * g[t, TG_NX]
+            by += wj * g[t, TG_NY]
+            bz += wj * g[t, TG_NZ]
+        mub += wj * road.tri_mu[t]
+        rrb += wj * road.tri_rr[t]
+    z /= wsum
+    r = min(rmin / OFF_SURVEY_BLEND, 1.0)
     w = r * r * (3.0 - 2.0 * r)
-    nx = (1.0 - w) * bx
-    ny = (1.0 - w) * by
-    nz = (1.0 - w) * bz + w
+    nx = (1.0 - w) * bx / wsum
+    ny = (1.0 - w) * by / wsum
+    nz = (1.0 - w) * bz / wsum + w
     inv = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
     fp = road.fpar
-    mu = (1.0 - w) * road.tri_mu[t] + w * fp[FP_OFF_MU]
-    rr = (1.0 - w) * road.tri_rr[t] + w * fp[FP_OFF_RR]
+    mu = (1.0 - w) * mub / wsum + w * fp[FP_OFF_MU]
+    rr = (1.0 - w) * rrb / wsum + w * fp[FP_OFF_RR]
     return -1, z, nx * inv, ny * inv, nz * inv, mu, rr
 
 
