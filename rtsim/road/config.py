@@ -19,7 +19,12 @@ grid_spacing = 0.5            # m, [0.05, 10]
 alpha_radius = 3.0            # optional, m: outline radius (default: 2 x median point spacing)
 mu = 1.0                      # per-triangle values when the survey has no such column
 rolling_resistance = 0.010
+off_survey_friction = 0.6     # friction scale of the ground beyond the survey's outline, (0, 2]
+off_survey_rolling_resistance = 0.02   # its rolling resistance, [0, 0.1]
 ```
+The world does not end where the survey does: beyond the outline the ground continues at the height
+of the nearest outline points, levelling out and taking the off-survey friction within 1 m
+(rtsim.road.model, "Off the survey"), so a tyre that rolls off the mesh keeps its load.
 Every error is a ConfigError naming the file, the key, the value and what is allowed.
 """
 from __future__ import annotations
@@ -76,6 +81,13 @@ class MeshRoadConfig(_Road):
     smooth_normals: bool = Field(True, strict=True,
                                  description="contact normals interpolated from vertex normals, so tyre "
                                              "forces are continuous across triangle edges")
+    off_survey_friction: float = Field(0.6, gt=MU_RANGE[0], le=MU_RANGE[1], allow_inf_nan=False,
+                                       strict=True, description="friction scale of the ground beyond "
+                                                                "the survey (grass, gravel: about 0.6)")
+    off_survey_rolling_resistance: float = Field(0.02, ge=RR_RANGE[0], le=RR_RANGE[1],
+                                                 allow_inf_nan=False, strict=True,
+                                                 description="rolling resistance of the ground beyond "
+                                                             "the survey")
 
 
 RoadConfig = Annotated[Union[FlatRoadConfig, GradeRoadConfig, MeshRoadConfig],
@@ -103,4 +115,6 @@ def load_road(path) -> Road:
     survey = read_survey(survey_path)
     mesh = survey_to_mesh(survey, cfg.grid_spacing, cfg.alpha_radius, cfg.mu, cfg.rolling_resistance)
     return make_mesh(mesh.vertices, mesh.triangles, mesh.tri_mu, mesh.tri_rr,
-                     cell_size=cfg.grid_spacing, source=str(survey_path), smooth_normals=cfg.smooth_normals)
+                     cell_size=cfg.grid_spacing, source=str(survey_path), smooth_normals=cfg.smooth_normals,
+                     off_survey_mu=cfg.off_survey_friction,
+                     off_survey_rr=cfg.off_survey_rolling_resistance)

@@ -11,7 +11,23 @@ Kinds (`ipar[IP_KIND]`):
   gx = g cos(psi), gy = g sin(psi). The mesh arrays are empty. The query reports face 0.
 - `ROAD_MESH` (1): a triangle mesh that is a height field over the x-y plane (one surface height per
   (x, y), which is what a survey gives, so no z hint is needed), with per-triangle friction and rolling
-  resistance and a uniform 2D grid hash for O(1) lookup. Points outside every triangle are off the road.
+  resistance and a uniform 2D grid hash for O(1) lookup. Points outside every triangle are off the
+  survey: without a declared ground (IP_GROUND = 0) they are off the road (height -inf); with one, the
+  ground continues beyond the survey's outline (below).
+
+Off the survey (IP_GROUND = 1): the world does not end where the survey does. At a point outside every
+triangle, at horizontal distance r from the nearest point of the mesh's boundary edges, each boundary
+edge j offers its nearest point B_j (distance r_j) with the mesh's height z_j, normal n_j (smooth or
+facet) and triangle's mu_j, rr_j there. The edges within a relative band of the nearest one are
+averaged with weights w_j = (1 - (r_j - r) / (OFF_SURVEY_BAND r))^2 (0 beyond the band, 1 for the
+nearest), so the ground is continuous even where the nearest edge changes (a concave outline): height
+z_B = sum w_j z_j / sum w_j (at the outline, r -> 0, the mesh's own height), unit normal
+normalize((1 - w) n_B + w e_z) and friction scale and rolling resistance (1 - w) v_B + w v_off, with
+n_B, v_B the same weighted means, v_off the declared off-survey values (FP_OFF_MU, FP_OFF_RR) and
+w = smoothstep(r / OFF_SURVEY_BLEND). The query still reports face -1 there (off the survey), with
+these finite values. The nearest boundary
+point is found by a scan of the boundary edges (cost linear in the outline's length, paid only off
+the survey).
 
 Array layout (axes ISO 8855: x forward, y left, z up; SI units):
 
@@ -20,7 +36,8 @@ Array layout (axes ISO 8855: x forward, y left, z up; SI units):
 - `fpar` float64 (NFPAR,): FP_X0, FP_Y0, FP_Z0, FP_GX, FP_GY (plane: reference point and height
   gradient), FP_NX, FP_NY, FP_NZ (plane: unit normal), FP_MU, FP_RR (plane: friction scale and
   rolling resistance), FP_GRID_X0, FP_GRID_Y0 (mesh: lower-left corner of the grid hash), FP_INV_H
-  (mesh: 1 / cell size), FP_GRID_X1, FP_GRID_Y1 (mesh: upper-right corner).
+  (mesh: 1 / cell size), FP_GRID_X1, FP_GRID_Y1 (mesh: upper-right corner), FP_OFF_MU, FP_OFF_RR
+  (mesh: the ground beyond the survey).
 - `vert` float64 (nv, 3): vertex x, y, z.
 - `tri` int32 (nt, 3): vertex indices, counter-clockwise seen from above (+z).
 - `tri_geom` float64 (nt, NGEOM): per triangle, relative to its vertex 0 (x0, y0, z0):
@@ -52,7 +69,8 @@ IP_NCY = 2
 IP_NT = 3
 IP_NV = 4
 IP_SMOOTH = 5   # mesh: 1 = normals interpolated from vertex normals (smooth across edges)
-NIPAR = 6
+IP_GROUND = 6   # mesh: 1 = the ground continues beyond the survey (see "Off the survey" above)
+NIPAR = 7
 
 # fpar
 FP_X0 = 0
@@ -70,7 +88,9 @@ FP_GRID_Y0 = 11
 FP_INV_H = 12
 FP_GRID_X1 = 13
 FP_GRID_Y1 = 14
-NFPAR = 15
+FP_OFF_MU = 15      # mesh: friction scale of the ground beyond the survey
+FP_OFF_RR = 16      # mesh: rolling resistance of the ground beyond the survey
+NFPAR = 17
 
 # tri_geom columns
 TG_X0 = 0
@@ -96,7 +116,18 @@ MAX_CELLS = 4_000_000
 Road = namedtuple("Road", [
     "ipar", "fpar", "vert", "tri", "tri_geom", "tri_mu", "tri_rr", "cell_start", "cell_tri",
     "vert_n",   # (nv, 3) area-weighted unit vertex normals (used with IP_SMOOTH)
+    "bnd_vert",  # (nb, 2) int32: the two vertices of each boundary edge (an edge of one triangle only)
+    "bnd_tri",   # (nb,) int32: the triangle each boundary edge belongs to
 ])
+
+#: Distance beyond the survey's outline (m) over which the ground's normal, friction and rolling
+#: resistance blend from the mesh's values at the nearest boundary point to a level surface with the
+#: off-survey values (a C1 smoothstep of the distance), so a tyre rolling off the edge sees none jump.
+OFF_SURVEY_BLEND = 1.0
+
+#: Relative width of the band of boundary edges averaged for the ground beyond the survey: edges
+#: whose nearest point is at most (1 + OFF_SURVEY_BAND) times the nearest distance away.
+OFF_SURVEY_BAND = 0.5
 
 #: Friction scale and rolling resistance accepted anywhere (configs and survey columns).
 MU_RANGE = (0.0, 2.0)        # exclusive lower bound, inclusive upper bound
@@ -108,7 +139,8 @@ def _empty_mesh_fields():
         vert=np.zeros((0, 3)), tri=np.zeros((0, 3), dtype=np.int32),
         tri_geom=np.zeros((0, NGEOM)), tri_mu=np.zeros(0), tri_rr=np.zeros(0),
         cell_start=np.zeros(1, dtype=np.int32), cell_tri=np.zeros(0, dtype=np.int32),
-        vert_n=np.zeros((0, 3)),
+        vert_n=np.zeros((0, 3)), bnd_vert=np.zeros((0, 2), dtype=np.int32),
+        bnd_tri=np.zeros(0, dtype=np.int32),
     )
 
 
@@ -207,12 +239,26 @@ def build_grid_hash(vert: np.ndarray, tri: np.ndarray, cell_size: float):
     return x0, y0, h, ncx, ncy, cell_start, cell_tri
 
 
+def boundary_edges(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The edges of a triangle list that belong to one triangle only: (vertex pairs (nb, 2) int32,
+    their triangle (nb,) int32)."""
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    owner = np.tile(np.arange(tri.shape[0]), 3)
+    key = np.sort(e, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    once = cnt[inv.ravel()] == 1
+    return e[once].astype(np.int32), owner[once].astype(np.int32)
+
+
 def make_mesh(vertices, triangles, tri_mu, tri_rr, cell_size: float | None = None,
-              source: str = "mesh", smooth_normals: bool = False) -> Road:
+              source: str = "mesh", smooth_normals: bool = False,
+              off_survey_mu: float | None = None, off_survey_rr: float = 0.0) -> Road:
     """A triangle-mesh road from vertices (nv, 3), triangles (nt, 3) and per-triangle friction scale
     and rolling resistance (scalars broadcast). Triangles are re-oriented counter-clockwise; the
-    grid-hash cell size defaults to the mean edge length. Bad input raises ConfigError naming
-    `source`."""
+    grid-hash cell size defaults to the mean edge length. With `off_survey_mu` given, the ground
+    continues beyond the mesh with that friction scale and `off_survey_rr` (see "Off the survey" in
+    the module docstring); without it, points off the mesh are off the road. Bad input raises
+    ConfigError naming `source`."""
     vert = np.ascontiguousarray(vertices, dtype=np.float64)
     tri = np.array(triangles, dtype=np.int64)
     if vert.ndim != 2 or vert.shape[1] != 3 or vert.shape[0] < 3:
@@ -256,6 +302,16 @@ def make_mesh(vertices, triangles, tri_mu, tri_rr, cell_size: float | None = Non
     fpar[[FP_GRID_X0, FP_GRID_Y0, FP_INV_H]] = x0, y0, 1.0 / h
     fpar[FP_GRID_X1], fpar[FP_GRID_Y1] = x0 + ncx * h, y0 + ncy * h
     fpar[FP_NZ] = 1.0
+    if off_survey_mu is not None:
+        if not MU_RANGE[0] < off_survey_mu <= MU_RANGE[1]:
+            raise ConfigError(f"{source}: off-survey friction scale {off_survey_mu} out of range "
+                              f"({MU_RANGE[0]}, {MU_RANGE[1]}]")
+        if not RR_RANGE[0] <= off_survey_rr <= RR_RANGE[1]:
+            raise ConfigError(f"{source}: off-survey rolling resistance {off_survey_rr} out of range "
+                              f"[{RR_RANGE[0]}, {RR_RANGE[1]}]")
+        ipar[IP_GROUND] = 1
+        fpar[FP_OFF_MU], fpar[FP_OFF_RR] = off_survey_mu, off_survey_rr
+    bnd_vert, bnd_tri = boundary_edges(tri)
     # vertex normals: area-weighted mean of the adjacent facets' normals (the cross product of two
     # edges is the normal times twice the area)
     e1 = vert[tri[:, 1]] - vert[tri[:, 0]]
@@ -268,4 +324,5 @@ def make_mesh(vertices, triangles, tri_mu, tri_rr, cell_size: float | None = Non
     vert_n[norm > 0] /= norm[norm > 0, None]
     vert_n[norm == 0] = (0.0, 0.0, 1.0)
     return Road(ipar=ipar, fpar=fpar, vert=vert, tri=tri, tri_geom=geom, tri_mu=mu, tri_rr=rr,
-                cell_start=cell_start, cell_tri=cell_tri, vert_n=vert_n)
+                cell_start=cell_start, cell_tri=cell_tri, vert_n=vert_n, bnd_vert=bnd_vert,
+                bnd_tri=bnd_tri)

@@ -35,7 +35,8 @@ import math
 from rtsim.jit import inline_kernel, kernel
 from rtsim.road.model import (
     FP_GRID_X0, FP_GRID_X1, FP_GRID_Y0, FP_GRID_Y1, FP_GX, FP_GY, FP_INV_H, FP_MU, FP_NX, FP_NY,
-    FP_NZ, FP_RR, FP_X0, FP_Y0, FP_Z0, INSIDE_TOL, IP_KIND, IP_NCX, IP_NCY, IP_SMOOTH, ROAD_PLANE, TG_B11, TG_B12,
+    FP_NZ, FP_OFF_MU, FP_OFF_RR, FP_RR, FP_X0, FP_Y0, FP_Z0, INSIDE_TOL, IP_GROUND, IP_KIND, IP_NCX,
+    IP_NCY, IP_SMOOTH, OFF_SURVEY_BAND, OFF_SURVEY_BLEND, ROAD_PLANE, TG_B11, TG_B12,
     TG_B21, TG_B22, TG_GX, TG_GY, TG_NX, TG_NY, TG_NZ, TG_X0, TG_Y0, TG_Z0,
 )
 
@@ -63,8 +64,91 @@ MAX_CONTACT_PLANES = 3
 
 
 @inline_kernel
+def _edge_point(road, j, x, y):
+    """(squared horizontal distance, parameter s in [0, 1]) of the point of boundary edge j nearest (x, y)."""
+    v = road.vert
+    a = road.bnd_vert[j, 0]
+    b = road.bnd_vert[j, 1]
+    ex = v[b, 0] - v[a, 0]
+    ey = v[b, 1] - v[a, 1]
+    dx = x - v[a, 0]
+    dy = y - v[a, 1]
+    ee = ex * ex + ey * ey
+    s = (dx * ex + dy * ey) / ee if ee > 0.0 else 0.0
+    s = min(max(s, 0.0), 1.0)
+    rx = dx - s * ex
+    ry = dy - s * ey
+    return rx * rx + ry * ry, s
+
+
+@inline_kernel
+def off_survey(road, x, y):
+    """(face, z, nx, ny, nz, mu, rr) of the ground beyond a mesh's survey at (x, y), the rule of
+    "Off the survey" in rtsim.road.model: face -1; z = -inf (no ground) when the mesh declares none,
+    has no boundary or (x, y) is not finite."""
+    nb = road.bnd_vert.shape[0]
+    if road.ipar[IP_GROUND] == 0 or nb == 0 or not (math.isfinite(x) and math.isfinite(y)):
+        return -1, -math.inf, 0.0, 0.0, 1.0, 0.0, 0.0
+    best = math.inf
+    for j in range(nb):
+        r2, s = _edge_point(road, j, x, y)
+        best = min(best, r2)
+    rmin = math.sqrt(best)
+    band = OFF_SURVEY_BAND * rmin
+    v = road.vert
+    smooth = road.ipar[IP_SMOOTH] != 0
+    wsum = 0.0
+    z = 0.0
+    bx = 0.0
+    by = 0.0
+    bz = 0.0
+    mub = 0.0
+    rrb = 0.0
+    for j in range(nb):
+        r2, s = _edge_point(road, j, x, y)
+        if r2 > best:
+            if not band > 0.0:
+                continue
+            u = (math.sqrt(r2) - rmin) / band
+            if u >= 1.0:
+                continue
+            wj = (1.0 - u) * (1.0 - u)
+        else:
+            wj = 1.0
+        a = road.bnd_vert[j, 0]
+        b = road.bnd_vert[j, 1]
+        t = road.bnd_tri[j]
+        wsum += wj
+        z += wj * ((1.0 - s) * v[a, 2] + s * v[b, 2])
+        if smooth:
+            vn = road.vert_n
+            bx += wj * ((1.0 - s) * vn[a, 0] + s * vn[b, 0])
+            by += wj * ((1.0 - s) * vn[a, 1] + s * vn[b, 1])
+            bz += wj * ((1.0 - s) * vn[a, 2] + s * vn[b, 2])
+        else:
+            g = road.tri_geom
+            bx += wj * g[t, TG_NX]
+            by += wj * g[t, TG_NY]
+            bz += wj * g[t, TG_NZ]
+        mub += wj * road.tri_mu[t]
+        rrb += wj * road.tri_rr[t]
+    z /= wsum
+    r = min(rmin / OFF_SURVEY_BLEND, 1.0)
+    w = r * r * (3.0 - 2.0 * r)
+    nx = (1.0 - w) * bx / wsum
+    ny = (1.0 - w) * by / wsum
+    nz = (1.0 - w) * bz / wsum + w
+    inv = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
+    fp = road.fpar
+    mu = (1.0 - w) * mub / wsum + w * fp[FP_OFF_MU]
+    rr = (1.0 - w) * rrb / wsum + w * fp[FP_OFF_RR]
+    return -1, z, nx * inv, ny * inv, nz * inv, mu, rr
+
+
+@inline_kernel
 def locate(road, x, y):
-    """(face, z, nx, ny, nz, mu, rr) of the road under (x, y); face -1 and z = -inf off the road."""
+    """(face, z, nx, ny, nz, mu, rr) of the road under (x, y); face -1 off the survey of a mesh, where
+    z is the continued ground (off_survey) or -inf without one."""
     fp = road.fpar
     if road.ipar[IP_KIND] == ROAD_PLANE:
         z = fp[FP_Z0] + fp[FP_GX] * (x - fp[FP_X0]) + fp[FP_GY] * (y - fp[FP_Y0])
@@ -99,14 +183,15 @@ def locate(road, x, y):
             nz = l0 * vn[a, 2] + l1 * vn[b, 2] + l2 * vn[c3, 2]
             inv = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz)
             return t, z, nx * inv, ny * inv, nz * inv, road.tri_mu[t], road.tri_rr[t]
-    return -1, -math.inf, 0.0, 0.0, 1.0, 0.0, 0.0
+    return off_survey(road, x, y)
 
 
 @kernel
 def road_query(road, x, y, out):
     """Surface under (x, y): out[Q_Z] height, out[Q_NX:Q_NZ+1] unit normal (up), out[Q_MU] friction
     scale, out[Q_RR] rolling-resistance coefficient. Returns the triangle index (0 for a plane), or -1
-    off the road (then out = -inf, (0, 0, 1), 0, 0)."""
+    off a mesh's survey: then out is the ground continued beyond it (rtsim.road.model, "Off the
+    survey"), or -inf, (0, 0, 1), 0, 0 for a mesh without one."""
     t, z, nx, ny, nz, mu, rr = locate(road, x, y)
     out[Q_Z] = z
     out[Q_NX] = nx
@@ -121,11 +206,12 @@ def road_query(road, x, y, out):
 def wheel_contact(road, cx, cy, cz, ax, ay, az, r0, out):
     """Contact of a wheel disc (centre (cx, cy, cz), unit spin axis (ax, ay, az), unloaded radius r0)
     with the road; see the module docstring for the geometry. Fills out[0:NCONTACT] (CT_* slots) and
-    returns the index of the triangle whose plane was used (0 for a plane road), or -1 if the centre
-    is not above the road (then d = -inf, P = C, n = e_z, e_x = e_x of the world). A wheel lying flat
-    on the road (cos(gamma) < 1e-9) also reports d = -inf."""
+    returns the index of the triangle whose plane was used (0 for a plane road), -1 for the tangent
+    plane of the ground beyond a mesh's survey; if there is no ground under the centre (a mesh without
+    off-survey ground) d = -inf, P = C, n = e_z, e_x = e_x of the world. A wheel lying flat on the
+    road (cos(gamma) < 1e-9) also reports d = -inf."""
     t, z, nx, ny, nz, mu, rr = locate(road, cx, cy)
-    if t < 0:
+    if z == -math.inf:
         out[CT_PX] = cx
         out[CT_PX + 1] = cy
         out[CT_PX + 2] = cz
@@ -170,7 +256,7 @@ def wheel_contact(road, cx, cy, cz, ax, ay, az, r0, out):
         if it == MAX_CONTACT_PLANES - 1:
             break
         t2, z2, nx2, ny2, nz2, mu2, rr2 = locate(road, px, py)
-        if t2 < 0 or t2 == t:
+        if z2 == -math.inf or t2 == t:
             break
         t = t2
         qx = px
