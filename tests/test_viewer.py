@@ -254,6 +254,10 @@ def test_the_motorcycle_leans_with_the_key(page, tmp_path):
         t0 = _sim_time(pg)
         pg.keyboard.down("ArrowRight")
         _wait_sim(pg, t0 + 2.5)
+        # the key ramps on the page's frames (wall clock, at most 0.1 s a frame): wait until it is full,
+        # then hold it 1.5 s of simulated time (the roll is asserted from 1 s after the full demand on)
+        pg.wait_for_function("rtsimView.input.steer >= 1.0", timeout=EVENT * 1000)
+        _wait_sim(pg, _sim_time(pg) + 1.5)
         t1 = _sim_time(pg)
         pg.keyboard.up("ArrowRight")
         _wait_sim(pg, t1 + 1.5)                             # the recorder closes a chunk every second

@@ -26,6 +26,7 @@ view.setVehicleVisible = (on) => { if (scene.vehicle) scene.vehicle.group.visibl
 const scene = new Scene3D($('view'));
 const plots = new Plots($('plot-channels'), $('plot-health'), $('pick'));
 const input = new Input();
+view.input = input;          // (tests: the keys' ramped inputs, as the page drives with them)
 view.plots = plots;
 let info = null, state = null, sensors = null, status = null, commands = null;
 let pulling = false, clockOffset = 0, bestPing = Infinity, simWall = null;
