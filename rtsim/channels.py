@@ -298,3 +298,52 @@ SENSOR_NAMES = CAR.sensor_names
 STATE_NAMES = CAR.state_names
 COMMAND_NAMES = CAR.command_names
 BY_NAME = {c.name: c for c in car_sensors(("fl", "fr")) + SENSORS + COMMANDS + EPS_SENSORS + EPS_COMMANDS}
+
+
+@dataclass(frozen=True)
+class Plausible:
+    """The range a channel's reading can take on a road vehicle, in the channel's SI unit: wide enough for
+    any real manoeuvre and sensor offset, narrow enough that the same signal logged in another unit (degrees
+    for radians, km/h for m/s, Pa for kPa, rpm for rad/s, mm for m, percent for a fraction) falls outside it.
+    `rate`: the range holds the channel's time derivative (per s) instead of its value (a cumulative angle);
+    `other_unit`: the likely mistake named when a reading falls outside."""
+    lo: float
+    hi: float
+    other_unit: str
+    rate: bool = False
+
+
+_PRESSURE = Plausible(-200.0, 25_000.0, "Pa or psi")          # kPa: 250 bar is far above any brake line
+_WHEEL_ANGLE = Plausible(-30.0, 400.0, "degrees", rate=True)  # rad/s: about 110 m/s on a 0.28 m wheel
+_FRACTION = Plausible(-0.05, 1.05, "percent")
+
+#: The plausible range of every sensor and command channel of the shipped dictionaries (declared once,
+#: here; the validation workflow's data checks read it; tests/test_validate_data.py checks it is complete).
+PLAUSIBLE: dict[str, Plausible] = {
+    **{f"accel_{a}": Plausible(-60.0, 60.0, "g or ft/s^2") for a in "xyz"},       # about 6 g
+    **{f"gyro_{a}": Plausible(-10.0, 10.0, "deg/s") for a in "xyz"},
+    "roll": Plausible(-1.2, 1.2, "degrees"), "pitch": Plausible(-1.2, 1.2, "degrees"),
+    **{f"wheel_angle_{w}": _WHEEL_ANGLE for w in WHEELS},
+    "brake_pressure": _PRESSURE, "brake_pressure_cmd": _PRESSURE,
+    "steering_wheel_angle": Plausible(-15.0, 15.0, "degrees"),      # more than 2 turns either way
+    "steering_wheel_angle_cmd": Plausible(-15.0, 15.0, "degrees"),
+    "steer_angle_fl": Plausible(-1.2, 1.2, "degrees"), "steer_angle_fr": Plausible(-1.2, 1.2, "degrees"),
+    "engine_speed": Plausible(-50.0, 1_300.0, "rpm"),                # 12 400 rpm
+    "steering_torque": Plausible(-150.0, 150.0, "N*cm"),
+    "throttle_angle": Plausible(-0.2, 1.8, "degrees"), "throttle_angle_cmd": Plausible(-0.2, 1.8, "degrees"),
+    **{f"wheel_torque_{w}": Plausible(-20_000.0, 20_000.0, "N*cm") for w in WHEELS},
+    "eps_motor_angle": Plausible(-5_000.0, 5_000.0, "degrees"),
+    "eps_motor_speed": Plausible(-1_500.0, 1_500.0, "rpm"),
+    "eps_motor_current": Plausible(-300.0, 300.0, "mA"), "motor_current_cmd": Plausible(-300.0, 300.0, "mA"),
+    "eps_power_stage": Plausible(0.0, 1.0, "another code"),
+    "vehicle_speed": Plausible(-10.0, 90.0, "km/h"),
+    "wheel_speed_front": Plausible(-30.0, 400.0, "rpm or deg/s"),
+    "wheel_speed_rear": Plausible(-30.0, 400.0, "rpm or deg/s"),
+    "steer_angle": Plausible(-1.2, 1.2, "degrees"), "steer_rate": Plausible(-20.0, 20.0, "deg/s"),
+    "fork_travel": Plausible(-0.02, 0.4, "mm"), "shock_travel": Plausible(-0.02, 0.3, "mm"),
+    "rider_throttle": _FRACTION, "throttle": _FRACTION, "throttle_cmd": _FRACTION,
+    "rider_brake_front": _PRESSURE, "rider_brake_rear": _PRESSURE,
+    "brake_pressure_front": _PRESSURE, "brake_pressure_rear": _PRESSURE,
+    "brake_pressure_front_cmd": _PRESSURE, "brake_pressure_rear_cmd": _PRESSURE,
+    "assist_torque_cmd": Plausible(-150.0, 150.0, "N*cm"),
+}

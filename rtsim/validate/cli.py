@@ -25,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="frame of the runs' accel_x/y/z: 'body' (the IMU's axes, senses gravity when the body rolls "
                         "or pitches) or 'level' (yaw-aligned horizontal frame, as INS loggers output); default: as "
                         "the runs declare it (CSV comment '# accel_frame: level' or MCAP metadata), else body")
+    p.add_argument("--min-runs", type=int, default=3, metavar="N",
+                   help="stop unless N runs pass the data checks (default 3: a band from fewer runs is too wide to "
+                        "judge by; lower it knowingly, the report then says so at its top)")
     p.add_argument("--max-iterations", type=int, default=4, help="effects added at most (default 4)")
     p.add_argument("--workers", type=int, default=2, help="processes fitting candidates in parallel (default 2)")
     p.add_argument("--ray", metavar="auto|ADDRESS", help="re-simulate on Ray: 'auto' starts a local instance on "
@@ -69,7 +72,7 @@ def main(args: argparse.Namespace) -> int:
 
     opts = Options(vehicle=args.vehicle, runs=list(args.runs), report=args.report, road=args.road, rate=args.rate,
                    align=args.align, max_iterations=args.max_iterations, workers=args.workers, ray=args.ray,
-                   compare=args.compare, accel_frame=args.accel_frame)
+                   compare=args.compare, accel_frame=args.accel_frame, min_runs=args.min_runs)
     prog = nullcontext(None) if args.no_progress else RichProgress()
     with prog as pr:
         opts.progress = pr

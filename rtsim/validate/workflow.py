@@ -57,7 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
-from .data import accel_frame, load_runs
+from .data import MIN_RUNS, accel_frame, announce, load_runs, require_runs
 from .effectset import Effect, catalogue, from_mapping
 from .identify import (CLEAR, MAX_SIMS, MIN_DELTA_IC, MIN_REDUCTION, MIN_SIZE, Candidate, Context, combine_runs,
                        equivalents, evidence_strength, fit_sensor_effects, rank, rebase, run_estimate)
@@ -96,6 +96,7 @@ class Options:
     accel_frame: str | None = None    # "body" or "level": the runs' accelerometer frame (None: as the runs
                                       # declare it, else body; data.accel_frame)
     progress: object = None           # a Progress-like object with .stage(text, total) / .advance()
+    min_runs: int = MIN_RUNS          # stop unless this many runs pass the data checks (data.require_runs)
 
 
 @dataclass
@@ -310,8 +311,12 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     activate(kind)                        # the vehicle's inputs, compared channels and effect catalogue
     prog.stage("loading runs", None)
     runs, rejected = load_runs(opts.runs, _sensor_names(opts, replayer))
+    announce(rejected)                    # one line per run left out, on stderr
+    require_runs(runs, rejected, opts.min_runs)
     frame = accel_frame(runs, opts.accel_frame)
     bench = build_benchmark(runs, rejected, opts.rate, opts.align, opts.compare)
+    announce(bench.rejected[len(rejected):])
+    require_runs(bench.runs, bench.rejected, opts.min_runs)
     tm["data"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     prog.stage("building the model", None)
