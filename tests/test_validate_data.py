@@ -5,7 +5,13 @@ against known logger offsets, and bad input (different manoeuvres, missing chann
 non-monotonic time, one run, two disagreeing runs) giving clear messages and sensible behaviour."""
 from __future__ import annotations
 
+import io
 import math
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +19,7 @@ import pytest
 from rtsim.errors import ConfigError
 from rtsim.validate.align import align
 from rtsim.validate.benchmark import build_benchmark
-from rtsim.validate.data import load_run, load_runs
+from rtsim.validate.data import DataError, announce, load_run, load_runs, require_runs
 from rtsim.validate.signals import wheel_speed
 from rtsim.validate.stats import band, error_metrics, inside_fraction, t_critical
 
@@ -180,20 +186,209 @@ def test_nans_short_gaps_filled_long_gaps_drop_the_channel(tmp_path):
     assert any("accel_x: recorded in 3 of 4 runs" in n for n in bench.notes)
 
 
-def test_non_monotonic_time_rejects_the_run_naming_the_row(tmp_path):
-    paths, _ = make_runs(tmp_path, n=3)
-    lines = paths[2].read_text().splitlines()
+# ------------------------------------------------------------------ the loud data checks (issue 30)
+def _edit(path, edit):
+    """Rewrite a CSV's lines (index 0: the header) with `edit(lines)`."""
+    lines = path.read_text().splitlines()
+    edit(lines)
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _cells(lines, cells, text):
+    """Put `text` in the (data row, column) cells; data row 1 is the line after the header."""
+    for row, col in cells:
+        c = lines[row].split(",")
+        c[col] = text
+        lines[row] = ",".join(c)
+
+
+def _left_out(paths):
+    """The one line per run left out that the workflow prints (data.announce), on runs loaded with every
+    numpy or Python warning turned into an error (none may leak)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        runs, rejected = load_runs(paths)
+        out = io.StringIO()
+        announce(rejected, out)
+    return runs, out.getvalue().splitlines()
+
+
+def _all_nan(lines):
+    for k in range(1, len(lines)):
+        lines[k] = ",".join(["nan"] * len(lines[k].split(",")))
+
+
+def _backwards(lines):
     lines[51], lines[52] = lines[52], lines[51]
-    paths[2].write_text("\n".join(lines) + "\n")
-    runs, rej = load_runs(paths)
-    assert len(runs) == 2 and len(rej) == 1
-    assert "column 'time', row 52" in rej[0].reason and "does not increase" in rej[0].reason
-    for p in paths[:2]:
-        p.write_text("time,accel_x\n0,1\n0,2\n")
-    runs, rej = load_runs(paths)
-    assert not runs and len(rej) == 3
-    with pytest.raises(ConfigError, match="no usable run"):
-        build_benchmark(runs, rej)
+
+
+def _duplicated_stamp(lines):
+    c = lines[300].split(",")
+    c[0] = lines[299].split(",")[0]
+    lines[300] = ",".join(c)
+
+
+def _duplicated_column(lines):
+    lines[0] = lines[0] + ",accel_x"
+    for k in range(1, len(lines)):
+        lines[k] = lines[k] + "," + lines[k].split(",")[4]
+
+
+def _junk(lines):
+    _cells(lines, [(1200, 4), (1201, 4), (2500, 1)], "x#1")
+
+
+BAD = {    # case: (edit of run3.csv, the exact line naming it and the reason)
+    "all-NaN run": (_all_nan, "run3.csv: every value is missing (NaN or empty): 4000 rows of time and 8 sensor "
+                              "channel(s)"),
+    "time going backwards": (_backwards, "run3.csv: time goes backwards at row 52: 3000.1 s after 3000.102 s (1 "
+                                         "such row(s)); time must be strictly increasing"),
+    "repeated time stamp": (_duplicated_stamp, "run3.csv: time stamp 3000.596 s repeated at row 300 (1 repeated "
+                                               "stamp(s)); time must be strictly increasing"),
+    "duplicated column": (_duplicated_column, "run3.csv: column 'accel_x' appears 2 times in the header (columns "
+                                              "5, 10): which one holds the channel cannot be told"),
+    "a few junk cells": (_junk, "run3.csv: column 'accel_x', row 1200: 'x#1' is not a finite number (3 "
+                                "such cell(s) in 2 column(s)); a sample is a number, or empty or nan when missing"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_a_bad_run_is_left_out_with_one_line_naming_it_and_the_reason(tmp_path, case):
+    """The issue's bad-data cases: each run is named with its reason in one line, no warning leaks, and
+    the good runs still make the benchmark (never a misleading "not repetitions")."""
+    paths, _ = make_runs(tmp_path, n=5)
+    edit, line = BAD[case]
+    _edit(paths[3], edit)
+    runs, lines = _left_out(paths)
+    assert lines == ["rtsim validate: run left out: " + line]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        bench = build_benchmark(runs, [])
+    assert bench.n == 4 and not bench.rejected
+
+
+def test_a_clean_run_with_missing_samples_is_used_and_the_gaps_noted(tmp_path):
+    """Empty and nan cells are a logger's missing samples, not junk: short gaps are filled (above)."""
+    paths, _ = make_runs(tmp_path, n=3)
+    _edit(paths[0], lambda ln: (_cells(ln, [(700, 4), (701, 4)], ""), _cells(ln, [(900, 2)], "NaN")))
+    runs, lines = _left_out(paths)
+    assert lines == [] and len(runs) == 3
+    assert any("channel accel_x: 2 missing/NaN sample(s) filled" in n for n in runs[0].notes)
+    assert any("channel wheel_torque_rl: 1 missing/NaN sample(s) filled" in n for n in runs[0].notes)
+
+
+def test_a_row_with_a_cell_too_many_is_named(tmp_path):
+    paths, _ = make_runs(tmp_path, n=3)
+    _edit(paths[1], lambda ln: ln.__setitem__(10, ln[10].replace(",", ",1,", 1)))
+    _, lines = _left_out(paths)
+    assert lines == ["rtsim validate: run left out: run1.csv: row 10 has 10 cells, the header 9: a cell holding "
+                     "the separator ',' or a truncated line shifts the columns"]
+
+
+def test_units_outside_the_dictionarys_plausible_range_are_named(tmp_path):
+    """A brake pressure logged in Pa (kPa expected) and wheel angles in degrees (radians expected) fall
+    outside their channels' plausible ranges (rtsim.channels.PLAUSIBLE); a wheel angle that a logger wraps
+    at one turn is not mistaken for a fast one."""
+    paths, _ = make_runs(tmp_path, n=4)
+    text = paths[0].read_text().splitlines()
+    head = text[0].split(",")
+    jb, jw = head.index("brake_pressure"), head.index("wheel_angle_fl")
+
+    def scale(lines, j, factor):
+        for k in range(1, len(lines)):
+            c = lines[k].split(",")
+            c[j] = f"{float(c[j]) * factor:.10g}"
+            lines[k] = ",".join(c)
+    _edit(paths[1], lambda ln: scale(ln, jb, 1000.0))
+    t = np.arange(int(DURATION * RATE)) / RATE
+    fast = manoeuvre(t, amp=5.0)                     # up to 6.6 m/s: 23 rad/s, 1350 deg/s
+    write(paths[2], t, {c: x * (180.0 / math.pi if c == "wheel_angle_fl" else 1.0) for c, x in fast.items()})
+
+    def wrap(lines):
+        for k in range(1, len(lines)):
+            c = lines[k].split(",")
+            c[jw] = f"{math.remainder(float(c[jw]), 2 * math.pi):.10g}"
+            lines[k] = ",".join(c)
+    before = load_run(paths[3]).channels["wheel_angle_fl"]
+    _edit(paths[3], wrap)
+    runs, lines = _left_out(paths)
+    assert lines == [
+        "rtsim validate: run left out: run1.csv: column 'brake_pressure' reads up to 2.006e+06 kPa (3009 of 4000 "
+        "samples outside its plausible range -200 .. 25000 kPa, the first at row 1): logged in Pa or psi instead of "
+        "kPa?",
+        "rtsim validate: run left out: run2.csv: column 'wheel_angle_fl' changes at up to 1310 rad/s (2644 of 3975 "
+        "samples outside its plausible range -30 .. 400 rad/s, the first at row 1332): logged in degrees instead "
+        "of rad?"]
+    assert [r.name for r in runs] == ["run0.csv", "run3.csv"]
+    unwrapped = runs[1].channels["wheel_angle_fl"]
+    np.testing.assert_allclose(unwrapped - unwrapped[0], before - before[0], atol=1e-6)
+
+
+def test_every_shipped_channel_declares_its_plausible_range():
+    """Declared once, beside the dictionary: every sensor and command channel of every shipped vehicle."""
+    from rtsim.channels import PLAUSIBLE, car_channels, two_wheeler_channels
+    for d in (car_channels(), car_channels(("fl", "fr")), car_channels(eps=True), two_wheeler_channels()):
+        for c in d.sensors + d.commands:
+            p = PLAUSIBLE.get(c.name)
+            assert p is not None and p.lo < p.hi and p.other_unit, c.name
+
+
+def test_fewer_than_three_good_runs_stop_unless_the_minimum_is_lowered(tmp_path):
+    paths, _ = make_runs(tmp_path, n=4)
+    _edit(paths[0], _all_nan)
+    _edit(paths[3], _backwards)
+    runs, lines = _left_out(paths)
+    assert len(lines) == 2 and len(runs) == 2
+    _, rejected = load_runs(paths)
+    with pytest.raises(DataError) as err:
+        require_runs(runs, rejected)
+    assert str(err.value) == ("2 usable run(s) of 4, at least 3 needed (--min-runs N lowers this); left out: "
+                              "run0.csv, run3.csv")
+    require_runs(runs, rejected, min_runs=2)
+    require_runs(runs[:1], rejected, min_runs=1)
+
+
+def test_the_cli_names_each_bad_run_and_stops_with_one_line(tmp_path):
+    """`rtsim validate` in a process of its own: one line per run left out, then the one-line error and
+    exit code 2 (before any model is built); nothing else on stderr (no warning)."""
+    paths, _ = make_runs(tmp_path, n=5)
+    _edit(paths[1], _all_nan)
+    _edit(paths[2], _duplicated_column)
+    _edit(paths[3], _junk)
+    root = Path(__file__).resolve().parents[1]
+    r = subprocess.run([sys.executable, "-m", "rtsim.cli", "validate", "--vehicle",
+                        str(root / "configs" / "vehicles" / "xbw.toml"), "--runs", str(tmp_path), "--report",
+                        str(tmp_path / "report"), "--no-progress"], cwd=root, capture_output=True, text=True,
+                       timeout=300, env={**os.environ, "PYTHONPATH": str(root)})
+    assert r.returncode == 2
+    assert r.stderr.splitlines() == [
+        "rtsim validate: run left out: " + BAD["all-NaN run"][1].replace("run3", "run1"),
+        "rtsim validate: run left out: " + BAD["duplicated column"][1].replace("run3", "run2"),
+        "rtsim validate: run left out: " + BAD["a few junk cells"][1],
+        "rtsim: error: 2 usable run(s) of 5, at least 3 needed (--min-runs N lowers this); left out: run1.csv, "
+        "run2.csv, run3.csv"]
+    assert r.stdout == ""
+
+
+def test_mcap_runs_get_the_same_checks(tmp_path):
+    from bridge.mcap_log import write_run
+    from rtsim.channels import SENSOR_NAMES
+    t = np.arange(2000) / RATE
+    ch = manoeuvre(t)
+    cols = ("time", *[c for c in SENSOR_NAMES if c in ch])
+    rows = np.column_stack([t, *[ch[c] for c in cols[1:]]])
+    rows[700, 0], rows[701, 0] = rows[701, 0], rows[700, 0]
+    write_run(tmp_path / "back.mcap", cols, rows, "xbw")
+    rows = np.column_stack([t, *[ch[c] * (1000.0 if c == "brake_pressure" else 1.0) for c in cols[1:]]])
+    write_run(tmp_path / "pascal.mcap", cols, rows, "xbw")
+    _, lines = _left_out([tmp_path / "back.mcap", tmp_path / "pascal.mcap"])
+    assert lines == [
+        "rtsim validate: run left out: back.mcap: time goes backwards at message 702: 1.4 s after 1.402 s (1 such "
+        "message(s)); time must be strictly increasing",
+        "rtsim validate: run left out: pascal.mcap: column 'brake_pressure' reads up to 2e+06 kPa (744 of 2000 "
+        "samples outside its plausible range -200 .. 25000 kPa, the first at message 1): logged in Pa or psi "
+        "instead of kPa?"]
 
 
 def test_mcap_recording_reads_like_csv(tmp_path):

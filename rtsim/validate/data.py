@@ -255,11 +255,12 @@ def _check_range(name: str, t: np.ndarray, x: np.ndarray, row: str) -> str | Non
     out = (v < p.lo) | (v > p.hi)
     if not out.any():
         return None
-    i = int(np.argmax(np.where(out, np.abs(v), -np.inf)))
-    what = "changes at" if p.rate else "reads"
-    return (f"column {name!r} {what} {v[i]:.4g} {u} at {row} {i + 1}, outside its plausible range {p.lo:g} .. "
-            f"{p.hi:g} {u} ({int(out.sum())} sample(s) outside): logged in {p.other_unit} instead of "
-            f"{unit(name)}?")
+    first = int(np.argmax(out))
+    worst = float(v[int(np.argmax(np.where(out, np.abs(v), -np.inf)))])
+    what = "changes at up to" if p.rate else "reads up to"
+    return (f"column {name!r} {what} {worst:.4g} {u} ({int(out.sum())} of {v.size} samples outside its plausible "
+            f"range {p.lo:g} .. {p.hi:g} {u}, the first at {row} {first + 1}): logged in {p.other_unit} instead "
+            f"of {unit(name)}?")
 
 
 def load_run(path: str | Path, sensor_names=SENSOR_NAMES) -> Run:
