@@ -86,10 +86,14 @@ def main(args: argparse.Namespace) -> int:
                                     f"effects identified by `rtsim validate` from {res.bench.n} run(s); "
                                     "value +- 95 % half-width")
         summ = report.write(res, args.report)
-    print(f"verdict: {res.verdict}")
+    verdict = summ["verdict"]
+    if verdict["notice"]:
+        print(verdict["notice"])
+    first, *rest = verdict["text"].splitlines()
+    print(f"verdict: {first}")
+    for line in rest:
+        print(f"  {line}")
     print(f"accelerometer frame: {res.accel_frame}")
-    for e in res.effects:
-        print(f"added: {e.label()}  (+- {', '.join(f'{v:.2g}' for v in e.uncertainty.values())})")
     for c, m in summ["after"].items():
         b = summ["before"][c]
         ins = lambda x: "no band" if x is None else f"{100 * x:.0f} % inside"   # noqa: E731

@@ -5,8 +5,13 @@ backend) and `DIR/summary.json`:
      "before": {channel: {"rms", "max", "inside_band"}}, "after": {...},
      "iterations": [{"iteration", "model_effects", "cost", "metrics", "where", "verdict", "winner",
                      "runner_up", "partners", "refitted", "joint", "candidates", "seconds"}, ...],
-     "verdict": text, "accel_frame": "body" | "level", "channels": {channel: {"status", "text", "signature",
+     "verdict": {"headline", "found", "channels", "turned_down", "confounded", "notice", "glossary", "text"},
+     "runs": {"used": [names], "left_out": [{"run", "reason"}], "min_runs"},
+     "accel_frame": "body" | "level", "channels": {channel: {"status", "text", "signature",
      "inside_band", "rms", "explained_by"}}, "nuisance": {name: {"value", "unit"}}, "correlations": [...], "confounded": [...]}
+
+The verdict (rtsim.validate.verdict: what was found, per channel, the candidates turned down and why, the
+terms it uses) heads report.html; when --min-runs lowered the minimum of runs, a notice stands above it.
 
 rms and max are in the channel's SI unit; inside_band is the share of samples (0..1) inside the 95 %
 band, null when there is no band (one run). Uncertainties are 95 % half-widths in the parameter's unit;
@@ -29,6 +34,7 @@ from .benchmark import LATERAL  # noqa: E402
 from .data import unit  # noqa: E402
 from .effectset import catalogue  # noqa: E402
 from .identify import evidence_strength  # noqa: E402
+from .verdict import Verdict, build as build_verdict  # noqa: E402
 from .workflow import Result  # noqa: E402
 
 
@@ -73,20 +79,36 @@ def _joint_row(d: dict) -> list:
             beyond(d["partner_beyond"]), "yes" if both else "no", d["simulations"]]
 
 
-def summary(res: Result) -> dict:
+def summary(res: Result, verdict: Verdict | None = None) -> dict:
+    v = verdict or build_verdict(res)
     return _clean({
         "effects": [{"name": e.name, "parameters": dict(e.params), "uncertainty": dict(e.uncertainty),
                      "model_error": dict(e.model_error)} for e in res.effects],
         "before": res.metrics(res.before),
         "after": res.metrics(res.after),
         "iterations": [it.summary() for it in res.iterations],
-        "verdict": res.verdict,
+        "verdict": v.summary(),
+        "runs": v.runs_summary(),
         "accel_frame": res.accel_frame,
         "channels": {c: {k: v for k, v in d.items()} for c, d in res.channels.items()},
         "nuisance": {n: {"value": v, "unit": u} for n, (v, u) in res.nuisance.items()},
         "correlations": [{"effects": [a, b], "correlation": r} for a, b, r in res.correlations],
         "confounded": [[a, b] for a, b, _ in res.confounded],
     })
+
+
+def displayed_adjustment(res: Result) -> dict:
+    """The model's outputs after the nuisance adjustments, as plotted: a wheel speed is never carried
+    across zero or moved off zero by them (a rolling radius scales a turning wheel, a resistance offset
+    acts while the car moves: at standstill a wheel speed stays at rest), so a stopped wheel reads zero
+    where the adjustment would push it past."""
+    adj = res.objective.adjusted(res.after)
+    out = dict(adj)
+    for c in adj:
+        if c.startswith("wheel_speed") and c in res.after:
+            x, m = np.asarray(adj[c]), np.asarray(res.after[c])
+            out[c] = np.where(np.sign(x) != np.sign(m), 0.0, x)
+    return out
 
 
 def _plot_channel(res: Result, c: str, path: Path) -> None:
@@ -101,7 +123,7 @@ def _plot_channel(res: Result, c: str, path: Path) -> None:
     a1.plot(t, res.before[c], color="tab:red", lw=0.9, label="model before")
     if res.effects:
         a1.plot(t, res.after[c], color="tab:green", lw=0.9, ls="--", label="model after")
-    adj = res.objective.adjusted(res.after)[c] if res.nuisance else None
+    adj = displayed_adjustment(res)[c] if res.nuisance else None
     if adj is not None and np.allclose(adj, res.after[c], rtol=0.0, atol=1e-9 * (1.0 + float(np.max(np.abs(adj))))):
         adj = None                    # a channel the nuisance adjustments do not touch
     if adj is not None:
@@ -184,10 +206,34 @@ def _pct(x) -> str:
     return "no band" if x is None else f"{100 * x:.1f} %"
 
 
+def _verdict_html(res: Result, v: Verdict) -> list[str]:
+    """The report's head: the notice (--min-runs lowered), the terms, the verdict's sections."""
+    e = html.escape
+    out = [f"<p class=notice><b>{e(v.notice)}</b></p>"] if v.notice else []
+    out.append("<p class=terms><b>Terms.</b> " + " ".join(
+        f"<i>{e(k)}</i>: {e(d)}." for k, d in v.glossary.items()) + "</p>")
+    out.append(f"<h2>Verdict</h2><p class=verdict><b>{e(v.headline)}</b></p>")
+    if v.channels:
+        rows = [[c.channel, c.status, c.text.partition(": ")[2], _fmt(res.channels.get(c.channel, {}).get("rms")),
+                 _pct(c.inside_band)] for c in v.channels]
+        out.append("<h3>Per channel, after the named effects and the nuisance adjustments</h3>" + _table(
+            rows, ["channel", "status", "what the model does there", "RMS (nuisance adjusted)", "inside band"]))
+    if v.turned_down:
+        rows = [[t.effect, t.iteration, t.reason] for t in v.turned_down]
+        out.append("<h3>Considered and turned down</h3>" + _table(rows, ["candidate (fitted value)", "iteration",
+                                                                         "why it was not named"]))
+    else:
+        out.append("<h3>Considered and turned down</h3><p>none</p>")
+    left = "".join(f"<li>{e(d['run'])}: {e(d['reason'])}</li>" for d in v.left_out)
+    out.append(f"<p><b>Runs:</b> {len(v.runs_used)} used" + (f"; left out:</p><ul>{left}</ul>" if left else ".</p>"))
+    return out
+
+
 def write(res: Result, folder: Path) -> dict:
     """report.html, the plots and summary.json into `folder`; returns the summary."""
     folder.mkdir(parents=True, exist_ok=True)
-    summ = summary(res)
+    verdict = build_verdict(res)
+    summ = summary(res, verdict)
     (folder / "summary.json").write_text(json.dumps(summ, indent=2))
     bench = res.bench
     plots = []
@@ -198,8 +244,7 @@ def write(res: Result, folder: Path) -> dict:
         plots.append((c, name))
     cat = catalogue()
     e = html.escape
-    parts = [f"<h1>Validation report: {e(res.options.vehicle.name)}</h1>",
-             f"<p class=verdict><b>Verdict.</b> {e(res.verdict)}</p>",
+    parts = [f"<h1>Validation report: {e(res.options.vehicle.name)}</h1>", *_verdict_html(res, verdict),
              f"<p>Accelerations compared in the {e(res.accel_frame)} frame (see Model and replay).</p>"]
     # identified effects
     if res.effects:
@@ -235,13 +280,6 @@ def write(res: Result, folder: Path) -> dict:
                                                                  "inside band before", "inside band after"]))
     if res.comparison:
         parts.append(f"<p>Model outputs: {e(res.comparison)}.</p>")
-    if res.channels:
-        rows = [[c, d["text"], _fmt(d["rms"]), _pct(d["inside_band"])] for c, d in res.channels.items()]
-        parts.append("<h2>Per channel: explained, structural or inside the band</h2><p>After the effects added "
-                     "and the nuisance adjustments; structural: what no catalogue effect explains, with the "
-                     "shape of what is left (offset, gain, lag or drift).</p>" +
-                     _table(rows, ["channel", "what the model lacks there", "RMS (nuisance adjusted)",
-                                   "inside band (nuisance adjusted)"]))
     if res.nuisance:
         rows = [[n, f"{v:.4g}", u] for n, (v, u) in res.nuisance.items()]
         parts.append("<h3>Nuisance adjustments (fitted alongside, never named as an effect)</h3>" +
@@ -352,6 +390,7 @@ def write(res: Result, folder: Path) -> dict:
     parts.append(f"<p>Timing: {e(timing)}</p>")
     style = ("body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;font-size:90%}"
              "td,th{border:1px solid #bbb;padding:2px 6px}.verdict{background:#eef;padding:6px}"
+             ".notice{background:#fec;padding:6px}.terms{font-size:85%;color:#333}"
              "img{max-width:100%}pre{background:#f6f6f6;padding:6px;overflow-x:auto}")
     (folder / "report.html").write_text(f"<!doctype html><html><head><meta charset=utf-8><title>rtsim validate"
                                         f"</title><style>{style}</style></head><body>{''.join(parts)}</body></html>")
