@@ -48,8 +48,14 @@ def test_cli_writes_report_summary_and_new_config(report):
     out, text, digest = report
     assert hashlib.sha256(VEHICLE.read_bytes()).hexdigest() == digest          # original untouched
     summ = json.loads((out / "summary.json").read_text())
-    assert set(summ) == {"effects", "before", "after", "iterations", "verdict", "channels", "nuisance",
+    assert set(summ) == {"effects", "before", "after", "iterations", "verdict", "runs", "channels", "nuisance",
                          "correlations", "confounded", "accel_frame"}
+    assert summ["runs"] == {"used": [p.name for p in sorted(runs)], "left_out": [], "min_runs": 3}
+    v = summ["verdict"]
+    assert v["headline"].startswith("Found: sensor_bias on accel_x: bias = ") and not v["notice"]
+    assert v["found"][0]["name"] == "sensor_bias" and v["found"][0]["values"][0]["unit"] == "m/s^2"
+    assert v["text"].splitlines()[0] == v["headline"] and f"verdict: {v['headline']}" in text
+    assert {c["channel"]: c["status"] for c in v["channels"]}["accel_x"] == "explained"
     assert summ["accel_frame"] == "body" and "accelerometer frame: body" in text     # rtsim's own runs: body
     eff = summ["effects"][0]
     assert eff["name"] == "sensor_bias" and eff["parameters"]["channel"] == "accel_x"
@@ -108,11 +114,18 @@ def test_cli_on_ray_gives_the_same_summary(runs, report, tmp_path):
 
 def test_cli_one_run_compares_without_a_band(runs, tmp_path):
     out = tmp_path / "one"
+    """Below the 3 runs the data checks ask for only with --min-runs, and the report says so at its top."""
     assert _standalone(["--vehicle", str(VEHICLE), "--runs", str(runs[0]), "--report", str(out),
-                        "--no-progress", "--max-iterations", "1"]) == 0
+                        "--no-progress", "--max-iterations", "1"]) == 2
+    assert _standalone(["--vehicle", str(VEHICLE), "--runs", str(runs[0]), "--report", str(out),
+                        "--no-progress", "--max-iterations", "1", "--min-runs", "1"]) == 0
     summ = json.loads((out / "summary.json").read_text())
     assert all(m["inside_band"] is None for m in summ["before"].values())
-    assert "no confidence interval" in (out / "report.html").read_text()
+    assert summ["runs"]["min_runs"] == 1 and summ["verdict"]["notice"].startswith(
+        "Fewer runs allowed than the 3 the data checks ask for (--min-runs 1): 1 run(s) used, no band")
+    html = (out / "report.html").read_text()
+    assert "no confidence interval" in html
+    assert html.index("<h1>") < html.index("class=notice") < html.index("Terms.") < html.index("<h2>Verdict")
 
 
 def test_cli_bad_input_is_one_line(tmp_path, capsys):
