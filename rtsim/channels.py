@@ -322,7 +322,8 @@ _FRACTION = Plausible(-0.05, 1.05, "percent")
 PLAUSIBLE: dict[str, Plausible] = {
     **{f"accel_{a}": Plausible(-60.0, 60.0, "g or ft/s^2") for a in "xyz"},       # about 6 g
     **{f"gyro_{a}": Plausible(-10.0, 10.0, "deg/s") for a in "xyz"},
-    "roll": Plausible(-1.2, 1.2, "degrees"), "pitch": Plausible(-1.2, 1.2, "degrees"),
+    "roll": Plausible(-1.7, 1.7, "degrees"),            # a two-wheeler lying on its side: about 1.5 rad
+    "pitch": Plausible(-1.2, 1.2, "degrees"),
     **{f"wheel_angle_{w}": _WHEEL_ANGLE for w in WHEELS},
     "brake_pressure": _PRESSURE, "brake_pressure_cmd": _PRESSURE,
     "steering_wheel_angle": Plausible(-15.0, 15.0, "degrees"),      # more than 2 turns either way

@@ -6,6 +6,7 @@ non-monotonic time, one run, two disagreeing runs) giving clear messages and sen
 from __future__ import annotations
 
 import io
+import json
 import math
 import os
 import subprocess
@@ -369,6 +370,11 @@ def test_the_cli_names_each_bad_run_and_stops_with_one_line(tmp_path):
         "rtsim: error: 2 usable run(s) of 5, at least 3 needed (--min-runs N lowers this); left out: run1.csv, "
         "run2.csv, run3.csv"]
     assert r.stdout == ""
+    summ = json.loads((tmp_path / "report" / "summary.json").read_text())      # kept for the record
+    assert summ["runs"] == {"used": ["run0.csv", "run4.csv"], "min_runs": 3, "left_out": [
+        {"run": f"run{i}.csv", "reason": BAD[case][1].partition(": ")[2]}
+        for i, case in ((1, "all-NaN run"), (2, "duplicated column"), (3, "a few junk cells"))]}
+    assert summ["verdict"]["headline"].startswith("Stopped before any fit: 2 usable run(s) of 5")
 
 
 def test_mcap_runs_get_the_same_checks(tmp_path):

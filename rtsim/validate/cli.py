@@ -68,6 +68,7 @@ def main(args: argparse.Namespace) -> int:
 
     from . import report
     from .configwrite import write_config
+    from .data import DataError
     from .workflow import Options, run
 
     opts = Options(vehicle=args.vehicle, runs=list(args.runs), report=args.report, road=args.road, rate=args.rate,
@@ -76,7 +77,12 @@ def main(args: argparse.Namespace) -> int:
     prog = nullcontext(None) if args.no_progress else RichProgress()
     with prog as pr:
         opts.progress = pr
-        res = run(opts)
+        try:
+            res = run(opts)
+        except DataError as exc:
+            if getattr(exc, "runs", None) is not None:      # too few runs: the runs and reasons, kept
+                report.write_stopped(exc.runs, str(exc), args.report)
+            raise
         if pr:
             pr.stage("writing the report", None)
         if res.effects:

@@ -379,8 +379,11 @@ def require_runs(used: list, rejected: list[Rejected], min_runs: int = MIN_RUNS)
         return
     total = len(used) + len(rejected)
     out = ("; left out: " + ", ".join(r.path.name for r in rejected)) if rejected else ""
-    raise DataError(f"{len(used)} usable run(s) of {total}, at least {min_runs} needed (--min-runs N lowers "
+    err = DataError(f"{len(used)} usable run(s) of {total}, at least {min_runs} needed (--min-runs N lowers "
                     f"this){out}")
+    err.runs = {"used": [r.name for r in used], "left_out": [{"run": r.path.name, "reason": r.reason}
+                                                             for r in rejected], "min_runs": min_runs}
+    raise err
 
 
 def accel_frame(runs: list[Run], asked: str | None = None) -> str:

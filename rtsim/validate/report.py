@@ -229,6 +229,26 @@ def _verdict_html(res: Result, v: Verdict) -> list[str]:
     return out
 
 
+def write_stopped(runs: dict, why: str, folder: Path) -> dict:
+    """summary.json and report.html of a run the data checks stopped (data.require_runs): the runs used and
+    left out with their reasons, and why it stopped."""
+    folder.mkdir(parents=True, exist_ok=True)
+    head = f"Stopped before any fit: {why}."
+    lines = [head, f"Runs: {len(runs['used'])} used" + (f", {len(runs['left_out'])} left out:" if runs["left_out"]
+                                                          else "")]
+    lines += [f"  {d['run']}: {d['reason']}" for d in runs["left_out"]]
+    summ = {"verdict": {"headline": head, "found": [], "channels": [], "turned_down": [], "confounded": [],
+                        "notice": "", "text": "\n".join(lines)}, "runs": runs}
+    (folder / "summary.json").write_text(json.dumps(summ, indent=2))
+    e = html.escape
+    left = "".join(f"<li>{e(d['run'])}: {e(d['reason'])}</li>" for d in runs["left_out"])
+    (folder / "report.html").write_text(
+        "<!doctype html><html><head><meta charset=utf-8><title>rtsim validate</title></head><body>"
+        f"<h1>Validation stopped</h1><p><b>{e(head)}</b></p><p>Runs used: {e(', '.join(runs['used']) or 'none')}"
+        f"</p><p>Left out:</p><ul>{left}</ul></body></html>")
+    return summ
+
+
 def write(res: Result, folder: Path) -> dict:
     """report.html, the plots and summary.json into `folder`; returns the summary."""
     folder.mkdir(parents=True, exist_ok=True)
