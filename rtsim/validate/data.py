@@ -344,9 +344,12 @@ def load_run(path: str | Path, sensor_names=SENSOR_NAMES) -> Run:
 
 def load_runs(paths: list[str | Path], sensor_names=SENSOR_NAMES) -> tuple[list[Run], list[Rejected]]:
     """Every run that can be read, and the rejected ones with their reasons. Paths may be folders
-    (their *.csv and *.mcap files, sorted by name); `sensor_names`: the vehicle's sensor channels."""
+    (their *.csv and *.mcap files, sorted by name); `sensor_names`: the vehicle's sensor channels.
+    DataError when a path does not exist or a folder holds no run."""
     files: list[Path] = []
     for p in map(Path, paths):
+        if not p.exists():                 # a path mistyped on the command line: no run to leave out
+            raise DataError(f"{p}: no such file or folder")
         if p.is_dir():
             found = sorted([*p.glob("*.csv"), *p.glob("*.mcap")])
             if not found:
