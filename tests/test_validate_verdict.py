@@ -91,7 +91,7 @@ def test_found_effects_come_first_with_values_and_intervals():
                    _cand(mass, "its 95 % interval includes no added mass")])
     v = build(res)
     assert v.headline == ("Found: sensor_bias on accel_x: bias = 0.195 m/s^2, 95 % interval 0.185 .. 0.205 "
-                          "m/s^2.")
+                          "m/s^2. Structural, not a catalogue effect, on accel_y (see per channel).")
     assert v.found[0].values == [{"parameter": "bias", "value": 0.195, "half_width": 0.01, "low": 0.195 - 0.01,
                                   "high": 0.195 + 0.01, "unit": "m/s^2"}]
     byc = {c.channel: c for c in v.channels}
@@ -110,6 +110,16 @@ def test_inside_the_band_as_given():
     assert v.headline == ("Found: no catalogue effect. The model agrees with the data: every compared channel is "
                           "inside the band.")
     assert "Considered and turned down: none" in v.lines() and contradictions(v) == []
+
+
+def test_one_run_has_no_band_and_judges_no_channel():
+    res = _result([], {"accel_x": _channel("structural", kind="offset", value=0.1, share=0.9, inside=None)}, [],
+                  min_runs=1, runs=1)
+    v = build(res)
+    assert v.headline == "Found: no catalogue effect. One run: no band to judge the channels by."
+    assert [c.text for c in v.channels] == ["accel_x: no band (one run): not judged"]
+    assert v.notice.startswith("Fewer runs allowed than the 3 the data checks ask for (--min-runs 1): 1 run(s) "
+                               "used, no band (one run)") and contradictions(v) == []
 
 
 def test_confounded_effects_are_said_in_the_first_line():

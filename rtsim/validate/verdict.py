@@ -3,7 +3,8 @@ and the head of report.html all show this one object):
 
 1. what was found: the named effects with their values and 95 % intervals, or "no catalogue effect";
 2. per compared channel, after the named effects and the nuisance adjustments: explained (by a named
-   effect), structural (with the shape of what is left: offset, gain, lag or drift) or inside the band;
+   effect), structural (with the shape of what is left: offset, gain, lag or drift) or inside the band
+   ("no band" with one run);
 3. the candidates that were considered and not named, each with the reason the selection gave (its
    Candidate.note).
 
@@ -38,6 +39,7 @@ GLOSSARY = {
     "95 % interval": "value +- half-width, from the runs one by one and the model error together",
 }
 
+SHAPES = ("offset", "gain", "lag", "drift")
 SHOWN_PER_CHANNEL = 3         # candidates turned down named on a structural channel's line
 
 
@@ -53,7 +55,7 @@ class Found:
 @dataclass
 class ChannelLine:
     channel: str
-    status: str                   # "explained" | "structural" | "inside the band"
+    status: str                   # "explained" | "structural" | "inside the band" | "no band" (one run)
     text: str
     explained_by: list[str] = field(default_factory=list)
     shape: dict | None = None     # structural: {"kind", "value", "unit", "share"}
@@ -188,12 +190,18 @@ def build(res) -> Verdict:
         by = [b for b in d.get("explained_by", []) if b in labels]
         status = d.get("status")
         ib = d.get("inside_band")
-        if status == "structural":
+        if ib is None:                     # one run: no band, nothing to judge inside or outside
+            lines.append(ChannelLine(c, "no band", f"{c}: no band (one run): not judged"
+                                     + (f"; moved by {' and '.join(by)}" if by else ""), by))
+        elif status == "structural":
             sig = d.get("signature") or {"kind": "unshaped", "value": 0.0, "share": 0.0}
             shape = {"kind": sig.get("kind"), "value": sig.get("value"), "unit": unit(c), "share": sig.get("share")}
             considered = [t.effect for t in down if _acts_on(res, t, c)]
             considered.sort(key=lambda lab: 0 if f"[{c}]" in lab else 1)
-            text = (f"{c}: structural, not a catalogue effect; shape {describe_signature(sig, unit(c))}"
+            how = describe_signature(sig, unit(c))
+            if sig.get("kind") in SHAPES:
+                how = "shape " + how
+            text = (f"{c}: structural, not a catalogue effect; {how}"
                     + (f"; moved in part by {' and '.join(by)}" if by else "")
                     + (f"; considered and turned down on this channel: {', '.join(considered[:SHOWN_PER_CHANNEL])}"
                        + (f" and {len(considered) - SHOWN_PER_CHANNEL} more" if len(considered) > SHOWN_PER_CHANNEL
@@ -211,13 +219,17 @@ def build(res) -> Verdict:
         headline = "Found: " + "; ".join(f.text for f in named) + "."
         if confounded:
             headline += " The data cannot separate " + "; ".join(confounded) + "."
+        if structural:
+            headline += f" Structural, not a catalogue effect, on {', '.join(structural)} (see per channel)."
     else:
         headline = "Found: no catalogue effect."
         if structural:
             headline += (f" What is left on {', '.join(structural)} is structural (a difference in the model's "
                          f"structure, described by its shape below; no catalogue effect was selected for it).")
-        elif lines:
+        elif lines and all(ln.status == "inside the band" for ln in lines):
             headline += " The model agrees with the data: every compared channel is inside the band."
+        elif lines:
+            headline += " One run: no band to judge the channels by."
     bench = res.bench
     min_runs = getattr(res.options, "min_runs", MIN_RUNS)
     notice = ""
