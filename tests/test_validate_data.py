@@ -270,11 +270,19 @@ def test_a_bad_run_is_left_out_with_one_line_naming_it_and_the_reason(tmp_path, 
 
 
 def test_a_clean_run_with_missing_samples_is_used_and_the_gaps_noted(tmp_path):
-    """Empty and nan cells are a logger's missing samples, not junk: short gaps are filled (above)."""
+    """Empty and nan cells are a logger's missing samples, not junk: short gaps are filled (above); text in
+    a column that is no channel is not checked."""
     paths, _ = make_runs(tmp_path, n=3)
     _edit(paths[0], lambda ln: (_cells(ln, [(700, 4), (701, 4)], ""), _cells(ln, [(900, 2)], "NaN")))
+
+    def text_column(lines):              # a column that is no channel may hold text: it is ignored
+        lines[0] += ",mode"
+        for k in range(1, len(lines)):
+            lines[k] += ",cruise"
+    _edit(paths[1], text_column)
     runs, lines = _left_out(paths)
     assert lines == [] and len(runs) == 3
+    assert "ignored 1 non-sensor column(s): mode" in runs[1].notes
     assert any("channel accel_x: 2 missing/NaN sample(s) filled" in n for n in runs[0].notes)
     assert any("channel wheel_torque_rl: 1 missing/NaN sample(s) filled" in n for n in runs[0].notes)
 
