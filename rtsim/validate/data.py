@@ -35,7 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rtsim.channels import BY_NAME, COMMAND_NAMES, PLAUSIBLE, SENSOR_NAMES
+from rtsim.channels import (BY_NAME, COMMAND_NAMES, PLAUSIBLE, SENSOR_NAMES, TWO_WHEELER_COMMANDS,
+                            TWO_WHEELER_SENSORS)
 from rtsim.errors import ConfigError
 
 from .signals import WHEEL_ANGLES, unwrap_angle
@@ -419,7 +420,9 @@ def accel_frame(runs: list[Run], asked: str | None = None) -> str:
 
 
 def unit(channel: str) -> str:
-    """SI unit of a sensor or derived channel."""
+    """SI unit of a sensor or derived channel (a car's or a two-wheeler's)."""
     if channel.startswith("wheel_speed_"):
         return "rad/s"
-    return BY_NAME[channel].unit if channel in BY_NAME else ""
+    if channel in BY_NAME:
+        return BY_NAME[channel].unit
+    return next((c.unit for c in TWO_WHEELER_SENSORS + TWO_WHEELER_COMMANDS if c.name == channel), "")
