@@ -298,7 +298,7 @@ def test_a_row_with_a_cell_too_many_is_named(tmp_path):
 def test_units_outside_the_dictionarys_plausible_range_are_named(tmp_path):
     """A brake pressure logged in Pa (kPa expected) and wheel angles in degrees (radians expected) fall
     outside their channels' plausible ranges (rtsim.channels.PLAUSIBLE); a wheel angle that a logger wraps
-    at one turn is not mistaken for a fast one."""
+    at one turn is not mistaken for a fast one; a lone spike is named as such."""
     paths, _ = make_runs(tmp_path, n=4)
     text = paths[0].read_text().splitlines()
     head = text[0].split(",")
@@ -321,14 +321,18 @@ def test_units_outside_the_dictionarys_plausible_range_are_named(tmp_path):
             lines[k] = ",".join(c)
     before = load_run(paths[3]).channels["wheel_angle_fl"]
     _edit(paths[3], wrap)
-    runs, lines = _left_out(paths)
+    spike = write(tmp_path / "spike.csv", t, {**manoeuvre(t), "accel_x": np.where(np.arange(t.size) == 77, 1e30,
+                                                                                  manoeuvre(t)["accel_x"])})
+    runs, lines = _left_out([*paths, spike])
     assert lines == [
         "rtsim validate: run left out: run1.csv: column 'brake_pressure' reads up to 2.006e+06 kPa (3009 of 4000 "
         "samples outside its plausible range -200 .. 25000 kPa, the first at row 1): logged in Pa or psi instead of "
         "kPa?",
         "rtsim validate: run left out: run2.csv: column 'wheel_angle_fl' changes at up to 1310 rad/s (2644 of 3975 "
         "samples outside its plausible range -30 .. 400 rad/s, the first at row 1332): logged in degrees instead "
-        "of rad?"]
+        "of rad?",
+        "rtsim validate: run left out: spike.csv: column 'accel_x' reads up to 1e+30 m/s^2 (1 of 4000 samples outside "
+        "its plausible range -60 .. 60 m/s^2, the first at row 78): a spike or junk values in the log?"]
     assert [r.name for r in runs] == ["run0.csv", "run3.csv"]
     unwrapped = runs[1].channels["wheel_angle_fl"]
     np.testing.assert_allclose(unwrapped - unwrapped[0], before - before[0], atol=1e-6)

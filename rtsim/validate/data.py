@@ -48,6 +48,8 @@ MIN_SAMPLES = 10
 MIN_RUNS = 3
 #: Window (s) over which a cumulative channel's rate is taken for its plausibility check
 RATE_WINDOW = 0.05
+#: share of a channel's samples (at most; or 3) outside its plausible range read as spikes, not as another unit
+SPIKE = 0.001
 #: accelerometer frames a logger may declare (replay.ACCEL_FRAMES; kept here so loading needs no model)
 ACCEL_FRAMES = ("body", "level")
 #: cell texts that mark a missing sample (anything else that is not a finite number is junk)
@@ -259,9 +261,11 @@ def _check_range(name: str, t: np.ndarray, x: np.ndarray, row: str) -> str | Non
     first = int(np.argmax(out))
     worst = float(v[int(np.argmax(np.where(out, np.abs(v), -np.inf)))])
     what = "changes at up to" if p.rate else "reads up to"
-    return (f"column {name!r} {what} {worst:.4g} {u} ({int(out.sum())} of {v.size} samples outside its plausible "
-            f"range {p.lo:g} .. {p.hi:g} {u}, the first at {row} {first + 1}): logged in {p.other_unit} instead "
-            f"of {unit(name)}?")
+    k = int(out.sum())
+    hint = ("a spike or junk values in the log?" if k <= max(3, SPIKE * v.size) else
+            f"logged in {p.other_unit} instead of {unit(name)}?")
+    return (f"column {name!r} {what} {worst:.4g} {u} ({k} of {v.size} samples outside its plausible "
+            f"range {p.lo:g} .. {p.hi:g} {u}, the first at {row} {first + 1}): {hint}")
 
 
 def load_run(path: str | Path, sensor_names=SENSOR_NAMES) -> Run:
