@@ -104,11 +104,12 @@ def test_structural_lag_sign():
 def test_cli_frame_mismatch_is_an_error(tmp_path, capsys):
     """`rtsim validate --accel-frame body` on runs that declare the level frame stops with the reason."""
     from rtsim.validate.cli import _standalone
-    runs = [_csv(tmp_path / f"l{i}.csv", "level") for i in range(2)]
+    runs = [_csv(tmp_path / f"l{i}.csv", "level") for i in range(3)]
     rc = _standalone(["--vehicle", str(VEHICLE), "--runs", *map(str, runs), "--report", str(tmp_path / "r"),
                       "--accel-frame", "body", "--no-progress"])
     assert rc == 2
-    assert "declare accel_frame level (l0.csv, l1.csv) but the body frame was asked" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "declare accel_frame level (l0.csv, l1.csv, l2.csv) but the body frame was asked" in err
 
 
 def test_mcap_metadata_declares_the_frame(tmp_path):
