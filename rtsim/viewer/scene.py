@@ -62,7 +62,8 @@ def two_wheeler_shape(vehicle: dict) -> dict:
     head = [ground + axis[0] * 1.0 - px, 0.0, axis[2] * 1.0 - pz]
     return {"kind": "two_wheeler", "rear_wheel": [-px, 0.0, rr - pz], "front_wheel": [wb - px, 0.0, rf - pz],
             "rear_radius": rr, "front_radius": rf, "steer_axis": axis, "steer_head": head,
-            "rider": [vehicle["rider"]["cg_m"][0] - px, 0.0, vehicle["rider"]["cg_m"][1] - pz],
+            "rider": ([vehicle["rider"]["cg_m"][0] - px, 0.0, vehicle["rider"]["cg_m"][1] - pz]
+                      if vehicle.get("rider") else None),          # (the benchmark bicycle has none)
             "cg": [vehicle["rear_frame"]["cg_m"][0] - px, 0.0, vehicle["rear_frame"]["cg_m"][1] - pz]}
 
 
