@@ -188,12 +188,10 @@ function channels(inp) {
   for (const g of info.controls) {
     const active = g.channels.some((c) => inp[c.control] !== 0);
     if (active) taken.add(g.name);
-    else if (g.release === 'hand_back' && taken.has(g.name)) {
-      taken.delete(g.name);
-      for (const c of g.channels) out[c.channel] = null;
-    }
-    if (!taken.has(g.name)) continue;
-    for (const c of g.channels) out[c.channel] = c.sign * inp[c.control] * c.full_scale;
+    else if (g.release === 'hand_back') taken.delete(g.name);
+    // a group not taken is sent as null in every request: the server keeps only the newest request
+    // while one is in flight, so a hand-back must not ride on one request alone
+    for (const c of g.channels) out[c.channel] = taken.has(g.name) ? c.sign * inp[c.control] * c.full_scale : null;
   }
   return out;
 }
@@ -202,7 +200,6 @@ function drive(inp, now) {
   if (!$('drive').checked && input.touched && !view.driveDeclined) $('drive').checked = true;   // first input: drive
   if (!$('drive').checked || ws.readyState !== 1) return;
   const ch = channels(inp);
-  if (!Object.keys(ch).length) return;                             // no group taken yet: nothing to send
   const key = JSON.stringify(Object.entries(ch).map(([n, x]) => [n, x === null ? null : x.toFixed(4)])) + $('takeover').checked;
   if (key === lastSent && now - lastSentAt < 100) return;          // unchanged: every 100 ms (the service holds 1 s)
   lastSent = key; lastSentAt = now;
