@@ -4,8 +4,9 @@ opens the throttle and brakes. The page scales each key by what the motorcycle s
 (rtsim.vehicle.motorcycle.user_controls: 40 % throttle, 30 degrees of lean, the brakes for 0.5 g) and takes
 over only the channels of the key's group; the recording is the evidence.
 
-One service, one view server and one browser for the module (the tests ride on one after the other). Waits are bounded by the simulated time the page reports (waits.py bounds them in wall time,
-generously, never asserted); every criterion is on recorded samples and their simulated time stamps.
+One service, one view server and one browser for the module (the tests ride on, one after the other).
+Waits are bounded by the simulated time the page reports (waits.py bounds them in wall time, generously,
+never asserted); every criterion is on recorded samples and their simulated time stamps.
 """
 from __future__ import annotations
 
@@ -114,14 +115,14 @@ def test_the_motorcycle_leans_with_the_key(moto):
 
 
 def test_the_keyboard_rides_the_motorcycle_for_20_s_without_a_fall(moto):
-    """Riding on from where the page is (the service's recording keeps one clock): lean right, lean left, straight, throttle, brake, straight, for at
-    least 20 s of simulated time, every key held at full after its ramp. The recording shows: no model
-    fault (a fall is one) and the service running throughout; the roll bounded by the demand's 30 deg
-    plus 0.1 rad; the front tyre loaded throughout (the throttle at full key does not lift the front
-    wheel: wide open did, and the motorcycle fell within 3 s); the speed held between half and twice the
-    start's 12 m/s (the rider keeps it whenever no throttle or brake key is down: those groups are handed
-    back on release); the throttle at full key is 40 %, and it and the brakes act only while their keys
-    drive them."""
+    """Riding on from where the page is (the service's recording keeps one clock): lean right, lean left,
+    straight, throttle, brake, straight, for at least 20 s of simulated time, every key held at full after
+    its ramp. The recording shows: no model fault (a fall is one) and the service running throughout; the
+    roll bounded by the demand's 30 deg plus 0.1 rad; the front tyre loaded throughout (the throttle at
+    full key does not lift the front wheel: wide open did, and the motorcycle fell within 3 s); the speed
+    held between half and twice the start's 12 m/s (the rider keeps it whenever no throttle or brake key
+    is down: those groups are handed back on release); the throttle at full key is 40 %, and it and the
+    brakes act only while their keys drive them."""
     pg, _logs, rec = moto
     start = _sim_time(pg)
     keys = {}
