@@ -88,24 +88,55 @@ def test_weave_and_capsize_speeds(whipple):
     assert abs(found["capsize", "unstable"] - CAPSIZE_SPEED) < 1e-3
 
 
-def test_knife_edge_bicycle_conserves_energy_while_it_weaves(whipple):
-    """No slip and no dissipation: a roll disturbance at 5 m/s decays into the weave while the total
-    energy stays constant; the roll's envelope decays at the weave's rate."""
+def _roll_modes(t, roll, scale):
+    """Least-squares fit of roll(t) = A e^(a t) + e^(s t) (B cos w t + C sin w t): the capsize rate a and
+    the weave's s + i w (1/s), with free rates (started 10 % off the benchmark's values)."""
+    from scipy.optimize import least_squares
+
+    def resid(p):
+        A, a, B, C, s, w = p
+        return (A * np.exp(a * t) + np.exp(s * t) * (B * np.cos(w * t) + C * np.sin(w * t)) - roll) / scale
+    lam_c, lam_w = TABLE2[5][2], TABLE2[5][0]
+    fit = least_squares(resid, [roll[0], 0.9 * lam_c, 0.0, 0.0, 1.1 * lam_w.real, 0.9 * lam_w.imag],
+                        xtol=1e-14, ftol=1e-14)
+    _A, a, _B, _C, s, w = fit.x
+    return a, complex(s, w), float(np.sqrt(np.mean(resid(fit.x) ** 2)))
+
+
+def test_knife_edge_bicycle_conserves_energy_and_its_weave_decays_at_the_benchmarks_rates(whipple):
+    """No slip and no dissipation: a small roll disturbance (0.03 rad/s of roll rate, about 0.006 rad of
+    roll) at 5 m/s decays while the total energy stays constant.
+
+    The decay is required at the benchmark's rates (Meijaard et al. 2007, Table 2 at 5 m/s): from 0.5 s
+    on (castering, -14/s, has died out) the roll is fitted with the capsize and weave modes, rates free;
+    the fitted capsize rate (-0.3229/s) and the weave's decay rate (-0.7753/s) and frequency (4.4649 rad/s)
+    must each be within 0.3 % of the published eigenvalues (measured: 0.03 % and 0.001 %; the nonlinear
+    terms shift the rates with the square of the amplitude: ten times this disturbance shifted them by
+    2.2 % and 1.2 %), the fit leaving under 0.1 % of the peak roll; and the late envelope (3-4 s) at most
+    the early one (1-2 s) times e^(-0.3229 x 1 s), the slowest mode's decay over the second between them.
+    A weave that does not decay, or grows, fails every one of these."""
     dof = np.zeros(NDOF)
     q = whipple.coordinates(dof)
     qd = straight_running_velocity(whipple, q, 5.0)
     dof[D_ROLL] = 1e-6
     roll_dir = (whipple.coordinates(dof) - q) / 1e-6
-    qd = qd + 0.3 * roll_dir                      # 0.3 rad/s of roll rate
+    qd = qd + 0.03 * roll_dir                     # 0.03 rad/s of roll rate
     sim = Simulation(whipple.mech, 1e-3, q0=q, qd0=qd)
     tr = sim.run(4.0, stride=10)
     e = sim.energy(tr)
     assert np.max(np.abs(e - e[0])) < 1e-6 * abs(e[0])
     roll = np.array([whipple.group(qq, "V")[2] for qq in tr.q])
+    peak = np.abs(roll).max()
+    fit = tr.t >= 0.5
+    capsize, weave, residual = _roll_modes(tr.t[fit], roll[fit], peak)
+    lam_c, lam_w = TABLE2[5][2], TABLE2[5][0]
+    assert residual < 1e-3, residual
+    assert capsize == pytest.approx(lam_c, rel=3e-3)
+    assert weave.real == pytest.approx(lam_w.real, rel=3e-3)
+    assert weave.imag == pytest.approx(lam_w.imag, rel=3e-3)
     late = np.abs(roll[tr.t > 3.0]).max()
     early = np.abs(roll[(tr.t > 1.0) & (tr.t < 2.0)]).max()
-    # capsize (-0.32/s) outlasts the weave (-0.78/s) at 5 m/s: the slow mode bounds the late envelope
-    assert late < early * np.exp(-0.32 * 1.0) * 1.5
+    assert late <= early * np.exp(lam_c * 1.0)
 
 
 def test_eigen_and_statics_commands(tmp_path):

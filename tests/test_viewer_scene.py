@@ -82,3 +82,48 @@ def test_buildings_beside_the_survey(tmp_path):
     bad.write_text("x,y,length\n1,2,3\n")
     with pytest.raises(ValueError, match="header"):
         read_buildings(bad, v)
+
+
+CARS = ("xbw", "xbw_fwd", "eps_car")
+TWO_WHEELERS = ("motorcycle", "whipple_benchmark")
+
+
+@pytest.mark.parametrize("name", CARS + TWO_WHEELERS)
+def test_every_vehicle_describes_its_controls(name):
+    """What the page's controls mean comes from the vehicle (its config's ``user_controls()``), for every
+    shipped vehicle: each of its user channels (rtsim.service.user_input) in exactly one group, driven by
+    one of the page's three controls, its full scale inside the channel's range; every control drives
+    something. The service sends it (``view`` in its configuration) and the page's scene passes it on."""
+    from rtsim.service.user_input import user_channels
+    from rtsim.vehicle.motorcycle.config import load_motorcycle
+    from rtsim.viewer.scene import describe
+
+    path = ROOT / "configs" / "vehicles" / f"{name}.toml"
+    cfg, _ = (load_vehicle if name in CARS else load_motorcycle)(path)
+    view = cfg.user_controls()
+    chans = user_channels("car" if name in CARS else "two_wheeler")
+    got = [c for g in view["controls"] for c in g["channels"]]
+    assert sorted(c["channel"] for c in got) == sorted(chans)
+    assert {c["control"] for c in got} == {"throttle", "brake", "steer"}
+    for c in got:
+        lo, hi, _unit, _meaning = chans[c["channel"]]
+        assert 0.0 < c["full_scale"] and lo <= c["sign"] * c["full_scale"] <= hi, c
+    assert all(g["release"] in ("hold", "hand_back") for g in view["controls"])
+    page = describe({"vehicle": cfg.model_dump(mode="json"), "view": view})
+    assert page["controls"] == view["controls"] and page["plots"] == view["plots"]
+
+
+def test_the_motorcycles_full_keys():
+    """The motorcycle's full throttle key is 40 % (wide open lifts its front wheel); its full brake key
+    0.5 g of deceleration, 80 % of it on the front: the calipers' torques over the wheel radii, against
+    the machine's weight with its rider (275 kg); the full lean key 30 degrees, right key leaning right."""
+    from rtsim.vehicle.motorcycle.config import load_motorcycle
+
+    cfg, _ = load_motorcycle(ROOT / "configs" / "vehicles" / "motorcycle.toml")
+    full = {c["channel"]: c["sign"] * c["full_scale"] for g in cfg.user_controls()["controls"] for c in g["channels"]}
+    assert full["throttle_cmd"] == 0.4
+    front = full["brake_pressure_front_cmd"] * cfg.brakes.front_nm_per_kpa / cfg.front_wheel.radius_m
+    rear = full["brake_pressure_rear_cmd"] * cfg.brakes.rear_nm_per_kpa / cfg.rear_wheel.radius_m
+    assert front + rear == pytest.approx(0.5 * 9.81 * 275.0, rel=1e-9)
+    assert front == pytest.approx(4 * rear, rel=1e-9)
+    assert full["roll_angle_demand"] == pytest.approx(np.radians(30.0), rel=1e-12)

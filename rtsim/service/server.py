@@ -331,6 +331,7 @@ class Service:
             "zenoh": {"endpoints": list(self.zenoh.endpoints)} if self.zenoh is not None else None,
             "dbc": str(self.codec.path),
             "channels": json.loads(self.codec.channels.to_json()),   # the served vehicle's interface
+            "view": self.model.config.user_controls(),     # what rtsim view's controls mean for it
         }
 
     # -- running ---------------------------------------------------------------------------------------

@@ -1,7 +1,8 @@
 """What the page draws, described once from the service's configuration: the vehicle's shape (wheel
 centres, radii, tyre stiffness, body size: from its config file as the service reports it), the road
-(plane, grade, or the survey mesh with its per-triangle friction) and the user channels with their
-ranges. All in SI units and ISO 8855 axes (x forward, y left, z up), as the state channels.
+(plane, grade, or the survey mesh with its per-triangle friction), and the vehicle's controls and default
+plots as the vehicle describes them (rtsim.vehicle.kit.user_controls). All in SI units and ISO 8855 axes
+(x forward, y left, z up), as the state channels.
 
 Buildings: simple blocks from an optional file beside a survey (``<survey stem>_buildings.csv``).
 
@@ -15,7 +16,6 @@ import math
 import re
 from pathlib import Path
 
-from rtsim.service.user_input import user_channels
 
 
 def _tir_value(path: Path, key: str, default: float) -> float:
@@ -62,7 +62,8 @@ def two_wheeler_shape(vehicle: dict) -> dict:
     head = [ground + axis[0] * 1.0 - px, 0.0, axis[2] * 1.0 - pz]
     return {"kind": "two_wheeler", "rear_wheel": [-px, 0.0, rr - pz], "front_wheel": [wb - px, 0.0, rf - pz],
             "rear_radius": rr, "front_radius": rf, "steer_axis": axis, "steer_head": head,
-            "rider": [vehicle["rider"]["cg_m"][0] - px, 0.0, vehicle["rider"]["cg_m"][1] - pz],
+            "rider": ([vehicle["rider"]["cg_m"][0] - px, 0.0, vehicle["rider"]["cg_m"][1] - pz]
+                      if vehicle.get("rider") else None),          # (the benchmark bicycle has none)
             "cg": [vehicle["rear_frame"]["cg_m"][0] - px, 0.0, vehicle["rear_frame"]["cg_m"][1] - pz]}
 
 
@@ -160,27 +161,14 @@ def describe(config: dict) -> dict:
         from rtsim.vehicle.offline import default_vehicle_path
         vehicle_path = default_vehicle_path()
     shape = car_shape(vehicle, vehicle_path) if kind == "car" else two_wheeler_shape(vehicle)
-    limits = _pedal_scales(kind, vehicle)
     return {
         "vehicle_id": config.get("vehicle_id"), "name": vehicle.get("name"), "kind": kind, "dt": config.get("dt"),
         "mode": (config.get("options") or {}).get("mode"),
         "scenario": (config.get("scenario") or {}).get("name"),
         "shape": shape, "road": road_description(road_path),
         "channels": config.get("channels"),
-        "user": {name: {"lo": lo, "hi": hi, "unit": unit, "meaning": meaning, "full_scale": limits.get(name, hi)}
-                 for name, (lo, hi, unit, meaning) in user_channels(kind).items()},
+        # the vehicle's own description of its controls and default plots (rtsim.vehicle.kit.user_controls),
+        # as the service sends it; a service (or a recording) from before it: nothing to drive with
+        "controls": (config.get("view") or {}).get("controls") or [],
+        "plots": (config.get("view") or {}).get("plots") or [],
     }
-
-
-def _pedal_scales(kind: str, vehicle: dict) -> dict:
-    """What a full pedal or a full steering input means for this vehicle (the page's defaults): a car's
-    wide-open throttle and the brake actuator's maximum from its config; a two-wheeler's full brakes from
-    its caliper limit, 30 degrees of lean, 40 % throttle (wide open lifts the front wheel of a sport
-    motorcycle in the low gears: a person with a key cannot modulate it)."""
-    if kind == "car":
-        thr = ((vehicle.get("powertrain") or {}).get("throttle") or {}).get("max", 1.4)
-        brk = (((vehicle.get("brakes") or {}).get("actuator")) or {}).get("max", 12000.0)
-        return {"throttle_angle_cmd": thr, "brake_pressure_cmd": 0.6 * brk, "steering_wheel_angle_cmd": 3.0}
-    pmax = (vehicle.get("brakes") or {}).get("max_pressure_kpa", 12000.0)
-    return {"throttle_cmd": 0.4, "brake_pressure_front_cmd": 0.6 * pmax, "brake_pressure_rear_cmd": 0.3 * pmax,
-            "roll_angle_demand": math.radians(30.0)}

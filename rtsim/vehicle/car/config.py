@@ -335,6 +335,11 @@ class VehicleConfig(Strict):
                       f"ratio <= {hi:g} of road cars (steering-wheel angle per road-wheel angle at straight ahead)")
         return self
 
+    def user_controls(self) -> dict:
+        """What `rtsim view`'s controls mean for this car (rtsim.vehicle.car.user_controls)."""
+        from .user_controls import user_controls
+        return user_controls(self)
+
 
 def load_vehicle(path: str | Path) -> tuple[VehicleConfig, Path]:
     """The validated vehicle config and the folder its relative paths refer to. The [effects] tables

@@ -14,7 +14,7 @@
 //   page's clock corrected by the offset to the server's clock (ping/pong); and server -> screen, from
 //   the sample's arrival at the server to that frame (any mode).
 import { Scene3D } from './scene.js';
-import { Plots } from './plots.js';
+import { Plots, tickLabels } from './plots.js';
 import { Input } from './input.js';
 
 const $ = (id) => document.getElementById(id);
@@ -28,6 +28,7 @@ const plots = new Plots($('plot-channels'), $('plot-health'), $('pick'));
 const input = new Input();
 view.input = input;          // (tests: the keys' ramped inputs, as the page drives with them)
 view.plots = plots;
+view.tickLabels = tickLabels;   // (tests: the axes' tick labels)
 let info = null, state = null, sensors = null, status = null, commands = null;
 let pulling = false, clockOffset = 0, bestPing = Infinity, simWall = null;
 const simWallSamples = [];
@@ -78,9 +79,11 @@ function start(i, source) {
     $('files').textContent = i.replays.map((r, k) => `${k ? 'B (blue)' : 'A (red)'}: ${r.file}`).join(' · ');
     for (const id of ['drive', 'takeover', 'release', 'settings-btn', 'reset']) $(id).disabled = true;
   }
-  const defaults = i.kind === 'car' ? ['speed', 'yaw_rate', 'steering_wheel_angle']
-    : ['speed', 'roll_angle', 'steer_angle'];
-  plots.init(i, defaults);
+  plots.init(i, i.plots);           // the vehicle's default channels
+  if (source !== 'replay' && !i.controls.length) {
+    $('drive').disabled = true;
+    view.drive.error = 'this service does not describe its controls: driving is off (a newer rtsim serve does)';
+  }
   if (i.road.note) $('run').textContent = i.road.note;
   for (let k = 0; k < 5; k++) setTimeout(ping, 200 * k);
   setInterval(() => { bestPing *= 1.02; ping(); }, 2000);     // (let the best sample age: clocks drift)
@@ -174,23 +177,30 @@ function take(m) {
 }
 
 // ---- driving ------------------------------------------------------------------------------------------
+// The vehicle's control groups (info.controls, rtsim.vehicle.kit.user_controls): touching a control takes
+// over its group's channels only (the rest stay with the rider, the scenario's driver or the bus ECU); each
+// value is sign * control * full_scale; a group back at rest is held there or handed back (null), as the
+// vehicle says.
+const taken = new Set();          // names of the groups the user drives now
+view.taken = taken;
 function channels(inp) {
-  const u = info.user, fs = (n) => u[n].full_scale;
-  if (info.kind === 'car') {
-    return { throttle_angle_cmd: inp.throttle * fs('throttle_angle_cmd'),
-             brake_pressure_cmd: inp.brake * fs('brake_pressure_cmd'),
-             steering_wheel_angle_cmd: -inp.steer * fs('steering_wheel_angle_cmd') };     // ISO: left positive
+  const out = {};
+  for (const g of info.controls) {
+    const active = g.channels.some((c) => inp[c.control] !== 0);
+    if (active) taken.add(g.name);
+    else if (g.release === 'hand_back') taken.delete(g.name);
+    // a group not taken is sent as null in every request: the server keeps only the newest request
+    // while one is in flight, so a hand-back must not ride on one request alone
+    for (const c of g.channels) out[c.channel] = taken.has(g.name) ? c.sign * inp[c.control] * c.full_scale : null;
   }
-  return { throttle_cmd: inp.throttle, brake_pressure_front_cmd: inp.brake * fs('brake_pressure_front_cmd'),
-           brake_pressure_rear_cmd: inp.brake * fs('brake_pressure_rear_cmd'),
-           roll_angle_demand: inp.steer * fs('roll_angle_demand') };                       // right: lean right
+  return out;
 }
 
 function drive(inp, now) {
   if (!$('drive').checked && input.touched && !view.driveDeclined) $('drive').checked = true;   // first input: drive
   if (!$('drive').checked || ws.readyState !== 1) return;
   const ch = channels(inp);
-  const key = JSON.stringify(Object.values(ch).map((x) => x.toFixed(4))) + $('takeover').checked;
+  const key = JSON.stringify(Object.entries(ch).map(([n, x]) => [n, x === null ? null : x.toFixed(4)])) + $('takeover').checked;
   if (key === lastSent && now - lastSentAt < 100) return;          // unchanged: every 100 ms (the service holds 1 s)
   lastSent = key; lastSentAt = now;
   ws.send(JSON.stringify({ type: 'drive', seq: ++driveSeq, t_page: performance.now(), takeover: $('takeover').checked, ...ch }));
@@ -207,7 +217,7 @@ function ack(m) {
 }
 
 $('release').onclick = () => {
-  $('drive').checked = false; view.driveDeclined = true;
+  $('drive').checked = false; view.driveDeclined = true; taken.clear();
   ws.send(JSON.stringify({ type: 'drive', seq: ++driveSeq, release: true }));
 };
 $('drive').onchange = () => { view.driveDeclined = !$('drive').checked; if (!$('drive').checked) $('release').onclick(); };
@@ -295,7 +305,7 @@ function panel(inp) {
   $('health').innerHTML = `<tr><td><b>loop</b></td><td>p50</td><td>p99</td><td>max</td></tr>
     <tr><td>lateness</td><td class="v">${ms(s.lateness_p50)}</td><td class="v">${ms(s.lateness_p99)}</td><td class="v">${ms(s.lateness_max)}</td></tr>
     <tr><td>cpu/step</td><td class="v">${us(s.cpu_p50)}</td><td class="v">${us(s.cpu_p99)}</td><td class="v">${us(s.cpu_max)}</td></tr>
-    <tr><td>overruns ${s.overruns ?? '–'}</td><td colspan="3">stalls ${s.stalls ?? '–'} · skipped ${s.skipped_steps ?? '–'} · faults ${
+    <tr><td colspan="4">overruns ${s.overruns ?? '–'} · stalls ${s.stalls ?? '–'} · skipped ${s.skipped_steps ?? '–'} · faults: ${
       Object.entries(s.faults || {}).filter(([, v]) => v).map(([k]) => k).join(', ') || 'none'}</td></tr>`;
   const L = view.latency;
   $('latency').innerHTML = `<tr><td><b>latency</b> (median)</td><td></td></tr>

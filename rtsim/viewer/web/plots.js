@@ -16,6 +16,28 @@ class Series {
   }
 }
 
+// Tick labels of a value axis: as many decimals as the tick step needs (uPlot's default formatter keeps at
+// most three, so ticks 0.0001 apart all read "0"), and an SI prefix (p n µ m k M G) where plain decimals
+// would be long: the largest tick below 0.01 or from 100 000 on. Consecutive ticks always read differently.
+const PREFIX = { '-12': 'p', '-9': 'n', '-6': 'µ', '-3': 'm', '3': 'k', '6': 'M', '9': 'G' };
+function decimals(x) {                 // decimals that write x (> 0) exactly, to 1 ppm
+  for (let d = 0; d < 12; d++) { const y = x * 10 ** d; if (Math.abs(y - Math.round(y)) <= 1e-6 * y) return d; }
+  return 12;
+}
+export function tickLabels(splits, incr) {
+  const vals = splits.filter((v) => v != null && Number.isFinite(v));
+  if (!(incr > 0)) incr = vals.length > 1 ? Math.min(...vals.slice(1).map((v, k) => Math.abs(v - vals[k])).filter((d) => d > 0)) : 0;
+  const big = Math.max(0, ...vals.map(Math.abs));
+  if (!(big > 0) || !(incr > 0)) return splits.map((v) => (v == null ? '' : String(v)));
+  let e = 0;
+  if (big < 1e-2 || big >= 1e5) e = Math.max(-12, Math.min(9, 3 * Math.floor(Math.log10(big) / 3)));
+  const scale = 10 ** e, d = decimals(incr / scale), pre = PREFIX[String(e)] || '';
+  return splits.map((v) => (v == null ? '' : (Math.abs(v) < 1e-6 * incr ? 0 : v / scale).toFixed(d) + pre));
+}
+const axisValues = (u, splits, _axis, _space, incr) => tickLabels(splits, incr);
+// the value axis as wide as its longest label (about 7 px a character at the axis' 12 px font) plus the ticks
+const axisSize = (u, values) => Math.max(40, 16 + 7 * Math.max(0, ...(values || []).map((s) => String(s).length)));
+
 function firstAtOrAfter(t, x) {      // index of the first t[i] >= x (t ascending)
   let lo = 0, hi = t.length;
   while (lo < hi) { const m = (lo + hi) >> 1; if (t[m] < x) lo = m + 1; else hi = m; }
@@ -59,7 +81,7 @@ export class Plots {
     this.healthPlot = new uPlot({
       width: 500, height: 110, title: 'loop health', legend: { live: false },
       scales: { x: { time: false } },
-      axes: [{}, { label: 'us / ms', size: 50 }],
+      axes: [{ values: axisValues }, { label: 'us / ms', values: axisValues, size: (u, v) => 20 + axisSize(u, v) }],
       series: [{ label: 't [s]' }, { label: 'lateness p99 [ms]', stroke: '#c0282d' },
                { label: 'cpu/step p50 [us]', stroke: '#1f5fbf' }, { label: 'cpu/step p99 [us]', stroke: '#2a9d4a' }],
     }, [[], [], [], []], this.healthEl);
@@ -75,7 +97,7 @@ export class Plots {
     if (this.chart) this.chart.destroy();
     this.chart = new uPlot({
       width: 500, height: 170, legend: { live: false }, scales: { x: { time: false } },
-      axes: [{}, { size: 50 }],
+      axes: [{ values: axisValues }, { values: axisValues, size: axisSize }],
       series: [{ label: 't [s]' }, ...this.keys.map((k, i) => {
         const n = k.replace(' (B)', '');
         return { label: `${k} [${this.units[n]}]`, stroke: PALETTE[this.picked.indexOf(n) % 6], dash: k.endsWith('(B)') ? [6, 4] : undefined };

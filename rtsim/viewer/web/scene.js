@@ -241,14 +241,16 @@ export class Scene3D {
     const seat = new THREE.Mesh(new THREE.BoxGeometry(0.6, 0.26, 0.1), dark);
     seat.position.set(cg.x - 0.15, 0, cg.z + 0.25);
     group.add(seat);
-    const r = new THREE.Vector3(...s.rider);
-    const rider = new THREE.Mesh(new THREE.BoxGeometry(0.32, 0.4, 0.62), new THREE.MeshLambertMaterial({ color: '#e0a030' }));
-    rider.position.set(r.x, 0, r.z + 0.05);
-    rider.rotation.y = 0.45;
-    group.add(rider);
-    const helmet = new THREE.Mesh(new THREE.SphereGeometry(0.14, 16, 12), dark);
-    helmet.position.set(r.x + 0.22, 0, r.z + 0.45);
-    group.add(helmet);
+    const r = new THREE.Vector3(...(s.rider || s.cg));   // the rider's centre (the cockpit camera's reference)
+    if (s.rider) {                       // (a machine without a rider, the benchmark bicycle: none drawn)
+      const rider = new THREE.Mesh(new THREE.BoxGeometry(0.32, 0.4, 0.62), new THREE.MeshLambertMaterial({ color: '#e0a030' }));
+      rider.position.set(r.x, 0, r.z + 0.05);
+      rider.rotation.y = 0.45;
+      group.add(rider);
+      const helmet = new THREE.Mesh(new THREE.SphereGeometry(0.14, 16, 12), dark);
+      helmet.position.set(r.x + 0.22, 0, r.z + 0.45);
+      group.add(helmet);
+    }
     const rw = new THREE.Vector3(...s.rear_wheel);
     const swing = new THREE.Mesh(new THREE.BoxGeometry(rw.length(), 0.06, 0.06), dark);
     swing.position.set(rw.x / 2, 0.08, rw.z / 2);
