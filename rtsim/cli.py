@@ -254,7 +254,10 @@ def _describe(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from rtsim import __version__
+
     p = argparse.ArgumentParser(prog="rtsim", description="Real-time HIL vehicle simulator")
+    p.add_argument("--version", action="version", version=f"rtsim {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bench", help="run the multibody benchmark problems (IFToMM A01-A05) and time them")
     b.add_argument("--problem", help="run one problem: pendulum, fourbar, fourbar2, fourbar40, andrews, bricard, flyball")
@@ -302,8 +305,8 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV (a motorcycle's "
                        "scenario: also its summary); exit status 3 if the model failed (the rows up to the failure written, "
                        "the failure beside them in <out>.model_fault.json) or the motorcycle fell")
-    r.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")
-    r.add_argument("--scenario", required=True, help="scenario TOML (configs/scenarios/)")
+    r.add_argument("--vehicle", help="vehicle TOML or name in configs/vehicles (default: the scenario's, else xbw)")
+    r.add_argument("--scenario", required=True, help="scenario TOML or name in configs/scenarios")
     r.add_argument("--out", required=True, help="output file: .csv or .mcap")
     r.add_argument("--summary", metavar="JSON", help="two-wheeler scenarios: also write the summary (measured "
                    "against the manoeuvre's analytic references) to this JSON file")
@@ -334,7 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--out", metavar="DIR", help="folder for the figures (default: <run stem>_plots/ beside it)")
     pl.set_defaults(func=_plot)
     d = sub.add_parser("describe", help="print the vehicle model's size and key parameters")
-    d.add_argument("--vehicle", help="vehicle TOML (default configs/vehicles/xbw.toml)")
+    d.add_argument("--vehicle", help="vehicle TOML or name in configs/vehicles (default xbw)")
     d.add_argument("--json", action="store_true")
     d.set_defaults(func=_describe)
     for name, module, text in _DELEGATED:

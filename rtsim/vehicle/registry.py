@@ -134,9 +134,12 @@ class VehicleKind:
         raise NotImplementedError
 
 
-#: the fields `rtsim describe --json` reports for every vehicle (a kind adds its own after them)
+#: the fields `rtsim describe --json` reports for every vehicle (a kind adds its own after them), in SI
+#: units: masses per body (kg), the geometry in the vehicle's design frame (m; wheel_centres one row per
+#: wheel, front first), the channel dictionary's names (sensors, commands, state)
 DESCRIBE_FIELDS = ("name", "id", "kind", "file", "n_coordinates", "n_constraints", "n_dof", "mass", "masses",
                    "geometry", "channels")
+DESCRIBE_GEOMETRY = ("wheelbase", "track_front", "track_rear", "cg_height", "cg_to_front_axle", "wheel_centres")
 
 
 @dataclass
@@ -160,10 +163,12 @@ class OpenedVehicle:
 
     def describe(self) -> dict:
         info = self.kind.describe(self)
-        missing = [k for k in DESCRIBE_FIELDS if k not in info]
+        missing = [k for k in DESCRIBE_FIELDS if k not in info] + \
+            [f"geometry.{k}" for k in DESCRIBE_GEOMETRY if k not in info.get("geometry", {})]
         if missing:
             raise RuntimeError(f"{type(self.kind).__name__}.describe lacks {', '.join(missing)}")
-        return {**{k: info[k] for k in DESCRIBE_FIELDS}, **info}
+        geometry = {**{k: info["geometry"][k] for k in DESCRIBE_GEOMETRY}, **info["geometry"]}
+        return {**{k: info[k] for k in DESCRIBE_FIELDS}, **info, "geometry": geometry}
 
     def refuse(self, command: str) -> None:
         """RtsimError (one line) when ``command`` does not apply to this vehicle."""
