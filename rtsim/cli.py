@@ -150,7 +150,8 @@ def _run(args) -> int:
             print(f"\r{sc.name}: {pct:3d} %", end="", file=sys.stderr, flush=True)
             shown[0] = pct
     res = vehicle.run_offline(sc, progress)
-    res.write(out)
+    from bridge.mcap_log import write_offline
+    write_offline(res, out)
     if res.summary:
         text = json.dumps(res.summary, indent=2)
         if args.summary:

@@ -39,8 +39,9 @@ def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object]:
         vehicle.check_scenario(sc)
         vehicle.model                   # built under the overrides (their values are read on load)
     res = vehicle.run_offline(sc, seed=spec["seed"])
-    write = {"csv": lambda p: res.write(Path(p).with_suffix(".csv")),
-             "mcap": lambda p: res.write(Path(p).with_suffix(".mcap"))}
+    from bridge.mcap_log import write_offline
+    write = {"csv": lambda p: write_offline(res, Path(p).with_suffix(".csv")),
+             "mcap": lambda p: write_offline(res, Path(p).with_suffix(".mcap"))}
     return res.status, res.message, res.columns, res.data, write
 
 

@@ -73,16 +73,23 @@ class OfflineRun:
     fault: Any = None            # rtsim.model_fault.ModelFault that ended the run early, if any
     summary: dict = field(default_factory=dict)
     line: str = ""               # one console line: what was simulated, how fast, where to
-    writers: dict = field(default_factory=dict)    # ".csv"/".mcap" -> callable(path)
+    vehicle_id: str = ""
+    channels: Any = None         # the columns' ChannelDictionary (an MCAP's schemas)
+    scene: Any = None            # what the 3D scene is drawn from (bridge.mcap_log.write_run's ``sim``)
 
     def column(self, name: str):
         return self.data[:, self.columns.index(name)]
 
-    def write(self, path: str | Path) -> None:
-        suffix = Path(path).suffix.lower()
-        if suffix not in self.writers:
-            raise ConfigError(f"{path}: output must end in {' or '.join(sorted(self.writers))}")
-        self.writers[suffix](path)
+    def write_csv(self, path: str | Path) -> None:
+        """The rows as CSV: a header of the columns, values to 9 significant digits. (MCAP: the app layer
+        writes it, bridge.mcap_log.write_offline.)"""
+        import csv
+
+        with Path(path).open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(self.columns)
+            for r in self.data:
+                w.writerow([f"{v:.9g}" for v in r])
 
 
 @dataclass(frozen=True)

@@ -59,17 +59,13 @@ class CarKind(VehicleKind):
         return None
 
     def run_offline(self, opened, sc, progress=None, seed=0) -> OfflineRun:
-        from bridge.mcap_log import write_run
-
-        from ..offline import run, sim_for, write_csv
+        from ..offline import run, sim_for
 
         sim = sim_for(opened.model, sc)
         res = run(sim, sc, progress, seed=seed)
         out = OfflineRun(res.columns, res.data, res.wall_s, res.steps, status="ok" if res.fault is None else "failed",
-                         message="" if res.fault is None else res.fault.line(), fault=res.fault)
-        out.writers = {".csv": lambda p: write_csv(res, p),
-                       ".mcap": lambda p: write_run(p, res.columns, res.data, sim.vm.config.id, sim.vm.channels,
-                                                    sim=sim)}      # with the 3D scene
+                         message="" if res.fault is None else res.fault.line(), fault=res.fault,
+                         vehicle_id=sim.vm.config.id, channels=sim.vm.channels, scene=sim)
         dist = float(np.sum(np.hypot(np.diff(res.column("pos_x")), np.diff(res.column("pos_y")))))
         peak = float(res.column("speed").max()) if len(res.data) else 0.0
         out.line = (f"{sc.name}: {res.data[-1, 0] if len(res.data) else 0.0:g} s simulated in {res.wall_s:.2f} s "

@@ -56,14 +56,13 @@ class TwoWheelerKind(VehicleKind):
         return None
 
     def run_offline(self, opened, sc, progress=None, seed=0) -> OfflineRun:
-        from .offline import prepare, run, write_csv, write_mcap
+        from .offline import CHANNELS, prepare, run, scene_source
 
         ride, sc = prepare(opened.path, sc, mm=opened.model)
         res = run(ride, sc, progress)
         out = OfflineRun(res.columns, res.data, res.wall_s, res.steps, res.status, res.message, res.fault,
-                         res.summary)
-        out.writers = {".csv": lambda p: write_csv(res, p),
-                       ".mcap": lambda p: write_mcap(res, p, ride.sim.mm.config.id, mm=ride.sim.mm)}
+                         res.summary, vehicle_id=ride.sim.mm.config.id, channels=CHANNELS,
+                         scene=scene_source(ride.sim.mm))
         out.line = (f"{sc.name}: {res.summary.get('simulated_s')} s simulated in {res.wall_s:.2f} s, "
                     f"{len(res.data)} rows")
         return out

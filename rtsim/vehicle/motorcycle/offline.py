@@ -359,12 +359,17 @@ def write_csv(res: MotorcycleRun, path: str | Path) -> None:
             w.writerow([f"{v:.9g}" for v in r])
 
 
-def write_mcap(res: MotorcycleRun, path: str | Path, vehicle_id: str, mm=None) -> None:
-    """The run's rows as an MCAP file; with the built two-wheeler `mm` also its 3D scene (the road plane,
-    the machine's body, fork, swingarm and wheels every 10 ms), as a served session records it."""
+def scene_source(mm):
+    """What bridge.mcap_log.write_run draws the 3D scene from (its ``sim``): the built two-wheeler `mm`
+    (the road plane, the machine's body, fork, swingarm and wheels every 10 ms), as a served session
+    records it."""
     from types import SimpleNamespace
 
+    return SimpleNamespace(vm=SimpleNamespace(model=mm, channels=CHANNELS), road=None)
+
+
+def write_mcap(res: MotorcycleRun, path: str | Path, vehicle_id: str, mm=None) -> None:
+    """The run's rows as an MCAP file; with the built two-wheeler `mm` also its 3D scene."""
     from bridge.mcap_log import write_run
 
-    sim = None if mm is None else SimpleNamespace(vm=SimpleNamespace(model=mm, channels=CHANNELS), road=None)
-    write_run(path, res.columns, res.data, vehicle_id, CHANNELS, sim=sim)
+    write_run(path, res.columns, res.data, vehicle_id, CHANNELS, sim=None if mm is None else scene_source(mm))
