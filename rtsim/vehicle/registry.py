@@ -140,6 +140,11 @@ class VehicleKind:
     def demo(self, opened: "OpenedVehicle") -> Demo:
         raise NotImplementedError
 
+    def user_inputs(self, opened: "OpenedVehicle"):
+        """What a person may drive (rtsim.vehicle.kit.user_inputs.UserInputs): channels, ranges, full
+        scales, the bus command each competes with."""
+        raise NotImplementedError
+
 
 #: the fields `rtsim describe --json` reports for every vehicle (a kind adds its own after them), in SI
 #: units: masses per body (kg), the geometry in the vehicle's design frame (m; wheel_centres one row per
@@ -200,6 +205,11 @@ class OpenedVehicle:
     @property
     def demo(self) -> Demo:
         return self.kind.demo(self)
+
+    @property
+    def user_inputs(self):
+        """The vehicle's user channels with their full scales (the viewer's key and pedal scaling)."""
+        return self.kind.user_inputs(self)
 
     @property
     def default_scenario(self) -> Path:

@@ -83,8 +83,22 @@ class CarKind(VehicleKind):
         if model is None:
             model = models[key] = opened.model
         ini = sc.spec.initial
-        return VehicleSim(model, load_road(sc.road_path), dt if dt is not None else sc.dt, brake_pressure=0.0,
-                          position=(ini.x, ini.y), yaw=ini.yaw, speed=ini.speed)
+        sim = VehicleSim(model, load_road(sc.road_path), dt if dt is not None else sc.dt, brake_pressure=0.0,
+                         position=(ini.x, ini.y), yaw=ini.yaw, speed=ini.speed)
+        sim.user_inputs = opened.user_inputs
+        return sim
+
+    def user_inputs(self, opened):
+        """The car's user channels, full scales from its config: the throttle's wide-open angle, the brake
+        actuator's maximum."""
+        from ..kit.brake import brake_config
+        from ..kit.powertrain import powertrain_config
+        from .inputs import user_inputs
+
+        cfg = opened.config
+        thr = powertrain_config(cfg.powertrain or None, "powertrain").throttle.max
+        brk = brake_config(cfg.brakes or None, "brakes").actuator.max
+        return user_inputs(float(thr), float(brk))
 
     def demo(self, opened) -> Demo:
         if opened.config.eps is not None:      # the EPS ECU closes the assist loop: lockstep, its manoeuvre

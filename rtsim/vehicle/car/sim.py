@@ -30,6 +30,7 @@ from .effect_kernels import (FS_DL, FS_LAG, FS_SIZE, FX_B_LAG, FX_DL, FX_DL_K, F
                              neutral_params, physical_sensors, sensor_stage)
 from .effects import pack_effects, validate_effects
 from .layout import CI_PHI, WHEELS
+from .inputs import USER_INPUTS as CAR_USER_INPUTS
 from .observer import NSTATE_OUT
 from .step import (CMD_BRAKE, COMMAND_SLOTS, EX_SELECTOR, INVALID_SLOTS, Parts, States, make_io, make_vehicle_data,
                    vehicle_advance)
@@ -209,6 +210,9 @@ class VehicleSim:
     command_slots = COMMAND_SLOTS     # where each bus command's value goes in io.commands
     invalid_slots = INVALID_SLOTS     # where 1.0 goes while a command has no valid value
     nstate = NSTATE_OUT               # observer state channels
+    eps_commands = ("motor_current_cmd",)   # bus commands that put the EPS in external mode (the ECU's)
+    rider_on = False                  # no rider inside the step (its in-loop source: the scenario's driver)
+    user_inputs = CAR_USER_INPUTS     # what a person may drive (the vehicle's own: set by its kind)
 
     def raise_status(self, status: int, step: int) -> None:
         """The exception of a failed step's status."""

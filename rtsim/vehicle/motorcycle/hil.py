@@ -13,6 +13,7 @@ from drivers.rider import rider as make_rider
 
 from .build import MotorcycleModel
 from .config import MotorcycleConfig
+from .inputs import USER_INPUTS
 from .layout import NAMES, POINTS, VECTORS
 from .plant import COMMAND_SLOTS, FALL_ROLL, FELL, INVALID_SLOTS, NCOMMAND, PlantIO, make_plant
 from .sim import Fall, TwoWheelerSim
@@ -50,6 +51,8 @@ class TwoWheelerHil:
     kind = "two_wheeler"
     command_slots = COMMAND_SLOTS
     invalid_slots = INVALID_SLOTS
+    eps_commands = ()                 # no electric power steering
+    user_inputs = USER_INPUTS         # what a person may drive (the vehicle's own: set by its kind)
 
     def __init__(self, mm: MotorcycleModel, dbc: Path, q_static: np.ndarray, dt: float, speed: float = 0.0,
                  x: float = 0.0, y: float = 0.0, yaw: float = 0.0, rider=None, mu: float = 1.0):

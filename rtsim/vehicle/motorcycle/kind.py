@@ -98,8 +98,17 @@ class TwoWheelerKind(VehicleKind):
             r = sc.rider()
             if "tyre_lean" not in sc.spec.rider.model_fields_set:      # the vehicle's own tyres' crown correction
                 r.par[P_TYRE_LEAN] = tyre_lean_ratio(mm)
-        return TwoWheelerHil(mm, dbc, q, dt if dt is not None else sc.dt, speed=ini.speed, x=ini.x, y=ini.y,
-                             yaw=ini.yaw, rider=r, mu=road.mu)
+        sim = TwoWheelerHil(mm, dbc, q, dt if dt is not None else sc.dt, speed=ini.speed, x=ini.x, y=ini.y,
+                            yaw=ini.yaw, rider=r, mu=road.mu)
+        sim.user_inputs = opened.user_inputs
+        return sim
+
+    def user_inputs(self, opened):
+        """The two-wheeler's user channels, the brakes' full scales from its caliper limit."""
+        from .inputs import user_inputs
+
+        brakes = opened.config.brakes
+        return user_inputs(brakes.max_pressure_kpa if brakes is not None else 12000.0)
 
     def demo(self, opened) -> Demo:
         return Demo("drivers.rider_assist_demo", "lockstep", None, DEMO_DURATION, True, "two_wheeler")
