@@ -111,11 +111,11 @@ class FuzzTarget:
     """One vehicle file, built once, ready to ride drawn sequences on the shipped roads it can run on."""
 
     def __init__(self, vehicle: str | Path, dt: float = 1e-3):
-        from rtsim.service.server import vehicle_kind
+        from rtsim.vehicle.registry import open_vehicle
 
         self.path = Path(vehicle)
         self.dt = float(dt)
-        self.kind = vehicle_kind(self.path)
+        self.kind = open_vehicle(self.path).name      # (its per-kind set-up: still branches, see below)
         self.skipped_roads: dict[str, str] = {}
         if self.kind == "two_wheeler":
             self._init_two_wheeler()
@@ -190,7 +190,7 @@ class FuzzTarget:
             rc = read_road_config(p)
             if isinstance(rc, FlatRoadConfig) and rc.height == 0.0:
                 roads.append(p.stem)
-            else:   # the service refuses these too (rtsim.service.server._two_wheeler_sim)
+            else:   # the service refuses these too (rtsim.vehicle.motorcycle.kind.TwoWheelerKind.service_sim)
                 self.skipped_roads[p.stem] = "a two-wheeler's tyres run on the plane z = 0 only"
         self.roads = tuple(roads)
 
