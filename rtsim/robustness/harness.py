@@ -264,8 +264,8 @@ class FuzzTarget:
             from rtsim.vehicle.motorcycle.layout import K_DELTA, K_PHI_R, K_THETA
             from rtsim.vehicle.motorcycle.plant import IN_ASSIST, IN_RIDER_TORQUE
             from rtsim.vehicle.motorcycle.plant import FELL
-            args = sim.loop_args()
-            m, veh, vd, rider, parts, io = args[0], args[2], args[3], args[4], args[5], args[7]
+            v = sim.served()
+            m, veh, vd, rider, parts, io = v.m, v.params, v.plant, v.rider, v.parts, v.io
             k_rear, k_arm, k_steer = parts.idx[K_PHI_R], parts.idx[K_THETA], parts.idx[K_DELTA]
         # a car's held commands run in one call for up to CHECK_S (the checks at its end); a two-wheeler's
         # each command period (its drive and steering work are summed per period)

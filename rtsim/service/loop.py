@@ -224,7 +224,7 @@ class HilLoop:
         self._bus_errors_at_status = self.port.errors if self.port is not None else 0
         # one compiled call per step, its fixed arguments (model, state, loop arrays) bound once: passed
         # as one address table instead of unboxing ~120 arrays at every call (rtsim.boundcall)
-        self._loop_run = bind(loop_run, *sim.loop_args(), self.lp, self.ls, self.rings, n_free=3)
+        self._loop_run = bind(loop_run, sim.served(), self.lp, self.ls, self.rings, n_free=3)
 
     def _user_slots(self, sim) -> tuple[np.ndarray, np.ndarray]:
         """Per user channel (rtsim.service.user_input): the command slot it writes (a car's) or the

@@ -134,7 +134,7 @@ class VehicleKind:
         raise NotImplementedError
 
     def service_sim(self, opened: "OpenedVehicle", sc, dt: float | None, models: dict, rider: bool):
-        """The vehicle at the scenario's start as the service steps it (its ``loop_args``)."""
+        """The vehicle at the scenario's start as the service steps it (its ``served()`` tuple)."""
         raise NotImplementedError
 
     def demo(self, opened: "OpenedVehicle") -> Demo:

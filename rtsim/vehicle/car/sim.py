@@ -5,6 +5,7 @@ with `set_effects`, without rebuilding the model."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -46,6 +47,19 @@ def _align_z(n: np.ndarray) -> np.ndarray:
     k = axis / sin_a
     kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) + sin_a * kx + (1 - cos_a) * kx @ kx
+
+
+class LoopCar(NamedTuple):
+    """The car in the service's compiled step (rtsim.service.vehicles): the multibody model and data,
+    the compiled vehicle and its data, the road, the parts' parameters, their states, the IO arrays."""
+    m: object
+    d: object
+    vehicle: object
+    data: object
+    road: object
+    parts: object
+    states: object
+    io: object
 
 
 class VehicleSim:
@@ -201,11 +215,9 @@ class VehicleSim:
         self.states = self.states._replace(sensors=ss)
 
     # ---- what the HIL service's loop needs of a vehicle (rtsim.service.vehicles) ------------------------
-    kind = "car"
-
-    def loop_args(self) -> tuple:
-        """The eight arguments of the service's compiled step (rtsim.service.vehicles)."""
-        return (self.m, self.data, self.vm.vehicle, self.vd, self.road, self.parts, self.states, self.io)
+    def served(self) -> "LoopCar":
+        """The car as the service's compiled step takes it (rtsim.service.vehicles): one named tuple."""
+        return LoopCar(self.m, self.data, self.vm.vehicle, self.vd, self.road, self.parts, self.states, self.io)
 
     command_slots = COMMAND_SLOTS     # where each bus command's value goes in io.commands
     invalid_slots = INVALID_SLOTS     # where 1.0 goes while a command has no valid value
