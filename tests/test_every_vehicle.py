@@ -184,3 +184,25 @@ def test_an_unknown_kind_is_refused_in_one_line(tmp_path, capsys):
     bad.write_text('name = "x"\nid = "x"\nkind = "tricycle"\n')
     code, _, err = _cli(capsys, "describe", "--vehicle", bad)
     _one_line_refusal(code, err, "kind = 'tricycle'", "unknown vehicle kind")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_vehicle_declares_its_user_inputs(name):
+    """What `rtsim view` may drive (the vehicle's UserInputs): each channel's full scale within its range,
+    and the command it competes with one of the vehicle's own bus commands (its channel dictionary) or,
+    where its DBC does not carry it (the EPS car's throttle, brake and steering), an input of the
+    scenario's in-loop driver."""
+    from drivers.base import INPUT_NAMES
+
+    vehicle = open_vehicle(name)
+    inputs = vehicle.user_inputs
+    commands = set(vehicle.describe()["channels"]["commands"])
+    assert len(set(inputs.names)) == len(inputs.names) >= 3
+    for ch in inputs.channels:
+        assert ch.lo <= ch.full_scale <= ch.hi and ch.lo < ch.hi, ch
+        assert ch.bus in commands or (inputs.in_loop == "scenario" and ch.bus in INPUT_NAMES), (ch, sorted(commands))
+    # the bus takes over a channel it replaces unless the user took over; one it adds to stays the user's
+    ch = inputs.channels[0]
+    assert inputs.who(ch, user_set=True, takeover=False, valid=True, in_loop=True) == "ecu"
+    assert inputs.who(ch, user_set=True, takeover=True, valid=True, in_loop=True) == "user"
+    assert inputs.who(ch, user_set=False, takeover=False, valid=False, in_loop=False) == inputs.idle
