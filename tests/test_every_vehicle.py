@@ -206,3 +206,51 @@ def test_every_vehicle_declares_its_user_inputs(name):
     assert inputs.who(ch, user_set=True, takeover=False, valid=True, in_loop=True) == "ecu"
     assert inputs.who(ch, user_set=True, takeover=True, valid=True, in_loop=True) == "user"
     assert inputs.who(ch, user_set=False, takeover=False, valid=False, in_loop=False) == inputs.idle
+
+
+def test_a_vehicle_file_may_name_its_own_assembly(tmp_path, capsys, monkeypatch):
+    """``assembly = "package.module"``: the registry takes that module's KIND, unchanged itself; a module
+    that cannot be imported, or defines no KIND, is refused in one line."""
+    (tmp_path / "sled_assembly.py").write_text('''
+from rtsim.vehicle.registry import VehicleKind
+
+
+class SledKind(VehicleKind):
+    """A one-body sled: enough of a kind for `describe`."""
+    name = "sled"
+    not_for = {"run": "a sled has no scenario runner"}
+
+    def load(self, data, path):
+        return data, path.parent
+
+    def build(self, opened):
+        return opened.config["mass_kg"]
+
+    def describe(self, opened):
+        m = opened.model
+        return {"name": opened.config["name"], "id": "sled", "kind": self.name, "file": str(opened.path),
+                "n_coordinates": 7, "n_constraints": 1, "n_dof": 6, "mass": m, "masses": {"body": m},
+                "geometry": {"wheelbase": 1.0, "track_front": 0.5, "track_rear": 0.5, "cg_height": 0.2,
+                             "cg_to_front_axle": 0.5, "wheel_centres": []},
+                "channels": {"sensors": ["speed"], "commands": [], "state": ["speed"]}}
+
+
+KIND = SledKind()
+''')
+    monkeypatch.syspath_prepend(str(tmp_path))
+    sled = tmp_path / "sled.toml"
+    sled.write_text('name = "Sled"\nassembly = "sled_assembly"\nmass_kg = 42.0\n')
+    code, out, err = _cli(capsys, "describe", "--vehicle", sled, "--json")
+    assert code == 0, err
+    info = json.loads(out)
+    assert tuple(info)[:len(DESCRIBE_FIELDS)] == DESCRIBE_FIELDS and info["kind"] == "sled" and info["mass"] == 42.0
+    code, _, err = _cli(capsys, "run", "--vehicle", sled, "--scenario", _short("step_steer_80kph", tmp_path),
+                        "--out", tmp_path / "x.csv")
+    _one_line_refusal(code, err, "rtsim run does not apply to sled.toml", "no scenario runner")
+    sled.write_text('name = "Sled"\nassembly = "no_such_assembly"\n')
+    code, _, err = _cli(capsys, "describe", "--vehicle", sled)
+    _one_line_refusal(code, err, "assembly = 'no_such_assembly'", "cannot import")
+    (tmp_path / "kindless_assembly.py").write_text("X = 1\n")
+    sled.write_text('name = "Sled"\nassembly = "kindless_assembly"\n')
+    code, _, err = _cli(capsys, "describe", "--vehicle", sled)
+    _one_line_refusal(code, err, "defines no KIND")
