@@ -19,6 +19,18 @@ from rtsim.errors import ConfigError
 ENERGY_NAMES = frozenset(c.name for c in ENERGY)
 
 
+def write_offline(res, path: str | Path) -> None:
+    """An offline run of any vehicle (rtsim.vehicle.registry.OfflineRun) to ``path``: .csv (its own
+    writer) or .mcap (``write_run``, with the 3D scene); ConfigError for any other suffix."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".csv":
+        res.write_csv(path)
+    elif suffix == ".mcap":
+        write_run(path, res.columns, res.data, res.vehicle_id, res.channels, sim=res.scene)
+    else:
+        raise ConfigError(f"{path}: output must end in .csv or .mcap")
+
+
 def write_run(path: str | Path, columns: tuple[str, ...], rows, vehicle_id: str,
               channels: ChannelDictionary = CAR, sim=None) -> None:
     """Write the rows of a run (columns: `time`, then channels of `channels`, as

@@ -57,13 +57,7 @@ SENSOR_ALIASES = {
 #: Allowed value range of each input channel (inclusive), used to validate profiles and recordings.
 #: Throttle: a plate angle from closed to fully open. Brake: up to 20 MPa, beyond any passenger car's
 #: line pressure. Steering wheel: two turns each way. Wheel torque: +-5 kN*m per wheel.
-LIMITS: dict[str, tuple[float, float]] = {
-    "throttle_angle_cmd": (0.0, 0.5 * math.pi),
-    "brake_pressure_cmd": (0.0, 20000.0),
-    "steering_wheel_angle_cmd": (-4.0 * math.pi, 4.0 * math.pi),
-    "wheel_torque_rl": (-5000.0, 5000.0),
-    "wheel_torque_rr": (-5000.0, 5000.0),
-}
+from rtsim.vehicle.car.inputs import LIMITS  # noqa: E402  (the car's input ranges, declared by the vehicle)
 
 
 def input_name(column: str) -> str | None:

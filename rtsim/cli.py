@@ -127,20 +127,21 @@ def _bench(args) -> int:
 
 
 def _run(args) -> int:
+    """A scenario offline on its vehicle (rtsim.vehicle.registry): rows to CSV/MCAP, the summary (what the
+    manoeuvre measured, when the vehicle reports one) to the console and --summary; exit status
+    MODEL_FAULT_EXIT when the model failed or the vehicle fell."""
     from pathlib import Path
 
-    from rtsim.vehicle.offline import prepare, run, write_csv
-
     from drivers.scenario import load_scenario
+    from rtsim.vehicle.registry import open_vehicle, resolve_scenario
 
     out = args.out
-    kind = Path(out).suffix.lower()
-    if kind not in (".csv", ".mcap"):
+    if Path(out).suffix.lower() not in (".csv", ".mcap"):
         raise RtsimError(f"{out}: output must end in .csv or .mcap")
-    sc = load_scenario(args.scenario, check_files=True)
-    if sc.two_wheeler:
-        return _run_two_wheeler(args, sc, kind)
-    sim, sc = prepare(args.vehicle, sc)
+    sc = load_scenario(resolve_scenario(args.scenario), check_files=True)
+    vehicle = open_vehicle(args.vehicle if args.vehicle is not None else sc.vehicle_path)
+    vehicle.refuse("run")
+    vehicle.check_scenario(sc)
     shown = [-1]
 
     def progress(frac):
@@ -148,21 +149,21 @@ def _run(args) -> int:
         if pct // 5 != shown[0] // 5 and sys.stderr.isatty():
             print(f"\r{sc.name}: {pct:3d} %", end="", file=sys.stderr, flush=True)
             shown[0] = pct
-    res = run(sim, sc, progress)
-    if kind == ".csv":
-        write_csv(res, out)
-    else:
-        from bridge.mcap_log import write_run
-        write_run(out, res.columns, res.data, sim.vm.config.id, sim.vm.channels, sim=sim)   # with the 3D scene
-    if res.fault is not None:
-        return _model_fault_exit(res.fault, len(res.data), out)
-    dist = float(np.sum(np.hypot(np.diff(res.column("pos_x")), np.diff(res.column("pos_y")))))
-    print(f"{'' if not sys.stderr.isatty() else chr(13)}{sc.name}: {sc.duration:g} s simulated in {res.wall_s:.2f} s "
-          f"({res.wall_s / res.steps * 1e6:.1f} us/step), distance {dist:.1f} m, "
-          f"peak speed {res.column('speed').max() * 3.6:.1f} km/h, {len(res.data)} rows -> {out}")
+    res = vehicle.run_offline(sc, progress)
+    from bridge.mcap_log import write_offline
+    write_offline(res, out)
+    if res.summary:
+        text = json.dumps(res.summary, indent=2)
+        if args.summary:
+            Path(args.summary).write_text(text + "\n")
+        print(text)
+    print(f"{'' if not sys.stderr.isatty() else chr(13)}{res.line} -> {out}; status {res.status}"
+          f"{': ' + res.message if res.message else ''}")
     if args.plot is not None:
         _write_figures(res.columns, res.data, args.plot or None, out, sc.name)
-    return 0
+    if res.fault is not None:
+        return _model_fault_exit(res.fault, len(res.data), out)
+    return 0 if res.status == "ok" else MODEL_FAULT_EXIT
 
 
 MODEL_FAULT_EXIT = 3      # `rtsim run`: the model failed (a two-wheeler: or fell); the rows up to it are written
@@ -179,31 +180,6 @@ def _model_fault_exit(fault, rows: int, out) -> int:
         print("\r", end="", file=sys.stderr)
     print(f"rtsim run: {fault.line()}; {rows} rows up to it -> {out} (the failure: {side})", file=sys.stderr)
     return MODEL_FAULT_EXIT
-
-
-def _run_two_wheeler(args, sc, kind) -> int:
-    """A motorcycle scenario: rows to CSV/MCAP, the summary to the console (and --summary JSON); exit
-    status 3 when the motorcycle fell."""
-    from rtsim.vehicle.motorcycle.offline import prepare, run, write_csv, write_mcap
-
-    ride, sc = prepare(args.vehicle, sc)
-    res = run(ride, sc)
-    if kind == ".csv":
-        write_csv(res, args.out)
-    else:
-        write_mcap(res, args.out, ride.sim.mm.config.id, mm=ride.sim.mm)   # with the 3D scene
-    text = json.dumps(res.summary, indent=2)
-    if args.summary:
-        from pathlib import Path
-        Path(args.summary).write_text(text + "\n")
-    print(text)
-    print(f"{sc.name}: {res.summary.get('simulated_s')} s simulated in {res.wall_s:.2f} s, {len(res.data)} rows "
-          f"-> {args.out}; status {res.status}{': ' + res.message if res.message else ''}")
-    if args.plot is not None:
-        _write_figures(res.columns, res.data, args.plot or None, args.out, sc.name)
-    if res.fault is not None:
-        return _model_fault_exit(res.fault, len(res.data), args.out)
-    return 0 if res.status == "ok" else MODEL_FAULT_EXIT
 
 
 def _energy(args) -> int:
@@ -264,16 +240,12 @@ def _write_figures(columns, data, out_dir, source, title) -> None:
 
 
 def _describe(args) -> int:
-    from rtsim.road.model import make_plane
-    from rtsim.vehicle.car.config import load_vehicle
-    from rtsim.vehicle.car.build import build_vehicle
-    from rtsim.vehicle.car.describe import describe
-    from rtsim.vehicle.offline import default_vehicle_path
-    from rtsim.vehicle.car.sim import VehicleSim
+    """The vehicle's size and key parameters (every vehicle: rtsim.vehicle.registry.DESCRIBE_FIELDS)."""
+    from rtsim.vehicle.registry import open_vehicle
 
-    cfg, base = load_vehicle(args.vehicle or default_vehicle_path())
-    model = build_vehicle(cfg, base)
-    info = describe(model, VehicleSim(model, make_plane(), 1e-3))
+    vehicle = open_vehicle(args.vehicle)
+    vehicle.refuse("describe")
+    info = vehicle.describe()
     if args.json:
         print(json.dumps(info, indent=2))
     else:
@@ -283,7 +255,10 @@ def _describe(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from rtsim import __version__
+
     p = argparse.ArgumentParser(prog="rtsim", description="Real-time HIL vehicle simulator")
+    p.add_argument("--version", action="version", version=f"rtsim {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bench", help="run the multibody benchmark problems (IFToMM A01-A05) and time them")
     b.add_argument("--problem", help="run one problem: pendulum, fourbar, fourbar2, fourbar40, andrews, bricard, flyball")
@@ -331,8 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV (a motorcycle's "
                        "scenario: also its summary); exit status 3 if the model failed (the rows up to the failure written, "
                        "the failure beside them in <out>.model_fault.json) or the motorcycle fell")
-    r.add_argument("--vehicle", help="vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)")
-    r.add_argument("--scenario", required=True, help="scenario TOML (configs/scenarios/)")
+    r.add_argument("--vehicle", help="vehicle TOML or name in configs/vehicles (default: the scenario's, else xbw)")
+    r.add_argument("--scenario", required=True, help="scenario TOML or name in configs/scenarios")
     r.add_argument("--out", required=True, help="output file: .csv or .mcap")
     r.add_argument("--summary", metavar="JSON", help="two-wheeler scenarios: also write the summary (measured "
                    "against the manoeuvre's analytic references) to this JSON file")
@@ -363,7 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--out", metavar="DIR", help="folder for the figures (default: <run stem>_plots/ beside it)")
     pl.set_defaults(func=_plot)
     d = sub.add_parser("describe", help="print the vehicle model's size and key parameters")
-    d.add_argument("--vehicle", help="vehicle TOML (default configs/vehicles/xbw.toml)")
+    d.add_argument("--vehicle", help="vehicle TOML or name in configs/vehicles (default xbw)")
     d.add_argument("--json", action="store_true")
     d.set_defaults(func=_describe)
     for name, module, text in _DELEGATED:

@@ -10,6 +10,15 @@ from pathlib import Path
 from rtsim.errors import RtsimError
 
 
+def _two_wheeler(path, command: str):
+    """The opened vehicle (rtsim.vehicle.registry); one line of refusal where ``command`` does not apply."""
+    from rtsim.vehicle.registry import open_vehicle
+
+    vehicle = open_vehicle(path)
+    vehicle.refuse(command)
+    return vehicle
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vehicle", required=True, help="two-wheeler vehicle TOML (e.g. configs/vehicles/motorcycle.toml)")
     p.add_argument("--speeds", default="1:60:0.5", help="start:stop:step or a comma list, m/s (1:60:0.5)")
@@ -18,9 +27,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main(args) -> int:
-    from rtsim.vehicle.motorcycle.config import load_motorcycle
-    from rtsim.vehicle.motorcycle.build import build_motorcycle
-
     from .eigen import TwoWheelerLinearisation
     from .stability import as_dict, root_locus, speed_grid, sweep, write_json
 
@@ -28,8 +34,9 @@ def main(args) -> int:
         speeds = speed_grid(args.speeds)
     except ValueError as exc:
         raise RtsimError(str(exc)) from None
-    cfg, base = load_motorcycle(args.vehicle)
-    lin = TwoWheelerLinearisation(build_motorcycle(cfg, base))
+    vehicle = _two_wheeler(args.vehicle, "eigen")
+    cfg = vehicle.config
+    lin = TwoWheelerLinearisation(vehicle.model)
     results, crossings = sweep(lin, speeds)
     data = as_dict(cfg.name, results, crossings)
     if args.out:
@@ -53,12 +60,10 @@ def statics_main(args) -> int:
     """The two-wheeler at rest with the rider on: wheel loads, suspension sag, the frame's attitude."""
     import numpy as np
 
-    from rtsim.vehicle.motorcycle.build import build_motorcycle
-    from rtsim.vehicle.motorcycle.config import load_motorcycle
     from rtsim.vehicle.motorcycle.sim import static_pose
 
-    cfg, base = load_motorcycle(args.vehicle)
-    mm = build_motorcycle(cfg, base)
+    vehicle = _two_wheeler(args.vehicle, "statics")
+    cfg, mm = vehicle.config, vehicle.model
     q, loads = static_pose(mm)
     q0 = mm.coordinates(np.zeros(11))
     des = mm.design

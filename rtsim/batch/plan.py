@@ -47,8 +47,10 @@ Value = Any     # a TOML value: number, string, boolean, list, table
 
 
 class Case(Strict):
-    scenario: str = Field(min_length=1, description="scenario TOML, relative to the plan")
-    vehicle: Optional[str] = Field(default=None, description="vehicle TOML (default: the scenario's)")
+    scenario: str = Field(min_length=1, description="scenario TOML, relative to the plan, or a name in "
+                          "configs/scenarios")
+    vehicle: Optional[str] = Field(default=None, description="vehicle TOML, relative to the plan, or a name in "
+                                   "configs/vehicles (default: the scenario's)")
     overrides: dict[str, Value] = {}
 
     @model_validator(mode="after")
@@ -137,9 +139,17 @@ def load_plan(path: str | Path) -> tuple[Plan, Path]:
     """The validated plan and the folder its relative paths refer to; every case's files must exist."""
     path = Path(path)
     plan = load(Plan, path)
+    from rtsim.vehicle.registry import SCENARIOS, VEHICLES
+
     for i, c in enumerate(plan.cases):
-        for key in ("scenario", "vehicle"):
+        for key, folder in (("scenario", SCENARIOS), ("vehicle", VEHICLES)):
             rel = getattr(c, key)
-            if rel is not None and not (path.parent / rel).is_file():
-                raise problem(path, f"cases[{i}].{key}", rel, f"file not found ({(path.parent / rel).resolve()})")
+            if rel is None or (path.parent / rel).is_file():
+                continue
+            named = folder / f"{rel}.toml"          # a name of a shipped config
+            if "/" not in rel and named.is_file():
+                c = plan.cases[i] = c.model_copy(update={key: str(named)})
+                continue
+            raise problem(path, f"cases[{i}].{key}", rel, f"file not found ({(path.parent / rel).resolve()}) and "
+                          f"no configs/{folder.name}/{rel}.toml")
     return plan, path.parent

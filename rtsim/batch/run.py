@@ -22,36 +22,27 @@ from .expand import split_overrides
 from .metrics import compute
 
 def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object]:
-    """(status, message, columns, data, writer) of the spec's run."""
+    """(status, message, columns, data, writer) of the spec's run, on the vehicle the registry opens
+    (rtsim.vehicle.registry: the spec's vehicle, else the scenario's, else the default car)."""
     from drivers.scenario import load_scenario
+    from rtsim.vehicle.registry import DEFAULT_VEHICLE, open_vehicle
 
     scen = Path(spec["scenario"])
     veh_over, scen_over = split_overrides(spec["overrides"])
     files = {scen.resolve(): scen_over}
     with overrides(files):
         sc = load_scenario(scen, check_files=True)
-        vpath = Path(spec["vehicle"]) if spec["vehicle"] else sc.vehicle_path
-        if vpath is None and not sc.two_wheeler:
-            from rtsim.vehicle.offline import default_vehicle_path
-            vpath = default_vehicle_path()
-        if vpath is not None:
-            files[vpath.resolve()] = veh_over
-        if sc.two_wheeler:
-            from rtsim.vehicle.motorcycle import offline as moto
-            ride, sc = moto.prepare(vpath, sc)
-        else:
-            from rtsim.vehicle import offline as car
-            sim, sc = car.prepare(vpath, sc)
-    if sc.two_wheeler:
-        res = moto.run(ride, sc)
-        write = {"csv": lambda p: moto.write_csv(res, p),
-                 "mcap": lambda p: moto.write_mcap(res, p, ride.sim.mm.config.id, mm=ride.sim.mm)}
-        return res.status, res.message, res.columns, res.data, write
-    res = car.run(sim, sc, seed=spec["seed"])
-    from bridge.mcap_log import write_run
-    write = {"csv": lambda p: car.write_csv(res, p),
-             "mcap": lambda p: write_run(p, res.columns, res.data, sim.vm.config.id, sim.vm.channels, sim=sim)}
-    return "ok", "", res.columns, res.data, write
+        vpath = Path(spec["vehicle"]) if spec["vehicle"] else (sc.vehicle_path or DEFAULT_VEHICLE)
+        files[vpath.resolve()] = veh_over
+        vehicle = open_vehicle(vpath)
+        vehicle.refuse("batch")
+        vehicle.check_scenario(sc)
+        vehicle.model                   # built under the overrides (their values are read on load)
+    res = vehicle.run_offline(sc, seed=spec["seed"])
+    from bridge.mcap_log import write_offline
+    write = {"csv": lambda p: write_offline(res, Path(p).with_suffix(".csv")),
+             "mcap": lambda p: write_offline(res, Path(p).with_suffix(".mcap"))}
+    return res.status, res.message, res.columns, res.data, write
 
 
 def verdict(status: str, metrics: dict, criteria: list) -> tuple[str, str]:

@@ -111,11 +111,11 @@ class FuzzTarget:
     """One vehicle file, built once, ready to ride drawn sequences on the shipped roads it can run on."""
 
     def __init__(self, vehicle: str | Path, dt: float = 1e-3):
-        from rtsim.service.server import vehicle_kind
+        from rtsim.vehicle.registry import open_vehicle
 
         self.path = Path(vehicle)
         self.dt = float(dt)
-        self.kind = vehicle_kind(self.path)
+        self.kind = open_vehicle(self.path).name      # (its per-kind set-up: still branches, see below)
         self.skipped_roads: dict[str, str] = {}
         if self.kind == "two_wheeler":
             self._init_two_wheeler()
@@ -190,7 +190,7 @@ class FuzzTarget:
             rc = read_road_config(p)
             if isinstance(rc, FlatRoadConfig) and rc.height == 0.0:
                 roads.append(p.stem)
-            else:   # the service refuses these too (rtsim.service.server._two_wheeler_sim)
+            else:   # the service refuses these too (rtsim.vehicle.motorcycle.kind.TwoWheelerKind.service_sim)
                 self.skipped_roads[p.stem] = "a two-wheeler's tyres run on the plane z = 0 only"
         self.roads = tuple(roads)
 
@@ -264,8 +264,8 @@ class FuzzTarget:
             from rtsim.vehicle.motorcycle.layout import K_DELTA, K_PHI_R, K_THETA
             from rtsim.vehicle.motorcycle.plant import IN_ASSIST, IN_RIDER_TORQUE
             from rtsim.vehicle.motorcycle.plant import FELL
-            args = sim.loop_args()
-            m, veh, vd, rider, parts, io = args[0], args[2], args[3], args[4], args[5], args[7]
+            v = sim.served()
+            m, veh, vd, rider, parts, io = v.m, v.params, v.plant, v.rider, v.parts, v.io
             k_rear, k_arm, k_steer = parts.idx[K_PHI_R], parts.idx[K_THETA], parts.idx[K_DELTA]
         # a car's held commands run in one call for up to CHECK_S (the checks at its end); a two-wheeler's
         # each command period (its drive and steering work are summed per period)

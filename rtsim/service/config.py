@@ -189,8 +189,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append", metavar="FOLDER",
                            type=Path, help=f.description)
         else:
-            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, type=_arg_type(f.annotation),
-                           help=f.description)
+            option = flag or f"--{name.replace('_', '-')}"
+            p.add_argument(option, dest=dest, type=_arg_type(f.annotation), help=f.description,
+                           metavar=option.lstrip("-").upper().replace("-", "_"))
     p.add_argument("--json", action="store_true", help="print the closing summary as JSON")
 
 

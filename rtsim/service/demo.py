@@ -46,15 +46,14 @@ from rtsim.errors import RtsimError
 
 from .cli import format_summary
 from .ecu_process import EcuProcess
-from .server import ServeOptions, Service, resolve_scenario, resolve_vehicle, vehicle_kind
+from .server import ServeOptions, Service, resolve_scenario, resolve_vehicle
 
 ROOT = Path(__file__).resolve().parents[2]
 #: tests: the ECU command to run instead of ``python -m drivers.ecu_demo`` (shell words; the bus,
 #: manoeuvre and duration arguments are appended)
 ECU_COMMAND_ENV = "RTSIM_DEMO_ECU"
-EPS_SCENARIO = "step_steer_80kph"
+EPS_SCENARIO = "step_steer_80kph"     # the EPS car's demo manoeuvre (its kind's Demo.scenario)
 DEFAULT_ZENOH_PORT = 7447
-TWO_WHEELER_DURATION = 20.0      # s of simulated time: the figure-eight's two circles and straights
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -146,15 +145,15 @@ def main(args) -> int:
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)     # progress lines show at once in a pipe too
     vehicle = resolve_vehicle(args.vehicle) if args.vehicle else None
-    two_wheeler = vehicle is not None and vehicle_kind(vehicle) == "two_wheeler"
-    eps = vehicle is not None and not two_wheeler and _has_eps(vehicle)
+    from rtsim.vehicle.registry import open_vehicle
+    demo = open_vehicle(vehicle).demo           # what the vehicle's demo runs (its ECU, mode, manoeuvre)
     if args.mode is None:
-        args.mode = "lockstep" if eps or two_wheeler else "realtime"
-    if two_wheeler and args.duration is None:
-        args.duration = TWO_WHEELER_DURATION
+        args.mode = demo.mode
+    if args.duration is None:
+        args.duration = demo.duration
     kw = {"vehicle": vehicle} if vehicle is not None else {}
-    if args.scenario or eps:
-        kw["scenario"] = resolve_scenario(args.scenario or EPS_SCENARIO)
+    if args.scenario or demo.scenario:
+        kw["scenario"] = resolve_scenario(args.scenario or demo.scenario)
     for flag, port in (("--can-hub-port", args.can_hub_port), ("--zenoh-port", args.zenoh_port)):
         if port is not None and not 1 <= port <= 65535:
             raise RtsimError(f"{flag} {port}: a TCP port is 1..65535")
@@ -166,10 +165,10 @@ def main(args) -> int:
     check_ports(service_ports(opts, "--zenoh-port"), "rtsim demo")    # every port, before the ECU and any compile
     if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
         raise RtsimError(f"--duration {args.duration}: must be a positive number of seconds")
-    if args.silent_after is not None and not ((eps or two_wheeler) and args.silent_after > 0):
+    if args.silent_after is not None and not (demo.silent_after and args.silent_after > 0):
         raise RtsimError("--silent-after: only with a car with electric power steering or a two-wheeler, a "
                          "positive time in s")
-    if eps and args.duration is None:
+    if demo.scenario is not None and args.duration is None:     # the whole manoeuvre
         from drivers.scenario import load_scenario
         args.duration = load_scenario(opts.scenario).duration
     iface, chan = args.can_interface, args.can_channel
@@ -178,7 +177,7 @@ def main(args) -> int:
             ("remote", chan or f"{HUB_HOST}:{args.can_hub_port or default_hub_port()}")
     # the ECU starts first (its imports and its own kernels take seconds) and waits for the service's
     # bus and first frames (bounded, saying so); the service ends when the ECU does
-    ecu_module = "drivers.eps_demo" if eps else ("drivers.rider_assist_demo" if two_wheeler else "drivers.ecu_demo")
+    ecu_module = demo.ecu
     cmd = shlex.split(os.environ.get(ECU_COMMAND_ENV, "")) or [sys.executable, "-m", ecu_module]
     cmd = cmd + ["--can-interface", iface, "--can-channel", chan, "--manoeuvre", args.manoeuvre]
     if args.silent_after is not None:
@@ -211,18 +210,7 @@ def main(args) -> int:
     ecu.wait(5.0)
     if ecu.returncode != 0:
         return _fail(ecu.describe_end())
-    if eps:
-        return _report_eps(args, svc, summary, ecu.result)
-    if two_wheeler:
-        return _report_two_wheeler(args, svc, summary, ecu.result)
-    return _report(args, svc, summary, ecu.result)
-
-
-def _has_eps(vehicle: Path) -> bool:
-    from rtsim.vehicle.car.config import load_vehicle
-
-    cfg, _ = load_vehicle(vehicle)
-    return cfg.eps is not None
+    return REPORTS[demo.report](args, svc, summary, ecu.result)
 
 
 def recorded_eps(path: Path, vehicle_id: str) -> dict:
@@ -319,3 +307,7 @@ def _report(args, svc: Service, summary: dict, result: dict) -> int:
     if accepted <= 0:
         return _fail("the service accepted no command from the demo ECU (see the rejection counters above)")
     return 0
+
+
+#: the closing report of each vehicle's demo (rtsim.vehicle.registry.Demo.report)
+REPORTS = {"car": _report, "eps": _report_eps, "two_wheeler": _report_two_wheeler}

@@ -27,8 +27,9 @@ frozen, time going on, the watchdog, SIM_STATUS and SIM_DIAG at their period, no
 
 One call instead of several matters: each call from Python unboxes the model and state tuples (about
 a hundred arrays, several microseconds), more than the checks, the sensors and the packing cost.
-Times are simulation times: ``k`` steps of ``dt`` s. The vehicle is any the service can serve: its
-eight arguments and the calls into it are in rtsim.service.vehicles.
+Times are simulation times: ``k`` steps of ``dt`` s. The vehicle is any the service can serve: one
+named tuple of its model, data and parts (``sim.served()``); the calls into it are in
+rtsim.service.vehicles.
 """
 from __future__ import annotations
 
@@ -274,20 +275,20 @@ def fault_step(lp, ls, rg, commands):
 
 
 @kernel
-def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
+def one_step(v, lp, ls, rg):
     """Step 2 of the module docstring, once. Returns the vehicle step's status."""
     li = ls.li
     h = lp.dt[0]
     k = li[LI_K]
     t = k * h
     if lp.ints[PI_DRIVER]:
-        vehicle_drive(m, d, veh, vd, road, parts, states, io, lp, ls, t, h)
-    mask = rx_watchdog(lp.rx, ls.rx, t, io.commands)
+        vehicle_drive(v, lp, ls, t, h)
+    mask = rx_watchdog(lp.rx, ls.rx, t, v.io.commands)
     if mask != li[LI_MASK]:
         li[LI_MASK] = mask
-        _command_event(rg, lp.rx, t, CMD_MASK, mask, io.commands, True)
-    vehicle_user(m, d, veh, vd, road, parts, states, io, lp, ls, h)
-    status = vehicle_advance(m, d, veh, vd, road, parts, states, io, h)
+        _command_event(rg, lp.rx, t, CMD_MASK, mask, v.io.commands, True)
+    vehicle_user(v, lp, ls, h)
+    status = vehicle_advance(v, h)
     if status != OK:
         return status
     k += 1
@@ -295,7 +296,7 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
     t1 = k * h
     ints = lp.ints
     if k % ints[PI_SENSOR_EVERY] == 0:
-        vehicle_sensors(m, d, veh, vd, road, parts, states, io, ls.values)
+        vehicle_sensors(v, ls.values)
         vals = ls.values
         pack_frames(vals, t1, lp.sensor_time_start, lp.sensor_time_mask, lp.sensor_sig_int,
                     lp.sensor_sig_float, ls.words)
@@ -310,7 +311,7 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
         rg.heads[H_SENSOR] += 1
         li[LI_SENT] += 1
     if k % ints[PI_STATE_EVERY] == 0:
-        vehicle_observe(m, d, veh, vd, road, parts, states, io, ls.state)
+        vehicle_observe(v, ls.state)
         j = rg.heads[H_STATE] % rg.state_t.shape[0]
         rg.state_t[j] = t1
         for c in range(ls.state.shape[0]):
@@ -323,7 +324,7 @@ def one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg):
 
 
 @kernel
-def loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter):
+def loop_run(v, lp, ls, rg, frames, nsteps, ack_counter):
     """The module docstring's steps: frames in (if ``frames``), ``nsteps`` steps, the lockstep
     acknowledgement (if ``ack_counter >= 0``). Returns OK or the failed step's status: the vehicle's state
     is then that of the last good step, ``LI_MODEL_FAULT`` the status, the failed step's period run as the
@@ -332,23 +333,23 @@ def loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps,
     call's own duration in processor cycles goes to ``ls.cycles`` (how much of a loop period the compiled
     work takes)."""
     c0 = read_cycles()
-    status = _loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter)
+    status = _loop_run(v, lp, ls, rg, frames, nsteps, ack_counter)
     ls.cycles[ls.li[LI_K] % ls.cycles.shape[0]] = read_cycles() - c0
     return status
 
 
 @inline_kernel
-def _loop_run(m, d, veh, vd, road, parts, states, io, lp, ls, rg, frames, nsteps, ack_counter):
+def _loop_run(v, lp, ls, rg, frames, nsteps, ack_counter):
     if frames:
         take_frames(lp, ls, rg)
     for _ in range(nsteps):
         if ls.li[LI_MODEL_FAULT] != 0:
-            fault_step(lp, ls, rg, io.commands)
+            fault_step(lp, ls, rg, v.io.commands)
             continue
-        status = one_step(m, d, veh, vd, road, parts, states, io, lp, ls, rg)
+        status = one_step(v, lp, ls, rg)
         if status != OK:                    # the model-fault state from this step's period on
             ls.li[LI_MODEL_FAULT] = status
-            fault_step(lp, ls, rg, io.commands)
+            fault_step(lp, ls, rg, v.io.commands)
             return status
     if ack_counter >= 0:
         t = ls.li[LI_K] * lp.dt[0]

@@ -49,7 +49,7 @@ from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_MODEL_FAULT, LI_OVERRUNS, L
                      PI_STATUS_EVERY, PI_STATUS_ID, PI_STEP_REQ_ID, ST_BUS_ERROR, ST_FAULT0, ST_RANGE, LoopParams,
                      LoopState, loop_run)
 from .rings import Rings, RxWriter, make_rings
-from .user_input import NUSR, NWORK, TWO_WHEELER_BUS, USER_HOLD, check_value, user_channels
+from .user_input import NUSR, NWORK, USER_HOLD, check_value
 
 RUN_STATES = ("running", "paused", "model_fault")
 STEPPING = ("running", "model_fault")     # the states whose steps advance simulation time
@@ -158,11 +158,12 @@ class HilLoop:
         command). A two-wheeler's in-loop driver is its rider (if it has one)."""
         self.sim = sim
         names = self.codec.channels.command_names
-        car = sim.kind == "car"
-        self.external_eps = car and any(n in sim.invalid_slots for n in names)   # the DBC carries the EPS's command
+        self.external_eps = any(n in sim.eps_commands for n in names)   # the DBC carries the EPS's command
         if self.external_eps:
             sim.external_eps(True)
-        driven = [i for i, n in enumerate(INPUT_NAMES) if car and n in sim.command_slots and n not in names]
+        # the scenario's driver drives the vehicle's driver inputs its DBC does not carry (a two-wheeler has
+        # none of them: its in-loop source is its rider, sim.rider_on)
+        driven = [i for i, n in enumerate(INPUT_NAMES) if n in sim.command_slots and n not in names]
         self.driver = driver if driver is not None and driven else Driver()
         self.driver.reset()
         drv_slot = np.full(NINPUT, -1, dtype=np.int64)
@@ -190,7 +191,7 @@ class HilLoop:
         ints[PI_MODE_CODE] = c.modes[self.mode]
         ints[PI_STEP_REQ_ID], ints[PI_STATUS_ID], ints[PI_ACK_ID], ints[PI_DIAG_ID] = \
             c.step_request.frame_id, c.status_frame.frame_id, c.step_ack.frame_id, c.diag_frame.frame_id
-        ints[PI_DRIVER] = bool(np.any(drv_slot >= 0)) if car else sim.rider_on
+        ints[PI_DRIVER] = bool(np.any(drv_slot >= 0)) or sim.rider_on
         usr_slot, usr_rx = self._user_slots(sim)
         faults = self.rx.fault_names
         sources = c.status_sources
@@ -223,7 +224,7 @@ class HilLoop:
         self._bus_errors_at_status = self.port.errors if self.port is not None else 0
         # one compiled call per step, its fixed arguments (model, state, loop arrays) bound once: passed
         # as one address table instead of unboxing ~120 arrays at every call (rtsim.boundcall)
-        self._loop_run = bind(loop_run, *sim.loop_args(), self.lp, self.ls, self.rings, n_free=3)
+        self._loop_run = bind(loop_run, sim.served(), self.lp, self.ls, self.rings, n_free=3)
 
     def _user_slots(self, sim) -> tuple[np.ndarray, np.ndarray]:
         """Per user channel (rtsim.service.user_input): the command slot it writes (a car's) or the
@@ -232,14 +233,11 @@ class HilLoop:
         names = self.codec.channels.command_names
         slot = np.full(NUSR, -1, dtype=np.int64)
         rx = np.full(NUSR, -1, dtype=np.int64)
-        for u, name in enumerate(user_channels(sim.kind)):
-            bus = name if sim.kind == "car" else TWO_WHEELER_BUS[name]
-            if sim.kind == "car":
-                slot[u] = sim.command_slots.get(name, -1)
-            elif bus in names:
-                slot[u] = sim.invalid_slots.get(bus, -1)
-            if bus in names:
-                rx[u] = names.index(bus)
+        inputs = sim.user_inputs
+        for u, ch in enumerate(inputs.channels):
+            slot[u] = inputs.slot(ch, sim.command_slots, sim.invalid_slots, names)
+            if ch.bus in names:
+                rx[u] = names.index(ch.bus)
         return slot, rx
 
     def _every(self, period: float, what: str) -> int:
@@ -463,12 +461,12 @@ class HilLoop:
         applied (``sim_time``, ``wall_time``: the service's clock) and who drives each channel now."""
         if not self.user_input:
             return {"ok": False, "error": "drive: this service does not accept user commands (--no-user-input)"}
-        kind = self.sim.kind
+        inputs = self.sim.user_inputs
         new = {}
         takeover = args.get("takeover")
         if takeover is not None and not isinstance(takeover, bool):
             return {"ok": False, "error": f"drive: takeover = {takeover!r} must be true or false"}
-        chans = list(user_channels(kind))
+        chans = list(inputs.names)
         for name, value in args.items():
             if name in ("takeover", "release", "seq"):
                 continue
@@ -479,7 +477,7 @@ class HilLoop:
                 new[chans.index(name)] = np.nan
                 continue
             try:
-                v = check_value(kind, name, value)
+                v = check_value(inputs, name, value)
             except ValueError as exc:
                 return {"ok": False, "error": f"drive: {exc}"}
             new[chans.index(name)] = v
@@ -506,7 +504,7 @@ class HilLoop:
         if now == self._usr_last:
             return
         self._usr_last = now
-        names = user_channels(self.sim.kind)
+        names = self.sim.user_inputs.names
         self._log_event("user", {"time": self.sim_time, "step": self.k, "cause": cause,
                                  "channels": {n: now[0][u] for u, n in enumerate(names)},
                                  "takeover": now[1], "seq": self._usr_seq})
@@ -515,7 +513,7 @@ class HilLoop:
         """Set the user source as a recorded change says (re-simulation; see ``_user_changed``): every
         user channel's value (None or absent: not driven) and the takeover."""
         usr = self.ls.usr
-        for u, n in enumerate(user_channels(self.sim.kind)):
+        for u, n in enumerate(self.sim.user_inputs.names):
             v = channels.get(n)
             usr[u] = np.nan if v is None else float(v)
         self.ls.usr_mode[0] = int(bool(takeover))
@@ -529,7 +527,7 @@ class HilLoop:
         """The user source: the channels it drives now (SI values), whether it took over, the last request's
         sequence number and how many requests came."""
         usr = self.ls.usr
-        return {"channels": {n: float(usr[u]) for u, n in enumerate(user_channels(self.sim.kind))
+        return {"channels": {n: float(usr[u]) for u, n in enumerate(self.sim.user_inputs.names)
                              if not np.isnan(usr[u])},
                 "takeover": bool(self.ls.usr_mode[0]), "seq": self._usr_seq, "requests": self._usr_requests,
                 "accepted": self.user_input}
@@ -538,27 +536,16 @@ class HilLoop:
         """Who drives each of the vehicle's driving inputs now: "user" (rtsim view), "ecu" (a valid bus
         command), "scenario" (a car's in-loop driver), "rider" (a two-wheeler's), "safe" (the watchdog's
         safe value) or "none" (nobody: zero)."""
-        kind = self.sim.kind
+        inputs = self.sim.user_inputs
         names = self.codec.channels.command_names
         iv = self.rx.state.iv
         usr, takeover = self.ls.usr, bool(self.ls.usr_mode[0])
         out = {}
-        for u, name in enumerate(user_channels(kind)):
-            bus = name if kind == "car" else TWO_WHEELER_BUS[name]
+        for u, ch in enumerate(inputs.channels):
+            bus = ch.bus
             valid = bus in names and bool(iv[names.index(bus), IV_HAS_VALUE]) and not iv[names.index(bus), IV_TIMED_OUT]
-            user = not np.isnan(usr[u]) and (takeover or not valid or (kind == "two_wheeler" and bus != name))
-            if kind == "car":
-                in_loop = int(self.lp.drv_slot[u]) >= 0 if u < len(self.lp.drv_slot) else False
-                who = "user" if user else "ecu" if valid else "scenario" if in_loop else "safe"
-            else:
-                rider = bool(self.sim.rider_on)
-                if bus != name:             # the steering: the rider's (or the user's) torque plus the assist
-                    who = "user" if user else "rider" if rider else "none"
-                    if valid and not (user and takeover):
-                        who += "+ecu"
-                else:
-                    who = "user" if user else "ecu" if valid else "rider" if rider else "none"
-            out[name] = who
+            in_loop = (u < len(self.lp.drv_slot) and int(self.lp.drv_slot[u]) >= 0) or bool(self.sim.rider_on)
+            out[ch.name] = inputs.who(ch, not np.isnan(usr[u]), takeover, valid, in_loop)
         return out
 
     def _live_driver(self, args: dict) -> dict:

@@ -30,109 +30,36 @@ from rtsim.model_fault import TEST_FAULT_METADATA
 from rtsim.realtime.health import LoopHealth
 from rtsim.realtime.pacer import Pacer
 
-from .config import DEFAULT_SCENARIO, TWO_WHEELER_SCENARIO, ServeOptions
+from rtsim.vehicle.registry import resolve_scenario, resolve_vehicle
+
+from .config import DEFAULT_SCENARIO, ServeOptions
 from .control_args import ControlError, check_request, scenario_file, scenario_folders
 from .loop import HilLoop, Request
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _resolve(name: str | Path, kind: str, folder: str) -> Path:
-    """A config path, or a bare name of configs/<folder>/<name>.toml."""
-    p = Path(name)
-    if p.exists():
-        return p
-    cand = ROOT / "configs" / folder / f"{name}.toml"
-    if cand.exists():
-        return cand
-    raise ConfigError(f"{kind} {str(name)!r}: no such file and no configs/{folder}/{name}.toml")
-
-
-def resolve_scenario(name: str | Path) -> Path:
-    """A scenario path, or a bare name of configs/scenarios/<name>.toml."""
-    return _resolve(name, "scenario", "scenarios")
-
-
-def resolve_vehicle(name: str | Path) -> Path:
-    """A vehicle path, or a bare name of configs/vehicles/<name>.toml."""
-    return _resolve(name, "vehicle", "vehicles")
-
-
-def vehicle_kind(path: Path) -> str:
-    """"two_wheeler" for a two-wheeler's vehicle file (``kind = "two_wheeler"``), else "car"."""
-    from rtsim.configfile import load_toml
-
-    return "two_wheeler" if load_toml(Path(path)).get("kind") == "two_wheeler" else "car"
-
-
 def default_scenario(vehicle: Path | None) -> Path:
-    """The scenario served when none is given: the two-wheeler's own for a two-wheeler, else hil_flat."""
-    if vehicle is not None and vehicle_kind(resolve_vehicle(vehicle)) == "two_wheeler":
-        return TWO_WHEELER_SCENARIO
-    return DEFAULT_SCENARIO
+    """The scenario served when none is given: the vehicle's own default (rtsim.vehicle.registry)."""
+    if vehicle is None:
+        return DEFAULT_SCENARIO
+    from rtsim.vehicle.registry import open_vehicle
+    return open_vehicle(vehicle).default_scenario
 
 
 def build_sim(scenario: Path | None, vehicle: Path | None = None, dt: float | None = None,
               models: dict | None = None, rider: bool = True):
-    """(vehicle sim, Scenario) at the scenario's start (None: ``default_scenario``): a car's VehicleSim
-    or a two-wheeler's TwoWheelerHil (with the scenario's rider unless ``rider`` is False). ``models``
-    caches built vehicle models by resolved config path (a build solves the suspension linkages or
-    settles the two-wheeler on its suspension: seconds)."""
+    """(vehicle sim, Scenario) at the scenario's start (None: the vehicle's default scenario), as the
+    vehicle's kind builds it for the service (rtsim.vehicle.registry: a car's VehicleSim, a
+    two-wheeler's TwoWheelerHil with the scenario's rider unless ``rider`` is False). ``models`` caches
+    built vehicle models by resolved config path (a build solves the suspension linkages or settles the
+    two-wheeler on its suspension: seconds)."""
     from drivers.scenario import load_scenario
-    from rtsim.road.config import load_road
-    from rtsim.vehicle.car.config import load_vehicle
-    from rtsim.vehicle.car.build import build_vehicle
-    from rtsim.vehicle.offline import default_vehicle_path
-    from rtsim.vehicle.car.sim import VehicleSim
+    from rtsim.vehicle.registry import open_vehicle
 
     sc = load_scenario(scenario if scenario is not None else default_scenario(vehicle), check_files=True)
-    vpath = resolve_vehicle(vehicle) if vehicle is not None else (sc.vehicle_path or default_vehicle_path())
-    models = {} if models is None else models
-    if vehicle_kind(vpath) == "two_wheeler":
-        return _two_wheeler_sim(sc, vpath, dt, models, rider), sc
-    model = models.get(vpath.resolve())
-    if model is None:
-        cfg, base = load_vehicle(vpath)
-        model = models[vpath.resolve()] = build_vehicle(cfg, base)
-    road = load_road(sc.road_path)
-    ini = sc.spec.initial
-    sim = VehicleSim(model, road, dt if dt is not None else sc.dt, brake_pressure=0.0,
-                     position=(ini.x, ini.y), yaw=ini.yaw, speed=ini.speed)
-    return sim, sc
-
-
-def _two_wheeler_sim(sc, vpath: Path, dt: float | None, models: dict, rider: bool):
-    """A two-wheeler at the scenario's start (see ``build_sim``): on the flat road of the scenario (the
-    two-wheeler's tyres run on the plane z = 0 only), its friction scale the tyres' road friction."""
-    from rtsim.road.config import FlatRoadConfig, read_road_config
-    from rtsim.vehicle.motorcycle.build import build_motorcycle
-    from rtsim.vehicle.motorcycle.config import load_motorcycle, refuse_effects
-    from drivers.rider import P_TYRE_LEAN
-    from rtsim.vehicle.motorcycle.hil import TwoWheelerHil
-    from rtsim.vehicle.motorcycle.ride import tyre_lean_ratio
-    from rtsim.vehicle.motorcycle.sim import static_pose
-
-    road = read_road_config(sc.road_path)
-    if not isinstance(road, FlatRoadConfig) or road.height != 0.0:
-        raise ConfigError(f"{sc.path}: road {sc.road_path}: a two-wheeler runs on a flat road at height 0 only")
-    if rider and sc.spec.rider is None:
-        raise ConfigError(f"{sc.path}: no [rider] section for the two-wheeler {vpath.name} (serve it with "
-                          f"--rider off for a controller on the bus to ride it)")
-    key = (vpath.resolve(), "two_wheeler")
-    if key not in models:
-        cfg, base = load_motorcycle(vpath)
-        refuse_effects(cfg, vpath, "the service")
-        mm = build_motorcycle(cfg, base)
-        models[key] = (mm, (base / cfg.interface.dbc).resolve(), static_pose(mm)[0])
-    mm, dbc, q = models[key]
-    ini = sc.spec.initial
-    r = None
-    if rider:
-        r = sc.rider()
-        if "tyre_lean" not in sc.spec.rider.model_fields_set:      # the vehicle's own tyres' crown correction
-            r.par[P_TYRE_LEAN] = tyre_lean_ratio(mm)
-    return TwoWheelerHil(mm, dbc, q, dt if dt is not None else sc.dt, speed=ini.speed, x=ini.x, y=ini.y,
-                         yaw=ini.yaw, rider=r, mu=road.mu)
+    opened = open_vehicle(vehicle if vehicle is not None else sc.vehicle_path)
+    return opened.service_sim(sc, dt, models, rider), sc
 
 
 class Service:
@@ -332,6 +259,13 @@ class Service:
             "dbc": str(self.codec.path),
             "channels": json.loads(self.codec.channels.to_json()),   # the served vehicle's interface
             "view": self.model.config.user_controls(),     # what rtsim view's controls mean for it
+            # what a person may drive (rtsim.vehicle.kit.user_inputs): ranges, full scales (what a full key
+            # or pedal asks), the bus command each competes with and whether that command adds to it
+            "user_inputs": {"writes": self.sim.user_inputs.writes, "in_loop": self.sim.user_inputs.in_loop,
+                            "channels": {c.name: {"lo": c.lo, "hi": c.hi, "unit": c.unit, "meaning": c.meaning,
+                                                  "full_scale": c.full_scale, "bus": c.bus,
+                                                  "adds_to_bus": c.adds_to_bus}
+                                         for c in self.sim.user_inputs.channels}},
         }
 
     # -- running ---------------------------------------------------------------------------------------

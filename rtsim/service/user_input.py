@@ -22,44 +22,30 @@ from __future__ import annotations
 
 import math
 
-from drivers.base import LIMITS
+from rtsim.vehicle.car.inputs import USER_INPUTS as CAR_USER
+from rtsim.vehicle.motorcycle.inputs import USER_INPUTS as TWO_WHEELER_USER
 
 NUSR = 4                 # user channels per vehicle (the car uses the first three)
 NWORK = 3                # lean loop state: on, rate-limited reference (rad), integral (N m)
 USER_HOLD = 1.0          # s of wall time a user command is held without a new request
 
-#: per vehicle kind: the user channels in their slot order, with (lo, hi, unit, meaning)
+#: the shipped kinds' user channels, (lo, hi, unit, meaning) in slot order: every name the drive op may
+#: carry (rtsim.service.control_args). A served vehicle's own: its sim's ``user_inputs``.
 USER_CHANNELS: dict[str, dict[str, tuple[float, float, str, str]]] = {
-    "car": {
-        "throttle_angle_cmd": (*LIMITS["throttle_angle_cmd"], "rad", "throttle plate angle"),
-        "brake_pressure_cmd": (*LIMITS["brake_pressure_cmd"], "kPa", "brake line pressure"),
-        "steering_wheel_angle_cmd": (*LIMITS["steering_wheel_angle_cmd"], "rad",
-                                     "steering-wheel angle, positive steering left"),
-    },
-    "two_wheeler": {
-        "throttle_cmd": (0.0, 1.0, "1", "throttle, 0 closed .. 1 wide open"),
-        "brake_pressure_front_cmd": (0.0, 20000.0, "kPa", "front caliper pressure"),
-        "brake_pressure_rear_cmd": (0.0, 20000.0, "kPa", "rear caliper pressure"),
-        "roll_angle_demand": (-math.radians(60.0), math.radians(60.0), "rad",
-                              "lean angle asked of the lean loop, positive leaning right"),
-    },
-}
-
-#: a two-wheeler's user channel -> the bus command it competes with (whose invalid flag a takeover sets)
-TWO_WHEELER_BUS = {"throttle_cmd": "throttle_cmd", "brake_pressure_front_cmd": "brake_pressure_front_cmd",
-                   "brake_pressure_rear_cmd": "brake_pressure_rear_cmd", "roll_angle_demand": "assist_torque_cmd"}
+    "car": CAR_USER.table(), "two_wheeler": TWO_WHEELER_USER.table()}
 
 
 def user_channels(kind: str) -> dict[str, tuple[float, float, str, str]]:
+    """(Kept for callers that know only the kind; the loop reads the served vehicle's ``user_inputs``.)"""
     return USER_CHANNELS[kind]
 
 
-def check_value(kind: str, name: str, value) -> float:
-    """A user command's value as a float within its range; ValueError naming channel, value and range."""
-    chans = USER_CHANNELS[kind]
+def check_value(inputs, name: str, value) -> float:
+    """A user command's value as a float within its range (``inputs``: the vehicle's UserInputs);
+    ValueError naming channel, value and range."""
+    chans = inputs.table()
     if name not in chans:
-        raise ValueError(f"{name!r} is not a user channel of a {kind.replace('_', '-')} (those are: "
-                         f"{', '.join(chans)})")
+        raise ValueError(f"{name!r} is not a user channel of this vehicle (those are: {', '.join(chans)})")
     lo, hi, unit, _ = chans[name]
     if isinstance(value, bool):
         raise ValueError(f"{name} = {value!r} is not a number")

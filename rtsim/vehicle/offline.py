@@ -63,7 +63,11 @@ def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario) -> tupl
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, check_files=True)
     vpath = Path(vehicle) if vehicle is not None else (sc.vehicle_path or default_vehicle_path())
     cfg, base = load_vehicle(vpath)
-    model = build_vehicle(cfg, base)
+    return sim_for(build_vehicle(cfg, base), sc), sc
+
+
+def sim_for(model, sc: Scenario) -> VehicleSim:
+    """The built car `model` at the scenario's start on its road, the brake at the driver's first command."""
     road = load_road(sc.road_path)
     ini = sc.spec.initial
     driver = sc.driver()
@@ -72,7 +76,7 @@ def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario) -> tupl
                      yaw=ini.yaw, speed=ini.speed)
     if sc.torque_mode:
         sim.set_torque_mode(True)
-    return sim, sc
+    return sim
 
 
 def vehicle_state(sim: VehicleSim, out: np.ndarray) -> None:

@@ -341,11 +341,12 @@ class VehicleConfig(Strict):
         return user_controls(self)
 
 
-def load_vehicle(path: str | Path) -> tuple[VehicleConfig, Path]:
-    """The validated vehicle config and the folder its relative paths refer to. The [effects] tables
-    are checked first, so that their errors name the file and the full key (effects.<name>.<param>)."""
+def load_vehicle(path: str | Path, data: dict | None = None) -> tuple[VehicleConfig, Path]:
+    """The validated vehicle config and the folder its relative paths refer to (``data``: the file's
+    table when already read, rtsim.vehicle.registry). The [effects] tables are checked first, so that
+    their errors name the file and the full key (effects.<name>.<param>)."""
     path = Path(path)
-    data = load_toml(path)
+    data = load_toml(path) if data is None else dict(data)
     if "effects" in data:
         data["effects"] = validate_effects(data["effects"], f"{path}: effects")
     cfg = validate(VehicleConfig, data, str(path))

@@ -55,7 +55,17 @@ def describe(model: VehicleModel, sim: VehicleSim) -> dict:
 
 
 def _steering_ratio(model: VehicleModel, sim: VehicleSim) -> float:
-    """Steering-wheel angle per mean front road-wheel angle around straight ahead."""
+    """Steering-wheel angle per mean front road-wheel angle around straight ahead. With electric power
+    steering the fitted corners are functions of the knuckle's own angle (the tie rods are constraints),
+    so the ratio is the front linkage's with the EPS rack (as the config's check computes it)."""
+    cfg = model.config
+    if cfg.eps is not None:
+        from ..kit.linkage_checks import steering_ratio
+        from ..kit.linkages import DoubleWishbone, VerticalSlider
+        hp = {k: None if v is None else np.array(v, dtype=float) for k, v in cfg.front.hardpoints.model_dump().items()}
+        geom = (DoubleWishbone if cfg.front.suspension == "double_wishbone" else VerticalSlider)(
+            spin_axis=cfg.front.spin_axis(), **hp)
+        return float(steering_ratio(geom, cfg.eps.rack_travel_per_rad_m))
     rp = sim.stcfg.rack_travel_per_rad
     ds = 1e-3
     angles = []

@@ -5,6 +5,7 @@ with `set_effects`, without rebuilding the model."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,6 +31,7 @@ from .effect_kernels import (FS_DL, FS_LAG, FS_SIZE, FX_B_LAG, FX_DL, FX_DL_K, F
                              neutral_params, physical_sensors, sensor_stage)
 from .effects import pack_effects, validate_effects
 from .layout import CI_PHI, WHEELS
+from .inputs import USER_INPUTS as CAR_USER_INPUTS
 from .observer import NSTATE_OUT
 from .step import (CMD_BRAKE, COMMAND_SLOTS, EX_SELECTOR, INVALID_SLOTS, Parts, States, make_io, make_vehicle_data,
                    vehicle_advance)
@@ -45,6 +47,19 @@ def _align_z(n: np.ndarray) -> np.ndarray:
     k = axis / sin_a
     kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) + sin_a * kx + (1 - cos_a) * kx @ kx
+
+
+class LoopCar(NamedTuple):
+    """The car in the service's compiled step (rtsim.service.vehicles): the multibody model and data,
+    the compiled vehicle and its data, the road, the parts' parameters, their states, the IO arrays."""
+    m: object
+    d: object
+    vehicle: object
+    data: object
+    road: object
+    parts: object
+    states: object
+    io: object
 
 
 class VehicleSim:
@@ -200,15 +215,16 @@ class VehicleSim:
         self.states = self.states._replace(sensors=ss)
 
     # ---- what the HIL service's loop needs of a vehicle (rtsim.service.vehicles) ------------------------
-    kind = "car"
-
-    def loop_args(self) -> tuple:
-        """The eight arguments of the service's compiled step (rtsim.service.vehicles)."""
-        return (self.m, self.data, self.vm.vehicle, self.vd, self.road, self.parts, self.states, self.io)
+    def served(self) -> "LoopCar":
+        """The car as the service's compiled step takes it (rtsim.service.vehicles): one named tuple."""
+        return LoopCar(self.m, self.data, self.vm.vehicle, self.vd, self.road, self.parts, self.states, self.io)
 
     command_slots = COMMAND_SLOTS     # where each bus command's value goes in io.commands
     invalid_slots = INVALID_SLOTS     # where 1.0 goes while a command has no valid value
     nstate = NSTATE_OUT               # observer state channels
+    eps_commands = ("motor_current_cmd",)   # bus commands that put the EPS in external mode (the ECU's)
+    rider_on = False                  # no rider inside the step (its in-loop source: the scenario's driver)
+    user_inputs = CAR_USER_INPUTS     # what a person may drive (the vehicle's own: set by its kind)
 
     def raise_status(self, status: int, step: int) -> None:
         """The exception of a failed step's status."""

@@ -390,7 +390,8 @@ def refuse_effects(cfg: MotorcycleConfig, path: str | Path, runner: str) -> None
                           "identified on, or remove the [effects] tables to run the nominal model")
 
 
-def load_motorcycle(path: str | Path) -> tuple[MotorcycleConfig, Path]:
-    """The validated two-wheeler file and the folder its relative paths refer to."""
+def load_motorcycle(path: str | Path, data: dict | None = None) -> tuple[MotorcycleConfig, Path]:
+    """The validated two-wheeler file and the folder its relative paths refer to (``data``: the file's
+    table when already read, rtsim.vehicle.registry)."""
     path = Path(path)
-    return validate(MotorcycleConfig, load_toml(path), str(path)), path.parent
+    return validate(MotorcycleConfig, load_toml(path) if data is None else data, str(path)), path.parent

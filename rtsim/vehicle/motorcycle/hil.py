@@ -4,6 +4,7 @@ rider (or none: ``--rider off``) inside the compiled step (rtsim.vehicle.motorcy
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ from drivers.rider import rider as make_rider
 
 from .build import MotorcycleModel
 from .config import MotorcycleConfig
+from .inputs import USER_INPUTS
 from .layout import NAMES, POINTS, VECTORS
 from .plant import COMMAND_SLOTS, FALL_ROLL, FELL, INVALID_SLOTS, NCOMMAND, PlantIO, make_plant
 from .sim import Fall, TwoWheelerSim
@@ -43,13 +45,26 @@ def place(mm: MotorcycleModel, q: np.ndarray, x: float, y: float, yaw: float) ->
     return out
 
 
+class LoopTwoWheeler(NamedTuple):
+    """The two-wheeler in the service's compiled step (rtsim.service.vehicles): the multibody model and
+    data, its plant's parameters and state (rtsim.vehicle.motorcycle.plant), the rider, the parts, the IO."""
+    m: object
+    d: object
+    params: object
+    plant: object
+    rider: object
+    parts: object
+    io: object
+
+
 class TwoWheelerHil:
     """The served two-wheeler (see the module docstring): the interface the service's loop needs
-    (``loop_args``, command slots, channel counts, ``raise_status``) over a TwoWheelerSim."""
+    (``served``, command slots, channel counts, ``raise_status``) over a TwoWheelerSim."""
 
-    kind = "two_wheeler"
     command_slots = COMMAND_SLOTS
     invalid_slots = INVALID_SLOTS
+    eps_commands = ()                 # no electric power steering
+    user_inputs = USER_INPUTS         # what a person may drive (the vehicle's own: set by its kind)
 
     def __init__(self, mm: MotorcycleModel, dbc: Path, q_static: np.ndarray, dt: float, speed: float = 0.0,
                  x: float = 0.0, y: float = 0.0, yaw: float = 0.0, rider=None, mu: float = 1.0):
@@ -66,12 +81,11 @@ class TwoWheelerHil:
         self.rider = rider if rider is not None else make_rider(np.array([0.0, 1.0]), np.zeros(2))
         self.params, self.state = make_plant(mm, self.rider_on)
         self.io = PlantIO(np.zeros(NCOMMAND))
-        self._unused = np.zeros(1)            # the step's `states` argument (a car's; unused here)
         self.io.commands[[INVALID_SLOTS[n] for n in INVALID_SLOTS]] = 1.0     # no command yet
 
-    def loop_args(self) -> tuple:
-        """The eight arguments of the service's compiled step (rtsim.service.vehicles)."""
-        return (self.m, self.data, self.params, self.state, self.rider, self.parts, self._unused, self.io)
+    def served(self) -> "LoopTwoWheeler":
+        """The two-wheeler as the service's compiled step takes it (rtsim.service.vehicles)."""
+        return LoopTwoWheeler(self.m, self.data, self.params, self.state, self.rider, self.parts, self.io)
 
     def seed_sensor_noise(self, seed: int) -> None:
         """(The two-wheeler's sensors are ideal: nothing to seed.)"""

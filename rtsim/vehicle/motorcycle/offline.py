@@ -92,10 +92,11 @@ def check_flat_road(sc: Scenario) -> float:
     return cfg.mu
 
 
-def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario) -> tuple[Ride, Scenario]:
+def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario, mm=None) -> tuple[Ride, Scenario]:
     """The ride of a motorcycle scenario: the vehicle (argument, else the scenario's), its static pose
     with the rider on, straight running at the initial speed from the origin heading +x, the rider
-    (its tyre-crown lean ratio from the vehicle unless the scenario sets `tyre_lean`) and the profiles."""
+    (its tyre-crown lean ratio from the vehicle unless the scenario sets `tyre_lean`) and the profiles.
+    ``mm``: the vehicle's model when already built (rtsim.vehicle.registry), else built from its file."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, check_files=True)
     if not sc.two_wheeler:
         raise ConfigError(f"{sc.path}: not a two-wheeler scenario (no [rider] or [two_wheeler])")
@@ -107,9 +108,11 @@ def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario) -> tupl
     vpath = vehicle if vehicle is not None else sc.vehicle_path
     if vpath is None:
         raise problem(sc.path, "vehicle", None, "a two-wheeler scenario names its vehicle file (or give --vehicle)")
-    cfg, base = load_motorcycle(vpath)
-    refuse_effects(cfg, vpath, "the offline ride")
-    mm = build_motorcycle(cfg, base)
+    if mm is None:
+        cfg, base = load_motorcycle(vpath)
+        refuse_effects(cfg, vpath, "the offline ride")
+        mm = build_motorcycle(cfg, base)
+    refuse_effects(mm.config, vpath, "the offline ride")
     q, loads = static_pose(mm, dt=sc.dt)
     sim = TwoWheelerSim(mm, dt=sc.dt, speed=ini.speed, q=q, mu=mu)
     rider = None
@@ -356,12 +359,17 @@ def write_csv(res: MotorcycleRun, path: str | Path) -> None:
             w.writerow([f"{v:.9g}" for v in r])
 
 
-def write_mcap(res: MotorcycleRun, path: str | Path, vehicle_id: str, mm=None) -> None:
-    """The run's rows as an MCAP file; with the built two-wheeler `mm` also its 3D scene (the road plane,
-    the machine's body, fork, swingarm and wheels every 10 ms), as a served session records it."""
+def scene_source(mm):
+    """What bridge.mcap_log.write_run draws the 3D scene from (its ``sim``): the built two-wheeler `mm`
+    (the road plane, the machine's body, fork, swingarm and wheels every 10 ms), as a served session
+    records it."""
     from types import SimpleNamespace
 
+    return SimpleNamespace(vm=SimpleNamespace(model=mm, channels=CHANNELS), road=None)
+
+
+def write_mcap(res: MotorcycleRun, path: str | Path, vehicle_id: str, mm=None) -> None:
+    """The run's rows as an MCAP file; with the built two-wheeler `mm` also its 3D scene."""
     from bridge.mcap_log import write_run
 
-    sim = None if mm is None else SimpleNamespace(vm=SimpleNamespace(model=mm, channels=CHANNELS), road=None)
-    write_run(path, res.columns, res.data, vehicle_id, CHANNELS, sim=sim)
+    write_run(path, res.columns, res.data, vehicle_id, CHANNELS, sim=None if mm is None else scene_source(mm))
