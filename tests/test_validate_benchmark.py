@@ -54,3 +54,184 @@ def test_cases_are_well_formed():
             assert o["name"] in cases.OUTSIDE[fam] and o["name"] not in EFFECTS
     assert [c["id"] for c in cases.ISSUE] == ["issue_gyro_z_bias", "issue_accel_y_scale", "issue_tyre_stiffness",
                                              "issue_gyro_z_delay", "issue_mass", "issue_brake_friction"]
+
+
+# ------------------------------------------------------------------------- the generator's independence
+def test_fieldbench_shares_no_model_code():
+    """The simulators import nothing of rtsim but their own package: no vehicle model, no multibody code,
+    no validation workflow (they read only the config's and `rtsim describe`'s numbers)."""
+    import ast
+    from pathlib import Path
+
+    import rtsim.validate.fieldbench as fb
+    folder = Path(fb.__file__).parent
+    allowed_external = {"numpy", "scipy", "numba", "math", "json", "hashlib", "os", "tempfile", "tomllib",
+                        "pathlib", "shutil", "__future__"}
+    files = sorted(folder.glob("*.py"))
+    assert len(files) >= 6
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    assert node.level == 1, (path.name, node.module)      # only this package
+                    continue
+                names = [node.module]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                continue
+            for name in names:
+                assert name.split(".")[0] in allowed_external, (path.name, name)
+
+
+# ------------------------------------------------------------------------------ physics of the generator
+@pytest.fixture(scope="module")
+def car():
+    """The simulators' numbers of the test car, from `rtsim describe` and its config."""
+    from rtsim.validate.bench import VEHICLE
+    from rtsim.validate.fieldbench import vehicle
+    from rtsim.validate.replay import Replayer
+    from rtsim.vehicle.car.describe import describe
+    from rtsim.vehicle.car.sim import VehicleSim
+    rp = Replayer(VEHICLE)
+    return vehicle.numbers(describe(rp.model, VehicleSim(rp.model, rp.road, 1e-3)), VEHICLE)
+
+
+def _steady(car, sim, tyre, steer, speed=15.0, **kw):
+    """A constant steering-wheel angle held 8 s: the last second's means of the lateral outputs."""
+    import numpy as np
+
+    from rtsim.validate.fieldbench import sims
+    n = int(round(8.0 / sims.DT))
+    out = sims.lateral(sims.lateral_params(car, sim == "roll", tyre, **kw), np.full(n, steer), speed, 0)
+    return out[-int(sims.RATE):].mean(axis=0)
+
+
+@pytest.mark.parametrize("sim, tyre", [("planar", "tanh"), ("planar", "brush"), ("roll", "tanh"), ("roll", "brush")])
+def test_steady_turn_linear_range(car, sim, tyre):
+    """In the linear range the steady yaw rate is the single-track model's (Milliken & Milliken, ch. 5):
+    r = v delta / (L + K v^2), understeer K = m (b / C_f - a / C_r) / L with the axles' cornering
+    stiffnesses (two tyres each); the lateral acceleration is v r. The load transfer changes the axle
+    stiffness only to second order (both laws are linear at small slip)."""
+    from rtsim.validate.fieldbench import sims
+    v, sw = 15.0, 0.1
+    o = _steady(car, sim, tyre, sw, v)
+    a, b = car["a"], car["b"]
+    L = a + b
+    K = car["mass"] * (b / (2 * car["cy_front"]) - a / (2 * car["cy_rear"])) / L
+    r = v * (sw / car["steering_ratio"]) / (L + K * v * v)
+    assert o[sims.O_GZ] == pytest.approx(r, rel=0.01)
+    assert o[sims.O_AYG] == pytest.approx(v * r, rel=0.01)
+
+
+def test_steady_roll_angle(car):
+    """The roll simulator's steady roll angle: m_s h' a_y / (K_f + K_r - m_s g h') (gravity's moment on the
+    rolled sprung mass), its accelerometer the body-frame a_y cos(phi) + g sin(phi)."""
+    import math
+
+    from rtsim.validate.fieldbench import sims
+    o = _steady(car, "roll", "tanh", 0.5)
+    p = sims.lateral_params(car, True, "tanh")
+    ay = o[sims.O_AYG]
+    phi = p[sims.L_MS] * p[sims.L_HP] * ay / (p[sims.L_KRF] + p[sims.L_KRR] - p[sims.L_MS] * sims.G * p[sims.L_HP])
+    assert ay > 2.0 and o[sims.O_ROLL] == pytest.approx(phi, rel=0.02)
+    assert o[sims.O_AY] == pytest.approx(ay * math.cos(o[sims.O_ROLL]) + sims.G * math.sin(o[sims.O_ROLL]), rel=0.01)
+
+
+def test_stiffness_and_mass_effects(car):
+    """The hidden tyre stiffness scales the understeer term (a softer tyre, a lower yaw gain, by the
+    single-track formula), an added mass at the centre of mass raises it in proportion to the mass."""
+    from rtsim.validate.fieldbench import sims
+    v, sw = 15.0, 0.1
+    a, b = car["a"], car["b"]
+    L = a + b
+    for kw, m, s in (({"stiffness_scale": 0.6}, car["mass"], 0.6), ({"added_mass": 200.0}, car["mass"] + 200.0, 1.0)):
+        K = m * (b / (2 * s * car["cy_front"]) - a / (2 * s * car["cy_rear"])) / L
+        r = v * (sw / car["steering_ratio"]) / (L + K * v * v)
+        assert _steady(car, "planar", "tanh", sw, v, **kw)[sims.O_GZ] == pytest.approx(r, rel=0.015), kw
+
+
+@pytest.mark.parametrize("grade", [0.0, 0.04])
+def test_pitch_standstill_on_grade(car, grade):
+    """Held on the brake on a grade: the body at rest, the accelerometer reads gravity's component along
+    the road, g sin(atan(grade)), the wheels do not turn."""
+    import math
+
+    import numpy as np
+
+    from rtsim.validate.fieldbench import sims
+    n = int(round(3.0 / sims.DT))
+    out = sims.pitch(sims.pitch_params(car, "tanh", grade=grade), np.full(n, 2500.0), np.zeros(n), 0)
+    rest = out[int(sims.RATE):]
+    assert np.mean(rest[:, 0]) == pytest.approx(sims.G * math.sin(math.atan(grade)), abs=0.01)
+    assert np.ptp(rest[:, 1]) < 1e-6 and np.ptp(rest[:, 2]) < 1e-6
+
+
+def test_pitch_drive_and_coast(car):
+    """A constant drive torque T per rear wheel on the level: once the transients settle, the car
+    accelerates at (2 T / r - rolling resistance - drag) / (m + 2 (J_f + J_r) / r^2), r the loaded radius
+    (the wheels' spin inertia accelerates with the car), within 2 %."""
+    import numpy as np
+
+    from rtsim.validate.fieldbench import sims
+    n = int(round(4.0 / sims.DT))
+    T = 200.0
+    out = sims.pitch(sims.pitch_params(car, "brush"), np.zeros(n), np.full(n, T), 0)
+    k0, k1 = int(2.0 * sims.RATE), int(3.0 * sims.RATE)
+    v = out[k0:k1, 8]
+    acc = (v[-1] - v[0]) / ((k1 - k0 - 1) / sims.RATE)
+    fz_rear = car["fz_rear"]
+    r_l = car["unloaded_radius"] - fz_rear / car["tyre_vertical"]
+    drag = 0.5 * car["air_density"] * car["drag_area"] * np.mean(v) ** 2
+    m_eq = car["mass"] + 2 * (car["j_front"] + car["j_rear"]) / r_l ** 2
+    expected = (2 * T / r_l - car["rolling_resistance"] * car["mass"] * sims.G - drag) / m_eq
+    assert acc == pytest.approx(expected, rel=0.02)
+
+
+# ------------------------------------------------------------------------------------- scatter and logger
+def test_coloured_noise_statistics():
+    """The logger noise's AR(1) part has the stated deviation and step correlation (a long series)."""
+    import numpy as np
+
+    from rtsim.validate.fieldbench import scatter
+    x = scatter.ar1(np.random.default_rng(1), 400_000, 0.06, 0.98)
+    assert np.std(x) == pytest.approx(0.06, rel=0.03)
+    assert np.corrcoef(x[1:], x[:-1])[0, 1] == pytest.approx(0.98, abs=0.003)
+
+
+def test_driver_scatter_statistics():
+    """Run to run, the input gain varies by GAIN_SD in its constant part and wanders by at most GAIN_WANDER
+    within a run (together about +-2 %); node times shift by SHIFT_SD and stay increasing."""
+    import numpy as np
+
+    from rtsim.validate.fieldbench import scatter
+    rng = np.random.default_rng(2)
+    t = np.linspace(0.0, 12.0, 1201)
+    draws = [scatter.Scatter(rng) for _ in range(4000)]
+    a = np.array([d.a for d in draws])
+    assert np.std(a) == pytest.approx(scatter.GAIN_SD, rel=0.05)
+    g = np.array([d.gain(t) for d in draws[:500]])
+    assert np.all(np.abs(g - 1.0 - a[:500, None]) <= scatter.GAIN_WANDER + 1e-12)
+    assert 0.015 < np.percentile(np.abs(g - 1.0), 95) < 0.03
+    nodes = np.array([d.nodes((1.0, 1.6, 4.6)) for d in draws])
+    assert np.all(np.diff(nodes, axis=1) > 0)
+    assert np.std(nodes[:, 0] - 1.0 * np.array([d.stretch for d in draws])) == pytest.approx(scatter.SHIFT_SD, rel=0.05)
+
+
+def test_runs_are_quantised_and_readable(car, tmp_path):
+    """A case's CSV runs: every channel a whole number of its quantisation steps, noise on every channel
+    (no two runs alike), and rtsim validate's loader reads them with the declared frame."""
+    import numpy as np
+
+    from rtsim.validate.data import load_runs
+    from rtsim.validate.fieldbench import generate, scatter
+    case = cases.ISSUE[0]
+    paths = generate.write_runs(case, car, tmp_path / "runs", n=2)
+    runs, rejected = load_runs(paths)
+    assert len(runs) == 2 and not rejected
+    for c in generate.channels(case):
+        lsb = scatter.NOISE[c][3]
+        x = runs[0].channels[c] / lsb
+        assert np.max(np.abs(x - np.round(x))) < 1e-3, c
+        assert not np.array_equal(runs[0].channels[c][:100], runs[1].channels[c][:100]), c
+    assert all(r.accel_frame == "level" for r in runs)

@@ -19,9 +19,9 @@ Values in the model's terms (what a right fit finds):
 run (no scatter, no noise) on the workflow's 100 Hz grid, per compared channel c: the structural
 mismatch S_c = RMS(model without effect - simulator without effect), the effect's size
 E_c = RMS(simulator with the effect alone - simulator without), both after removing by least squares
-what a field validation must allow for anyway (wheel speeds: a constant scale, an axle's rolling radius,
-and a drift growing linearly with the time moved, a resistance offset; accel_x: a constant offset while
-moving), and the floor F_c = the channel's noise left in the mean of the seven runs (sd / sqrt(7)). An
+what a field validation must allow for anyway (wheel speeds, per axle: one scale of both wheels, a rolling
+radius, and one drift growing linearly with the time moved, a resistance offset; accel_x: a constant
+offset while moving), and the floor F_c = the channel's noise left in the mean of the seven runs (sd / sqrt(7)). An
 effect is larger iff max over c of E_c / max(S_c, F_c) >= `RATIO`; a case is larger iff every hidden
 effect is.
 """
@@ -57,20 +57,28 @@ def _bench(case, t, ch, folder: Path, name: str, sensor_names):
     return build_benchmark(runs, rejected)
 
 
-def _allowed(c: str, t: np.ndarray, ref: np.ndarray, moving: np.ndarray) -> np.ndarray | None:
-    """Columns a field validation must allow for on channel c (module docstring), or None."""
-    if c.startswith("wheel_speed_"):
-        return np.column_stack([ref, np.cumsum(moving) * (t[1] - t[0])])
-    if c == "accel_x":
-        return moving[:, None].astype(float)
-    return None
-
-
-def _left(x: np.ndarray, basis: np.ndarray | None) -> np.ndarray:
-    if basis is None:
-        return x
-    coef, *_ = np.linalg.lstsq(basis, x, rcond=None)
-    return x - basis @ coef
+def _left_over(diff: dict, data0: dict, t: np.ndarray, moving: np.ndarray) -> dict:
+    """Per channel, the RMS of `diff` (channel -> difference on the grid) after removing by least squares
+    what a field validation must allow for (module docstring): per axle, one scale of both wheel speeds
+    (a rolling radius) and one drift growing with the time moved (a resistance offset); accel_x, a
+    constant offset while moving."""
+    out = {}
+    drift = np.cumsum(moving) * (t[1] - t[0])
+    for axle in ("f", "r"):
+        pair = [c for c in (f"wheel_speed_{axle}l", f"wheel_speed_{axle}r") if c in diff]
+        if pair:
+            basis = np.vstack([np.column_stack([data0[c], drift]) for c in pair])
+            x = np.concatenate([diff[c] for c in pair])
+            coef, *_ = np.linalg.lstsq(basis, x, rcond=None)
+            rest = (x - basis @ coef).reshape(len(pair), -1)
+            out.update({c: _rms(r) for c, r in zip(pair, rest)})
+    for c, d in diff.items():
+        if c in out:
+            continue
+        if c == "accel_x":
+            d = d - moving * (d[moving].mean() if moving.any() else 0.0)
+        out[c] = _rms(d)
+    return out
 
 
 def _rms(x) -> float:
@@ -114,8 +122,7 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
             tg = b0.t
             data0 = {c: b0.mean(c) for c in compared}
             moving = np.abs(data0.get("wheel_speed_rl", np.ones_like(tg))) > 0.5
-            basis = {c: _allowed(c, tg, data0[c], moving) for c in compared}
-            structural = {c: _rms(_left(model[c] - data0[c], basis[c])) for c in compared}
+            structural = _left_over({c: model[c] - data0[c] for c in compared}, data0, tg, moving)
             effects = []
             for h in case["hidden"]:
                 alone = {"hidden": [h], "outside": []}
@@ -123,7 +130,7 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
                 for c, eff in generate.sensor_effects({**case, **alone}).items():
                     ch1[c] = scatter.sensor_effect(t1, ch1[c], **eff)
                 b1 = _bench(case, t1, ch1, folder, f"with_{len(effects)}", names)
-                size = {c: _rms(_left(b1.mean(c) - data0[c], basis[c])) for c in compared if c in b1.bands}
+                size = _left_over({c: b1.mean(c) - data0[c] for c in compared if c in b1.bands}, data0, tg, moving)
                 ratio = {c: size[c] / max(structural[c], _floor(c)) for c in size}
                 param, value = next((k, v) for k, v in h.items() if k not in ("effect", "channel"))
                 channel = h.get("channel")
