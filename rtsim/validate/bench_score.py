@@ -86,3 +86,20 @@ def confusion(outcomes: list[dict]) -> dict[str, Counter]:
             else:
                 row["nothing"] += 1
     return rows
+
+
+def acceptable(rec: dict, truth: dict) -> tuple[bool, str]:
+    """Whether a case's outcome meets the bar, and why not: nothing named that was not hidden; every
+    hidden effect larger than the structural mismatch named within its tolerance; a smaller one either
+    not named or named within its tolerance (it may be told apart or not)."""
+    if rec["extra"]:
+        return False, f"named {', '.join(rec['extra'])}, not hidden"
+    for e in truth["effects"]:
+        k = _key(e["effect"], e["channel"])
+        if k in rec["errors"]:
+            if not rec["within"][k]:
+                return False, (f"{k} named {100 * rec['errors'][k]:.1f} % off its value in the model's terms "
+                               f"{e['model_terms']:.4g}")
+        elif e["larger"]:
+            return False, f"{k} not named (its effect is {e['ratio']:.1f} times the structural mismatch)"
+    return True, ""
