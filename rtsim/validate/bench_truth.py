@@ -17,8 +17,10 @@ Values in the model's terms (what a right fit finds):
 
 "Larger than the structural mismatch" (decided before the method changed). On the noise-free nominal
 run (no scatter, no noise) on the workflow's 100 Hz grid, per compared channel c: the structural
-mismatch S_c = RMS(model without effect - simulator without effect), the effect's size
-E_c = RMS(simulator with the effect alone - simulator without), both after removing by least squares
+mismatch S_c = RMS(model without effect - simulator without effect), the effect's size E_c = RMS of the
+change it makes to that difference (simulator with the effect alone minus the model replaying that run's
+inputs, minus the same without the effect: a model effect's change of the recorded inputs, e.g. the
+speed controller's torques, is replayed; a sensor effect changes the reading alone), both after removing by least squares
 what a field validation must allow for anyway (wheel speeds, per axle: one scale of both wheels, a rolling
 radius, and one drift growing linearly with the time moved, a resistance offset; accel_x: a constant
 offset while moving), and the floor F_c = the channel's noise left in the mean of the seven runs (sd / sqrt(7)). An
@@ -130,7 +132,13 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
                 for c, eff in generate.sensor_effects({**case, **alone}).items():
                     ch1[c] = scatter.sensor_effect(t1, ch1[c], **eff)
                 b1 = _bench(case, t1, ch1, folder, f"with_{len(effects)}", names)
-                size = _left_over({c: b1.mean(c) - data0[c] for c in compared if c in b1.bands}, data0, tg, moving)
+                if kind(h["effect"]) == "model":      # the residual's change: inputs that feed back (the
+                    # speed controller's torques) change the model's replay too
+                    model1 = replayer.reported(replayer.simulate(replayer.inputs(b1), []), b1.t, [])
+                    change = {c: (b1.mean(c) - model1[c]) - (data0[c] - model[c]) for c in compared if c in b1.bands}
+                else:
+                    change = {c: b1.mean(c) - data0[c] for c in compared if c in b1.bands}
+                size = _left_over(change, data0, tg, moving)
                 ratio = {c: size[c] / max(structural[c], _floor(c)) for c in size}
                 param, value = next((k, v) for k, v in h.items() if k not in ("effect", "channel"))
                 channel = h.get("channel")
@@ -163,7 +171,7 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
 def cached_truth(case: dict, car: dict, replayer, tyre_params, root: Path | None = None) -> dict:
     """`truth`, cached on disk beside the generated runs (keyed by the case and the car)."""
     root = Path(root or generate.cache_root())
-    path = root / f"{case['id']}_{generate.key(case, car, 'truth-v1')}.json"
+    path = root / f"{case['id']}_{generate.key(case, car, 'truth-v2')}.json"
     if path.exists():
         return json.loads(path.read_text())
     out = truth(case, car, replayer, tyre_params)
