@@ -4,14 +4,15 @@ laws, realistic run-to-run scatter and logger noise), scored against the generat
 (bench_truth, bench_score).
 
     python -m rtsim.validate.bench [--set heldout|tuning|issue] [--limit N | --reduced] [--workers N]
-                                   [--json] [--out DIR] [--cases ID,...]
+                                   [--json] [--out DIR] [--cases ID,...] [--prepare-only]
     python -m rtsim.validate.bench --straight-line [--effect NAME=VALUE]   (the seed's straight line)
 
 Default: the held-out set (never used to tune the method). Reports the share of the cases named right
 (among those whose effect is larger than the structural mismatch), the value error, the false-naming
 rate, the none-cases named and the "cannot be told apart" rate, as a table and a confusion matrix, and
-what it cost (generation, truth, workflow). Generated runs and truths are cached on disk
-(fieldbench.generate.cache_root; RTSIM_FIELDBENCH_CACHE overrides). `--reduced`: the cases of
+what it cost (generation, truth, workflow). Generated runs and truths are made first, `--workers`
+processes forked after the model is built, and cached on disk (fieldbench.generate.cache_root;
+RTSIM_FIELDBENCH_CACHE overrides; `--prepare-only` stops there). `--reduced`: the cases of
 REDUCED (the CI form, tests/test_validate_benchmark.py). `--workers`: the workflow's worker processes
 (cases run one after another in this process, the model built once).
 
@@ -228,6 +229,32 @@ def show(records: list[dict], console=None) -> None:
     console.print(m)
 
 
+_BENCH: "Bench | None" = None
+
+
+def _prepare_one(case: dict) -> tuple[float, float]:
+    t0 = time.perf_counter()
+    _BENCH.runs(case)
+    t1 = time.perf_counter()
+    _BENCH.truth(case)
+    return t1 - t0, time.perf_counter() - t1
+
+
+def prepare(bench: Bench, cases: list[dict], workers: int) -> tuple[float, float]:
+    """Generate every case's runs and truth into the disk cache, `workers` processes forked after the model
+    was built (it is shared, never rebuilt). Returns the seconds spent generating and on the truths,
+    summed over the cases."""
+    global _BENCH
+    _BENCH = bench
+    if workers <= 1 or len(cases) <= 1:
+        done = [_prepare_one(c) for c in cases]
+    else:
+        import multiprocessing
+        with multiprocessing.get_context("fork").Pool(workers) as pool:
+            done = pool.map(_prepare_one, cases, chunksize=1)
+    return sum(a for a, _ in done), sum(b for _, b in done)
+
+
 def field(args) -> int:
     import json
     import os
@@ -237,6 +264,14 @@ def field(args) -> int:
     t0 = time.perf_counter()
     bench = Bench()
     setup = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    gen, tru = prepare(bench, cases, args.workers)
+    prep = time.perf_counter() - t1
+    if not args.json:
+        print(f"{len(cases)} cases generated and their truths computed in {prep:.0f} s ({args.workers} processes; "
+              f"generation {gen:.1f} s, truths {tru:.0f} s of process time)", flush=True)
+    if args.prepare_only:
+        return 0
     records = []
     for k, case in enumerate(cases):
         rec = bench.run(case, out, args.workers)
@@ -247,8 +282,8 @@ def field(args) -> int:
     total = time.perf_counter() - t0
     from .bench_score import rates
     summary = {"set": "reduced" if args.reduced else args.set, "cases": records, "rates": rates(records),
-               "seconds": {"total": total, "setup": setup,
-                           **{k: sum(r["seconds"][k] for r in records) for k in ("generate", "truth", "workflow")}},
+               "seconds": {"total": total, "setup": setup, "prepare": prep, "generate": gen, "truth": tru,
+                           "workflow": sum(r["seconds"]["workflow"] for r in records)},
                "workers": args.workers, "cpus": os.cpu_count()}
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench.json").write_text(json.dumps(summary, indent=1, default=str))
@@ -257,8 +292,8 @@ def field(args) -> int:
     else:
         show(records)
         sec = summary["seconds"]
-        print(f"{len(records)} cases in {total:.0f} s (setup {setup:.0f} s, generation {sec['generate']:.1f} s, "
-              f"truth {sec['truth']:.0f} s, workflow {sec['workflow']:.0f} s; {args.workers} workers); "
+        print(f"{len(records)} cases in {total:.0f} s (setup {setup:.0f} s, generation and truths {prep:.0f} s, "
+              f"workflow {sec['workflow']:.0f} s; {args.workers} workers); "
               f"results: {out / 'bench.json'}")
     return 0
 
@@ -272,6 +307,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--workers", type=int, default=2, help="the workflow's worker processes")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.add_argument("--out", type=Path, help="reports and bench.json (default: a temporary folder)")
+    p.add_argument("--prepare-only", action="store_true", help="only generate the runs and truths into the cache")
     p.add_argument("--straight-line", action="store_true", help="the seed's straight line instead (--effect)")
     p.add_argument("--effect", default="brake_friction=0.85", help="with --straight-line: hidden model effect "
                    "NAME=VALUE (its first parameter), or 'none'")
