@@ -237,6 +237,46 @@ def test_runs_are_quantised_and_readable(car, tmp_path):
     assert all(r.accel_frame == "level" for r in runs)
 
 
+# ------------------------------------------------------------------------------------------------ scoring
+def _truth(*effects):
+    return {"effects": [dict(zip(("effect", "channel", "param", "model_terms", "kind", "larger", "ratio"), e))
+                        for e in effects], "larger": all(e[5] for e in effects)}
+
+
+def test_scoring():
+    """Outcomes against a truth: the exact set within tolerance is right (10 % sensor, 20 % model, of the
+    value in the model's terms), an extra effect is a false naming, a value outside its tolerance is off,
+    a smaller-than-structural effect may go unnamed; the rates count them."""
+    from rtsim.validate.bench_score import acceptable, confusion, outcome, rates
+    bias = ("sensor_bias", "gyro_z", "bias", 0.03, "sensor", True, 5.0)
+    tyre = ("tyre_slip_stiffness", None, "scale", 0.55, "model", True, 9.0)
+    small = ("mass", None, "added_mass", 100.0, "model", False, 0.5)
+    one = {"id": "a", "kind": "one", "sim": "planar", "tyre": "tanh"}
+    named = lambda *n: [{"effect": e, "channel": c, "params": {p: v}} for e, c, p, v in n]   # noqa: E731
+    r1 = outcome(one, _truth(bias), named(("sensor_bias", "gyro_z", "bias", 0.0327)), "")
+    assert r1["status"] == "right" and acceptable(r1, _truth(bias))[0]
+    r2 = outcome(one, _truth(bias), named(("sensor_bias", "gyro_z", "bias", 0.0334)), "")
+    assert r2["status"] == "value off" and not acceptable(r2, _truth(bias))[0]
+    r3 = outcome(one, _truth(tyre), named(("tyre_slip_stiffness", None, "scale", 0.65),
+                                          ("mass", None, "added_mass", 12.8)), "")
+    assert r3["status"] == "false" and r3["extra"] == ["mass"] and not acceptable(r3, _truth(tyre))[0]
+    r4 = outcome(one, _truth(small), [], "... cannot be told apart ...")
+    assert r4["status"] == "missed" and r4["told_apart"] and acceptable(r4, _truth(small))[0]
+    r5 = outcome(one, _truth(tyre), [], "")
+    assert not acceptable(r5, _truth(tyre))[0]
+    none = {"id": "n", "kind": "none", "sim": "pitch", "tyre": "tanh"}
+    r6 = outcome(none, _truth(), named(("road_grade", None, "grade", 0.01)), "")
+    r7 = outcome(none, _truth(), [], "no catalogue effect")
+    assert (r6["status"], r7["status"]) == ("false", "right")
+    rt = rates([r1, r2, r3, r4, r5, r6, r7])
+    assert rt["named_right"]["count"] == 1 and rt["named_right"]["of"] == 4       # r1 of r1 r2 r3 r5
+    assert rt["false_naming"]["count"] == 2 and rt["none_cases_named"] == {"share": 0.5, "count": 1, "of": 2}
+    assert rt["cannot_be_told_apart"]["count"] == 1
+    conf = confusion([r1, r3, r6, r7])
+    assert conf["sensor_bias[gyro_z]"]["sensor_bias[gyro_z]"] == 1 and conf["tyre_slip_stiffness"]["mass"] == 1
+    assert conf["none"] == {"road_grade": 1, "nothing": 1}
+
+
 # ------------------------------------------------------------------------------------ reduced benchmark
 #: THE one list of the reduced benchmark's cases that fail with today's method, each with its reason (what
 #: the bar check said). A case here is a strict expected failure: when the method is changed and it

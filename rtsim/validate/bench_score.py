@@ -71,8 +71,8 @@ def rates(outcomes: list[dict]) -> dict:
 
 def confusion(outcomes: list[dict]) -> dict[str, Counter]:
     """hidden effect[channel] (or "none" / "outside") -> Counter of what was named for it: the same effect, another
-    one, or "nothing". A hidden effect counts its own name when named, else each extra named effect,
-    else "nothing"."""
+    one, or "nothing". A hidden effect counts its own name when named, and each effect named in its case that
+    was not hidden; "nothing" when neither."""
     rows: dict[str, Counter] = {}
     for o in outcomes:
         hidden = o["hidden"] or [o["kind"]]
@@ -80,10 +80,9 @@ def confusion(outcomes: list[dict]) -> dict[str, Counter]:
             row = rows.setdefault(h, Counter())
             if h in o["named"]:
                 row[h] += 1
-            elif o["extra"]:
-                for x in o["extra"]:
-                    row[x] += 1
-            else:
+            for x in o["extra"]:
+                row[x] += 1
+            if h not in o["named"] and not o["extra"]:
                 row["nothing"] += 1
     return rows
 
