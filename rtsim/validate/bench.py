@@ -190,13 +190,26 @@ def _fmt(r: dict) -> str:
     return f"{100 * r['share']:.0f} % ({r['count']}/{r['of']})" if r["of"] else "-"
 
 
+SHORT = {"sensor_bias": "bias", "sensor_scale": "scale", "sensor_delay": "delay", "tyre_slip_stiffness": "tyre",
+         "rolling_resistance": "roll.res", "brake_friction": "brake", "road_grade": "grade", "brake_lag": "b.lag",
+         "wheel_angle_": "wa_", "tyre_relaxation": "relax", "driveline_compliance": "driveline",
+         "bearing_drag": "bearing", "brake_stiction": "stiction", "aero_drag": "aero"}
+
+
+def _short(label: str) -> str:
+    """A column's short name: sensor_bias[gyro_z] -> bias[gyro_z], wheel_angle_fl -> wa_fl, ..."""
+    for k, v in SHORT.items():
+        label = label.replace(k, v)
+    return label
+
+
 def show(records: list[dict], console=None) -> None:
     """Per-case table, the rates and the confusion matrix (rich)."""
     from rich.console import Console
     from rich.table import Table
 
     from .bench_score import confusion, rates
-    console = console or Console()
+    console = console or Console(width=None if sys.stdout.isatty() else 160)
     t = Table(title="field benchmark: cases")
     for col in ("case", "sim", "hidden", "larger", "named", "status", "value error", "s"):
         t.add_column(col)
@@ -223,7 +236,7 @@ def show(records: list[dict], console=None) -> None:
     m = Table(title="confusion: hidden (rows) -> named (columns)")
     m.add_column("hidden")
     for c in cols:
-        m.add_column(c, justify="right")
+        m.add_column(_short(c), justify="right")
     for h in sorted(conf):
         m.add_row(h, *(str(conf[h].get(c, "")) for c in cols))
     console.print(m)

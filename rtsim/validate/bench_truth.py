@@ -8,7 +8,8 @@ Values in the model's terms (what a right fit finds):
   slip angle, lateral force) of the noise-free run with the effect, every 50 ms where |tan alpha| >
   0.002: a tyre-level fit of the two tyre laws, no vehicle fit;
 - sensor effects: the hidden value composed with what the model, replayed without any effect on the
-  noise-free nominal run, reads on the channel: a bias plus the mean offset (simulator - model), a scale
+  noise-free nominal run, reads on the channel: a bias plus the mean offset (simulator - model; on
+  accel_x less the part a resistance offset within +-0.03 m/s^2 takes), a scale
   times the least-squares gain of the simulator's channel on the model's, a delay plus the time shift
   (+-0.1 s, 0.5 ms steps) that best aligns the model's channel with the simulator's (the model's own lag
   reads as part of a delay); a wheel angle's scale as hidden (the other wheel of its axle is the
@@ -22,8 +23,8 @@ change it makes to that difference (simulator with the effect alone minus the mo
 inputs, minus the same without the effect: a model effect's change of the recorded inputs, e.g. the
 speed controller's torques, is replayed; a sensor effect changes the reading alone), both after removing by least squares
 what a field validation must allow for anyway (wheel speeds, per axle: one scale of both wheels, a rolling
-radius, and one drift growing linearly with the time moved, a resistance offset; accel_x: a constant
-offset while moving), and the floor F_c = the channel's noise left in the mean of the seven runs (sd / sqrt(7)). An
+radius within +-1.5 %, and one drift growing linearly with the time moved, a resistance offset within
++-0.03 m/s^2; accel_x: that offset while moving; bounded least squares), and the floor F_c = the channel's noise left in the mean of the seven runs (sd / sqrt(7)). An
 effect is larger iff max over c of E_c / max(S_c, F_c) >= `RATIO`; a case is larger iff every hidden
 effect is.
 """
@@ -39,6 +40,8 @@ import numpy as np
 from .fieldbench import generate, scatter
 
 RATIO = 2.0
+RADIUS_RANGE = 0.015         # an axle's rolling radius, relative
+OFFSET_RANGE = 0.03          # m/s^2, a resistance offset
 WHEEL_SPEED_FLOOR = 0.05     # rad/s: a wheel speed's noise left in the mean (quantised angles derived)
 TOL = {"sensor": 0.10, "model": 0.20}
 
@@ -59,11 +62,13 @@ def _bench(case, t, ch, folder: Path, name: str, sensor_names):
     return build_benchmark(runs, rejected)
 
 
-def _left_over(diff: dict, data0: dict, t: np.ndarray, moving: np.ndarray) -> dict:
-    """Per channel, the RMS of `diff` (channel -> difference on the grid) after removing by least squares
-    what a field validation must allow for (module docstring): per axle, one scale of both wheel speeds
-    (a rolling radius) and one drift growing with the time moved (a resistance offset); accel_x, a
-    constant offset while moving."""
+def _left_over(diff: dict, data0: dict, t: np.ndarray, moving: np.ndarray, radius: float) -> dict:
+    """Per channel, the RMS of `diff` (channel -> difference on the grid) after removing by bounded least
+    squares what a field validation must allow for (module docstring): per axle, one scale of both wheel
+    speeds within +-`RADIUS_RANGE` (a rolling radius) and one drift growing with the time moved, a
+    resistance offset within +-`OFFSET_RANGE` m/s^2 (divided by the wheel radius); accel_x, that offset
+    while moving."""
+    from scipy.optimize import lsq_linear
     out = {}
     drift = np.cumsum(moving) * (t[1] - t[0])
     for axle in ("f", "r"):
@@ -71,14 +76,15 @@ def _left_over(diff: dict, data0: dict, t: np.ndarray, moving: np.ndarray) -> di
         if pair:
             basis = np.vstack([np.column_stack([data0[c], drift]) for c in pair])
             x = np.concatenate([diff[c] for c in pair])
-            coef, *_ = np.linalg.lstsq(basis, x, rcond=None)
+            lim = np.array([RADIUS_RANGE, OFFSET_RANGE / radius])
+            coef = lsq_linear(basis, x, bounds=(-lim, lim)).x
             rest = (x - basis @ coef).reshape(len(pair), -1)
             out.update({c: _rms(r) for c, r in zip(pair, rest)})
     for c, d in diff.items():
         if c in out:
             continue
-        if c == "accel_x":
-            d = d - moving * (d[moving].mean() if moving.any() else 0.0)
+        if c == "accel_x" and moving.any():
+            d = d - moving * float(np.clip(d[moving].mean(), -OFFSET_RANGE, OFFSET_RANGE))
         out[c] = _rms(d)
     return out
 
@@ -124,7 +130,8 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
             tg = b0.t
             data0 = {c: b0.mean(c) for c in compared}
             moving = np.abs(data0.get("wheel_speed_rl", np.ones_like(tg))) > 0.5
-            structural = _left_over({c: model[c] - data0[c] for c in compared}, data0, tg, moving)
+            radius = replayer.wheel_radius
+            structural = _left_over({c: model[c] - data0[c] for c in compared}, data0, tg, moving, radius)
             effects = []
             for h in case["hidden"]:
                 alone = {"hidden": [h], "outside": []}
@@ -138,7 +145,7 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
                     change = {c: (b1.mean(c) - model1[c]) - (data0[c] - model[c]) for c in compared if c in b1.bands}
                 else:
                     change = {c: b1.mean(c) - data0[c] for c in compared if c in b1.bands}
-                size = _left_over(change, data0, tg, moving)
+                size = _left_over(change, data0, tg, moving, radius)
                 ratio = {c: size[c] / max(structural[c], _floor(c)) for c in size}
                 param, value = next((k, v) for k, v in h.items() if k not in ("effect", "channel"))
                 channel = h.get("channel")
@@ -149,7 +156,10 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
                 elif channel is not None and not channel.startswith("wheel_angle_") and channel in data0:
                     m, d = model[channel], data0[channel]
                     if h["effect"] == "sensor_bias":
-                        terms = value + float(np.mean(d - m))
+                        off = float(np.mean(d - m))
+                        if channel == "accel_x":         # the resistance offset takes up to OFFSET_RANGE of it
+                            off -= float(np.clip(off, -OFFSET_RANGE, OFFSET_RANGE))
+                        terms = value + off
                     elif h["effect"] == "sensor_scale":
                         terms = value * float(m @ d / (m @ m))
                     elif h["effect"] == "sensor_delay":
@@ -171,7 +181,7 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
 def cached_truth(case: dict, car: dict, replayer, tyre_params, root: Path | None = None) -> dict:
     """`truth`, cached on disk beside the generated runs (keyed by the case and the car)."""
     root = Path(root or generate.cache_root())
-    path = root / f"{case['id']}_{generate.key(case, car, 'truth-v2')}.json"
+    path = root / f"{case['id']}_{generate.key(case, car, 'truth-v3')}.json"
     if path.exists():
         return json.loads(path.read_text())
     out = truth(case, car, replayer, tyre_params)
