@@ -206,18 +206,19 @@ def _short(label: str) -> str:
 def show(records: list[dict], console=None) -> None:
     """Per-case table, the rates and the confusion matrix (rich)."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     from .bench_score import confusion, rates
-    console = console or Console(width=None if sys.stdout.isatty() else 160)
+    console = console or Console(width=None if sys.stdout.isatty() else 200)
     t = Table(title="field benchmark: cases")
     for col in ("case", "sim", "hidden", "larger", "named", "status", "value error", "s"):
         t.add_column(col)
     for r in records:
         named = ", ".join(f"{n['effect']}[{n['channel']}]" if n["channel"] else n["effect"] for n in r["found"])
         errs = ", ".join(f"{100 * e:.1f} %" for e in r["errors"].values())
-        t.add_row(r["id"], f"{r['sim']}/{r['tyre']}", r["label"], "yes" if r["larger"] else "no",
-                  named or ("error" if r["error"] else "-"), r["status"] + (" (told apart)" if r["told_apart"] else ""),
+        t.add_row(r["id"], f"{r['sim']}/{r['tyre']}", escape(r["label"]), "yes" if r["larger"] else "no",
+                  escape(named) or ("error" if r["error"] else "-"), r["status"] + (" (told apart)" if r["told_apart"] else ""),
                   errs, f"{r['seconds']['workflow']:.0f}")
     console.print(t)
     rt = rates(records)
@@ -234,11 +235,11 @@ def show(records: list[dict], console=None) -> None:
     conf = confusion(records)
     cols = sorted({c for row in conf.values() for c in row} - {"nothing"}) + ["nothing"]
     m = Table(title="confusion: hidden (rows) -> named (columns)")
-    m.add_column("hidden")
+    m.add_column("hidden", no_wrap=True)
     for c in cols:
-        m.add_column(_short(c), justify="right")
+        m.add_column(escape(_short(c)), justify="right")
     for h in sorted(conf):
-        m.add_row(h, *(str(conf[h].get(c, "")) for c in cols))
+        m.add_row(escape(_short(h)), *(str(conf[h].get(c, "")) for c in cols))
     console.print(m)
 
 
