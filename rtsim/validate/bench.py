@@ -218,7 +218,8 @@ def show(records: list[dict], console=None) -> None:
         named = ", ".join(f"{n['effect']}[{n['channel']}]" if n["channel"] else n["effect"] for n in r["found"])
         errs = ", ".join(f"{100 * e:.1f} %" for e in r["errors"].values())
         t.add_row(r["id"], f"{r['sim']}/{r['tyre']}", escape(r["label"]), "yes" if r["larger"] else "no",
-                  escape(named) or ("error" if r["error"] else "-"), r["status"] + (" (told apart)" if r["told_apart"] else ""),
+                  escape(named) or ("error" if r["error"] else "-"),
+                  r["status"] + (" (told apart)" if r["told_apart"] else ""),
                   errs, f"{r['seconds']['workflow']:.0f}")
     console.print(t)
     rt = rates(records)

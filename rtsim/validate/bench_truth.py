@@ -16,17 +16,17 @@ Values in the model's terms (what a right fit finds):
   reference);
 - every other model effect: the hidden value (the simulators implement the catalogue's definitions).
 
-"Larger than the structural mismatch" (decided before the method changed). On the noise-free nominal
-run (no scatter, no noise) on the workflow's 100 Hz grid, per compared channel c: the structural
-mismatch S_c = RMS(model without effect - simulator without effect), the effect's size E_c = RMS of the
-change it makes to that difference (simulator with the effect alone minus the model replaying that run's
-inputs, minus the same without the effect: a model effect's change of the recorded inputs, e.g. the
-speed controller's torques, is replayed; a sensor effect changes the reading alone), both after removing by least squares
-what a field validation must allow for anyway (wheel speeds, per axle: one scale of both wheels, a rolling
-radius within +-1.5 %, and one drift growing linearly with the time moved, a resistance offset within
-+-0.03 m/s^2; accel_x: that offset while moving; bounded least squares), and the floor F_c = the channel's noise left in the mean of the seven runs (sd / sqrt(7)). An
-effect is larger iff max over c of E_c / max(S_c, F_c) >= `RATIO`; a case is larger iff every hidden
-effect is.
+"Larger than the structural mismatch" (decided before the method changed). On the noise-free nominal run (no
+scatter, no noise) on the workflow's 100 Hz grid, per compared channel c: the structural mismatch S_c =
+RMS(model without effect - simulator without effect), the effect's size E_c = RMS of the change it makes to
+that difference (simulator with the effect alone minus the model replaying that run's inputs, minus the same
+without the effect: a model effect's change of the recorded inputs, e.g. the speed controller's torques, is
+replayed; a sensor effect changes the reading alone), both after removing by least squares what a field
+validation must allow for anyway (wheel speeds, per axle: one scale of both wheels, a rolling radius within
++-1.5 %, and one drift growing linearly with the time moved, a resistance offset within +-0.03 m/s^2; accel_x:
+that offset while moving; bounded least squares), and the floor F_c = the channel's noise left in the mean of
+the seven runs (sd / sqrt(7)). An effect is larger iff max over c of E_c / max(S_c, F_c) >= `RATIO`; a case is
+larger iff every hidden effect is.
 """
 from __future__ import annotations
 

@@ -306,7 +306,8 @@ def _pitch(p, brake_cmd, torque_cmd, dt, every, nsettle):
                 f1 += fade * c_d * (om[i] * re - v)
             fxs[i] = 2 * f1
             t_drive = 2 * tq if i == 1 else 0.0
-            t_rr = (p[P_RR] * r0 * math.tanh(2.0 * om[i] * re) + p[P_RRADD] * rl * math.tanh(om[i] * re / 0.05)) * fzs[i]
+            t_rr = (p[P_RR] * r0 * math.tanh(2.0 * om[i] * re)
+                    + p[P_RRADD] * rl * math.tanh(om[i] * re / 0.05)) * fzs[i]
             gain = p[P_GF] if i == 0 else p[P_GR]
             pr = p_line if i == 0 else p_r
             t_want = 2 * gain * pr

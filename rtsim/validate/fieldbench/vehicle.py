@@ -71,7 +71,8 @@ def numbers(desc: dict, vehicle: Path) -> dict[str, float]:
     b = L - a
     mu_f, mu_r = cfg["front"]["unsprung_mass_kg"], cfg["rear"]["unsprung_mass_kg"]
     tf, tr = desc["track_front"], desc["track_rear"]
-    izz = (cfg["chassis"]["inertia_kgm2"][2] + 2 * mu_f * (a ** 2 + (tf / 2) ** 2) + 2 * mu_r * (b ** 2 + (tr / 2) ** 2))
+    izz = (cfg["chassis"]["inertia_kgm2"][2] + 2 * mu_f * (a ** 2 + (tf / 2) ** 2)
+           + 2 * mu_r * (b ** 2 + (tr / 2) ** 2))
     k_tyre = tir["VERTICAL_STIFFNESS"]
     out = {"mass": desc["mass"], "sprung_mass": cfg["chassis"]["mass_kg"], "unsprung_front": mu_f,
            "unsprung_rear": mu_r, "izz": izz, "ixx": cfg["chassis"]["inertia_kgm2"][0],
