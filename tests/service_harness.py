@@ -46,9 +46,10 @@ def can_segment():
 
 
 class ServiceProcess:
-    """`rtsim serve` in a child process; ``lines`` collects its stdout."""
+    """`rtsim serve` in a child process; ``lines`` collects its stdout. ``ready_timeout`` (wall s) only calls a
+    start hung: a first compile inside the loaded SocketCAN VM has taken minutes."""
 
-    def __init__(self, iface: str, channel: str, *args: str, ready_timeout: float = 180.0):
+    def __init__(self, iface: str, channel: str, *args: str, ready_timeout: float = 900.0):
         cmd = [sys.executable, "-m", "rtsim.cli", "serve", "--can-interface", iface, "--can-channel", channel,
                "--no-hub", *args]
         self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,

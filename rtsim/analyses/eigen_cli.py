@@ -70,8 +70,11 @@ def statics_main(args) -> int:
     fork = float(mm.group(q, "ZETA")[0])
     up = lambda x: float((mm.group(x, "W_R") - mm.group(x, "P")) @ mm.group(x, "H_AX"))   # noqa: E731
     x_axis = np.cos(cfg.caster_rad) * mm.group(q, "E1") - np.sin(cfg.caster_rad) * mm.group(q, "H_AX")
-    data = {"vehicle": cfg.name, "wheel_loads_n": {"front": float(loads[0]), "rear": float(loads[1])},
-            "front_share": float(loads[0] / loads.sum()),
+    carried = loads.sum() > 0.0       # 0: the wheels roll on constraints (no tyre model), whose loads are not kept
+    data = {"vehicle": cfg.name,
+            "wheel_loads_n": {"front": float(loads[0]), "rear": float(loads[1])} if carried else None,
+            "front_share": float(loads[0] / loads.sum()) if carried else None,
+            **({} if carried else {"note": "no tyre loads: the wheels touch the ground through rolling constraints"}),
             "fork_compression_m": fork,
             "fork_compression_from_design_m": fork - des.zeta0,
             "rear_axle_rise_from_design_m": up(q) - up(q0),

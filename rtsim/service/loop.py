@@ -117,7 +117,8 @@ class HilLoop:
         self.scenario_name = scenario_name
         self.on_chunk = on_chunk
         self.user_input = user_input       # the ``drive`` op (rtsim.service.user_input) accepted
-        self._usr_deadline = None          # monotonic time the user's commands lapse at
+        self._usr_deadline = None          # user_clock time the user's commands lapse at
+        self.user_clock = time.monotonic   # the wall clock (s) a user command's hold runs on; a test may set its own
         self._usr_seq = None
         self._usr_requests = 0
         # (topic, event) for the recording and re-simulation, each with the step it acted at: every change
@@ -357,7 +358,7 @@ class HilLoop:
         """What the SIM_STATUS frame needs from outside the step: loop overruns, the bus state."""
         self.li[LI_OVERRUNS] = self.health.overruns
         self.li[LI_BUS_ERROR] = self._bus_error()
-        if self._usr_deadline is not None and time.monotonic() > self._usr_deadline:
+        if self._usr_deadline is not None and self.user_clock() > self._usr_deadline:
             self._user_release()
             self._user_changed("lapse")
         self._bus_errors_at_status = self.port.errors if self.port is not None else 0
@@ -489,7 +490,7 @@ class HilLoop:
                 usr[u] = v
             if takeover is not None:
                 self.ls.usr_mode[0] = int(takeover)
-            self._usr_deadline = time.monotonic() + USER_HOLD if not np.all(np.isnan(usr)) else None
+            self._usr_deadline = self.user_clock() + USER_HOLD if not np.all(np.isnan(usr)) else None
         self._usr_requests += 1
         self._usr_seq = args.get("seq") if isinstance(args.get("seq"), int) else self._usr_seq
         self._user_changed("release" if args.get("release") else "drive")
