@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from drivers.base import INPUT_NAMES
 from rtsim.errors import RtsimError
 
-from .user_input import USER_CHANNELS
+from .user_input import USER_CHANNEL_NAMES
 
 SHIPPED_SCENARIOS = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
 
@@ -58,12 +58,12 @@ class LoadScenarioArgs(_Args):
 DriverArgs = create_model("DriverArgs", __base__=_Args,
                           **{name: (Optional[Finite], None) for name in INPUT_NAMES})
 
-#: drive: the user's channels of either vehicle kind (rtsim.service.user_input; the handler checks the
-#: served vehicle's channels and ranges), a number or null, and the request's flags
+#: drive: the shipped vehicles' user channels (rtsim.service.user_input; the handler checks the served
+#: vehicle's channels and ranges), a number or null, and the request's flags
 DriveArgs = create_model(
     "DriveArgs", __base__=_Args,
     takeover=(Optional[bool], None), release=(bool, False), seq=(Optional[int], None),
-    **{name: (Optional[Finite], None) for chans in USER_CHANNELS.values() for name in chans})
+    **{name: (Optional[Finite], None) for name in USER_CHANNEL_NAMES})
 
 #: op -> its arguments' model (the ops of bridge.zenoh_link.CONTROL_OPS)
 OP_ARGS: dict[str, type[BaseModel]] = {

@@ -258,14 +258,9 @@ class Service:
             "zenoh": {"endpoints": list(self.zenoh.endpoints)} if self.zenoh is not None else None,
             "dbc": str(self.codec.path),
             "channels": json.loads(self.codec.channels.to_json()),   # the served vehicle's interface
-            "view": self.model.config.user_controls(),     # what rtsim view's controls mean for it
-            # what a person may drive (rtsim.vehicle.kit.user_inputs): ranges, full scales (what a full key
-            # or pedal asks), the bus command each competes with and whether that command adds to it
-            "user_inputs": {"writes": self.sim.user_inputs.writes, "in_loop": self.sim.user_inputs.in_loop,
-                            "channels": {c.name: {"lo": c.lo, "hi": c.hi, "unit": c.unit, "meaning": c.meaning,
-                                                  "full_scale": c.full_scale, "bus": c.bus,
-                                                  "adds_to_bus": c.adds_to_bus}
-                                         for c in self.sim.user_inputs.channels}},
+            # what a person may drive (rtsim.vehicle.kit.user_inputs): channels, ranges, full scales, the
+            # bus command each competes with, the page's control groups and default plots
+            "user_inputs": self.sim.user_inputs.as_json(),
         }
 
     # -- running ---------------------------------------------------------------------------------------

@@ -1,15 +1,10 @@
 """The user's command source: a person driving the served vehicle from `rtsim view` (keyboard, gamepad,
 steering wheel), through the service's Zenoh ``drive`` control op.
 
-The user drives a fixed set of channels per vehicle kind (SI units, ISO 8855 signs):
-
-- a car: ``throttle_angle_cmd`` (rad), ``brake_pressure_cmd`` (kPa), ``steering_wheel_angle_cmd`` (rad,
-  positive steering left): the same channels as its ECU's commands;
-- a two-wheeler: ``throttle_cmd`` (1), ``brake_pressure_front_cmd`` and ``brake_pressure_rear_cmd`` (kPa)
-  and ``roll_angle_demand`` (rad, positive leaning right). A person cannot balance a motorcycle through
-  a keyboard's steering torque, so the user asks for a lean angle and a lean loop in the step
-  (drivers.lean_demand, the rider's roll-loop gains) turns it into the handlebar torque, as a rider
-  balancing by counter-steering would.
+The user drives the channels the served vehicle declares (its ``user_inputs``,
+rtsim.vehicle.kit.user_inputs: a car's own ECU commands; a two-wheeler's throttle, caliper pressures and
+a lean demand that a lean loop in the step, drivers.lean_demand, turns into handlebar torque), SI units,
+ISO 8855 signs.
 
 Priority, applied inside the compiled step after the watchdog (rtsim.service.vehicles.vehicle_user): a
 user channel replaces the in-loop driver's (the scenario's driver, the rider) always, and the bus ECU's
@@ -29,15 +24,9 @@ NUSR = 4                 # user channels per vehicle (the car uses the first thr
 NWORK = 3                # lean loop state: on, rate-limited reference (rad), integral (N m)
 USER_HOLD = 1.0          # s of wall time a user command is held without a new request
 
-#: the shipped kinds' user channels, (lo, hi, unit, meaning) in slot order: every name the drive op may
-#: carry (rtsim.service.control_args). A served vehicle's own: its sim's ``user_inputs``.
-USER_CHANNELS: dict[str, dict[str, tuple[float, float, str, str]]] = {
-    "car": CAR_USER.table(), "two_wheeler": TWO_WHEELER_USER.table()}
-
-
-def user_channels(kind: str) -> dict[str, tuple[float, float, str, str]]:
-    """(Kept for callers that know only the kind; the loop reads the served vehicle's ``user_inputs``.)"""
-    return USER_CHANNELS[kind]
+#: the shipped vehicles' user channel names: every name the drive op may carry (rtsim.service.control_args;
+#: the handler checks the served vehicle's own, its sim's ``user_inputs``)
+USER_CHANNEL_NAMES: tuple[str, ...] = tuple(dict.fromkeys(CAR_USER.names + TWO_WHEELER_USER.names))
 
 
 def check_value(inputs, name: str, value) -> float:

@@ -142,7 +142,7 @@ class VehicleKind:
 
     def user_inputs(self, opened: "OpenedVehicle"):
         """What a person may drive (rtsim.vehicle.kit.user_inputs.UserInputs): channels, ranges, full
-        scales, the bus command each competes with."""
+        scales, the bus command each competes with, the page's groups of them."""
         raise NotImplementedError
 
 
@@ -208,7 +208,7 @@ class OpenedVehicle:
 
     @property
     def user_inputs(self):
-        """The vehicle's user channels with their full scales (the viewer's key and pedal scaling)."""
+        """What a person may drive of the vehicle (the service's loop and config, the viewer's controls)."""
         return self.kind.user_inputs(self)
 
     @property

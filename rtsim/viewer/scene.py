@@ -1,7 +1,7 @@
 """What the page draws, described once from the service's configuration: the vehicle's shape (wheel
 centres, radii, tyre stiffness, body size: from its config file as the service reports it), the road
 (plane, grade, or the survey mesh with its per-triangle friction), and the vehicle's controls and default
-plots as the vehicle describes them (rtsim.vehicle.kit.user_controls). All in SI units and ISO 8855 axes
+plots as the vehicle describes them (rtsim.vehicle.kit.user_inputs). All in SI units and ISO 8855 axes
 (x forward, y left, z up), as the state channels.
 
 Buildings: simple blocks from an optional file beside a survey (``<survey stem>_buildings.csv``).
@@ -167,8 +167,18 @@ def describe(config: dict) -> dict:
         "scenario": (config.get("scenario") or {}).get("name"),
         "shape": shape, "road": road_description(road_path),
         "channels": config.get("channels"),
-        # the vehicle's own description of its controls and default plots (rtsim.vehicle.kit.user_controls),
-        # as the service sends it; a service (or a recording) from before it: nothing to drive with
-        "controls": (config.get("view") or {}).get("controls") or [],
-        "plots": (config.get("view") or {}).get("plots") or [],
+        # what the vehicle says a person may drive (rtsim.vehicle.kit.user_inputs), as the page's control
+        # groups, and its default plots; a service (or a recording) without it: nothing to drive with
+        "controls": page_controls(config.get("user_inputs") or {}),
+        "plots": (config.get("user_inputs") or {}).get("plots") or [],
     }
+
+
+def page_controls(user_inputs: dict) -> list[dict]:
+    """The page's control groups from the service's ``user_inputs`` (rtsim.vehicle.kit.user_inputs):
+    ``[{"name", "release", "channels": [{"channel", "control", "full_scale", "sign"}, ...]}, ...]``."""
+    chans = user_inputs.get("channels") or {}
+    return [{"name": g["name"], "release": g["release"],
+             "channels": [{"channel": n, "control": chans[n]["control"], "full_scale": chans[n]["full_scale"],
+                           "sign": chans[n]["sign"]} for n in g["channels"]]}
+            for g in user_inputs.get("groups") or []]

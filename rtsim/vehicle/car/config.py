@@ -335,11 +335,6 @@ class VehicleConfig(Strict):
                       f"ratio <= {hi:g} of road cars (steering-wheel angle per road-wheel angle at straight ahead)")
         return self
 
-    def user_controls(self) -> dict:
-        """What `rtsim view`'s controls mean for this car (rtsim.vehicle.car.user_controls)."""
-        from .user_controls import user_controls
-        return user_controls(self)
-
 
 def load_vehicle(path: str | Path, data: dict | None = None) -> tuple[VehicleConfig, Path]:
     """The validated vehicle config and the folder its relative paths refer to (``data``: the file's

@@ -1,10 +1,18 @@
 """The car's driving inputs: the ranges of its input channels (what a driver, a replay or a person may
-command, SI) and its user channels (rtsim.vehicle.kit.user_inputs)."""
+command, SI) and what a person may drive of it (rtsim.vehicle.kit.user_inputs).
+
+The person drives the ECU's own commands, the value written into the command slot. The pedals are one
+group (either key takes the throttle and the brake, so a car nobody else drives is not held by the
+watchdog's brake while the user accelerates): full throttle the plate's wide-open angle from
+[powertrain.throttle], full brake 60 % of the brake actuator's maximum (a key cannot modulate: full
+pressure locks the wheels). The steering is 3 rad of steering-wheel angle at full steer (about 170
+degrees: a parking manoeuvre's lock), positive steering left (ISO 8855), so a right key is negative.
+Released, both groups hold their rest values: the car coasts straight on."""
 from __future__ import annotations
 
 import math
 
-from ..kit.user_inputs import UserChannel, UserInputs
+from ..kit.user_inputs import ControlGroup, UserChannel, UserInputs
 
 #: input channel -> (lo, hi), SI: rad, kPa, rad, N m, N m
 LIMITS: dict[str, tuple[float, float]] = {
@@ -14,18 +22,23 @@ LIMITS: dict[str, tuple[float, float]] = {
     "wheel_torque_rl": (-5000.0, 5000.0),
     "wheel_torque_rr": (-5000.0, 5000.0),
 }
+BRAKE_FRACTION = 0.6           # of the actuator's maximum pressure at full brake
+STEERING_WHEEL_FULL_RAD = 3.0  # steering-wheel angle at full steer
 
 
 def user_inputs(throttle_max: float = 1.4, brake_max: float = 12000.0) -> UserInputs:
-    """A car's user channels: the ECU's own commands, the user's value written into the command slot.
-    Full scales: the throttle's wide-open angle, 60 % of the brake actuator's maximum, 3 rad at the
-    steering wheel."""
-    def ch(name, unit, meaning, full):
-        return UserChannel(name, *LIMITS[name], unit, meaning, full, name)
-    return UserInputs((ch("throttle_angle_cmd", "rad", "throttle plate angle", throttle_max),
-                       ch("brake_pressure_cmd", "kPa", "brake line pressure", 0.6 * brake_max),
-                       ch("steering_wheel_angle_cmd", "rad", "steering-wheel angle, positive steering left", 3.0)),
-                      writes="command", in_loop="scenario", idle="safe")
+    """A car's user channels (module docstring); ``throttle_max`` (rad) the wide-open plate angle,
+    ``brake_max`` (kPa) the brake actuator's maximum."""
+    def ch(name, unit, meaning, control, full, sign=1.0):
+        return UserChannel(name, *LIMITS[name], unit, meaning, full, bus=name, control=control, sign=sign)
+    return UserInputs(
+        (ch("throttle_angle_cmd", "rad", "throttle plate angle", "throttle", throttle_max),
+         ch("brake_pressure_cmd", "kPa", "brake line pressure", "brake", BRAKE_FRACTION * brake_max),
+         ch("steering_wheel_angle_cmd", "rad", "steering-wheel angle, positive steering left", "steer",
+            STEERING_WHEEL_FULL_RAD, sign=-1.0)),
+        (ControlGroup("pedals", "hold", ("throttle_angle_cmd", "brake_pressure_cmd")),
+         ControlGroup("steering", "hold", ("steering_wheel_angle_cmd",))),
+        writes="command", in_loop="scenario", idle="safe", plots=("speed", "yaw_rate", "steering_wheel_angle"))
 
 
 USER_INPUTS = user_inputs()       # with the default actuator limits (a vehicle's own: CarKind.user_inputs)

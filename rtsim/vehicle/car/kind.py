@@ -89,16 +89,12 @@ class CarKind(VehicleKind):
         return sim
 
     def user_inputs(self, opened):
-        """The car's user channels, full scales from its config: the throttle's wide-open angle, the brake
-        actuator's maximum."""
-        from ..kit.brake import brake_config
-        from ..kit.powertrain import powertrain_config
+        """The car's user channels (rtsim.vehicle.car.inputs), full scales from its config: the throttle's
+        wide-open angle, the brake actuator's maximum."""
         from .inputs import user_inputs
 
         cfg = opened.config
-        thr = powertrain_config(cfg.powertrain or None, "powertrain").throttle.max
-        brk = brake_config(cfg.brakes or None, "brakes").actuator.max
-        return user_inputs(float(thr), float(brk))
+        return user_inputs(float(cfg.powertrain.throttle.max), float(cfg.brakes.actuator.max))
 
     def demo(self, opened) -> Demo:
         if opened.config.eps is not None:      # the EPS ECU closes the assist loop: lockstep, its manoeuvre

@@ -375,11 +375,6 @@ class MotorcycleConfig(Strict):
         eps = self.caster_rad
         return (self.front_wheel.radius_m * math.sin(eps) - self.fork_offset) / math.cos(eps)
 
-    def user_controls(self) -> dict:
-        """What `rtsim view`'s controls mean for this two-wheeler (rtsim.vehicle.motorcycle.user_controls)."""
-        from .user_controls import user_controls
-        return user_controls(self)
-
 
 def refuse_effects(cfg: MotorcycleConfig, path: str | Path, runner: str) -> None:
     """A two-wheeler's [effects] are applied by `rtsim validate`'s replay only: `runner` (the service, the

@@ -104,11 +104,11 @@ class TwoWheelerKind(VehicleKind):
         return sim
 
     def user_inputs(self, opened):
-        """The two-wheeler's user channels, the brakes' full scales from its caliper limit."""
+        """The two-wheeler's user channels (rtsim.vehicle.motorcycle.inputs), the brakes' full scales from
+        its masses, wheels and calipers."""
         from .inputs import user_inputs
 
-        brakes = opened.config.brakes
-        return user_inputs(brakes.max_pressure_kpa if brakes is not None else 12000.0)
+        return user_inputs(opened.config)
 
     def demo(self, opened) -> Demo:
         return Demo("drivers.rider_assist_demo", "lockstep", None, DEMO_DURATION, True, "two_wheeler")

@@ -177,7 +177,7 @@ function take(m) {
 }
 
 // ---- driving ------------------------------------------------------------------------------------------
-// The vehicle's control groups (info.controls, rtsim.vehicle.kit.user_controls): touching a control takes
+// The vehicle's control groups (info.controls, rtsim.vehicle.kit.user_inputs): touching a control takes
 // over its group's channels only (the rest stay with the rider, the scenario's driver or the bus ECU); each
 // value is sign * control * full_scale; a group back at rest is held there or handed back (null), as the
 // vehicle says.
