@@ -188,24 +188,47 @@ def test_an_unknown_kind_is_refused_in_one_line(tmp_path, capsys):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_every_vehicle_declares_its_user_inputs(name):
-    """What `rtsim view` may drive (the vehicle's UserInputs): each channel's full scale within its range,
-    and the command it competes with one of the vehicle's own bus commands (its channel dictionary) or,
-    where its DBC does not carry it (the EPS car's throttle, brake and steering), an input of the
-    scenario's in-loop driver."""
+    """What `rtsim view` may drive (the vehicle's UserInputs): each channel's value at a full control
+    within its range, each channel in exactly one of the page's groups, and the command it competes with
+    one of the vehicle's own bus commands (its channel dictionary) or, where its DBC does not carry it
+    (the EPS car's throttle, brake and steering), an input of the scenario's in-loop driver."""
     from drivers.base import INPUT_NAMES
 
     vehicle = open_vehicle(name)
     inputs = vehicle.user_inputs
     commands = set(vehicle.describe()["channels"]["commands"])
     assert len(set(inputs.names)) == len(inputs.names) >= 3
+    grouped = [n for g in inputs.groups for n in g.channels]
+    assert sorted(grouped) == sorted(inputs.names)
     for ch in inputs.channels:
-        assert ch.lo <= ch.full_scale <= ch.hi and ch.lo < ch.hi, ch
+        assert ch.lo <= ch.sign * ch.full_scale <= ch.hi and ch.lo < ch.hi and ch.full_scale > 0, ch
         assert ch.bus in commands or (inputs.in_loop == "scenario" and ch.bus in INPUT_NAMES), (ch, sorted(commands))
     # the bus takes over a channel it replaces unless the user took over; one it adds to stays the user's
     ch = inputs.channels[0]
     assert inputs.who(ch, user_set=True, takeover=False, valid=True, in_loop=True) == "ecu"
     assert inputs.who(ch, user_set=True, takeover=True, valid=True, in_loop=True) == "user"
     assert inputs.who(ch, user_set=False, takeover=False, valid=False, in_loop=False) == inputs.idle
+
+
+def test_a_user_input_declaration_is_checked():
+    """A vehicle's user-input declaration is refused when a channel's full value lies outside its range,
+    when a channel sits in no group or in two, or when a group's release rule is unknown."""
+    from rtsim.vehicle.kit.user_inputs import ControlGroup, UserChannel, UserInputs
+
+    ok = UserChannel("u", 0.0, 1.0, "1", "a throttle", 0.5, bus="u", control="throttle")
+    with pytest.raises(ValueError, match="within 0 .. 1"):
+        UserChannel("u", 0.0, 1.0, "1", "a throttle", 0.5, bus="u", control="throttle", sign=-1.0)
+    with pytest.raises(ValueError, match="control 'pedal'"):
+        UserChannel("u", 0.0, 1.0, "1", "a throttle", 0.5, bus="u", control="pedal")
+    with pytest.raises(ValueError, match="release 'keep'"):
+        ControlGroup("g", "keep", ("u",))
+    with pytest.raises(ValueError, match="exactly one group"):
+        UserInputs((ok,), (), writes="command", in_loop="scenario", idle="safe")
+    with pytest.raises(ValueError, match="exactly one group"):
+        UserInputs((ok,), (ControlGroup("a", "hold", ("u",)), ControlGroup("b", "hold", ("u",))),
+                   writes="command", in_loop="scenario", idle="safe")
+    assert UserInputs((ok,), (ControlGroup("a", "hold", ("u",)),), writes="command", in_loop="scenario",
+                      idle="safe").full_scales() == {"u": 0.5}
 
 
 def test_a_vehicle_file_may_name_its_own_assembly(tmp_path, capsys, monkeypatch):

@@ -1,7 +1,7 @@
 """`rtsim view` rides the motorcycle: headless Chromium (Debian's, driven by Playwright) opens the page of a
 served motorcycle (realtime, recorded; its rider on the figure-eight at 12 m/s) and the keyboard leans it,
 opens the throttle and brakes. The page scales each key by what the motorcycle says its controls mean
-(rtsim.vehicle.motorcycle.user_controls: 40 % throttle, 30 degrees of lean, the brakes for 0.5 g) and takes
+(rtsim.vehicle.motorcycle.inputs: 40 % throttle, 30 degrees of lean, the brakes for 0.5 g) and takes
 over only the channels of the key's group; the recording is the evidence.
 
 One service, one view server and one browser for the module (the tests ride on, one after the other).
@@ -21,7 +21,7 @@ from service_harness import ServiceProcess, free_port
 from viewer_harness import NO_CHROMIUM, ViewThread, chromium_path, launch, require_page_libraries
 from waits import EVENT
 
-LEAN = math.radians(30.0)            # the lean demand at full key (rtsim.vehicle.motorcycle.user_controls)
+LEAN = math.radians(30.0)            # the lean demand at full key (rtsim.vehicle.motorcycle.inputs)
 THROTTLE = 0.4                       # the throttle at full key
 G = 9.81
 

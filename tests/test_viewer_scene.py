@@ -90,37 +90,51 @@ TWO_WHEELERS = ("motorcycle", "whipple_benchmark")
 
 @pytest.mark.parametrize("name", CARS + TWO_WHEELERS)
 def test_every_vehicle_describes_its_controls(name):
-    """What the page's controls mean comes from the vehicle (its config's ``user_controls()``), for every
-    shipped vehicle: each of its user channels (rtsim.service.user_input) in exactly one group, driven by
-    one of the page's three controls, its full scale inside the channel's range; every control drives
-    something. The service sends it (``view`` in its configuration) and the page's scene passes it on."""
-    from rtsim.service.user_input import user_channels
-    from rtsim.vehicle.motorcycle.config import load_motorcycle
+    """What the page's controls mean comes from the vehicle's one declaration of what a person may drive
+    (rtsim.vehicle.kit.user_inputs), for every shipped vehicle: each user channel in exactly one group,
+    driven by one of the page's three controls, its value at a full control inside the channel's range;
+    every control drives something. The service sends it (``user_inputs`` in its configuration) and the
+    page's scene turns it into the page's control groups, the same channels and full values."""
+    import json
+
+    from rtsim.vehicle.registry import open_vehicle
     from rtsim.viewer.scene import describe
 
-    path = ROOT / "configs" / "vehicles" / f"{name}.toml"
-    cfg, _ = (load_vehicle if name in CARS else load_motorcycle)(path)
-    view = cfg.user_controls()
-    chans = user_channels("car" if name in CARS else "two_wheeler")
-    got = [c for g in view["controls"] for c in g["channels"]]
-    assert sorted(c["channel"] for c in got) == sorted(chans)
+    vehicle = open_vehicle(ROOT / "configs" / "vehicles" / f"{name}.toml")
+    inputs = vehicle.user_inputs
+    sent = json.loads(json.dumps(inputs.as_json()))           # as the config answer carries it
+    page = describe({"vehicle": vehicle.config.model_dump(mode="json"), "user_inputs": sent})
+    got = [c for g in page["controls"] for c in g["channels"]]
+    assert sorted(c["channel"] for c in got) == sorted(inputs.names)
     assert {c["control"] for c in got} == {"throttle", "brake", "steer"}
+    table = inputs.table()
     for c in got:
-        lo, hi, _unit, _meaning = chans[c["channel"]]
+        lo, hi, _unit, _meaning = table[c["channel"]]
         assert 0.0 < c["full_scale"] and lo <= c["sign"] * c["full_scale"] <= hi, c
-    assert all(g["release"] in ("hold", "hand_back") for g in view["controls"])
-    page = describe({"vehicle": cfg.model_dump(mode="json"), "view": view})
-    assert page["controls"] == view["controls"] and page["plots"] == view["plots"]
+        assert c["sign"] * c["full_scale"] == inputs.full_scales()[c["channel"]]
+    assert [g["name"] for g in page["controls"]] == [g.name for g in inputs.groups]
+    assert all(g["release"] in ("hold", "hand_back") for g in page["controls"])
+    assert page["plots"] == list(inputs.plots) and page["plots"]
+
+
+def test_a_config_without_user_inputs_gives_nothing_to_drive():
+    """A service (or a recording) that does not declare its user inputs: no control group, no default
+    plot (the page turns driving off and says why)."""
+    from rtsim.viewer.scene import describe
+
+    cfg, _ = load_vehicle(ROOT / "configs" / "vehicles" / "xbw.toml")
+    page = describe({"vehicle": cfg.model_dump(mode="json")})
+    assert page["controls"] == [] and page["plots"] == []
 
 
 def test_the_motorcycles_full_keys():
     """The motorcycle's full throttle key is 40 % (wide open lifts its front wheel); its full brake key
     0.5 g of deceleration, 80 % of it on the front: the calipers' torques over the wheel radii, against
     the machine's weight with its rider (275 kg); the full lean key 30 degrees, right key leaning right."""
-    from rtsim.vehicle.motorcycle.config import load_motorcycle
+    from rtsim.vehicle.registry import open_vehicle
 
-    cfg, _ = load_motorcycle(ROOT / "configs" / "vehicles" / "motorcycle.toml")
-    full = {c["channel"]: c["sign"] * c["full_scale"] for g in cfg.user_controls()["controls"] for c in g["channels"]}
+    vehicle = open_vehicle(ROOT / "configs" / "vehicles" / "motorcycle.toml")
+    cfg, full = vehicle.config, vehicle.user_inputs.full_scales()
     assert full["throttle_cmd"] == 0.4
     front = full["brake_pressure_front_cmd"] * cfg.brakes.front_nm_per_kpa / cfg.front_wheel.radius_m
     rear = full["brake_pressure_rear_cmd"] * cfg.brakes.rear_nm_per_kpa / cfg.rear_wheel.radius_m
