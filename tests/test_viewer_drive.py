@@ -82,7 +82,7 @@ def test_bad_requests_are_refused_and_the_commands_lapse(monkeypatch):
     r = loop._control("drive", {"throttle_angle_cmd": 9.0})
     assert not r["ok"] and "throttle_angle_cmd = 9.0: outside 0 .. 1.5708 rad" in r["error"]
     r = loop._control("drive", {"roll_angle_demand": 0.1})
-    assert not r["ok"] and "not a user channel of a car" in r["error"]
+    assert not r["ok"] and "not a user channel of this vehicle (those are: throttle_angle_cmd" in r["error"]
     assert not loop._control("drive", {"brake_pressure_cmd": "lots"})["ok"]
     assert not loop._control("drive", {"takeover": "yes"})["ok"]
     assert loop.user_status()["channels"] == {}                  # nothing of a refused request applied
