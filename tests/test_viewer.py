@@ -19,7 +19,8 @@ import playwright.sync_api as playwright_api      # the test extra (a hard depen
 import pytest
 
 from service_harness import ServiceProcess, free_port
-from viewer_harness import NO_CHROMIUM, ViewThread, chromium_path, launch, require_page_libraries
+from viewer_harness import (NO_CHROMIUM, ViewThread, chromium_path, launch, open_page, require_page_libraries,
+                            sim_time, wait_sim)
 from waits import EVENT
 
 SHOT = os.environ.get("RTSIM_VIEW_SCREENSHOT")     # save the test's screenshot here (the README's)
@@ -49,12 +50,7 @@ def page(service):
     browser = None
     try:
         browser = launch(pw)
-        pg = browser.new_page(viewport={"width": 1280, "height": 720})
-        logs = []
-        pg.on("console", lambda m: logs.append((m.type, m.text)))
-        pg.on("pageerror", lambda e: logs.append(("pageerror", str(e))))
-        pg.goto(view.url)
-        pg.wait_for_function("window.rtsimView && window.rtsimView.pose !== null", timeout=EVENT * 1000)
+        pg, logs = open_page(browser, view.url)
         yield pg, logs, view
     finally:
         if browser is not None:
@@ -62,14 +58,6 @@ def page(service):
         pw.stop()
         view.close()
 
-
-def _sim_time(pg) -> float:
-    return float(pg.evaluate("rtsimView.pose.t"))
-
-
-def _wait_sim(pg, t: float) -> None:
-    """Until the page has drawn a state sample of simulation time >= t (bounded by EVENT s of wall time)."""
-    pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {t}", timeout=EVENT * 1000, polling=50)
 
 
 def _pixels(png: bytes) -> np.ndarray:
@@ -84,9 +72,9 @@ def test_the_page_draws_the_car_while_the_service_runs(page):
     The frame rate itself (30 frames/s or more from software rendering) is a wall-clock figure: it is measured by
     `rtsim bench --suite service --pages 1`, not asserted here, so a loaded machine cannot fail this test."""
     pg, _logs, _view = page
-    _wait_sim(pg, _sim_time(pg) + 1.0)
-    frames0, t0 = pg.evaluate("rtsimView.frames"), _sim_time(pg)
-    _wait_sim(pg, t0 + 1.0)
+    wait_sim(pg, sim_time(pg) + 1.0)
+    frames0, t0 = pg.evaluate("rtsimView.frames"), sim_time(pg)
+    wait_sim(pg, t0 + 1.0)
     frames1 = pg.evaluate("rtsimView.frames")
     assert frames1 > frames0, f"no frame drawn over 1 s of simulated time ({frames0} -> {frames1})"
     with_car = pg.screenshot()
@@ -111,20 +99,20 @@ def test_the_keyboard_drives_the_car_through_the_service(page, service):
 
     pg, _logs, _view = page
     _, _, rec = service
-    t0 = _sim_time(pg)
+    t0 = sim_time(pg)
     pg.keyboard.down("ArrowUp")
-    _wait_sim(pg, t0 + 3.0)
-    t1 = _sim_time(pg)
+    wait_sim(pg, t0 + 3.0)
+    t1 = sim_time(pg)
     pg.keyboard.down("ArrowLeft")
-    _wait_sim(pg, t1 + 2.0)
-    t2 = _sim_time(pg)
+    wait_sim(pg, t1 + 2.0)
+    t2 = sim_time(pg)
     pg.keyboard.up("ArrowUp")
     pg.keyboard.up("ArrowLeft")
     latency = pg.evaluate("rtsimView.latency")
     if SHOT:                                            # the README's picture: the car turning, the plots live
         os.makedirs(os.path.dirname(SHOT) or ".", exist_ok=True)
         pg.screenshot(path=SHOT)
-    _wait_sim(pg, t2 + 1.5)                             # the recorder closes a chunk every second
+    wait_sim(pg, t2 + 1.5)                             # the recorder closes a chunk every second
     msgs, _info = read_recording(rec)
     state = [m.data for m in msgs["rtsim/xbw/state"]]
     t = np.array([s["time"] for s in state])

@@ -18,7 +18,8 @@ import playwright.sync_api as playwright_api      # the test extra (a hard depen
 import pytest
 
 from service_harness import ServiceProcess, free_port
-from viewer_harness import NO_CHROMIUM, ViewThread, chromium_path, launch, require_page_libraries
+from viewer_harness import (NO_CHROMIUM, ViewThread, chromium_path, launch, open_page, require_page_libraries,
+                            sim_time, wait_sim)
 from waits import EVENT
 
 LEAN = math.radians(30.0)            # the lean demand at full key (rtsim.vehicle.motorcycle.inputs)
@@ -40,12 +41,7 @@ def moto(tmp_path_factory):
         view = ViewThread("motorcycle", [f"tcp/127.0.0.1:{zport}"])
         pw = playwright_api.sync_playwright().start()
         browser = launch(pw)
-        pg = browser.new_page(viewport={"width": 1280, "height": 720})
-        logs = []
-        pg.on("console", lambda m: logs.append((m.type, m.text)))
-        pg.on("pageerror", lambda e: logs.append(("pageerror", str(e))))
-        pg.goto(view.url)
-        pg.wait_for_function("window.rtsimView && window.rtsimView.pose !== null", timeout=EVENT * 1000)
+        pg, logs = open_page(browser, view.url)
         yield pg, logs, rec
     finally:
         if browser is not None:
@@ -58,25 +54,17 @@ def moto(tmp_path_factory):
         svc.close()
 
 
-def _sim_time(pg) -> float:
-    return float(pg.evaluate("rtsimView.pose.t"))
-
-
-def _wait_sim(pg, t: float) -> None:
-    """Until the page has drawn a state sample of simulation time >= t (bounded by EVENT s of wall time)."""
-    pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {t}", timeout=EVENT * 1000, polling=50)
-
 
 def _hold(pg, key: str, seconds: float) -> tuple[float, float]:
     """Hold ``key`` for ``seconds`` of simulated time after the page's ramp of it is full; returns the
     simulated times the key went down and up."""
-    t0 = _sim_time(pg)
+    t0 = sim_time(pg)
     pg.keyboard.down(key)
     control = {"ArrowUp": "throttle >= 1", "ArrowDown": "brake >= 1", "ArrowLeft": "steer <= -1",
                "ArrowRight": "steer >= 1"}[key]
     pg.wait_for_function(f"rtsimView.input.{control}", timeout=EVENT * 1000)
-    _wait_sim(pg, _sim_time(pg) + seconds)
-    t1 = _sim_time(pg)
+    wait_sim(pg, sim_time(pg) + seconds)
+    t1 = sim_time(pg)
     pg.keyboard.up(key)
     return t0, t1
 
@@ -97,7 +85,7 @@ def test_the_motorcycle_leans_with_the_key(moto):
     pg, _logs, rec = moto
     assert pg.evaluate("rtsimView.info.kind") == "two_wheeler"
     _down, t1 = _hold(pg, "ArrowRight", 1.5)       # (the roll is asserted from 1 s after the full demand on)
-    _wait_sim(pg, t1 + 1.5)                        # the recorder closes a chunk every second
+    wait_sim(pg, t1 + 1.5)                        # the recorder closes a chunk every second
     msgs, col = _recorded(rec)
     changes = [m.data for m in msgs["rtsim/motorcycle/user"]]
     demand = [c for c in changes if c["time"] <= t1 and (c["channels"].get("roll_angle_demand") or 0.0) > 0.0]
@@ -124,17 +112,17 @@ def test_the_keyboard_rides_the_motorcycle_for_20_s_without_a_fall(moto):
     is down: those groups are handed back on release); the throttle at full key is 40 %, and it and the
     brakes act only while their keys drive them."""
     pg, _logs, rec = moto
-    start = _sim_time(pg)
+    start = sim_time(pg)
     keys = {}
     keys["right"] = _hold(pg, "ArrowRight", 2.0)
     keys["left"] = _hold(pg, "ArrowLeft", 2.0)
-    _wait_sim(pg, _sim_time(pg) + 1.5)
+    wait_sim(pg, sim_time(pg) + 1.5)
     keys["throttle"] = _hold(pg, "ArrowUp", 2.0)
-    _wait_sim(pg, _sim_time(pg) + 2.0)
+    wait_sim(pg, sim_time(pg) + 2.0)
     keys["brake"] = _hold(pg, "ArrowDown", 1.0)
-    _wait_sim(pg, max(start + 20.0, _sim_time(pg) + 2.0))
-    end = _sim_time(pg)
-    _wait_sim(pg, end + 1.5)                                  # the recorder closes a chunk every second
+    wait_sim(pg, max(start + 20.0, sim_time(pg) + 2.0))
+    end = sim_time(pg)
+    wait_sim(pg, end + 1.5)                                  # the recorder closes a chunk every second
     assert end - start >= 20.0
     msgs, col = _recorded(rec)
     t = col("time")

@@ -12,6 +12,7 @@ import threading
 import pytest
 
 from rtsim.viewer.browser import CHROMIUM_ARGS, NO_CHROMIUM, chromium_path
+from waits import EVENT
 
 def require_page_libraries() -> None:
     """Skip (no npm on this machine to install them) or fail (set-up not run) without the page's libraries."""
@@ -65,3 +66,25 @@ class ViewThread:
             self._loop.call_soon_threadsafe(self._stop.set)
         self._thread.join(10.0)
         self.server.close()
+
+
+def open_page(browser, url: str, width: int = 1280, height: int = 720):
+    """A new page of ``browser`` at ``url``, its console messages and page errors collected in ``logs``, returned
+    once the page has drawn its first state sample: (page, logs)."""
+    pg = browser.new_page(viewport={"width": width, "height": height})
+    logs: list = []
+    pg.on("console", lambda m: logs.append((m.type, m.text)))
+    pg.on("pageerror", lambda e: logs.append(("pageerror", str(e))))
+    pg.goto(url)
+    pg.wait_for_function("window.rtsimView && window.rtsimView.pose !== null", timeout=EVENT * 1000)
+    return pg, logs
+
+
+def sim_time(pg) -> float:
+    """The simulation time (s) of the last state sample the page drew."""
+    return float(pg.evaluate("rtsimView.pose.t"))
+
+
+def wait_sim(pg, t: float) -> None:
+    """Until the page has drawn a state sample of simulation time >= t (bounded by EVENT s of wall time)."""
+    pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {t}", timeout=EVENT * 1000, polling=50)
