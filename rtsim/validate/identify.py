@@ -88,7 +88,8 @@ from rtsim.errors import RtsimError
 from rtsim.vehicle.kit.sensor_model import delayed
 
 from .effectset import Effect, catalogue
-from .objective import MIMIC, MOVING, Objective, _tau
+from .crossval import leave_one_run_out, normalised
+from .objective import MOVING, Objective, _tau
 from .stats import t_critical
 from .replay import Replayer, ReplayInputs
 from .signals import DERIVED
@@ -102,15 +103,11 @@ SECANT = 0.05                # shortest relative secant for the sensitivity behi
 
 class _Budget(Exception):
     """The candidate's simulation budget is spent (or it is not worth more)."""
-MIN_DELTA_IC = 10.0          # "very strong" evidence on the Kass-Raftery scale of 2 ln(Bayes factor)
-MIN_REDUCTION = 0.10         # a winner removes at least this share of the disagreement
-MIN_SIZE = 1.0               # and moves the outputs by at least this many standard errors (RMS)
-CLEAR = 2.0                  # a winner's value must lie this many 95 % half-widths from the off value
-SIGNATURE_SHARE = 0.2        # a channel is in a candidate's signature when it moves it by >= this share of
-                             # its largest move (and by >= MIN_SIZE standard errors)
-WORSE = 1.5                  # a candidate that multiplies a channel's cost by more than this (and leaves it
-WORSE_FLOOR = 4.0            # above this normalised cost) makes that channel worse: not eligible
-SENSOR_EXPLAINS = 0.75       # a sensor effect removes at least this share of its own channel's cost
+#: with fewer than 3 runs nothing can be cross-validated: the information criterion must then fall by this
+#: much ("very strong" evidence on the Kass-Raftery scale of 2 ln(Bayes factor))
+MIN_DELTA_IC = 10.0
+MIN_SIZE = 1.0               # standard errors (RMS): the joint fit's partner search (joint.py) and the notes
+CLEAR = 1.0                  # a winner's 95 % interval (runs one by one, model error included) excludes off
 #: a lateral accelerometer on the body reads gravity's component g sin(roll), about proportional to the
 #: lateral acceleration and lagging it with the roll dynamics: without the roll angle compared, a gain or a
 #: lag of accel_y cannot be told from the model's roll (its roll stiffness, not in the catalogue)
@@ -157,20 +154,34 @@ class Candidate:
     moved: float = 0.0                  # RMS normalised change on its signature channels
     joint: tuple | None = None          # (model effect, correlation) when judged jointly with a model effect
     confounded: str = ""                # why the data cannot tell it from the model's structure
+    cv: object = field(default=None, repr=False)       # crossval.CrossValidation against the model as it stands
+    structure: float = 0.0              # RMS structural mismatch (noise removed) left on its signature channels
 
     @property
     def outweighs_structure(self) -> bool:
-        """A model effect changes its channels by more than the mismatch it leaves there; a sensor
-        effect (the last stage between the car and the reading) removes most of its own channel's
-        disagreement: what a sensor effect explains only in part is structural."""
-        if self.kind == "sensor":
-            return self.local_reduction >= SENSOR_EXPLAINS
-        return self.moved >= self.left
+        """It changes its signature channels by more than the structural mismatch it leaves there (the
+        residual beyond the data's own uncertainty, `structure`): an effect smaller than what no
+        catalogue effect explains on those channels cannot be told apart from it."""
+        return self.moved >= self.structure
+
+    @property
+    def predicts(self) -> bool:
+        """It predicts left-out runs better (crossval; with fewer than 3 runs: the information criterion
+        falls by MIN_DELTA_IC)."""
+        if self.cv is not None:
+            return self.cv.better
+        return self.delta_ic <= -MIN_DELTA_IC
+
+    @property
+    def score(self) -> float:
+        """What ranks the candidates: the mean held-out loss it removes (negative: better), else its IC."""
+        if self.cv is not None:
+            return float((self.cv.cand.sum(axis=1) - self.cv.base.sum(axis=1)).mean())
+        return self.delta_ic
 
     @property
     def eligible(self) -> bool:
-        return (self.plausible and self.delta_ic <= -MIN_DELTA_IC and self.local_reduction >= MIN_REDUCTION
-                and self.size >= MIN_SIZE and not self.worse and self.outweighs_structure and not self.confounded)
+        return self.plausible and self.predicts and self.outweighs_structure and not self.confounded
 
     def summary(self) -> dict:
         return {"name": self.effect.name, "parameters": dict(self.effect.params),
@@ -179,6 +190,8 @@ class Candidate:
                 "significant": self.significant, "signature_match": self.match, "simulations": self.sims,
                 "signature_channels": self.signature, "local_reduction": self.local_reduction,
                 "worse_channels": self.worse, "moved": self.moved, "left": self.left,
+                "structure": self.structure, "eligible": self.eligible,
+                "cross_validation": self.cv.summary() if self.cv is not None else None,
                 "by_channel": {c: {"cost_before": v[0], "cost_with": v[1], "moved": v[2]}
                                for c, v in self.by_channel.items()},
                 "note": self.note, **({"requested": self.requested} if self.requested is not None else {})}
@@ -282,8 +295,6 @@ def _finish(ctx: Context, effect: Effect, kind: str, k: int, out: dict, J: np.nd
     # how far it moves the outputs: a sensor effect on its own channel(s), where it is judged (a move
     # spread over every compared channel would shrink with their number)
     size = distance(obj, out, ctx.outputs, _own(obj, effect.channel) if kind == "sensor" else None)
-    if plausible and size < MIN_SIZE:
-        notes.append(f"too small to matter: it moves the outputs by {size:.2f} standard errors (RMS)")
     cand = Candidate(effect, kind, k, cost, ic, 1.0 - cost / ctx.cost, ic - obj.ic(ctx.outputs, 0), plausible,
                      significant, match, by, sims, "; ".join(notes), requested, out, theta=th, u_theta=uth, J=J,
                      coord=coord, size=size)
@@ -306,10 +317,13 @@ def _own(obj: Objective, sensor: str) -> list[str]:
 
 
 def channel_evidence(ctx: Context, cand: Candidate) -> None:
-    """Per channel: the cost before and with the candidate and how far it moves the channel; its
-    signature channels (a sensor effect: its own channel; a model effect: the channels it moves by at
-    least MIN_SIZE standard errors and SIGNATURE_SHARE of its largest move), the share of their cost it
-    removes, the channels it makes worse, and the residual left on its signature channels."""
+    """What decides a candidate (module docstring, "Selection"): its leave-one-run-out cross-validation
+    against the model as it stands (crossval), its signature channels (a sensor effect: its own channel;
+    a model effect: the channels whose left-out-run prediction it improves, else the one it moves most),
+    how far it moves them and the structural mismatch it leaves there, and whether the nuisance
+    adjustments could stand in for it. Per channel also the cost before and with it and how far it moves
+    it (`by_channel`), the share of the signature channels' cost it removes and their information
+    criterion, for the report."""
     obj = ctx.objective
     if not cand.outputs:
         return
@@ -319,28 +333,30 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         d = ra[c] - rb[c]
         by[c] = (float(np.mean(rb[c] ** 2)), float(np.mean(ra[c] ** 2)), float(np.sqrt(np.mean(d * d))))
     cand.by_channel = by
+    m0, m1 = normalised(obj, ctx.outputs), normalised(obj, cand.outputs)
+    J = cand.J if cand.J is not None and float(cand.J @ cand.J) > 0 else None
+    cand.cv = leave_one_run_out(obj, m0, m1, J)
     if cand.kind == "sensor":
         sig = _own(obj, cand.effect.channel)
+    elif cand.cv is not None:
+        sig = [c for c in obj.channels if cand.cv.improves(c)] or [max(by, key=lambda c: by[c][2])]
     else:
-        top = max(v[2] for v in by.values())
-        sig = [c for c, v in by.items() if v[2] >= max(MIN_SIZE, SIGNATURE_SHARE * top)]
+        sig = [max(by, key=lambda c: by[c][2])]
     cand.signature = sig
-    if sig:
-        before = sum(by[c][0] for c in sig)
-        after = sum(by[c][1] for c in sig)
-        cand.local_reduction = 1.0 - after / before if before > 0 else 0.0
-        cand.left = math.sqrt(after / len(sig))
-        cand.moved = math.sqrt(sum(by[c][2] ** 2 for c in sig) / len(sig))
-    cand.worse = [c for c, v in by.items() if v[1] > WORSE * v[0] and v[1] > WORSE_FLOOR]
-    if sig:
-        # the evidence is judged on the signature channels; another channel counts only where it gets
-        # better (a channel it barely moves, with its own structural misfit, does not veto it; one it
-        # makes clearly worse is caught above)
-        ntot = sum(obj.n_eff.values())
-        local = sum(obj.n_eff[c] * (lr if c in sig else min(lr, 0.0)) for c in obj.channels
-                    for lr in [math.log(max(by[c][1], 1e-300) / max(by[c][0], 1e-300))])
-        cand.delta_ic = local + cand.k * math.log(ntot)
-        cand.ic = obj.ic(ctx.outputs, 0) + cand.delta_ic
+    before = sum(by[c][0] for c in sig)
+    after = sum(by[c][1] for c in sig)
+    cand.local_reduction = 1.0 - after / before if before > 0 else 0.0
+    cand.left = math.sqrt(after / len(sig))
+    # the normalised residual of a model within the data's own uncertainty has a mean square of 1: what
+    # is left beyond it is structural
+    cand.structure = math.sqrt(max(after / len(sig) - 1.0, 0.0))
+    cand.moved = math.sqrt(sum(by[c][2] ** 2 for c in sig) / len(sig))
+    cand.worse = [c for c in obj.channels if cand.cv is not None and cand.cv.worsens(c)]
+    ntot = sum(obj.n_eff.values())
+    local = sum(obj.n_eff[c] * (lr if c in sig else min(lr, 0.0)) for c in obj.channels
+                for lr in [math.log(max(by[c][1], 1e-300) / max(by[c][0], 1e-300))])
+    cand.delta_ic = local + cand.k * math.log(ntot)
+    cand.ic = obj.ic(ctx.outputs, 0) + cand.delta_ic
     ch = cand.effect.channel
     if (cand.kind == "sensor" and cand.effect.name in TILT_CONFOUNDED and ch in TILT and TILT[ch] not in obj.channels
             and ctx.replayer.accel_frame == "body"):          # a level-frame accelerometer senses no tilt
@@ -352,26 +368,32 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         cand.confounded = ("in the level frame a grade reads as a constant resistance (the resistance-offset "
                            "adjustment) while the car moves, and it never stands still here: record the body "
                            "frame (its accel_x senses no grade) to tell them apart")
-    if cand.kind == "model" and obj.nuisance is not None and not cand.confounded:
-        share, by_what = obj.nuisance.mimic(obj.raw_residual(cand.outputs) - obj.raw_residual(ctx.outputs))
-        if share >= MIMIC:
-            cand.confounded = (f"the nuisance adjustments reproduce {100 * share:.0f} % of what it changes (mostly "
-                               f"the {by_what.split(' (')[0]}): it cannot be told from that structural mismatch")
+    if cand.kind == "model" and obj.nuisance is not None and not cand.confounded and cand.cv is not None \
+            and cand.cv.better:
+        # the part of its change the nuisance adjustments cannot reproduce (free of their prior, inside
+        # their ranges) must predict left-out runs better on its own: else the adjustments stand for it
+        nu = obj.nuisance
+        d = m1 - m0
+        p = np.clip(np.linalg.lstsq(nu.D, d, rcond=None)[0], nu.lo, nu.hi)
+        beyond = leave_one_run_out(obj, m0, m1 - nu.D @ p, None)
+        if beyond is not None and not beyond.better:
+            share = 1.0 - float(np.sum((d - nu.D @ p) ** 2)) / max(float(d @ d), 1e-300)
+            cand.confounded = (f"the nuisance adjustments (rolling radii, resistance offset) reproduce "
+                               f"{100 * share:.0f} % of what it changes, and the rest does not improve the "
+                               f"prediction of left-out runs")
     if not cand.plausible:
         return
     notes = [cand.note] if cand.note else []
     if cand.confounded:
         notes.append(cand.confounded)
+    if cand.cv is not None and not cand.cv.better:
+        notes.append(f"does not improve the prediction of left-out runs (held-out error {100 * cand.cv.gain:+.0f} %, "
+                     f"p = {cand.cv.p_better:.2g})")
     if cand.worse:
-        notes.append("makes " + ", ".join(cand.worse) + " worse")
-    if sig and not cand.outweighs_structure:
-        if cand.kind == "sensor":
-            notes.append(f"explains only {100 * cand.local_reduction:.0f} % of its channel (a sensor effect explains "
-                         f"at least {100 * SENSOR_EXPLAINS:.0f} %): the rest is structural")
-        else:
-            notes.append(f"changes its channels ({', '.join(sig)}) by {cand.moved:.2g} standard errors, less than "
-                         f"the mismatch it leaves there ({cand.left:.2g}): cannot be told apart from the model's "
-                         f"structural mismatch")
+        notes.append("predicts " + ", ".join(cand.worse) + " worse in left-out runs")
+    if not cand.outweighs_structure:
+        notes.append(f"changes {', '.join(sig)} by {cand.moved:.2g} standard errors, less than the structural "
+                     f"mismatch left there ({cand.structure:.2g}): cannot be told apart from it")
     cand.note = "; ".join(notes)
 
 
@@ -656,7 +678,7 @@ def equivalents(obj: Objective, winner: Candidate, cands: list[Candidate]) -> li
     """Other plausible candidates whose fitted response is indistinguishable from the winner's."""
     out = []
     for c in cands:
-        if c is winner or not c.plausible or c.reduction < MIN_REDUCTION:
+        if c is winner or not c.plausible or not c.predicts:
             continue
         dist = distance(obj, winner.outputs, c.outputs)
         if dist < TIE_DISTANCE:
@@ -665,8 +687,8 @@ def equivalents(obj: Objective, winner: Candidate, cands: list[Candidate]) -> li
 
 
 def rank(cands: list[Candidate]) -> list[Candidate]:
-    """Eligible candidates first (by IC), then the others by IC."""
-    return sorted(cands, key=lambda c: (not c.eligible, c.ic))
+    """Eligible candidates first, then the others; each by the held-out loss it removes (Candidate.score)."""
+    return sorted(cands, key=lambda c: (not c.eligible, not c.plausible, c.score))
 
 
 def evidence_strength(delta: float) -> str:
