@@ -1,11 +1,24 @@
-"""Benchmark of the validation workflow on the seed's manoeuvre: seven repetitions of
-configs/scenarios/straight_line.toml (30 s, campus road) driven by the rtsim model with a hidden
-effect, with run-to-run variation of the pedal commands (time warp and amplitude, 1.5 %), sensor noise
-(the vehicle's sensor model, rtsim.vehicle.kit.sensor_model, with `NOISE`) and logger offsets, written
-as CSV; then `python -m rtsim.validate.cli` on them, as a user runs it
-(process start to report), timed.
+"""The validation benchmark (issue 30): `rtsim validate`'s workflow on independent field data with hidden
+effects drawn at random (rtsim.validate.fieldbench: three structurally different simulators, two tyre
+laws, realistic run-to-run scatter and logger noise), scored against the generator's truth
+(bench_truth, bench_score).
 
-    python -m rtsim.validate.bench [--out DIR] [--effect NAME=VALUE]   (default brake_friction=0.85)
+    python -m rtsim.validate.bench [--set heldout|tuning|issue] [--limit N | --reduced] [--workers N]
+                                   [--json] [--out DIR] [--cases ID,...]
+    python -m rtsim.validate.bench --straight-line [--effect NAME=VALUE]   (the seed's straight line)
+
+Default: the held-out set (never used to tune the method). Reports the share of the cases named right
+(among those whose effect is larger than the structural mismatch), the value error, the false-naming
+rate, the none-cases named and the "cannot be told apart" rate, as a table and a confusion matrix, and
+what it cost (generation, truth, workflow). Generated runs and truths are cached on disk
+(fieldbench.generate.cache_root; RTSIM_FIELDBENCH_CACHE overrides). `--reduced`: the cases of
+REDUCED (the CI form, tests/test_validate_benchmark.py). `--workers`: the workflow's worker processes
+(cases run one after another in this process, the model built once).
+
+The seed's straight line (`--straight-line`): seven repetitions of configs/scenarios/straight_line.toml
+(30 s, campus road) driven by the rtsim model with a hidden effect (default brake_friction=0.85), with
+run-to-run variation of the pedal commands (time warp and amplitude, 1.5 %), sensor noise and logger
+offsets, written as CSV; then `python -m rtsim.validate.cli` on them, as a user runs it, timed.
 """
 from __future__ import annotations
 
@@ -84,12 +97,8 @@ def generate(out: Path, effects: dict, n: int = 7, seed: int = 0) -> list[Path]:
     return paths
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", type=Path, default=Path("/tmp/rtsim_validate_bench"))
-    p.add_argument("--effect", default="brake_friction=0.85", help="hidden model effect NAME=VALUE (its "
-                   "first parameter), or 'none'")
-    args = p.parse_args(argv)
+def straight_line(args) -> int:
+    """The seed's straight line with a hidden model effect (module docstring), timed."""
     effects = {}
     if args.effect != "none":
         from rtsim.vehicle.car.effects import EFFECTS
@@ -106,6 +115,171 @@ def main(argv: list[str] | None = None) -> int:
     rc = subprocess.call(cmd)
     print(f"rtsim validate: exit {rc}, {time.perf_counter() - t1:.1f} s wall (process start to report)")
     return rc
+
+
+
+
+# ------------------------------------------------------------------------------------ field benchmark
+VEHICLE = ROOT / "configs" / "vehicles" / "xbw.toml"
+#: the reduced form run by the test suite: a few held-out cases (none, a sensor effect, a model effect,
+#: two at once, one outside the catalogue) beside the six issue cases
+REDUCED = ("c004", "c005", "c012", "c016", "c019")
+
+
+def select(name: str, limit: int | None = None, ids: list[str] | None = None, reduced: bool = False) -> list[dict]:
+    """The cases of a named set (fieldbench.cases.sets), or the REDUCED ones, or those named by id."""
+    from .fieldbench import cases
+    sets = cases.sets()
+    every = {c["id"]: c for s in sets.values() for c in s}
+    if ids:
+        return [every[i] for i in ids]
+    if reduced:
+        return [every[i] for i in REDUCED] + sets["issue"]
+    out = sets[name]
+    return out[:limit] if limit else out
+
+
+class Bench:
+    """The model built once, the car's numbers for the simulators, the tyre parameters for the truth."""
+
+    def __init__(self, vehicle: Path = VEHICLE):
+        from rtsim.vehicle.car.describe import describe
+        from rtsim.vehicle.car.sim import VehicleSim
+
+        from .fieldbench import vehicle as fb_vehicle
+        from .replay import Replayer
+        self.vehicle = Path(vehicle)
+        self.replayer = Replayer(self.vehicle)
+        sim = VehicleSim(self.replayer.model, self.replayer.road, 1e-3)
+        self.tyre_params = sim.tp
+        self.car = fb_vehicle.numbers(describe(self.replayer.model, sim), self.vehicle)
+
+    def runs(self, case: dict) -> list[Path]:
+        from .fieldbench import generate as fb_generate
+        return fb_generate.generate(case, self.car)
+
+    def truth(self, case: dict) -> dict:
+        from .bench_truth import cached_truth
+        return cached_truth(case, self.car, self.replayer, self.tyre_params)
+
+    def run(self, case: dict, out: Path, workers: int = 2) -> dict:
+        """The workflow on the case's runs (its public entry, as `rtsim validate` runs it), scored."""
+        from .bench_score import outcome
+        from .fieldbench.cases import label
+        from .workflow import Options, run
+        t0 = time.perf_counter()
+        paths = self.runs(case)
+        t1 = time.perf_counter()
+        truth = self.truth(case)
+        t2 = time.perf_counter()
+        try:
+            res = run(Options(self.vehicle, paths, out / case["id"], workers=workers), replayer=self.replayer)
+            named = [{"effect": e.name, "channel": e.channel, "params": dict(e.params)} for e in res.effects]
+            verdict, error = res.verdict, None
+        except Exception as exc:              # a workflow error is an outcome of the case, reported
+            named, verdict, error = [], "", f"{type(exc).__name__}: {exc}"
+        t3 = time.perf_counter()
+        rec = outcome(case, truth, named, verdict)
+        rec.update(label=label(case), truth=truth, found=named, verdict=verdict, error=error,
+                   seconds={"generate": t1 - t0, "truth": t2 - t1, "workflow": t3 - t2})
+        return rec
+
+
+def _fmt(r: dict) -> str:
+    return f"{100 * r['share']:.0f} % ({r['count']}/{r['of']})" if r["of"] else "-"
+
+
+def show(records: list[dict], console=None) -> None:
+    """Per-case table, the rates and the confusion matrix (rich)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from .bench_score import confusion, rates
+    console = console or Console()
+    t = Table(title="field benchmark: cases")
+    for col in ("case", "sim", "hidden", "larger", "named", "status", "value error", "s"):
+        t.add_column(col)
+    for r in records:
+        named = ", ".join(f"{n['effect']}[{n['channel']}]" if n["channel"] else n["effect"] for n in r["found"])
+        errs = ", ".join(f"{100 * e:.1f} %" for e in r["errors"].values())
+        t.add_row(r["id"], f"{r['sim']}/{r['tyre']}", r["label"], "yes" if r["larger"] else "no",
+                  named or ("error" if r["error"] else "-"), r["status"] + (" (told apart)" if r["told_apart"] else ""),
+                  errs, f"{r['seconds']['workflow']:.0f}")
+    console.print(t)
+    rt = rates(records)
+    s = Table(title="rates")
+    s.add_column("measure")
+    s.add_column("value")
+    s.add_row("named right (effect larger than the structural mismatch)", _fmt(rt["named_right"]))
+    s.add_row("value within 10 % (sensor) / 20 % (model)", _fmt(rt["value_within_tolerance"]))
+    s.add_row("value error, median", f"{100 * rt['value_error_median']:.1f} %")
+    s.add_row("false naming (named when nothing or something else was hidden)", _fmt(rt["false_naming"]))
+    s.add_row("none / outside-catalogue cases named", _fmt(rt["none_cases_named"]))
+    s.add_row("\"cannot be told apart\"", _fmt(rt["cannot_be_told_apart"]))
+    console.print(s)
+    conf = confusion(records)
+    cols = sorted({c for row in conf.values() for c in row} - {"nothing"}) + ["nothing"]
+    m = Table(title="confusion: hidden (rows) -> named (columns)")
+    m.add_column("hidden")
+    for c in cols:
+        m.add_column(c, justify="right")
+    for h in sorted(conf):
+        m.add_row(h, *(str(conf[h].get(c, "")) for c in cols))
+    console.print(m)
+
+
+def field(args) -> int:
+    import json
+    import os
+    import tempfile
+    cases = select(args.set, args.limit, args.cases.split(",") if args.cases else None, args.reduced)
+    out = Path(args.out or Path(tempfile.gettempdir()) / "rtsim_fieldbench_reports")
+    t0 = time.perf_counter()
+    bench = Bench()
+    setup = time.perf_counter() - t0
+    records = []
+    for k, case in enumerate(cases):
+        rec = bench.run(case, out, args.workers)
+        records.append(rec)
+        if not args.json:
+            print(f"[{k + 1}/{len(cases)}] {case['id']} {rec['label']}: {rec['status']} "
+                  f"(named {[n['effect'] for n in rec['found']]}; {rec['seconds']['workflow']:.0f} s)", flush=True)
+    total = time.perf_counter() - t0
+    from .bench_score import rates
+    summary = {"set": "reduced" if args.reduced else args.set, "cases": records, "rates": rates(records),
+               "seconds": {"total": total, "setup": setup,
+                           **{k: sum(r["seconds"][k] for r in records) for k in ("generate", "truth", "workflow")}},
+               "workers": args.workers, "cpus": os.cpu_count()}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench.json").write_text(json.dumps(summary, indent=1, default=str))
+    if args.json:
+        print(json.dumps(summary, indent=1, default=str))
+    else:
+        show(records)
+        sec = summary["seconds"]
+        print(f"{len(records)} cases in {total:.0f} s (setup {setup:.0f} s, generation {sec['generate']:.1f} s, "
+              f"truth {sec['truth']:.0f} s, workflow {sec['workflow']:.0f} s; {args.workers} workers); "
+              f"results: {out / 'bench.json'}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--set", choices=("heldout", "tuning", "issue"), default="heldout")
+    p.add_argument("--limit", type=int, help="the first N cases of the set")
+    p.add_argument("--reduced", action="store_true", help="the reduced form (a few held-out cases and the issue's)")
+    p.add_argument("--cases", help="comma-separated case ids")
+    p.add_argument("--workers", type=int, default=2, help="the workflow's worker processes")
+    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.add_argument("--out", type=Path, help="reports and bench.json (default: a temporary folder)")
+    p.add_argument("--straight-line", action="store_true", help="the seed's straight line instead (--effect)")
+    p.add_argument("--effect", default="brake_friction=0.85", help="with --straight-line: hidden model effect "
+                   "NAME=VALUE (its first parameter), or 'none'")
+    args = p.parse_args(argv)
+    if args.straight_line:
+        args.out = args.out or Path("/tmp/rtsim_validate_bench")
+        return straight_line(args)
+    return field(args)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,88 @@
+"""Scoring the field benchmark: each case's outcome from the named effects against the generator's truth
+(rtsim.validate.bench_truth), and the set's rates.
+
+Per case (named: the workflow's identified effects; hidden: the case's catalogue effects):
+- "right": the named effects are exactly the hidden ones (effect and channel), each value within
+  `TOL` of its value in the model's terms (sensor effects 10 %, model effects 20 %);
+- "value off": the right effects, a value outside its tolerance;
+- "false": an effect named that was not hidden (none, outside and small cases included);
+- "missed": something hidden, nothing (or only part of it) named, nothing false.
+Rates: named right = "right" among the cases whose every effect is larger than the structural mismatch;
+value error = per hidden effect named, |named - truth| / |truth| (within tolerance: its share);
+false naming = share of all cases with a "false" naming; none-cases named = none and outside cases
+with any named effect; "cannot be told apart" = share of cases whose verdict says so.
+"""
+from __future__ import annotations
+
+from collections import Counter
+
+TOL = {"sensor": 0.10, "model": 0.20}
+TOLD_APART = "cannot be told apart"
+
+
+def _key(effect: str, channel: str | None) -> str:
+    return f"{effect}[{channel}]" if channel else effect
+
+
+def outcome(case: dict, truth: dict, named: list[dict], verdict: str) -> dict:
+    """The case's outcome (module docstring). named: [{"effect", "channel", "params": {param: value}}]."""
+    hidden = {_key(e["effect"], e["channel"]): e for e in truth["effects"]}
+    found = {_key(n["effect"], n.get("channel")): n for n in named}
+    errors = {}
+    for k, e in hidden.items():
+        if k in found:
+            value = found[k]["params"].get(e["param"])
+            ref = e["model_terms"]
+            errors[k] = abs(value - ref) / abs(ref) if value is not None and ref else float("inf")
+    extra = sorted(set(found) - set(hidden))
+    if extra:
+        status = "false"
+    elif set(found) == set(hidden) and hidden:
+        status = "right" if all(errors[k] <= TOL[hidden[k]["kind"]] for k in hidden) else "value off"
+    elif not hidden:
+        status = "right"                    # nothing hidden, nothing named
+    else:
+        status = "missed"
+    return {"id": case["id"], "kind": case["kind"], "sim": case["sim"], "tyre": case["tyre"],
+            "larger": truth["larger"], "status": status, "hidden": sorted(hidden), "named": sorted(found),
+            "extra": extra, "errors": errors,
+            "within": {k: errors[k] <= TOL[hidden[k]["kind"]] for k in errors},
+            "told_apart": TOLD_APART in verdict.lower()}
+
+
+def rates(outcomes: list[dict]) -> dict:
+    """The set's rates (module docstring), with the counts behind them."""
+    def share(k, n):
+        return {"share": k / n if n else float("nan"), "count": k, "of": n}
+    larger = [o for o in outcomes if o["kind"] in ("one", "two") and o["larger"]]
+    errs = [(k, e, o["within"][k]) for o in outcomes for k, e in o["errors"].items()]
+    blank = [o for o in outcomes if o["kind"] in ("none", "outside")]
+    return {
+        "cases": len(outcomes),
+        "named_right": share(sum(o["status"] == "right" for o in larger), len(larger)),
+        "value_within_tolerance": share(sum(w for *_, w in errs), len(errs)),
+        "value_error_median": sorted(e for _, e, _ in errs)[len(errs) // 2] if errs else float("nan"),
+        "false_naming": share(sum(o["status"] == "false" for o in outcomes), len(outcomes)),
+        "none_cases_named": share(sum(bool(o["named"]) for o in blank), len(blank)),
+        "cannot_be_told_apart": share(sum(o["told_apart"] for o in outcomes), len(outcomes)),
+        "status": dict(Counter(o["status"] for o in outcomes)),
+    }
+
+
+def confusion(outcomes: list[dict]) -> dict[str, Counter]:
+    """hidden effect[channel] (or "none" / "outside") -> Counter of what was named for it: the same effect, another
+    one, or "nothing". A hidden effect counts its own name when named, else each extra named effect,
+    else "nothing"."""
+    rows: dict[str, Counter] = {}
+    for o in outcomes:
+        hidden = o["hidden"] or [o["kind"]]
+        for h in hidden:
+            row = rows.setdefault(h, Counter())
+            if h in o["named"]:
+                row[h] += 1
+            elif o["extra"]:
+                for x in o["extra"]:
+                    row[x] += 1
+            else:
+                row["nothing"] += 1
+    return rows

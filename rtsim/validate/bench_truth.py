@@ -1,0 +1,167 @@
+"""Ground truth of a field-benchmark case (rtsim.validate.fieldbench), from the generator and, where a
+hidden value means something else in rtsim's model, from the model replayed without any effect; never
+from the validation workflow's fits.
+
+Values in the model's terms (what a right fit finds):
+- tyre_slip_stiffness: the scale s of rtsim's Magic Formula tyre (slip angles fed as atan(s tan alpha))
+  whose lateral forces match the simulator's, least squares over the four tyres' operating points (load,
+  slip angle, lateral force) of the noise-free run with the effect, every 50 ms where |tan alpha| >
+  0.002: a tyre-level fit of the two tyre laws, no vehicle fit;
+- sensor effects: the hidden value composed with what the model, replayed without any effect on the
+  noise-free nominal run, reads on the channel: a bias plus the mean offset (simulator - model), a scale
+  times the least-squares gain of the simulator's channel on the model's, a delay plus the time shift
+  (+-0.1 s, 0.5 ms steps) that best aligns the model's channel with the simulator's (the model's own lag
+  reads as part of a delay); a wheel angle's scale as hidden (the other wheel of its axle is the
+  reference);
+- every other model effect: the hidden value (the simulators implement the catalogue's definitions).
+
+"Larger than the structural mismatch" (decided before the method changed). On the noise-free nominal
+run (no scatter, no noise) on the workflow's 100 Hz grid, per compared channel c: the structural
+mismatch S_c = RMS(model without effect - simulator without effect), the effect's size
+E_c = RMS(simulator with the effect alone - simulator without), both after removing by least squares
+what a field validation must allow for anyway (wheel speeds: a constant scale, an axle's rolling radius,
+and a drift growing linearly with the time moved, a resistance offset; accel_x: a constant offset while
+moving), and the floor F_c = the channel's noise left in the mean of the seven runs (sd / sqrt(7)). An
+effect is larger iff max over c of E_c / max(S_c, F_c) >= `RATIO`; a case is larger iff every hidden
+effect is.
+"""
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .fieldbench import generate, scatter
+
+RATIO = 2.0
+WHEEL_SPEED_FLOOR = 0.05     # rad/s: a wheel speed's noise left in the mean (quantised angles derived)
+TOL = {"sensor": 0.10, "model": 0.20}
+
+
+def _floor(channel: str) -> float:
+    if channel.startswith("wheel_speed_"):
+        return WHEEL_SPEED_FLOOR
+    sd, _, white, _ = scatter.NOISE.get(channel, (0.0, 0.0, 0.0, 0.0))
+    return math.hypot(sd, white) / math.sqrt(generate.N_RUNS)
+
+
+def _bench(case, t, ch, folder: Path, name: str, sensor_names):
+    from .benchmark import build_benchmark
+    from .data import load_runs
+    names = generate.channels(case)
+    p = generate.write_csv(folder / f"{name}.csv", t + 10.0, ch, names, generate.accel_frame(case))
+    runs, rejected = load_runs([p], sensor_names)
+    return build_benchmark(runs, rejected)
+
+
+def _allowed(c: str, t: np.ndarray, ref: np.ndarray, moving: np.ndarray) -> np.ndarray | None:
+    """Columns a field validation must allow for on channel c (module docstring), or None."""
+    if c.startswith("wheel_speed_"):
+        return np.column_stack([ref, np.cumsum(moving) * (t[1] - t[0])])
+    if c == "accel_x":
+        return moving[:, None].astype(float)
+    return None
+
+
+def _left(x: np.ndarray, basis: np.ndarray | None) -> np.ndarray:
+    if basis is None:
+        return x
+    coef, *_ = np.linalg.lstsq(basis, x, rcond=None)
+    return x - basis @ coef
+
+
+def _rms(x) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def _best_shift(t, model, data) -> float:
+    """d (s) with model(t - d) closest to data (least squares, +-0.1 s in 0.5 ms steps)."""
+    ds = np.arange(-0.1, 0.1 + 1e-9, 5e-4)
+    return float(ds[np.argmin([np.mean((np.interp(t - d, t, model) - data) ** 2) for d in ds])])
+
+
+def tyre_equivalent(tyre_params, fz, tan_alpha, fy, speed: float) -> float:
+    """The MF scale s reproducing the simulator's lateral forces (module docstring)."""
+    from scipy.optimize import minimize_scalar
+
+    from rtsim.vehicle.kit.tyre.magic_formula import mf52_forces
+    pts = [(f, a, y) for f, a, y in zip(fz.ravel(), tan_alpha.ravel(), fy.ravel()) if abs(a) > 0.002]
+
+    def cost(s):
+        return sum((mf52_forces(tyre_params, f, 0.0, math.atan(s * a), 0.0, speed, 1.0)[1] - y) ** 2
+                   for f, a, y in pts)
+    return float(minimize_scalar(cost, bounds=(0.2, 3.0), method="bounded", options={"xatol": 1e-4}).x)
+
+
+def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
+    """The case's ground truth (module docstring): per hidden effect its hidden value, its value in the
+    model's terms and its size ratio; per channel the structural mismatch; `larger` for the case."""
+    from .effectset import kind
+    frame = generate.accel_frame(case)
+    old = replayer.accel_frame
+    replayer.accel_frame = frame
+    names = replayer.model.channels.sensor_names
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            folder = Path(tmp)
+            t, ch0 = generate.simulate(case, car, None, {})
+            b0 = _bench(case, t, ch0, folder, "clean", names)
+            model = replayer.reported(replayer.simulate(replayer.inputs(b0), []), b0.t, [])
+            compared = list(b0.compared)
+            tg = b0.t
+            data0 = {c: b0.mean(c) for c in compared}
+            moving = np.abs(data0.get("wheel_speed_rl", np.ones_like(tg))) > 0.5
+            basis = {c: _allowed(c, tg, data0[c], moving) for c in compared}
+            structural = {c: _rms(_left(model[c] - data0[c], basis[c])) for c in compared}
+            effects = []
+            for h in case["hidden"]:
+                alone = {"hidden": [h], "outside": []}
+                t1, ch1 = generate.simulate(case, car, None, generate.sim_kwargs({**case, **alone}))
+                for c, eff in generate.sensor_effects({**case, **alone}).items():
+                    ch1[c] = scatter.sensor_effect(t1, ch1[c], **eff)
+                b1 = _bench(case, t1, ch1, folder, f"with_{len(effects)}", names)
+                size = {c: _rms(_left(b1.mean(c) - data0[c], basis[c])) for c in compared if c in b1.bands}
+                ratio = {c: size[c] / max(structural[c], _floor(c)) for c in size}
+                param, value = next((k, v) for k, v in h.items() if k not in ("effect", "channel"))
+                channel = h.get("channel")
+                terms = value
+                if h["effect"] == "tyre_slip_stiffness":
+                    terms = tyre_equivalent(tyre_params, ch1["_fz"][::25], ch1["_tan_alpha"][::25], ch1["_fy"][::25],
+                                            case["speed"])
+                elif channel is not None and not channel.startswith("wheel_angle_") and channel in data0:
+                    m, d = model[channel], data0[channel]
+                    if h["effect"] == "sensor_bias":
+                        terms = value + float(np.mean(d - m))
+                    elif h["effect"] == "sensor_scale":
+                        terms = value * float(m @ d / (m @ m))
+                    elif h["effect"] == "sensor_delay":
+                        terms = value + _best_shift(tg, m, d)
+                best = max(ratio, key=ratio.get)
+                effects.append({"effect": h["effect"], "channel": channel, "param": param, "hidden": value,
+                                "model_terms": terms, "kind": kind(h["effect"]), "ratio": ratio[best],
+                                "ratio_channel": best, "larger": ratio[best] >= RATIO})
+            nominal = None
+            if case["sim"] != "pitch":
+                nominal = tyre_equivalent(tyre_params, ch0["_fz"][::25], ch0["_tan_alpha"][::25], ch0["_fy"][::25],
+                                          case["speed"])
+    finally:
+        replayer.accel_frame = old
+    return {"id": case["id"], "effects": effects, "structural": structural,
+            "larger": bool(effects) and all(e["larger"] for e in effects), "tyre_nominal_in_model_terms": nominal}
+
+
+def cached_truth(case: dict, car: dict, replayer, tyre_params, root: Path | None = None) -> dict:
+    """`truth`, cached on disk beside the generated runs (keyed by the case and the car)."""
+    root = Path(root or generate.cache_root())
+    path = root / f"{case['id']}_{generate.key(case, car, 'truth-v1')}.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    out = truth(case, car, replayer, tyre_params)
+    root.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(out, indent=1))
+    tmp.replace(path)
+    return out
