@@ -39,6 +39,7 @@ class CrossValidation:
     base: np.ndarray
     cand: np.ndarray
     p_better: float = 1.0                               # p-value of "no improvement" (all channels)
+    t_better: float = 0.0                               # its t statistic (negative: the candidate is better)
     p_by_channel: dict = field(default_factory=dict)    # channel -> (p better, p worse)
 
     @property
@@ -68,17 +69,23 @@ class CrossValidation:
                                for c, p in self.p_by_channel.items()}}
 
 
+def t_statistic(diff: np.ndarray) -> float:
+    """The corrected resampled t statistic over leave-one-out folds (module docstring); diff: candidate
+    minus base loss per fold."""
+    n = diff.size
+    mean = float(diff.mean()) if n else 0.0
+    var = float(diff.var(ddof=1)) * (1.0 / n + 1.0 / (n - 1)) if n >= 2 else 0.0
+    if var <= 0.0:
+        return -math.inf if mean < 0 else math.inf if mean > 0 else 0.0
+    return mean / math.sqrt(var)
+
+
 def corrected_t(diff: np.ndarray) -> tuple[float, float]:
-    """One-sided p-values (improvement: diff < 0, worsening: diff > 0) of the corrected resampled t-test
-    over leave-one-out folds (module docstring); diff: candidate minus base loss per fold."""
+    """One-sided p-values (improvement: diff < 0, worsening: diff > 0) of the corrected resampled t-test."""
     n = diff.size
     if n < 2:
         return 1.0, 1.0
-    mean = float(diff.mean())
-    var = float(diff.var(ddof=1)) * (1.0 / n + 1.0 / (n - 1))
-    if var <= 0.0:
-        return (0.0, 1.0) if mean < 0 else (1.0, 0.0) if mean > 0 else (1.0, 1.0)
-    t = mean / math.sqrt(var)
+    t = t_statistic(diff)
     return float(student_t.cdf(t, n - 1)), float(student_t.sf(t, n - 1))
 
 
@@ -98,14 +105,20 @@ def normalised(obj, out: dict) -> np.ndarray:
     return np.concatenate([out[c] / obj.scale[c] for c in obj.channels])
 
 
-def leave_one_run_out(obj, m0: np.ndarray, m1: np.ndarray, J: np.ndarray | None) -> CrossValidation | None:
+def leave_one_run_out(obj, m0: np.ndarray, m1: np.ndarray, J: np.ndarray | None,
+                      deviations: list | None = None) -> CrossValidation | None:
     """The cross-validation of the model `m1` (normalised outputs at the candidate's fit, `normalised`; J
     its sensitivity, d residual / d theta, None: nothing re-fitted per fold) against `m0`; None with fewer
-    than 3 runs."""
+    than 3 runs. `deviations`: per run, the model's own response to that run's inputs minus its mean over
+    the runs (normalised; the current model's per-run replays): a run is then predicted from its own
+    inputs, the candidate's change taken as the same in every run, and the scatter the inputs explain
+    (a driver steering 2 % more in one run) leaves the comparison."""
     runs = _normalised_runs(obj)
     n = len(runs)
     if n < 3:
         return None
+    if deviations is not None and len(deviations) == n:
+        runs = [y - d for y, d in zip(runs, deviations)]
     nch = len(obj.channels)
     total = np.sum(runs, axis=0)
     nu = obj.nuisance
@@ -126,5 +139,6 @@ def leave_one_run_out(obj, m0: np.ndarray, m1: np.ndarray, J: np.ndarray | None)
         L1[f] = (e1 * e1).reshape(nch, -1).mean(axis=1)
     cv = CrossValidation(list(obj.channels), L0, L1)
     cv.p_better = corrected_t(L1.sum(axis=1) - L0.sum(axis=1))[0]
+    cv.t_better = t_statistic(L1.sum(axis=1) - L0.sum(axis=1))
     cv.p_by_channel = {c: corrected_t(L1[:, k] - L0[:, k]) for k, c in enumerate(obj.channels)}
     return cv

@@ -135,7 +135,7 @@ class Candidate:
     match: float                        # cosine between the needed change and the effect's sensitivity
     match_by_channel: dict
     sims: int
-    note: str = ""                      # why rejected / how fitted
+    note: str = ""                      # one plain sentence: why it was turned down ("" while it is not)
     requested: float | None = None      # the (implausible) value the data asks for, when rejected
     outputs: dict = field(default_factory=dict, repr=False)     # model outputs with the effect
     raw: dict | None = field(default=None, repr=False)         # the same before sensor effects (model effects)
@@ -155,14 +155,16 @@ class Candidate:
     joint: tuple | None = None          # (model effect, correlation) when judged jointly with a model effect
     confounded: str = ""                # why the data cannot tell it from the model's structure
     cv: object = field(default=None, repr=False)       # crossval.CrossValidation against the model as it stands
+    detail: str = ""                    # how it was fitted and judged (technical, "; "-separated)
     structure: float = 0.0              # RMS structural mismatch (noise removed) left on its signature channels
 
     @property
     def outweighs_structure(self) -> bool:
-        """It changes its signature channels by more than the structural mismatch it leaves there (the
-        residual beyond the data's own uncertainty, `structure`): an effect smaller than what no
-        catalogue effect explains on those channels cannot be told apart from it."""
-        return self.moved >= self.structure
+        """It changes its signature channels by more than the disagreement it leaves there (`left`: the
+        structural mismatch and the noise left in the data's mean, which hides any structure smaller than
+        itself): an effect smaller than what nothing in the catalogue explains on those channels cannot
+        be told apart from it, however consistently every run shows it."""
+        return self.moved >= self.left
 
     @property
     def predicts(self) -> bool:
@@ -174,14 +176,16 @@ class Candidate:
 
     @property
     def score(self) -> float:
-        """What ranks the candidates: the mean held-out loss it removes (negative: better), else its IC."""
+        """What ranks the candidates: the strength of the evidence that it predicts left-out runs better
+        (the fold test's t statistic, negative: better), else its IC."""
         if self.cv is not None:
-            return float((self.cv.cand.sum(axis=1) - self.cv.base.sum(axis=1)).mean())
+            return self.cv.t_better
         return self.delta_ic
 
     @property
     def eligible(self) -> bool:
-        return self.plausible and self.predicts and self.outweighs_structure and not self.confounded
+        return (self.plausible and self.predicts and not self.worse and self.outweighs_structure
+                and not self.confounded)
 
     def summary(self) -> dict:
         return {"name": self.effect.name, "parameters": dict(self.effect.params),
@@ -194,7 +198,7 @@ class Candidate:
                 "cross_validation": self.cv.summary() if self.cv is not None else None,
                 "by_channel": {c: {"cost_before": v[0], "cost_with": v[1], "moved": v[2]}
                                for c, v in self.by_channel.items()},
-                "note": self.note, **({"requested": self.requested} if self.requested is not None else {})}
+                "note": self.note, "detail": self.detail, **({"requested": self.requested} if self.requested is not None else {})}
 
 
 @dataclass
@@ -209,6 +213,7 @@ class Context:
     raw: dict                           # its outputs before sensor effects
     cost: float
     n_runs: int
+    deviations: list | None = None      # per run: its replay's normalised outputs minus their mean (crossval)
 
 
 # ------------------------------------------------------------------------------ parameter mapping
@@ -285,10 +290,7 @@ def _finish(ctx: Context, effect: Effect, kind: str, k: int, out: dict, J: np.nd
     match, by = _match(ctx, J, 1.0 if th >= 0 else -1.0)
     plausible = requested is None
     notes = [note] if note else []
-    if not plausible:
-        notes.append(f"rejected: the data ask for {coord.name} = {requested:.4g}, outside the plausible range "
-                     f"{coord.lo:g} .. {coord.hi:g}")
-    elif not significant:
+    if plausible and not significant:
         notes.append(f"{coord.name} = {coord.value(th):.4g} +- {effect.uncertainty[coord.name]:.2g}: the interval "
                      f"includes the off value")
     ic = obj.ic(out, k)
@@ -296,8 +298,11 @@ def _finish(ctx: Context, effect: Effect, kind: str, k: int, out: dict, J: np.nd
     # spread over every compared channel would shrink with their number)
     size = distance(obj, out, ctx.outputs, _own(obj, effect.channel) if kind == "sensor" else None)
     cand = Candidate(effect, kind, k, cost, ic, 1.0 - cost / ctx.cost, ic - obj.ic(ctx.outputs, 0), plausible,
-                     significant, match, by, sims, "; ".join(notes), requested, out, theta=th, u_theta=uth, J=J,
-                     coord=coord, size=size)
+                     significant, match, by, sims, "", requested, out, theta=th, u_theta=uth, J=J,
+                     coord=coord, size=size, detail="; ".join(notes))
+    if not plausible:
+        cand.note = (f"The data ask for {coord.name} = {requested:.4g}, outside its plausible range {coord.lo:g} to "
+                     f"{coord.hi:g}.")
     channel_evidence(ctx, cand)
     return cand
 
@@ -335,7 +340,7 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
     cand.by_channel = by
     m0, m1 = normalised(obj, ctx.outputs), normalised(obj, cand.outputs)
     J = cand.J if cand.J is not None and float(cand.J @ cand.J) > 0 else None
-    cand.cv = leave_one_run_out(obj, m0, m1, J)
+    cand.cv = leave_one_run_out(obj, m0, m1, J, ctx.deviations)
     if cand.kind == "sensor":
         sig = _own(obj, cand.effect.channel)
     elif cand.cv is not None:
@@ -375,26 +380,41 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         nu = obj.nuisance
         d = m1 - m0
         p = np.clip(np.linalg.lstsq(nu.D, d, rcond=None)[0], nu.lo, nu.hi)
-        beyond = leave_one_run_out(obj, m0, m1 - nu.D @ p, None)
+        beyond = leave_one_run_out(obj, m0, m1 - nu.D @ p, None, ctx.deviations)
         if beyond is not None and not beyond.better:
             share = 1.0 - float(np.sum((d - nu.D @ p) ** 2)) / max(float(d @ d), 1e-300)
             cand.confounded = (f"the nuisance adjustments (rolling radii, resistance offset) reproduce "
                                f"{100 * share:.0f} % of what it changes, and the rest does not improve the "
                                f"prediction of left-out runs")
+    explain_rejection(cand)
+
+
+def add_detail(cand: Candidate, text: str) -> None:
+    """Append to the candidate's technical detail."""
+    cand.detail = (cand.detail + "; " if cand.detail else "") + text
+
+
+def explain_rejection(cand: Candidate) -> None:
+    """The one sentence (Candidate.note) that says why a candidate is turned down, in the order the
+    rules apply; "" when it is eligible (the workflow may still turn it down: workflow._turned_down)."""
     if not cand.plausible:
-        return
-    notes = [cand.note] if cand.note else []
+        return                               # _finish said what value the data ask for
+    sig = ", ".join(cand.signature)
     if cand.confounded:
-        notes.append(cand.confounded)
-    if cand.cv is not None and not cand.cv.better:
-        notes.append(f"does not improve the prediction of left-out runs (held-out error {100 * cand.cv.gain:+.0f} %, "
-                     f"p = {cand.cv.p_better:.2g})")
-    if cand.worse:
-        notes.append("predicts " + ", ".join(cand.worse) + " worse in left-out runs")
-    if not cand.outweighs_structure:
-        notes.append(f"changes {', '.join(sig)} by {cand.moved:.2g} standard errors, less than the structural "
-                     f"mismatch left there ({cand.structure:.2g}): cannot be told apart from it")
-    cand.note = "; ".join(notes)
+        cand.note = cand.confounded[0].upper() + cand.confounded[1:] + "."
+    elif not cand.predicts:
+        cand.note = ("It did not improve the prediction of left-out runs" + (
+            f" (held-out error {100 * -cand.cv.gain:+.0f} %, p = {cand.cv.p_better:.2g})." if cand.cv is not None
+            else " (fewer than 3 runs: the information criterion did not fall enough)."))
+    elif cand.worse:
+        cand.note = (f"It predicts {', '.join(cand.worse)} worse in left-out runs while it improves "
+                     f"{sig}: it trades one mismatch for another.")
+    elif not cand.outweighs_structure:
+        cand.note = (f"It changes {sig} by less than the mismatch it leaves there ({cand.moved:.2g} against "
+                     f"{cand.left:.2g} standard errors), so it cannot be told apart from the model's structural "
+                     f"mismatch.")
+    else:
+        cand.note = ""
 
 
 # --------------------------------------------------------------------------------- model effects
@@ -643,8 +663,8 @@ def combine_runs(cand: Candidate, thetas: list[float]) -> None:
     half = t_critical(n) * float(th.std(ddof=1)) / math.sqrt(n)
     cand.per_run = [c.value(x) for x in th]
     if not c.tlo <= mean <= c.thi:
-        cand.note = (cand.note + "; " if cand.note else "") + \
-            f"per-run estimates average {c.value(mean):.4g}, outside the plausible range: mean-input fit kept"
+        add_detail(cand, f"per-run estimates average {c.value(mean):.4g}, outside the plausible range: mean-input "
+                         "fit kept")
         return
     first = c.value(cand.theta)
     cand.theta = mean
@@ -656,8 +676,7 @@ def combine_runs(cand: Candidate, thetas: list[float]) -> None:
     cand.effect.params[c.name] = c.value(mean)
     cand.effect.set_interval(c.name, c.value_uncertainty(mean, half), c.value_uncertainty(mean, model_error))
     cand.significant = bool(abs(mean) > half)
-    cand.note = (cand.note + "; " if cand.note else "") + \
-        f"value and 95 % interval from {n} per-run replays (the mean-input fit gave {first:.4g})"
+    add_detail(cand, f"value and 95 % interval from {n} per-run replays (the mean-input fit gave {first:.4g})")
 
 
 TIE_DISTANCE = 0.5
@@ -935,7 +954,7 @@ def joint_member(ctx: Context, fit: JointFit, k: int, base_outputs: dict) -> Can
     interval is the joint one (the others' uncertainty included)."""
     m = fit.members[k]
     base = Context(ctx.bench, ctx.objective, ctx.replayer, ctx.inputs, ctx.effects, base_outputs, {},
-                   ctx.objective.cost(base_outputs), ctx.n_runs)
+                   ctx.objective.cost(base_outputs), ctx.n_runs, ctx.deviations)
     th = float(fit.theta[k])
     cand = _finish(base, m.effect(th), "model", 1, fit.outputs, fit.J[:, k].copy(), th, m.coord, fit.sims,
                    fit.requested[k], "")

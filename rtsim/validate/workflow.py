@@ -59,8 +59,9 @@ import numpy as np
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import accel_frame, load_runs
 from .effectset import Effect, catalogue, from_mapping
-from .identify import (CLEAR, LITTLE, MAX_SIMS, Candidate, Context, combine_runs, equivalents, evidence_strength,
+from .identify import (CLEAR, LITTLE, MAX_SIMS, Candidate, Context, add_detail, combine_runs, equivalents,
                        fit_sensor_effects, rank, rebase, run_estimate)
+from .crossval import normalised
 from .joint import joint_model
 from .objective import Objective
 from .profile import activate, active, vehicle_kind
@@ -75,7 +76,7 @@ INSIDE_ENOUGH = 0.95
 INSIDE_MOSTLY = 0.90
 TRY_WINNERS = 2              # eligible candidates checked run by run before giving up
 CONFOUNDED = 0.9             # |correlation| of two identified effects' sensitivities above which they are confounded
-SCREEN_SIMS = 2              # trial and one Gauss-Newton step
+SCREEN_SIMS = 3              # trial, one Gauss-Newton step (and that step halved if it overshoots)
 REFINE_TOP = 2               # model effects refined to convergence per iteration
 
 
@@ -173,7 +174,7 @@ def _fit_model_candidates(ctx: Context, names: list[str], workers: int, progress
         if c.effect.name in byname:
             out.append(byname[c.effect.name])
         else:
-            c.note = (c.note + "; " if c.note else "") + "screened (trial and one Gauss-Newton step), not refined"
+            add_detail(c, "screened (trial and one damped Gauss-Newton step), not refined")
             out.append(c)
     ctx.replayer.simulations += sum(c.sims for c in out)
     return out
@@ -192,7 +193,7 @@ def _joint_sensor(ctx: Context, ranked: list[Candidate]) -> list[Candidate]:
     m = models[0]
     rp = ctx.replayer
     both = Context(ctx.bench, ctx.objective, rp, ctx.inputs, [*ctx.effects, m.effect], m.outputs, m.raw, m.cost,
-                   ctx.n_runs)
+                   ctx.n_runs, ctx.deviations)
     joint = sorted((c for c in fit_sensor_effects(both) if c.eligible), key=lambda c: c.score)
     out = []
     for j in joint[:TRY_WINNERS]:
@@ -205,9 +206,9 @@ def _joint_sensor(ctx: Context, ranked: list[Candidate]) -> list[Candidate]:
         same.outputs = rp.reported(ctx.raw, ctx.inputs.t, [*ctx.effects, same.effect])
         corr = float(m.J @ j.J) / (float(np.linalg.norm(m.J) * np.linalg.norm(j.J)) or 1.0) if m.J is not None \
             else float("nan")
-        same.note = (same.note + "; " if same.note else "") + (
+        add_detail(same, (
             f"judged jointly with {m.effect.label()}: with it in place it explains "
-            f"{100 * j.local_reduction:.0f} % of its channel (correlation of the two sensitivities {corr:+.2f})")
+            f"{100 * j.local_reduction:.0f} % of its channel (correlation of the two sensitivities {corr:+.2f})"))
         same.joint = (m.effect.label(), corr)
         out.append(same)
     return out
@@ -285,8 +286,13 @@ def _ensemble(ctx: Context, workers: int, cache: dict) -> tuple[Context | None, 
         return None, None
     raw = {c: np.mean([r[c] for r in raws], axis=0) for c in raws[0]}
     out = rp.reported(raw, bench.t, ctx.effects)
-    return Context(bench, ctx.objective, rp, ctx.inputs, ctx.effects, out, raw, ctx.objective.cost(out),
-                   ctx.n_runs), raws
+    # each run's replay minus their mean, normalised: the cross-validation predicts a run from its inputs
+    obj = ctx.objective
+    per_run = [normalised(obj, rp.reported(r, bench.t, ctx.effects)) for r in raws]
+    mean = np.mean(per_run, axis=0)
+    ctx.deviations = [x - mean for x in per_run]
+    return Context(bench, obj, rp, ctx.inputs, ctx.effects, out, raw, obj.cost(out), ctx.n_runs,
+                   ctx.deviations), raws
 
 
 def _sensor_names(opts: Options, replayer: Replayer | None) -> tuple[str, ...]:
@@ -376,13 +382,13 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
         taken = {e.name for e in current}
         names = [n for n, s in cat.items() if s.kind == "model" and n not in taken]
         prog.stage(f"iteration {k}: fitting effects", len(names) + REFINE_TOP + 1 + bench.n)
+        ens, raws = _ensemble(ctx, workers, replays)      # first: it gives ctx the runs' deviations
         cands = _fit_model_candidates(ctx, names, workers, prog)
-        ens, raws = _ensemble(ctx, workers, replays)
         sensors = fit_sensor_effects(ens or ctx)
         if ens is not None:
             rebase(sensors, ctx)
             for c in sensors:
-                c.note = (c.note + "; " if c.note else "") + "judged on the per-run replays averaged"
+                add_detail(c, "judged on the per-run replays averaged")
         cands += sensors
         prog.advance()
         ranked = rank(cands)
@@ -400,26 +406,25 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
                     rp.simulations += bench.n
                 failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(ests) if isinstance(r, Failed)]
                 if failed:
-                    cand.note = (cand.note + "; " if cand.note else "") + (
+                    add_detail(cand, (
                         "per-run replay failed (" + "; ".join(failed) + "): the mean-input fit and its "
-                        "linearised interval kept")
+                        "linearised interval kept"))
                 combine_runs(cand, [math.nan if isinstance(r, Failed) else r for r in ests])
             if abs(cand.theta) >= CLEAR * cand.u_theta:
                 win = cand
                 break
-            cand.note = (cand.note + "; " if cand.note else "") + (
-                f"not added: its 95 % interval from the runs one by one (+- {cand.u_theta:.2g} in the fitted "
-                f"coordinate) includes the off value")
+            cand.note = ("Its 95 % interval from the runs one by one includes the off value: the runs do not "
+                         "agree that it is there.")
         if win is None:
             best = ranked[0] if ranked else None
-            why = (f"; the best candidate, {best.effect.label()}, removes {100 * best.reduction:.0f} % "
-                   f"({best.note or 'evidence too weak'})") if best else ""
+            why = (f"; the best candidate, {best.effect.label()}, was turned down: "
+                   f"{best.note or 'it did not improve the prediction of left-out runs.'}") if best else ""
             close = [c for c in ranked if c.plausible and c.kind == "model" and not c.outweighs_structure
                      and c.predicts and not c.confounded]
             if close:
                 c = close[0]
                 why = (f"; {c.effect.label()} would change {', '.join(c.signature)} by {c.moved:.2g} standard "
-                       f"errors, less than the structural mismatch left there ({c.structure:.2g}): the data cannot "
+                       f"errors, less than the mismatch left there ({c.left:.2g}): the data cannot "
                        f"tell it apart from the structural mismatch")
             if not effects and _inside(metrics, INSIDE_MOSTLY):
                 verdict = ("no missing effect found: the model agrees with the benchmark (at least "
@@ -461,15 +466,18 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
             win.raw, win.outputs = joint.raw, joint.outputs
         ties = equivalents(obj, win, ranked)
         runner = next((c for c in ranked if c is not win and c.plausible), None)
-        gap = (runner.ic - win.ic) if runner else float("inf")
-        v = f"{win.effect.label()} removes {100 * win.reduction:.0f} % of the disagreement (IC {win.delta_ic:+.0f})"
+        for c in ranked:
+            if c is not win and not c.note:
+                c.note = f"{win.effect.label()} predicted the left-out runs better."
+        v = f"{win.effect.label()} removes {100 * win.reduction:.0f} % of the disagreement" + (
+            f" and {100 * win.cv.gain:.0f} % of the error in predicting a left-out run" if win.cv is not None else "")
         if ties:
             v += ("; indistinguishable on this manoeuvre from " + ", ".join(
                 f"{c.effect.label()} (responses {d:.2f} standard errors apart)" for c, d in ties) +
                   ": the data cannot tell these apart, the best-scoring one is added")
         if runner:
-            v += (f"; runner-up {runner.effect.label()} ({100 * runner.reduction:.0f} %, "
-                  f"{evidence_strength(gap)} for the winner, IC gap {gap:.1f})")
+            v += (f"; runner-up {runner.effect.label()} ({100 * runner.reduction:.0f} %" + (
+                f", {100 * runner.cv.gain:.0f} % of the left-out runs' error" if runner.cv is not None else "") + ")")
         effects.append(win.effect)
         latest[win.effect.key] = win
         partners = []
