@@ -41,29 +41,26 @@ of the model's response reads as part of a sensor delay, a constant offset as pa
 interval then holds the value in the model's terms (the hidden value composed with what the model reads
 in the same data without it), not the value alone.
 The winner's value and interval then come from the runs one by one (run_estimate, combine_runs:
-Student-t over the per-run estimates, as eq. 6). A candidate is `significant` when its interval
-excludes the off value; it is eligible to be added when it is plausible, removes at least
-`MIN_REDUCTION` of the cost, lowers the information criterion by at least `MIN_DELTA_IC` and changes the
-outputs by at least `MIN_SIZE` standard errors of the mean (RMS over the channels and samples; a sensor
-effect's over its own channel): smaller changes fit noise and the artefacts of averaging runs (e.g. the
-pitch oscillation after the stop, smeared in the mean).
+Student-t over the per-run estimates, as eq. 6).
 
-Evidence per channel (channel_evidence; data from elsewhere always carry structural mismatch beside
-the effect looked for). Residuals are the objective's: normalised by each channel's standard error,
-with the nuisance adjustments (objective.Nuisance) fitted at every candidate value. A candidate's
-signature channels are its own channel for a sensor effect, and for a model effect those it moves by
-at least MIN_SIZE standard errors and SIGNATURE_SHARE of its largest move. Its information criterion
-counts the signature channels and, elsewhere, only where it improves; `reduction` for eligibility is
-the share of the signature channels' cost it removes. It is not eligible when it makes another channel
-clearly worse (WORSE), when a model effect changes its channels by less than the residual it leaves
-there (cannot be told apart from the structural mismatch), when a sensor effect removes less than
-SENSOR_EXPLAINS of its channel's cost, or when a gain or lag of accel_y is asked for without the roll
-angle compared (TILT; body-frame accelerometers only: a level-frame one senses no tilt), or when a grade
-is asked for of level-frame data that never stand still (LEVEL_CONFOUNDED), or when the nuisance
-adjustments, free of their prior, reproduce at least MIMIC of what a model effect changes
-(objective.Nuisance.mimic: 200 kg against a resistance offset, when the measured torques hold the speed).
-The uncertainty of the winner combines the runs' scatter with the interval from the residual left at the
-optimum (Effect.model_error): it widens with the unexplained residual.
+Selection (channel_evidence, Candidate.eligible; issue 30). Residuals are the objective's: normalised by
+each channel's standard error, the nuisance adjustments (objective.Nuisance) fitted at every candidate
+value. A candidate is eligible when it is plausible and
+- it predicts left-out runs better (crossval.leave_one_run_out: each run predicted from its own inputs
+  by the model re-fitted on the other runs, the corrected resampled t-test over the folds at
+  crossval.ALPHA; with fewer than 3 runs: the information criterion falls by MIN_DELTA_IC);
+- it predicts no channel significantly worse (the same test per channel);
+- it moves its signature channels (a sensor effect: its own; a model effect: those whose left-out
+  prediction it improves) by more than the disagreement it leaves there (`left`, RMS in standard
+  errors: the structural mismatch and the noise left in the mean): cross-validation across repetitions
+  cannot see a structural mismatch, which is in every run alike;
+- for a model effect, what the nuisance adjustments cannot reproduce of its change (free of their
+  prior) still predicts left-out runs better;
+- it is not physically confounded: a gain or lag of accel_y asked for without the roll angle compared
+  (TILT; body-frame accelerometers only), a grade asked for of level-frame data that never stand still
+  (LEVEL_CONFOUNDED).
+Candidates are ranked by the fold test's t statistic (the strongest evidence first). Every candidate
+turned down carries one plain sentence saying why (Candidate.note; technical detail: Candidate.detail).
 
 Several model effects at once (fit_joint, joint_member, joint_run_estimate). Fitted one by one, the first
 of two model effects takes part of the second (a grade added first carries part of a hidden mass), and the
@@ -378,11 +375,10 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         # the part of its change the nuisance adjustments cannot reproduce (free of their prior, inside
         # their ranges) must predict left-out runs better on its own: else the adjustments stand for it
         nu = obj.nuisance
-        d = m1 - m0
-        p = np.clip(np.linalg.lstsq(nu.D, d, rcond=None)[0], nu.lo, nu.hi)
+        p = np.clip(np.linalg.lstsq(nu.D, m1 - m0, rcond=None)[0], nu.lo, nu.hi)
         beyond = leave_one_run_out(obj, m0, m1 - nu.D @ p, None, ctx.deviations)
         if beyond is not None and not beyond.better:
-            share = 1.0 - float(np.sum((d - nu.D @ p) ** 2)) / max(float(d @ d), 1e-300)
+            share, _ = nu.mimic(m1 - m0)
             cand.confounded = (f"the nuisance adjustments (rolling radii, resistance offset) reproduce "
                                f"{100 * share:.0f} % of what it changes, and the rest does not improve the "
                                f"prediction of left-out runs")
