@@ -57,7 +57,8 @@ value. A candidate is eligible when it is plausible and
 - for a model effect, what the nuisance adjustments cannot reproduce of its change (free of their
   prior) still predicts left-out runs better;
 - it is not physically confounded: a gain or lag of accel_y asked for without the roll angle compared
-  (TILT; body-frame accelerometers only), a grade asked for of level-frame data that never stand still
+  (TILT; body-frame accelerometers only), a gain or lag of the roll angle (ROLL_CONFOUNDED: the model's
+  roll stiffness and damping), a grade asked for of level-frame data that never stand still
   (LEVEL_CONFOUNDED).
 Candidates are ranked by the fold test's t statistic (the strongest evidence first). Every candidate
 turned down carries one plain sentence saying why (Candidate.note; technical detail: Candidate.detail).
@@ -110,6 +111,9 @@ CLEAR = 1.0                  # a winner's 95 % interval (runs one by one, model 
 #: lag of accel_y cannot be told from the model's roll (its roll stiffness, not in the catalogue)
 TILT = {"accel_y": "roll"}
 TILT_CONFOUNDED = ("sensor_scale", "sensor_delay")
+#: a gain or a lag of the measured roll angle has the signature of the model's roll stiffness and roll
+#: damping, which are not in the catalogue: an inclinometer's scale or delay cannot be told from them
+ROLL_CONFOUNDED = {"roll": ("sensor_scale", "sensor_delay")}
 #: a level-frame accelerometer senses a grade as it senses a resistance (a constant longitudinal force while
 #: the car moves: the resistance-offset nuisance), where a body-frame one senses no grade at all: in the level
 #: frame a grade is told from a resistance only where the car stands still
@@ -365,6 +369,10 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         what = cand.effect.name.split("_")[1]
         cand.confounded = (f"a {what} of {ch} cannot be told from the model's body {TILT[ch]} (the accelerometer "
                            f"reads g sin({TILT[ch]})): record {TILT[ch]} to tell them apart")
+    if cand.kind == "sensor" and cand.effect.name in ROLL_CONFOUNDED.get(ch, ()):
+        what = cand.effect.name.split("_")[1]
+        cand.confounded = (f"a {what} of the {ch} angle cannot be told from the model's roll stiffness and damping, "
+                           "which the catalogue does not hold")
     if (cand.effect.name in LEVEL_CONFOUNDED and ctx.replayer.accel_frame == "level" and obj.nuisance is not None
             and _moves_throughout(ctx)):
         cand.confounded = ("in the level frame a grade reads as a constant resistance (the resistance-offset "
