@@ -92,7 +92,7 @@ from rtsim.validate import report
 from rtsim.validate.benchmark import build_benchmark
 from rtsim.validate.data import load_runs
 from rtsim.validate.effectset import kind
-from rtsim.validate.identify import Context, fit_sensor_effects
+from rtsim.validate.identify import Context
 from rtsim.validate.objective import Objective
 from rtsim.validate.replay import Replayer
 from rtsim.validate.signals import DERIVED
