@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rtsim.validate.objective import MIMIC, RESISTANCE_RANGE, Nuisance
+from rtsim.validate.objective import RESISTANCE_RANGE, Nuisance
 
 RADIUS = 0.3
 CHANNELS = ["wheel_speed_fl", "wheel_speed_fr", "wheel_speed_rl", "wheel_speed_rr", "accel_x", "gyro_z"]
@@ -31,14 +31,12 @@ def test_a_resistance_inside_its_range_is_reproduced():
     nu = _nuisance()
     share, name = nu.mimic(0.5 * RESISTANCE_RANGE * _resistance(nu))
     assert share > 0.999 and name.startswith("resistance offset"), (share, name)
-    assert share >= MIMIC
 
 
 def test_beyond_the_range_only_the_range_is_reproduced():
     nu = _nuisance()
     share, _ = nu.mimic(3.0 * RESISTANCE_RANGE * _resistance(nu))
     assert abs(share - 5.0 / 9.0) < 1e-6, share
-    assert share < MIMIC
 
 
 def test_a_change_of_another_shape_is_not_reproduced():

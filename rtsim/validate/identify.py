@@ -41,29 +41,27 @@ of the model's response reads as part of a sensor delay, a constant offset as pa
 interval then holds the value in the model's terms (the hidden value composed with what the model reads
 in the same data without it), not the value alone.
 The winner's value and interval then come from the runs one by one (run_estimate, combine_runs:
-Student-t over the per-run estimates, as eq. 6). A candidate is `significant` when its interval
-excludes the off value; it is eligible to be added when it is plausible, removes at least
-`MIN_REDUCTION` of the cost, lowers the information criterion by at least `MIN_DELTA_IC` and changes the
-outputs by at least `MIN_SIZE` standard errors of the mean (RMS over the channels and samples; a sensor
-effect's over its own channel): smaller changes fit noise and the artefacts of averaging runs (e.g. the
-pitch oscillation after the stop, smeared in the mean).
+Student-t over the per-run estimates, as eq. 6).
 
-Evidence per channel (channel_evidence; data from elsewhere always carry structural mismatch beside
-the effect looked for). Residuals are the objective's: normalised by each channel's standard error,
-with the nuisance adjustments (objective.Nuisance) fitted at every candidate value. A candidate's
-signature channels are its own channel for a sensor effect, and for a model effect those it moves by
-at least MIN_SIZE standard errors and SIGNATURE_SHARE of its largest move. Its information criterion
-counts the signature channels and, elsewhere, only where it improves; `reduction` for eligibility is
-the share of the signature channels' cost it removes. It is not eligible when it makes another channel
-clearly worse (WORSE), when a model effect changes its channels by less than the residual it leaves
-there (cannot be told apart from the structural mismatch), when a sensor effect removes less than
-SENSOR_EXPLAINS of its channel's cost, or when a gain or lag of accel_y is asked for without the roll
-angle compared (TILT; body-frame accelerometers only: a level-frame one senses no tilt), or when a grade
-is asked for of level-frame data that never stand still (LEVEL_CONFOUNDED), or when the nuisance
-adjustments, free of their prior, reproduce at least MIMIC of what a model effect changes
-(objective.Nuisance.mimic: 200 kg against a resistance offset, when the measured torques hold the speed).
-The uncertainty of the winner combines the runs' scatter with the interval from the residual left at the
-optimum (Effect.model_error): it widens with the unexplained residual.
+Selection (channel_evidence, Candidate.eligible; issue 30). Residuals are the objective's: normalised by
+each channel's standard error, the nuisance adjustments (objective.Nuisance) fitted at every candidate
+value. A candidate is eligible when it is plausible and
+- it predicts left-out runs better (crossval.leave_one_run_out: each run predicted from its own inputs
+  by the model re-fitted on the other runs, the corrected resampled t-test over the folds at
+  crossval.ALPHA; with fewer than 3 runs: the information criterion falls by MIN_DELTA_IC);
+- it predicts no channel significantly worse (the same test per channel);
+- it moves its signature channels (a sensor effect: its own; a model effect: those whose left-out
+  prediction it improves) by more than the disagreement it leaves there (`left`, RMS in standard
+  errors: the structural mismatch and the noise left in the mean): cross-validation across repetitions
+  cannot see a structural mismatch, which is in every run alike;
+- for a model effect, what the nuisance adjustments cannot reproduce of its change (free of their
+  prior) still predicts left-out runs better;
+- it is not physically confounded: a gain or lag of accel_y asked for without the roll angle compared
+  (TILT; body-frame accelerometers only), a gain or lag of the roll angle (ROLL_CONFOUNDED: the model's
+  roll stiffness and damping), a grade asked for of level-frame data that never stand still
+  (LEVEL_CONFOUNDED).
+Candidates are ranked by the fold test's t statistic (the strongest evidence first). Every candidate
+turned down carries one plain sentence saying why (Candidate.note; technical detail: Candidate.detail).
 
 Several model effects at once (fit_joint, joint_member, joint_run_estimate). Fitted one by one, the first
 of two model effects takes part of the second (a grade added first carries part of a hidden mass), and the
@@ -88,7 +86,8 @@ from rtsim.errors import RtsimError
 from rtsim.vehicle.kit.sensor_model import delayed
 
 from .effectset import Effect, catalogue
-from .objective import MIMIC, MOVING, Objective, _tau
+from .crossval import leave_one_run_out, normalised
+from .objective import MOVING, Objective, _tau
 from .stats import t_critical
 from .replay import Replayer, ReplayInputs
 from .signals import DERIVED
@@ -102,20 +101,19 @@ SECANT = 0.05                # shortest relative secant for the sensitivity behi
 
 class _Budget(Exception):
     """The candidate's simulation budget is spent (or it is not worth more)."""
-MIN_DELTA_IC = 10.0          # "very strong" evidence on the Kass-Raftery scale of 2 ln(Bayes factor)
-MIN_REDUCTION = 0.10         # a winner removes at least this share of the disagreement
-MIN_SIZE = 1.0               # and moves the outputs by at least this many standard errors (RMS)
-CLEAR = 2.0                  # a winner's value must lie this many 95 % half-widths from the off value
-SIGNATURE_SHARE = 0.2        # a channel is in a candidate's signature when it moves it by >= this share of
-                             # its largest move (and by >= MIN_SIZE standard errors)
-WORSE = 1.5                  # a candidate that multiplies a channel's cost by more than this (and leaves it
-WORSE_FLOOR = 4.0            # above this normalised cost) makes that channel worse: not eligible
-SENSOR_EXPLAINS = 0.75       # a sensor effect removes at least this share of its own channel's cost
+#: with fewer than 3 runs nothing can be cross-validated: the information criterion must then fall by this
+#: much ("very strong" evidence on the Kass-Raftery scale of 2 ln(Bayes factor))
+MIN_DELTA_IC = 10.0
+MIN_SIZE = 1.0               # standard errors (RMS): the joint fit's partner search (joint.py) and the notes
+CLEAR = 1.0                  # a winner's 95 % interval (runs one by one, model error included) excludes off
 #: a lateral accelerometer on the body reads gravity's component g sin(roll), about proportional to the
 #: lateral acceleration and lagging it with the roll dynamics: without the roll angle compared, a gain or a
 #: lag of accel_y cannot be told from the model's roll (its roll stiffness, not in the catalogue)
 TILT = {"accel_y": "roll"}
 TILT_CONFOUNDED = ("sensor_scale", "sensor_delay")
+#: a gain or a lag of the measured roll angle has the signature of the model's roll stiffness and roll
+#: damping, which are not in the catalogue: an inclinometer's scale or delay cannot be told from them
+ROLL_CONFOUNDED = {"roll": ("sensor_scale", "sensor_delay")}
 #: a level-frame accelerometer senses a grade as it senses a resistance (a constant longitudinal force while
 #: the car moves: the resistance-offset nuisance), where a body-frame one senses no grade at all: in the level
 #: frame a grade is told from a resistance only where the car stands still
@@ -138,7 +136,7 @@ class Candidate:
     match: float                        # cosine between the needed change and the effect's sensitivity
     match_by_channel: dict
     sims: int
-    note: str = ""                      # why rejected / how fitted
+    note: str = ""                      # one plain sentence: why it was turned down ("" while it is not)
     requested: float | None = None      # the (implausible) value the data asks for, when rejected
     outputs: dict = field(default_factory=dict, repr=False)     # model outputs with the effect
     raw: dict | None = field(default=None, repr=False)         # the same before sensor effects (model effects)
@@ -157,20 +155,38 @@ class Candidate:
     moved: float = 0.0                  # RMS normalised change on its signature channels
     joint: tuple | None = None          # (model effect, correlation) when judged jointly with a model effect
     confounded: str = ""                # why the data cannot tell it from the model's structure
+    cv: object = field(default=None, repr=False)       # crossval.CrossValidation against the model as it stands
+    detail: str = ""                    # how it was fitted and judged (technical, "; "-separated)
+    structure: float = 0.0              # RMS structural mismatch (noise removed) left on its signature channels
 
     @property
     def outweighs_structure(self) -> bool:
-        """A model effect changes its channels by more than the mismatch it leaves there; a sensor
-        effect (the last stage between the car and the reading) removes most of its own channel's
-        disagreement: what a sensor effect explains only in part is structural."""
-        if self.kind == "sensor":
-            return self.local_reduction >= SENSOR_EXPLAINS
+        """It changes its signature channels by more than the disagreement it leaves there (`left`: the
+        structural mismatch and the noise left in the data's mean, which hides any structure smaller than
+        itself): an effect smaller than what nothing in the catalogue explains on those channels cannot
+        be told apart from it, however consistently every run shows it."""
         return self.moved >= self.left
 
     @property
+    def predicts(self) -> bool:
+        """It predicts left-out runs better (crossval; with fewer than 3 runs: the information criterion
+        falls by MIN_DELTA_IC)."""
+        if self.cv is not None:
+            return self.cv.better
+        return self.delta_ic <= -MIN_DELTA_IC
+
+    @property
+    def score(self) -> float:
+        """What ranks the candidates: the strength of the evidence that it predicts left-out runs better
+        (the fold test's t statistic, negative: better), else its IC."""
+        if self.cv is not None:
+            return self.cv.t_better
+        return self.delta_ic
+
+    @property
     def eligible(self) -> bool:
-        return (self.plausible and self.delta_ic <= -MIN_DELTA_IC and self.local_reduction >= MIN_REDUCTION
-                and self.size >= MIN_SIZE and not self.worse and self.outweighs_structure and not self.confounded)
+        return (self.plausible and self.predicts and not self.worse and self.outweighs_structure
+                and not self.confounded)
 
     def summary(self) -> dict:
         return {"name": self.effect.name, "parameters": dict(self.effect.params),
@@ -179,9 +195,11 @@ class Candidate:
                 "significant": self.significant, "signature_match": self.match, "simulations": self.sims,
                 "signature_channels": self.signature, "local_reduction": self.local_reduction,
                 "worse_channels": self.worse, "moved": self.moved, "left": self.left,
+                "structure": self.structure, "eligible": self.eligible,
+                "cross_validation": self.cv.summary() if self.cv is not None else None,
                 "by_channel": {c: {"cost_before": v[0], "cost_with": v[1], "moved": v[2]}
                                for c, v in self.by_channel.items()},
-                "note": self.note, **({"requested": self.requested} if self.requested is not None else {})}
+                "note": self.note, "detail": self.detail, **({"requested": self.requested} if self.requested is not None else {})}
 
 
 @dataclass
@@ -196,6 +214,7 @@ class Context:
     raw: dict                           # its outputs before sensor effects
     cost: float
     n_runs: int
+    deviations: list | None = None      # per run: its replay's normalised outputs minus their mean (crossval)
 
 
 # ------------------------------------------------------------------------------ parameter mapping
@@ -272,21 +291,19 @@ def _finish(ctx: Context, effect: Effect, kind: str, k: int, out: dict, J: np.nd
     match, by = _match(ctx, J, 1.0 if th >= 0 else -1.0)
     plausible = requested is None
     notes = [note] if note else []
-    if not plausible:
-        notes.append(f"rejected: the data ask for {coord.name} = {requested:.4g}, outside the plausible range "
-                     f"{coord.lo:g} .. {coord.hi:g}")
-    elif not significant:
+    if plausible and not significant:
         notes.append(f"{coord.name} = {coord.value(th):.4g} +- {effect.uncertainty[coord.name]:.2g}: the interval "
                      f"includes the off value")
     ic = obj.ic(out, k)
     # how far it moves the outputs: a sensor effect on its own channel(s), where it is judged (a move
     # spread over every compared channel would shrink with their number)
     size = distance(obj, out, ctx.outputs, _own(obj, effect.channel) if kind == "sensor" else None)
-    if plausible and size < MIN_SIZE:
-        notes.append(f"too small to matter: it moves the outputs by {size:.2f} standard errors (RMS)")
     cand = Candidate(effect, kind, k, cost, ic, 1.0 - cost / ctx.cost, ic - obj.ic(ctx.outputs, 0), plausible,
-                     significant, match, by, sims, "; ".join(notes), requested, out, theta=th, u_theta=uth, J=J,
-                     coord=coord, size=size)
+                     significant, match, by, sims, "", requested, out, theta=th, u_theta=uth, J=J,
+                     coord=coord, size=size, detail="; ".join(notes))
+    if not plausible:
+        cand.note = (f"The data ask for {coord.name} = {requested:.4g}, outside its plausible range {coord.lo:g} to "
+                     f"{coord.hi:g}.")
     channel_evidence(ctx, cand)
     return cand
 
@@ -306,10 +323,13 @@ def _own(obj: Objective, sensor: str) -> list[str]:
 
 
 def channel_evidence(ctx: Context, cand: Candidate) -> None:
-    """Per channel: the cost before and with the candidate and how far it moves the channel; its
-    signature channels (a sensor effect: its own channel; a model effect: the channels it moves by at
-    least MIN_SIZE standard errors and SIGNATURE_SHARE of its largest move), the share of their cost it
-    removes, the channels it makes worse, and the residual left on its signature channels."""
+    """What decides a candidate (module docstring, "Selection"): its leave-one-run-out cross-validation
+    against the model as it stands (crossval), its signature channels (a sensor effect: its own channel;
+    a model effect: the channels whose left-out-run prediction it improves, else the one it moves most),
+    how far it moves them and the structural mismatch it leaves there, and whether the nuisance
+    adjustments could stand in for it. Per channel also the cost before and with it and how far it moves
+    it (`by_channel`), the share of the signature channels' cost it removes and their information
+    criterion, for the report."""
     obj = ctx.objective
     if not cand.outputs:
         return
@@ -319,60 +339,86 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         d = ra[c] - rb[c]
         by[c] = (float(np.mean(rb[c] ** 2)), float(np.mean(ra[c] ** 2)), float(np.sqrt(np.mean(d * d))))
     cand.by_channel = by
+    m0, m1 = normalised(obj, ctx.outputs), normalised(obj, cand.outputs)
+    J = cand.J if cand.J is not None and float(cand.J @ cand.J) > 0 else None
+    cand.cv = leave_one_run_out(obj, m0, m1, J, ctx.deviations)
     if cand.kind == "sensor":
         sig = _own(obj, cand.effect.channel)
+    elif cand.cv is not None:
+        sig = [c for c in obj.channels if cand.cv.improves(c)] or [max(by, key=lambda c: by[c][2])]
     else:
-        top = max(v[2] for v in by.values())
-        sig = [c for c, v in by.items() if v[2] >= max(MIN_SIZE, SIGNATURE_SHARE * top)]
+        sig = [max(by, key=lambda c: by[c][2])]
     cand.signature = sig
-    if sig:
-        before = sum(by[c][0] for c in sig)
-        after = sum(by[c][1] for c in sig)
-        cand.local_reduction = 1.0 - after / before if before > 0 else 0.0
-        cand.left = math.sqrt(after / len(sig))
-        cand.moved = math.sqrt(sum(by[c][2] ** 2 for c in sig) / len(sig))
-    cand.worse = [c for c, v in by.items() if v[1] > WORSE * v[0] and v[1] > WORSE_FLOOR]
-    if sig:
-        # the evidence is judged on the signature channels; another channel counts only where it gets
-        # better (a channel it barely moves, with its own structural misfit, does not veto it; one it
-        # makes clearly worse is caught above)
-        ntot = sum(obj.n_eff.values())
-        local = sum(obj.n_eff[c] * (lr if c in sig else min(lr, 0.0)) for c in obj.channels
-                    for lr in [math.log(max(by[c][1], 1e-300) / max(by[c][0], 1e-300))])
-        cand.delta_ic = local + cand.k * math.log(ntot)
-        cand.ic = obj.ic(ctx.outputs, 0) + cand.delta_ic
+    before = sum(by[c][0] for c in sig)
+    after = sum(by[c][1] for c in sig)
+    cand.local_reduction = 1.0 - after / before if before > 0 else 0.0
+    cand.left = math.sqrt(after / len(sig))
+    # the normalised residual of a model within the data's own uncertainty has a mean square of 1: what
+    # is left beyond it is structural
+    cand.structure = math.sqrt(max(after / len(sig) - 1.0, 0.0))
+    cand.moved = math.sqrt(sum(by[c][2] ** 2 for c in sig) / len(sig))
+    cand.worse = [c for c in obj.channels if cand.cv is not None and cand.cv.worsens(c)]
+    ntot = sum(obj.n_eff.values())
+    local = sum(obj.n_eff[c] * (lr if c in sig else min(lr, 0.0)) for c in obj.channels
+                for lr in [math.log(max(by[c][1], 1e-300) / max(by[c][0], 1e-300))])
+    cand.delta_ic = local + cand.k * math.log(ntot)
+    cand.ic = obj.ic(ctx.outputs, 0) + cand.delta_ic
     ch = cand.effect.channel
     if (cand.kind == "sensor" and cand.effect.name in TILT_CONFOUNDED and ch in TILT and TILT[ch] not in obj.channels
             and ctx.replayer.accel_frame == "body"):          # a level-frame accelerometer senses no tilt
         what = cand.effect.name.split("_")[1]
         cand.confounded = (f"a {what} of {ch} cannot be told from the model's body {TILT[ch]} (the accelerometer "
                            f"reads g sin({TILT[ch]})): record {TILT[ch]} to tell them apart")
+    if cand.kind == "sensor" and cand.effect.name in ROLL_CONFOUNDED.get(ch, ()):
+        what = cand.effect.name.split("_")[1]
+        cand.confounded = (f"a {what} of the {ch} angle cannot be told from the model's roll stiffness and damping, "
+                           "which the catalogue does not hold")
     if (cand.effect.name in LEVEL_CONFOUNDED and ctx.replayer.accel_frame == "level" and obj.nuisance is not None
             and _moves_throughout(ctx)):
         cand.confounded = ("in the level frame a grade reads as a constant resistance (the resistance-offset "
                            "adjustment) while the car moves, and it never stands still here: record the body "
                            "frame (its accel_x senses no grade) to tell them apart")
-    if cand.kind == "model" and obj.nuisance is not None and not cand.confounded:
-        share, by_what = obj.nuisance.mimic(obj.raw_residual(cand.outputs) - obj.raw_residual(ctx.outputs))
-        if share >= MIMIC:
-            cand.confounded = (f"the nuisance adjustments reproduce {100 * share:.0f} % of what it changes (mostly "
-                               f"the {by_what.split(' (')[0]}): it cannot be told from that structural mismatch")
+    if cand.kind == "model" and obj.nuisance is not None and not cand.confounded and cand.cv is not None \
+            and cand.cv.better:
+        # the part of its change the nuisance adjustments cannot reproduce (free of their prior, inside
+        # their ranges) must predict left-out runs better on its own: else the adjustments stand for it
+        nu = obj.nuisance
+        p = np.clip(np.linalg.lstsq(nu.D, m1 - m0, rcond=None)[0], nu.lo, nu.hi)
+        beyond = leave_one_run_out(obj, m0, m1 - nu.D @ p, None, ctx.deviations)
+        if beyond is not None and not beyond.better:
+            share, _ = nu.mimic(m1 - m0)
+            cand.confounded = (f"the nuisance adjustments (rolling radii, resistance offset) reproduce "
+                               f"{100 * share:.0f} % of what it changes, and the rest does not improve the "
+                               f"prediction of left-out runs")
+    explain_rejection(cand)
+
+
+def add_detail(cand: Candidate, text: str) -> None:
+    """Append to the candidate's technical detail."""
+    cand.detail = (cand.detail + "; " if cand.detail else "") + text
+
+
+def explain_rejection(cand: Candidate) -> None:
+    """The one sentence (Candidate.note) that says why a candidate is turned down, in the order the
+    rules apply; "" when it is eligible (the workflow may still turn it down: workflow._turned_down)."""
     if not cand.plausible:
-        return
-    notes = [cand.note] if cand.note else []
+        return                               # _finish said what value the data ask for
+    sig = ", ".join(cand.signature)
     if cand.confounded:
-        notes.append(cand.confounded)
-    if cand.worse:
-        notes.append("makes " + ", ".join(cand.worse) + " worse")
-    if sig and not cand.outweighs_structure:
-        if cand.kind == "sensor":
-            notes.append(f"explains only {100 * cand.local_reduction:.0f} % of its channel (a sensor effect explains "
-                         f"at least {100 * SENSOR_EXPLAINS:.0f} %): the rest is structural")
-        else:
-            notes.append(f"changes its channels ({', '.join(sig)}) by {cand.moved:.2g} standard errors, less than "
-                         f"the mismatch it leaves there ({cand.left:.2g}): cannot be told apart from the model's "
-                         f"structural mismatch")
-    cand.note = "; ".join(notes)
+        cand.note = cand.confounded[0].upper() + cand.confounded[1:] + "."
+    elif not cand.predicts:
+        cand.note = ("It did not improve the prediction of left-out runs" + (
+            f" (held-out error {100 * -cand.cv.gain:+.0f} %, p = {cand.cv.p_better:.2g})." if cand.cv is not None
+            else " (fewer than 3 runs: the information criterion did not fall enough)."))
+    elif cand.worse:
+        cand.note = (f"It predicts {', '.join(cand.worse)} worse in left-out runs while it improves "
+                     f"{sig}: it trades one mismatch for another.")
+    elif not cand.outweighs_structure:
+        cand.note = (f"It changes {sig} by less than the mismatch it leaves there ({cand.moved:.2g} against "
+                     f"{cand.left:.2g} standard errors), so it cannot be told apart from the model's structural "
+                     f"mismatch.")
+    else:
+        cand.note = ""
 
 
 # --------------------------------------------------------------------------------- model effects
@@ -621,8 +667,8 @@ def combine_runs(cand: Candidate, thetas: list[float]) -> None:
     half = t_critical(n) * float(th.std(ddof=1)) / math.sqrt(n)
     cand.per_run = [c.value(x) for x in th]
     if not c.tlo <= mean <= c.thi:
-        cand.note = (cand.note + "; " if cand.note else "") + \
-            f"per-run estimates average {c.value(mean):.4g}, outside the plausible range: mean-input fit kept"
+        add_detail(cand, f"per-run estimates average {c.value(mean):.4g}, outside the plausible range: mean-input "
+                         "fit kept")
         return
     first = c.value(cand.theta)
     cand.theta = mean
@@ -634,8 +680,7 @@ def combine_runs(cand: Candidate, thetas: list[float]) -> None:
     cand.effect.params[c.name] = c.value(mean)
     cand.effect.set_interval(c.name, c.value_uncertainty(mean, half), c.value_uncertainty(mean, model_error))
     cand.significant = bool(abs(mean) > half)
-    cand.note = (cand.note + "; " if cand.note else "") + \
-        f"value and 95 % interval from {n} per-run replays (the mean-input fit gave {first:.4g})"
+    add_detail(cand, f"value and 95 % interval from {n} per-run replays (the mean-input fit gave {first:.4g})")
 
 
 TIE_DISTANCE = 0.5
@@ -656,7 +701,7 @@ def equivalents(obj: Objective, winner: Candidate, cands: list[Candidate]) -> li
     """Other plausible candidates whose fitted response is indistinguishable from the winner's."""
     out = []
     for c in cands:
-        if c is winner or not c.plausible or c.reduction < MIN_REDUCTION:
+        if c is winner or not c.plausible or not c.predicts:
             continue
         dist = distance(obj, winner.outputs, c.outputs)
         if dist < TIE_DISTANCE:
@@ -665,8 +710,8 @@ def equivalents(obj: Objective, winner: Candidate, cands: list[Candidate]) -> li
 
 
 def rank(cands: list[Candidate]) -> list[Candidate]:
-    """Eligible candidates first (by IC), then the others by IC."""
-    return sorted(cands, key=lambda c: (not c.eligible, c.ic))
+    """Eligible candidates first, then the others; each by the held-out loss it removes (Candidate.score)."""
+    return sorted(cands, key=lambda c: (not c.eligible, not c.plausible, c.score))
 
 
 def evidence_strength(delta: float) -> str:
@@ -913,7 +958,7 @@ def joint_member(ctx: Context, fit: JointFit, k: int, base_outputs: dict) -> Can
     interval is the joint one (the others' uncertainty included)."""
     m = fit.members[k]
     base = Context(ctx.bench, ctx.objective, ctx.replayer, ctx.inputs, ctx.effects, base_outputs, {},
-                   ctx.objective.cost(base_outputs), ctx.n_runs)
+                   ctx.objective.cost(base_outputs), ctx.n_runs, ctx.deviations)
     th = float(fit.theta[k])
     cand = _finish(base, m.effect(th), "model", 1, fit.outputs, fit.J[:, k].copy(), th, m.coord, fit.sims,
                    fit.requested[k], "")

@@ -26,7 +26,6 @@ RADIUS_RANGE = 0.015          # relative change of an axle's effective rolling r
 RESISTANCE_RANGE = 0.03       # m/s^2 of constant deceleration (about 0.003 g)
 MOVING = 0.5                  # m/s: the resistance offset acts above this speed
 PRIOR = 10.0                  # standard errors (see Nuisance.build)
-MIMIC = 0.8                   # share of an effect's change the nuisance adjustments reproduce (Nuisance.mimic)
 
 
 @dataclass
@@ -56,8 +55,8 @@ class Nuisance:
     def mimic(self, d: np.ndarray) -> tuple[float, str]:
         """How much of the change `d` (normalised, concatenated) an effect makes the adjustments reproduce,
         within their ranges and free of their prior: the share of |d|^2 they explain and the adjustment that
-        carries most of it. An effect they reproduce (share >= MIMIC) cannot be told from the structural
-        mismatch they stand for; one that goes beyond their ranges can."""
+        carries most of it (identify.channel_evidence: what they do not reproduce must still predict
+        left-out runs better, else the effect cannot be told from the mismatch they stand for)."""
         dd = float(d @ d)
         if dd <= 0.0:
             return 0.0, ""

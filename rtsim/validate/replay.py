@@ -15,9 +15,9 @@ learning control on the model itself, u(t) <- u(t) + e(t + d) with e = measured 
 phase lead d the loop's delay (the shift that best aligns the first pass's angle with the measured one;
 20 ms here), each pass one simulation with the config's effects, until the RMS error falls below
 `STEER_TOL` standard errors of the measured angle's mean or stops falling (at most `STEER_PASSES`
-simulations; 3 in practice: 0.017 -> 0.001 -> 0.0002 rad on that lane change). A single run's matching
-starts from the mean's correction (command minus angle) and uses the mean's delay, which leaves only the
-loop's response to the run's small deviation from the mean. The matched command is computed once per
+simulations; 3 in practice: 0.017 -> 0.001 -> 0.0002 rad on that lane change). A single run takes
+the mean's correction (command minus angle) added to its own measured angle, without a simulation of its
+own: that leaves only the loop's response to the run's small deviation from the mean. The matched command is computed once per
 replay input and model step and reused by every simulation with it (the effects under test change the
 rack load, which the loop's integral absorbs). A steering wheel that moves less than `STEER_ACTIVE` is
 replayed as the command unchanged.
@@ -241,8 +241,11 @@ class Replayer(InputCache):
         ref = inp.reference
         lead = None
         if ref is not None and ref.steer is not None and ref.steer.shape == target.shape:
-            u = target + (self.steering_command(ref, dt) - ref.steer)   # the mean's correction: a close guess
-            lead = ref.steer_lead.get(dt)
+            # a run: the mean's correction carried over unchecked (no simulation); what it leaves is the
+            # loop's response to the run's small deviation from the mean (well under a milliradian here)
+            u = target + (self.steering_command(ref, dt) - ref.steer)
+            inp.steer_cmd[dt], inp.steer_error[dt] = u, ref.steer_error.get(dt, float("nan"))
+            return u
         best, best_err = u, math.inf
         for _ in range(STEER_PASSES):
             raw = self._run(inp, inp.steer_effects, dt, u)

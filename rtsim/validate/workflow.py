@@ -59,8 +59,9 @@ import numpy as np
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import MIN_RUNS, accel_frame, announce, load_runs, require_runs
 from .effectset import Effect, catalogue, from_mapping
-from .identify import (CLEAR, MAX_SIMS, MIN_DELTA_IC, MIN_REDUCTION, MIN_SIZE, Candidate, Context, combine_runs,
-                       equivalents, evidence_strength, fit_sensor_effects, rank, rebase, run_estimate)
+from .identify import (CLEAR, LITTLE, MAX_SIMS, Candidate, Context, add_detail, combine_runs, equivalents,
+                       fit_sensor_effects, rank, rebase, run_estimate)
+from .crossval import normalised
 from .joint import joint_model
 from .objective import Objective
 from .profile import activate, active, vehicle_kind
@@ -76,7 +77,7 @@ INSIDE_MOSTLY = 0.90
 TRY_WINNERS = 2              # eligible candidates checked run by run before giving up
 CONFOUNDED = 0.9             # |correlation| of two identified effects' sensitivities above which they are confounded
 SCREEN_SIMS = 3              # trial, one Gauss-Newton step (and that step halved if it overshoots)
-REFINE_TOP = 3               # model effects refined to convergence per iteration
+REFINE_TOP = 2               # model effects refined to convergence per iteration
 
 
 @dataclass
@@ -165,7 +166,7 @@ def _fit_model_candidates(ctx: Context, names: list[str], workers: int, progress
     convergence, continuing from their screening simulations; candidates run in parallel."""
     screened = raise_failed(map_tasks(ctx, [("fit", n, SCREEN_SIMS, None) for n in names], workers, progress))
     screened.sort(key=lambda c: c.cost)
-    top = [c for c in screened[:REFINE_TOP] if c.reduction > 0.0]
+    top = [c for c in screened if c.reduction > LITTLE][:REFINE_TOP]
     refined = raise_failed(map_tasks(ctx, [("fit", c.effect.name, MAX_SIMS, c.points) for c in top], workers,
                                  progress))
     byname = {c.effect.name: c for c in refined}
@@ -174,7 +175,7 @@ def _fit_model_candidates(ctx: Context, names: list[str], workers: int, progress
         if c.effect.name in byname:
             out.append(byname[c.effect.name])
         else:
-            c.note = (c.note + "; " if c.note else "") + "screened (trial and one damped step), not refined"
+            add_detail(c, "screened (trial and one damped Gauss-Newton step), not refined")
             out.append(c)
     ctx.replayer.simulations += sum(c.sims for c in out)
     return out
@@ -187,15 +188,14 @@ def _joint_sensor(ctx: Context, ranked: list[Candidate]) -> list[Candidate]:
     is returned as this iteration's winner, at its jointly fitted value and judged on the current model
     (the model effect is refitted in the next iteration with it in place); the correlation of the two
     sensitivities is in its note."""
-    models = [c for c in ranked if c.kind == "model" and c.plausible and c.raw is not None and not c.worse
-              and c.local_reduction >= MIN_REDUCTION and c.delta_ic <= -MIN_DELTA_IC]
+    models = [c for c in ranked if c.kind == "model" and c.plausible and c.raw is not None and c.predicts]
     if not models:
         return []
     m = models[0]
     rp = ctx.replayer
     both = Context(ctx.bench, ctx.objective, rp, ctx.inputs, [*ctx.effects, m.effect], m.outputs, m.raw, m.cost,
-                   ctx.n_runs)
-    joint = sorted((c for c in fit_sensor_effects(both) if c.eligible), key=lambda c: c.ic)
+                   ctx.n_runs, ctx.deviations)
+    joint = sorted((c for c in fit_sensor_effects(both) if c.eligible), key=lambda c: c.score)
     out = []
     for j in joint[:TRY_WINNERS]:
         same = next((c for c in ranked if c.kind == "sensor" and c.effect.key == j.effect.key), None)
@@ -207,9 +207,9 @@ def _joint_sensor(ctx: Context, ranked: list[Candidate]) -> list[Candidate]:
         same.outputs = rp.reported(ctx.raw, ctx.inputs.t, [*ctx.effects, same.effect])
         corr = float(m.J @ j.J) / (float(np.linalg.norm(m.J) * np.linalg.norm(j.J)) or 1.0) if m.J is not None \
             else float("nan")
-        same.note = (same.note + "; " if same.note else "") + (
+        add_detail(same, (
             f"judged jointly with {m.effect.label()}: with it in place it explains "
-            f"{100 * j.local_reduction:.0f} % of its channel (correlation of the two sensitivities {corr:+.2f})")
+            f"{100 * j.local_reduction:.0f} % of its channel (correlation of the two sensitivities {corr:+.2f})"))
         same.joint = (m.effect.label(), corr)
         out.append(same)
     return out
@@ -235,23 +235,46 @@ def _prepare_runs(ctx: Context, workers: int) -> None:
             rp.remember(bench, i, ri)
 
 
-def _replay_runs(ctx: Context, effects: list[Effect], workers: int) -> tuple[dict | None, str]:
+def _model_key(effects: list[Effect]) -> tuple:
+    """What the car's motion depends on: the model effects and their values (sensor effects act on the
+    readings only)."""
+    return tuple(sorted(e.label() for e in effects if e.kind == "model"))
+
+
+def _run_raws(ctx: Context, effects: list[Effect], workers: int, cache: dict) -> list | None:
+    """Every run's own inputs replayed (at the model's step) with the model effects of `effects`, before
+    the sensor model: one simulation per run, made once per set of model effects (`cache`) and reused by
+    every later use with the same motion (the sensor effects' fits, the before/after comparison). None
+    with one run or when a replay fails (`cache` then holds the reason under "failed")."""
+    bench = ctx.bench
+    if bench.n < 2:
+        cache["failed"] = "one run"
+        return None
+    key = _model_key(effects)
+    if key not in cache:
+        _prepare_runs(ctx, workers)
+        raws = map_tasks(ctx, [("raw", effects, i) for i in range(bench.n)], workers, Quiet())
+        ctx.replayer.simulations += bench.n
+        failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(raws) if isinstance(r, Failed)]
+        if failed:
+            cache["failed"] = "a per-run replay failed (" + "; ".join(failed) + ")"
+        cache[key] = None if failed else raws
+    return cache[key]
+
+
+def _replay_runs(ctx: Context, effects: list[Effect], workers: int, cache: dict) -> tuple[dict | None, str]:
     """The model's counterpart of the benchmark mean: every run's own inputs replayed (at the model's
     step) with `effects`, the outputs averaged over the runs exactly as the data are. (None, why) with
     one run or when a replay fails."""
-    bench = ctx.bench
-    if bench.n < 2:
-        return None, "one run"
-    _prepare_runs(ctx, workers)
-    outs = map_tasks(ctx, [("replay", effects, i) for i in range(bench.n)], workers, Quiet())
-    ctx.replayer.simulations += bench.n
-    failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(outs) if isinstance(r, Failed)]
-    if failed:
-        return None, "a per-run replay failed (" + "; ".join(failed) + ")"
+    raws = _run_raws(ctx, effects, workers, cache)
+    if raws is None:
+        return None, cache.get("failed", "")
+    rp, bench = ctx.replayer, ctx.bench
+    outs = [rp.reported(r, bench.t, effects) for r in raws]
     return {c: np.mean([o[c] for o in outs], axis=0) for c in outs[0]}, ""
 
 
-def _ensemble(ctx: Context, workers: int) -> tuple[Context | None, list | None]:
+def _ensemble(ctx: Context, workers: int, cache: dict) -> tuple[Context | None, list | None]:
     """The iteration's model (its physical outputs) replayed with every run's own inputs and averaged over
     the runs like the data, as a context to fit the sensor effects in, and the per-run replays. A sensor
     effect is linear in the reading (a bias, a scale, a delay), so on the average of the replays it is
@@ -259,17 +282,18 @@ def _ensemble(ctx: Context, workers: int) -> tuple[Context | None, list | None]:
     artefact the mean-input replay leaves (a stop smeared in the data's mean, crisp in the replay, that a
     scale of accel_x cannot explain). (None, None) with one run or when a replay fails."""
     bench, rp = ctx.bench, ctx.replayer
-    if bench.n < 2:
-        return None, None
-    _prepare_runs(ctx, workers)
-    raws = map_tasks(ctx, [("raw", ctx.effects, i) for i in range(bench.n)], workers, Quiet())
-    rp.simulations += bench.n
-    if any(isinstance(r, Failed) for r in raws):
+    raws = _run_raws(ctx, ctx.effects, workers, cache)
+    if raws is None:
         return None, None
     raw = {c: np.mean([r[c] for r in raws], axis=0) for c in raws[0]}
     out = rp.reported(raw, bench.t, ctx.effects)
-    return Context(bench, ctx.objective, rp, ctx.inputs, ctx.effects, out, raw, ctx.objective.cost(out),
-                   ctx.n_runs), raws
+    # each run's replay minus their mean, normalised: the cross-validation predicts a run from its inputs
+    obj = ctx.objective
+    per_run = [normalised(obj, rp.reported(r, bench.t, ctx.effects)) for r in raws]
+    mean = np.mean(per_run, axis=0)
+    ctx.deviations = [x - mean for x in per_run]
+    return Context(bench, obj, rp, ctx.inputs, ctx.effects, out, raw, obj.cost(out), ctx.n_runs,
+                   ctx.deviations), raws
 
 
 def _sensor_names(opts: Options, replayer: Replayer | None) -> tuple[str, ...]:
@@ -340,6 +364,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     latest: dict = {}                   # effect key -> the candidate that fitted its current value
     iterations: list[Iteration] = []
     verdict = ""
+    replays: dict = {}                  # model effects -> every run's replay (_run_raws)
     workers = RayWorkers(opts.ray) if opts.ray else max(1, min(opts.workers, os.cpu_count() or 1))
     for k in range(1, opts.max_iterations + 1):
         ti = time.perf_counter()
@@ -362,13 +387,13 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
         taken = {e.name for e in current}
         names = [n for n, s in cat.items() if s.kind == "model" and n not in taken]
         prog.stage(f"iteration {k}: fitting effects", len(names) + REFINE_TOP + 1 + bench.n)
+        ens, raws = _ensemble(ctx, workers, replays)      # first: it gives ctx the runs' deviations
         cands = _fit_model_candidates(ctx, names, workers, prog)
-        ens, raws = _ensemble(ctx, workers)
         sensors = fit_sensor_effects(ens or ctx)
         if ens is not None:
             rebase(sensors, ctx)
             for c in sensors:
-                c.note = (c.note + "; " if c.note else "") + "judged on the per-run replays averaged"
+                add_detail(c, "judged on the per-run replays averaged")
         cands += sensors
         prog.advance()
         ranked = rank(cands)
@@ -386,28 +411,26 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
                     rp.simulations += bench.n
                 failed = [f"{bench.runs[i].name}: {r.message}" for i, r in enumerate(ests) if isinstance(r, Failed)]
                 if failed:
-                    cand.note = (cand.note + "; " if cand.note else "") + (
+                    add_detail(cand, (
                         "per-run replay failed (" + "; ".join(failed) + "): the mean-input fit and its "
-                        "linearised interval kept")
+                        "linearised interval kept"))
                 combine_runs(cand, [math.nan if isinstance(r, Failed) else r for r in ests])
             if abs(cand.theta) >= CLEAR * cand.u_theta:
                 win = cand
                 break
-            cand.note = (cand.note + "; " if cand.note else "") + (
-                f"not added: its 95 % interval (+- {cand.u_theta:.2g} in the fitted coordinate) does not clear the "
-                f"off value by a factor {CLEAR:g}")
+            cand.note = ("Its 95 % interval from the runs one by one includes the off value: the runs do not "
+                         "agree that it is there.")
         if win is None:
             best = ranked[0] if ranked else None
-            why = (f"; the best candidate, {best.effect.label()}, removes {100 * best.reduction:.0f} % "
-                   f"({best.note or 'evidence too weak'})") if best else ""
+            why = (f"; the best candidate, {best.effect.label()}, was turned down: "
+                   f"{best.note or 'it did not improve the prediction of left-out runs.'}") if best else ""
             close = [c for c in ranked if c.plausible and c.kind == "model" and not c.outweighs_structure
-                     and c.local_reduction >= MIN_REDUCTION and c.delta_ic <= -MIN_DELTA_IC and c.size >= MIN_SIZE
-                     and not c.worse]
+                     and c.predicts and not c.confounded]
             if close:
                 c = close[0]
                 why = (f"; {c.effect.label()} would change {', '.join(c.signature)} by {c.moved:.2g} standard "
-                       f"errors, less than the structural mismatch left there ({c.left:.2g}): the data cannot tell "
-                       f"it apart from the structural mismatch")
+                       f"errors, less than the mismatch left there ({c.left:.2g}): the data cannot "
+                       f"tell it apart from the structural mismatch")
             if not effects and _inside(metrics, INSIDE_MOSTLY):
                 verdict = ("no missing effect found: the model agrees with the benchmark (at least "
                            f"{100 * INSIDE_MOSTLY:.0f} % of every channel inside the band) and no candidate removes a "
@@ -416,8 +439,8 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
                 verdict = ("cannot be told apart: no catalogue effect stands out from the structural mismatch"
                            f"{why}")
             elif not effects:
-                verdict = ("no catalogue effect explains this: no candidate removes a significant, plausible "
-                           f"share of the disagreement on its own channels{why}")
+                verdict = ("no catalogue effect explains this: no candidate improves the prediction of left-out "
+                           f"runs and stands out from the structural mismatch{why}")
             else:
                 verdict = (f"after adding {' and '.join(label)}, no further candidate helps{why}")
             runner = next((c for c in ranked if c.plausible), None)
@@ -448,15 +471,18 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
             win.raw, win.outputs = joint.raw, joint.outputs
         ties = equivalents(obj, win, ranked)
         runner = next((c for c in ranked if c is not win and c.plausible), None)
-        gap = (runner.ic - win.ic) if runner else float("inf")
-        v = f"{win.effect.label()} removes {100 * win.reduction:.0f} % of the disagreement (IC {win.delta_ic:+.0f})"
+        for c in ranked:
+            if c is not win and not c.note:
+                c.note = f"{win.effect.label()} predicted the left-out runs better."
+        v = f"{win.effect.label()} removes {100 * win.reduction:.0f} % of the disagreement" + (
+            f" and {100 * win.cv.gain:.0f} % of the error in predicting a left-out run" if win.cv is not None else "")
         if ties:
             v += ("; indistinguishable on this manoeuvre from " + ", ".join(
                 f"{c.effect.label()} (responses {d:.2f} standard errors apart)" for c, d in ties) +
                   ": the data cannot tell these apart, the best-scoring one is added")
         if runner:
-            v += (f"; runner-up {runner.effect.label()} ({100 * runner.reduction:.0f} %, "
-                  f"{evidence_strength(gap)} for the winner, IC gap {gap:.1f})")
+            v += (f"; runner-up {runner.effect.label()} ({100 * runner.reduction:.0f} %" + (
+                f", {100 * runner.cv.gain:.0f} % of the left-out runs' error" if runner.cv is not None else "") + ")")
         effects.append(win.effect)
         latest[win.effect.key] = win
         partners = []
@@ -486,8 +512,8 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     if bench.n >= 2:
         prog.stage("replaying every run before and after", None)
     ctx = Context(bench, obj, rp, inp, [*base, *effects], after, {}, 0.0, bench.n)
-    ens_before, why = _replay_runs(ctx, base, workers)
-    ens_after = (_replay_runs(ctx, [*base, *effects], workers)[0] if effects else ens_before) if ens_before else None
+    ens_before, why = _replay_runs(ctx, base, workers, replays)
+    ens_after = _replay_runs(ctx, [*base, *effects], workers, replays)[0] if ens_before else None
     if ens_before is not None and ens_after is not None:
         before, after = ens_before, ens_after
         comparison = ("per-run replays averaged: each run's own inputs replayed and the model outputs averaged "
