@@ -417,8 +417,8 @@ def test_lateral_peer(replayer, car, tyre_params, folder, case):
         assert res.nuisance and all(abs(v) > 0 for v, _ in res.nuisance.values())
         report.write(res, folder / "html")
         html = (folder / "html" / "report.html").read_text()
-        assert "Per channel: explained, structural or inside the band" in html
-        assert "structural, not in the catalogue; lag: the model lags" in html and "Nuisance adjustments" in html
+        assert "Per channel, after the named effects and the nuisance adjustments" in html
+        assert "structural, not a catalogue effect; shape lag: the model lags" in html and "Nuisance adjustments" in html
         assert "Accelerations compared in the level frame" in html
         assert json.loads((folder / "html" / "summary.json").read_text())["accel_frame"] == "level"
     if case == "two_at_once":
