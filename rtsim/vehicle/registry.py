@@ -43,6 +43,8 @@ def resolve_config(name: str | Path, what: str, folder: Path) -> Path:
     p = Path(name)
     if p.exists():
         return p
+    if p.suffix or len(p.parts) > 1:           # a path, not a bare name: no shipped config to look up
+        raise ConfigError(f"{what} {str(name)!r}: no such file")
     cand = folder / f"{name}.toml"
     if cand.exists():
         return cand
