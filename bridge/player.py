@@ -258,18 +258,20 @@ def parse_ids(text: str | None) -> set[int] | None:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The arguments of ``rtsim play``."""
     parser.add_argument("file", metavar="FILE", help="recording (.mcap) or CAN log (.asc, .blf, .log, .csv)")
-    parser.add_argument("--rate", type=float, default=1.0, help="playback speed factor (2 = twice as fast)")
+    parser.add_argument("--rate", type=float, default=1.0, metavar="FACTOR",
+                        help="playback speed factor (2 = twice as fast)")
     parser.add_argument("--loop", action="store_true",
                         help="repeat the frames (period: their span plus one median frame interval)")
-    parser.add_argument("--duration", type=float, help="stop after this many seconds")
+    parser.add_argument("--duration", type=float, metavar="S", help="stop after this many seconds")
     parser.add_argument("--direction", choices=["rx", "tx", "all"],
                         help="which frames to send: tx = sent by the simulator (sensor and status frames, "
                              "the default for .mcap), rx = received by it (ECU commands), all (default for logs)")
-    parser.add_argument("--ids", help="only these arbitration ids, e.g. 0x100,0x101")
-    parser.add_argument("--vehicle", help="vehicle id in a recording with several")
-    parser.add_argument("--can-interface", help="python-can interface (default: socketcan vcan0 if present, "
+    parser.add_argument("--ids", metavar="ID,...", help="only these arbitration ids, e.g. 0x100,0x101")
+    parser.add_argument("--vehicle", metavar="ID", help="vehicle id in a recording with several")
+    parser.add_argument("--can-interface", metavar="INTERFACE",
+                        help="python-can interface (default: socketcan vcan0 if present, "
                                                 "else the embedded hub on 127.0.0.1)")
-    parser.add_argument("--can-channel", help="python-can channel (e.g. vcan0, 127.0.0.1:54701)")
+    parser.add_argument("--can-channel", metavar="CHANNEL", help="python-can channel (e.g. vcan0, 127.0.0.1:54701)")
     parser.add_argument("--json", action="store_true",
                         help="print one JSON report at the end (the recording's damage report, the statistics) "
                              "instead of the text lines")

@@ -261,9 +261,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"rtsim {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bench", help="run the multibody benchmark problems (IFToMM A01-A05) and time them")
-    b.add_argument("--problem", help="run one problem: pendulum, fourbar, fourbar2, fourbar40, andrews, bricard, flyball")
-    b.add_argument("--dt", type=float, help="time step, s (default: the problem's real-time step)")
-    b.add_argument("--t-end", type=float, help="end time, s (default: the problem's)")
+    b.add_argument("--problem", metavar="NAME",
+                   help="run one problem: pendulum, fourbar, fourbar2, fourbar40, andrews, bricard, flyball")
+    b.add_argument("--dt", type=float, metavar="S", help="time step, s (default: the problem's real-time step)")
+    b.add_argument("--t-end", type=float, metavar="S", help="end time, s (default: the problem's)")
     b.add_argument("--json", action="store_true", help="print a JSON list, one object per problem")
     b.add_argument("--scaling", action="store_true", help="also time the N-four-bar for N = 1, 2, 10, 40, 100")
     b.add_argument("--suite", choices=["mbs", "vehicle", "service", "dispatch", "fuzz"], default="mbs",
@@ -271,19 +272,19 @@ def build_parser() -> argparse.ArgumentParser:
                         "step; service: the HIL service's real-time budget under load (CAN, Zenoh, MCAP, ECU); "
                         "dispatch: the cost of a call into a kernel, direct and bound (rtsim.boundcall); "
                         "fuzz: command sequences drawn in each vehicle's DBC ranges (rtsim.robustness)")
-    b.add_argument("--count", type=int, default=2000,
+    b.add_argument("--count", type=int, default=2000, metavar="N",
                    help="fuzz suite: rides drawn per vehicle (2000)")
     b.add_argument("--vehicle", action="append", metavar="FILE",
                    help="fuzz suite: a vehicle TOML to fuzz (repeatable; default: every shipped vehicle)")
-    b.add_argument("--seed", type=int, default=0, help="fuzz suite: the draw's seed (0)")
+    b.add_argument("--seed", type=int, default=0, metavar="N", help="fuzz suite: the draw's seed (0)")
     b.add_argument("--failures", metavar="FILE",
                    help="fuzz suite: append each failing ride, as drawn, as a JSON line to FILE")
-    b.add_argument("--duration", type=float, default=60.0, help="service suite: wall seconds to run (60)")
+    b.add_argument("--duration", type=float, default=60.0, metavar="S", help="service suite: wall seconds to run (60)")
     b.add_argument("--no-record", action="store_true", help="service suite: without the MCAP recording")
     b.add_argument("--no-zenoh", action="store_true", help="service suite: without Zenoh")
     b.add_argument("--foxglove", action="store_true",
                    help="service suite: with the Foxglove server and a client subscribed to every topic")
-    b.add_argument("--spin", type=float, default=0.0002,
+    b.add_argument("--spin", type=float, default=0.0002, metavar="S",
                    help="service suite: busy-wait before each step, s (>= 0.001: never sleep)")
     b.add_argument("--pages", type=int, default=0, metavar="N",
                    help="service suite: also N pages of `rtsim view` in headless Chromium, drawing the live car")
@@ -306,9 +307,10 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="run a scenario offline as fast as possible and write CSV (a motorcycle's "
                        "scenario: also its summary); exit status 3 if the model failed (the rows up to the failure written, "
                        "the failure beside them in <out>.model_fault.json) or the motorcycle fell")
-    r.add_argument("--vehicle", help="vehicle TOML or name in configs/vehicles (default: the scenario's, else xbw)")
-    r.add_argument("--scenario", required=True, help="scenario TOML or name in configs/scenarios")
-    r.add_argument("--out", required=True, help="output file: .csv or .mcap")
+    r.add_argument("--vehicle", metavar="FILE|NAME",
+                   help="vehicle TOML or name in configs/vehicles (default: the scenario's, else xbw)")
+    r.add_argument("--scenario", required=True, metavar="FILE|NAME", help="scenario TOML or name in configs/scenarios")
+    r.add_argument("--out", required=True, metavar="FILE", help="output file: .csv or .mcap")
     r.add_argument("--summary", metavar="JSON", help="two-wheeler scenarios: also write the summary (measured "
                    "against the manoeuvre's analytic references) to this JSON file")
     r.add_argument("--plot", nargs="?", const="", metavar="DIR",
@@ -316,11 +318,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: <output stem>_plots/ beside the output)")
     r.set_defaults(func=_run)
     en = sub.add_parser("energy", help="the power audit of a recorded run: every port's energy and the balance")
-    en.add_argument("run", help="a run's MCAP or CSV (rtsim run --out)")
+    en.add_argument("run", metavar="RUN.mcap|.csv", help="a run's MCAP or CSV (rtsim run --out)")
     en.set_defaults(func=_energy)
     fe = sub.add_parser("feel", help="steering feel of a recorded run: torque against lateral acceleration "
                         "(gradients, hysteresis), angle gradient, the EPS motor's current, voltage and power")
-    fe.add_argument("run", help="a run's MCAP or CSV (rtsim run --out) of a car with electric power steering")
+    fe.add_argument("run", metavar="RUN.mcap|.csv",
+                    help="a run's MCAP or CSV (rtsim run --out) of a car with electric power steering")
     fe.add_argument("--from", dest="start", type=float, metavar="S",
                     help="start of the analysed window, s (default: the steady cycles of the steering input)")
     fe.add_argument("--to", dest="end", type=float, metavar="S", help="end of the analysed window, s")
@@ -334,11 +337,11 @@ def build_parser() -> argparse.ArgumentParser:
                          "and power) into DIR (default: <run stem>_plots/ beside the run)")
     fe.set_defaults(func=_feel)
     pl = sub.add_parser("plot", help="write PNG figures of a recorded run (CSV or MCAP)")
-    pl.add_argument("run", help="the run: .csv (header row) or .mcap recording")
+    pl.add_argument("run", metavar="RUN.mcap|.csv", help="the run: .csv (header row) or .mcap recording")
     pl.add_argument("--out", metavar="DIR", help="folder for the figures (default: <run stem>_plots/ beside it)")
     pl.set_defaults(func=_plot)
     d = sub.add_parser("describe", help="print the vehicle model's size and key parameters")
-    d.add_argument("--vehicle", help="vehicle TOML or name in configs/vehicles (default xbw)")
+    d.add_argument("--vehicle", metavar="FILE|NAME", help="vehicle TOML or name in configs/vehicles (default xbw)")
     d.add_argument("--json", action="store_true")
     d.set_defaults(func=_describe)
     for name, module, text in _DELEGATED:

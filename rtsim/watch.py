@@ -191,7 +191,7 @@ def render(snap: dict, vehicle_id: str, endpoint: str):
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--connect", metavar="ENDPOINT", action="append",
                    help=f"Zenoh endpoint of the service (repeatable; default {DEFAULT_ENDPOINT})")
-    p.add_argument("--vehicle-id", default="xbw", help="vehicle id of the service (default xbw)")
+    p.add_argument("--vehicle-id", default="xbw", metavar="ID", help="vehicle id of the service (default xbw)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (live view)")
     p.add_argument("--once", action="store_true",
                    help="print one snapshot once every topic has been heard (or --timeout "

@@ -165,7 +165,7 @@ def test_version_and_help_name_their_values(capsys):
     with pytest.raises(SystemExit):
         main(["serve", "--help"])
     text = capsys.readouterr().out
-    assert "--scenario SCENARIO" in text and "OPT_" not in text
+    assert "--scenario FILE|NAME" in text and "OPT_" not in text
 
 
 def test_run_takes_a_scenario_name(tmp_path, capsys, monkeypatch):

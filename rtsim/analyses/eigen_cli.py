@@ -20,8 +20,10 @@ def _two_wheeler(path, command: str):
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--vehicle", required=True, help="two-wheeler vehicle TOML (e.g. configs/vehicles/motorcycle.toml)")
-    p.add_argument("--speeds", default="1:60:0.5", help="start:stop:step or a comma list, m/s (1:60:0.5)")
+    p.add_argument("--vehicle", required=True, metavar="FILE|NAME",
+                   help="two-wheeler vehicle TOML (e.g. configs/vehicles/motorcycle.toml)")
+    p.add_argument("--speeds", default="1:60:0.5", metavar="START:STOP:STEP",
+                   help="start:stop:step or a comma list, m/s (1:60:0.5)")
     p.add_argument("--out", metavar="JSON", help="write the modes and stability changes here (default: stdout)")
     p.add_argument("--plot", metavar="PNG", help="also write the root locus here")
 
@@ -52,7 +54,7 @@ def main(args) -> int:
 
 
 def add_statics_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--vehicle", required=True, help="two-wheeler vehicle TOML")
+    p.add_argument("--vehicle", required=True, metavar="FILE|NAME", help="two-wheeler vehicle TOML")
     p.add_argument("--out", metavar="JSON", help="write the result here (default: stdout)")
 
 

@@ -15,15 +15,18 @@ from .results import Journal, sorted_rows, write_tables
 
 
 def add_arguments(p) -> None:
-    p.add_argument("plan", help="the plan TOML (configs/batch/)")
-    p.add_argument("--out", help="output folder (default: batch_<plan name>/ in the current folder); a journal "
+    p.add_argument("plan", metavar="PLAN.toml", help="the plan TOML (configs/batch/)")
+    p.add_argument("--out", metavar="DIR",
+                   help="output folder (default: batch_<plan name>/ in the current folder); a journal "
                    "there from an interrupted batch of the same plan is resumed")
-    p.add_argument("--workers", type=int, help="local pool: worker processes (default: one per core)")
+    p.add_argument("--workers", type=int, metavar="N", help="local pool: worker processes (default: one per core)")
     p.add_argument("--ray", metavar="auto|ADDRESS", help="run on Ray: 'auto' starts a local instance bound to "
                    "127.0.0.1, else the address of a running cluster (host:port)")
-    p.add_argument("--retries", type=int, default=3, help="Ray: times a run lost with its worker is retried (3)")
+    p.add_argument("--retries", type=int, default=3, metavar="N",
+                   help="Ray: times a run lost with its worker is retried (3)")
     p.add_argument("--no-report", action="store_true", help="skip the HTML summary")
-    p.add_argument("--limit", type=int, help="run at most this many of the missing runs (then stop; resumable)")
+    p.add_argument("--limit", type=int, metavar="N",
+                   help="run at most this many of the missing runs (then stop; resumable)")
 
 
 def columns(plan, params: list[str]) -> list[str]:

@@ -43,8 +43,8 @@ class ServeOptions(BaseModel):
     scenario_dirs: list[Path] = setting(
         [], "folder the control op load_scenario may read scenarios from, besides the shipped configs/scenarios "
         "(repeatable; a name outside these folders is refused)", "simulation.scenario_dirs", "--scenario-dir")
-    vehicle: Optional[Path] = setting(None, "vehicle TOML (default: the scenario's, else configs/vehicles/xbw.toml)",
-                                      "simulation.vehicle")
+    vehicle: Optional[Path] = setting(None, "vehicle TOML or name in configs/vehicles (default: the scenario's, else "
+                                      "configs/vehicles/xbw.toml)", "simulation.vehicle")
     dt: Optional[Step] = setting(None, "fixed step, s (default: the scenario's, 0.001)",
                                                    "simulation.dt")
     rider: Literal["on", "off"] = setting(
@@ -171,9 +171,19 @@ def _arg_type(annotation):
     return str
 
 
+#: what the value of each flag-settable setting is, as its --help shows it (a Literal's choices show themselves)
+METAVARS = {
+    "scenario": "FILE|NAME", "vehicle": "FILE|NAME", "dt": "S", "max_catch_up": "N", "loop_cpu": "CPU",
+    "loop_priority": "P", "hold_pressure": "KPA", "can_interface": "INTERFACE", "can_channel": "CHANNEL",
+    "can_hub_port": "PORT", "vehicle_id": "ID", "state_rate": "HZ", "status_rate": "HZ", "record": "FILE.mcap",
+    "foxglove_port": "PORT", "foxglove_host": "ADDRESS", "spin": "S", "duration": "S", "dbc": "FILE",
+}
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """One flag per declared setting (plus --config and --json)."""
-    p.add_argument("--config", help="service settings TOML (see configs/service.toml); flags override it")
+    p.add_argument("--config", metavar="FILE",
+                   help="service settings TOML (see configs/service.toml); flags override it")
     for name, f, _key, flag in _declared():
         if flag == "":
             continue
@@ -188,10 +198,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         elif f.annotation == list[Path]:
             p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append", metavar="FOLDER",
                            type=Path, help=f.description)
+        elif typing.get_args(f.annotation) and all(isinstance(c, str) for c in typing.get_args(f.annotation)):
+            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, choices=typing.get_args(f.annotation),
+                           help=f.description)
         else:
-            option = flag or f"--{name.replace('_', '-')}"
-            p.add_argument(option, dest=dest, type=_arg_type(f.annotation), help=f.description,
-                           metavar=option.lstrip("-").upper().replace("-", "_"))
+            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, type=_arg_type(f.annotation),
+                           help=f.description, metavar=METAVARS[name])
     p.add_argument("--json", action="store_true", help="print the closing summary as JSON")
 
 

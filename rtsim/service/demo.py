@@ -59,7 +59,7 @@ DEFAULT_ZENOH_PORT = 7447
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--record", default="demo.mcap", metavar="FILE.mcap",
                    help="recording (default demo.mcap in the current folder)")
-    p.add_argument("--duration", type=float, help="stop after this much simulated time, s "
+    p.add_argument("--duration", type=float, metavar="S", help="stop after this much simulated time, s "
                                                   "(default: the whole manoeuvre, about 50 s)")
     p.add_argument("--manoeuvre", choices=["demo", "straight_line", "lane_change"], default="demo",
                    help="demo: the straight-line manoeuvre, then a lane change (default)")
@@ -68,15 +68,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "lockstep for an EPS car (a Python controller answering within the 3 ms watchdog on a "
                         "host without real-time scheduling is not a given)")
     p.add_argument("--no-zenoh", action="store_true", help="do not publish over Zenoh")
-    p.add_argument("--vehicle", help="vehicle TOML or name in configs/vehicles (default xbw; a car with [eps], "
+    p.add_argument("--vehicle", metavar="FILE|NAME",
+                   help="vehicle TOML or name in configs/vehicles (default xbw; a car with [eps], "
                                      "e.g. eps_car, runs the demo EPS controller in the loop; a two-wheeler, "
                                      "e.g. motorcycle, its rider in the service and the demo rider-assist ECU)")
-    p.add_argument("--scenario", help="scenario TOML or name (default: hil_flat; with an EPS car "
+    p.add_argument("--scenario", metavar="FILE|NAME", help="scenario TOML or name (default: hil_flat; with an EPS car "
                                       f"{EPS_SCENARIO}, the first life situation)")
-    p.add_argument("--silent-after", type=float, help="EPS demo: the controller stops commanding after this "
+    p.add_argument("--silent-after", type=float, metavar="S",
+                   help="EPS demo: the controller stops commanding after this "
                                                       "much simulated time, s (the watchdog's safe state)")
-    p.add_argument("--can-interface", help="python-can interface (default: vcan0 if present, else the hub)")
-    p.add_argument("--can-channel", help="python-can channel")
+    p.add_argument("--can-interface", metavar="INTERFACE",
+                   help="python-can interface (default: vcan0 if present, else the hub)")
+    p.add_argument("--can-channel", metavar="CHANNEL", help="python-can channel")
     p.add_argument("--can-hub-port", type=int, metavar="PORT",
                    help="port of the loopback CAN hub the demo starts on 127.0.0.1 when there is no vcan0 and no "
                         f"--can-interface (default: ${HUB_PORT_ENV}, else {DEFAULT_HUB_PORT}); it must be free")

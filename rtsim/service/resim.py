@@ -369,10 +369,11 @@ def _compare(recorded, rerun, names) -> dict:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("recording", help="an MCAP recording of `rtsim serve --record`, or a python-can log "
+    p.add_argument("recording", metavar="FILE", help="an MCAP recording of `rtsim serve --record`, or a python-can log "
                                      "(.asc, .blf, candump .log) of ECU command frames")
-    p.add_argument("--vehicle", help="vehicle TOML to use instead of the recorded one (what-if runs)")
-    p.add_argument("--scenario", help="scenario TOML or name to use instead of the recorded one")
+    p.add_argument("--vehicle", metavar="FILE|NAME",
+                   help="vehicle TOML to use instead of the recorded one (what-if runs)")
+    p.add_argument("--scenario", metavar="FILE|NAME", help="scenario TOML or name to use instead of the recorded one")
     p.add_argument("--without-user", action="store_true",
                    help="leave out the recorded commands of the user (rtsim view): what the session would have been")
     p.add_argument("--json", action="store_true", help="print the report as JSON")

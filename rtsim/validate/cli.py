@@ -9,17 +9,20 @@ from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--vehicle", required=True, type=Path, help="vehicle TOML of the model to validate")
-    p.add_argument("--runs", required=True, nargs="+", type=Path,
+    p.add_argument("--vehicle", required=True, type=Path, metavar="FILE", help="vehicle TOML of the model to validate")
+    p.add_argument("--runs", required=True, nargs="+", type=Path, metavar="FILE",
                    help="repetitions of one manoeuvre: CSV files (column time [s] + sensor channels, SI) or "
                         "MCAP recordings of the service, or folders holding them")
-    p.add_argument("--report", required=True, type=Path, help="output folder: report.html, summary.json, plots, "
+    p.add_argument("--report", required=True, type=Path, metavar="DIR",
+                   help="output folder: report.html, summary.json, plots, "
                                                                "the new vehicle config")
-    p.add_argument("--road", type=Path, help="road TOML the runs were driven on (default configs/roads/flat.toml)")
-    p.add_argument("--rate", type=float, default=100.0, help="comparison grid rate, Hz (default 100)")
-    p.add_argument("--align", default="xcorr",
+    p.add_argument("--road", type=Path, metavar="FILE",
+                   help="road TOML the runs were driven on (default configs/roads/flat.toml)")
+    p.add_argument("--rate", type=float, default=100.0, metavar="HZ", help="comparison grid rate, Hz (default 100)")
+    p.add_argument("--align", default="xcorr", metavar="METHOD",
                    help="'xcorr' (cross-correlation of the inputs, default) or 'event:<channel>[:<fraction>]'")
-    p.add_argument("--compare", nargs="+", help="output channels to compare (default: wheel_speed_fl..rr, "
+    p.add_argument("--compare", nargs="+", metavar="CHANNEL",
+                   help="output channels to compare (default: wheel_speed_fl..rr, "
                                                 "accel_x; + accel_y, gyro_z, roll when steering)")
     p.add_argument("--accel-frame", choices=("body", "level"),
                    help="frame of the runs' accel_x/y/z: 'body' (the IMU's axes, senses gravity when the body rolls "
@@ -28,8 +31,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-runs", type=int, default=3, metavar="N",
                    help="stop unless N runs pass the data checks (default 3: a band from fewer runs is too wide to "
                         "judge by; lower it knowingly, the report then says so at its top)")
-    p.add_argument("--max-iterations", type=int, default=4, help="effects added at most (default 4)")
-    p.add_argument("--workers", type=int, default=2, help="processes fitting candidates in parallel (default 2)")
+    p.add_argument("--max-iterations", type=int, default=4, metavar="N", help="effects added at most (default 4)")
+    p.add_argument("--workers", type=int, default=2, metavar="N",
+                   help="processes fitting candidates in parallel (default 2)")
     p.add_argument("--ray", metavar="auto|ADDRESS", help="re-simulate on Ray: 'auto' starts a local instance on "
                                                         "127.0.0.1, else a cluster's address (same results)")
     p.add_argument("--no-progress", action="store_true", help="no progress display")

@@ -23,14 +23,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="play these recordings of rtsim serve instead (one, or two side by side) with a timeline")
     p.add_argument("--connect", metavar="ENDPOINT", action="append",
                    help=f"Zenoh endpoint of the service (repeatable; default {DEFAULT_ENDPOINT})")
-    p.add_argument("--vehicle-id", help="vehicle id of the service (default: the one that answers)")
+    p.add_argument("--vehicle-id", metavar="ID", help="vehicle id of the service (default: the one that answers)")
     p.add_argument("--bind", default="127.0.0.1", metavar="ADDRESS",
                    help="address the web server listens on (default 127.0.0.1: this machine only; another than "
                         "loopback only with --web-allow-remote)")
     p.add_argument("--web-allow-remote", action="store_true",
                    help="let the web server bind an address off loopback (other machines can then open the page): "
                         "a warning is printed and driving needs the per-session token in the URL printed")
-    p.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"web server port (default {DEFAULT_PORT}; "
+    p.add_argument("--port", type=int, default=DEFAULT_PORT, metavar="PORT",
+                   help=f"web server port (default {DEFAULT_PORT}; "
                                                                    "0: any free port)")
     p.add_argument("--allow-remote", action="store_true", help="allow a non-loopback Zenoh endpoint")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")

@@ -165,14 +165,18 @@ class InverseDynamics:
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenario", help="a motorcycle scenario with [rider]: its path, speed and vehicle")
-    p.add_argument("--vehicle", help="motorcycle TOML (default: the scenario's)")
+    p.add_argument("--scenario", metavar="FILE",
+                   help="a motorcycle scenario with [rider]: its path, speed and vehicle")
+    p.add_argument("--vehicle", metavar="FILE", help="motorcycle TOML (default: the scenario's)")
     p.add_argument("--path", metavar="CSV", help="instead of a scenario: the path, a CSV with columns x and y (m), "
                    "starting at the origin heading +x")
     p.add_argument("--closed", action="store_true", help="--path is a closed loop")
-    p.add_argument("--speed", type=float, help="target speed, m/s (with --path; default: the scenario's)")
-    p.add_argument("--duration", type=float, help="s (default: the scenario's, else the path's length / speed)")
-    p.add_argument("--out", required=True, help="CSV of t, steering torque, drive torque, roll, steer, ...")
+    p.add_argument("--speed", type=float, metavar="M/S",
+                   help="target speed, m/s (with --path; default: the scenario's)")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="s (default: the scenario's, else the path's length / speed)")
+    p.add_argument("--out", required=True, metavar="FILE.csv",
+                   help="CSV of t, steering torque, drive torque, roll, steer, ...")
     p.add_argument("--summary", metavar="JSON", help="also write the summary to this file")
 
 
