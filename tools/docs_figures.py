@@ -57,7 +57,7 @@ def render_vehicle(res) -> list[str]:
              "|---|---|---|---|---|"]
     for r in res:
         parts = sorted(r["share"].items(), key=lambda kv: -kv[1])[:3]
-        shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in parts)
+        shares = ", ".join(f"{k.split(' (')[0]} {100 * v:.0f} %" for k, v in parts) or "-"
         lines.append(f"| {r['scenario']} | {r['us_per_step']:.1f} | {r['newton_iterations_per_step']:.2f} | "
                      f"{r['factorizations_per_step']:.1f} | {shares} |")
     return lines
