@@ -1,6 +1,6 @@
 """A minimal Foxglove WebSocket client: subscribes to every channel a server advertises and counts what
 arrives, as the Foxglove app would load a server; for checking a running service's Foxglove server and
-for measuring its cost (the README's figures).
+for measuring its cost (`rtsim bench --suite service --foxglove`; docs/recording.md).
 
 ``python -m bridge.foxglove_client ws://127.0.0.1:8765 [--duration S]`` prints one JSON line at the
 end: messages and bytes per topic. Needs the ``websockets`` package (a test dependency of rtsim).

@@ -22,7 +22,7 @@ import time
 from typing import Callable, Iterable
 
 #: s; the service's first build and compile on a fresh clone (2-core machine, the demo ECU compiling
-#: its own kernels beside it): measured 65-86 s for `rtsim demo` with empty caches (see the README)
+#: its own kernels beside it): what `rtsim demo` took with empty caches (time `./tools/run` in a new clone)
 FIRST_COMPILE_S = 80
 
 #: the kernels the service calls from Python, "module:name"; the largest compile (~90 % of the time)
