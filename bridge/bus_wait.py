@@ -85,14 +85,14 @@ def positive_seconds(text: str) -> float:
 
 def add_client_arguments(p: argparse.ArgumentParser) -> None:
     """The bus and waiting options every CAN client of the service takes (the demo ECUs)."""
-    p.add_argument("--can-interface")
-    p.add_argument("--can-channel")
-    p.add_argument("--duration", type=positive_seconds, help="stop after this much simulated time, s")
+    p.add_argument("--can-interface", metavar="INTERFACE")
+    p.add_argument("--can-channel", metavar="CHANNEL")
+    p.add_argument("--duration", type=positive_seconds, metavar="S", help="stop after this much simulated time, s")
     p.add_argument("--lockstep", action="store_true", help="request the steps (service in --mode lockstep)")
-    p.add_argument("--timeout", type=positive_seconds, default=5.0,
+    p.add_argument("--timeout", type=positive_seconds, default=5.0, metavar="S",
                    help="give up after this long without frames once they flowed, s (default 5)")
-    p.add_argument("--connect-timeout", type=positive_seconds, default=600.0,
+    p.add_argument("--connect-timeout", type=positive_seconds, default=600.0, metavar="S",
                    help="wait at most this long for the service: its CAN bus, then its first sensor frames "
                         "(a first run on a fresh machine compiles for a minute or more), s (default 600)")
-    p.add_argument("--report-every", type=positive_seconds, default=10.0,
+    p.add_argument("--report-every", type=positive_seconds, default=10.0, metavar="S",
                    help="while waiting for the service, say so this often, s (default 10)")

@@ -67,9 +67,10 @@ def watch(url: str, duration: float, connect_timeout: float = 30.0) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m bridge.foxglove_client", description=__doc__.split("\n")[0])
-    ap.add_argument("url", help="the server, e.g. ws://127.0.0.1:8765")
-    ap.add_argument("--duration", type=float, default=10.0, help="seconds to listen (default 10)")
-    ap.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the server (default 30)")
+    ap.add_argument("url", metavar="URL", help="the server, e.g. ws://127.0.0.1:8765")
+    ap.add_argument("--duration", type=float, default=10.0, metavar="S", help="seconds to listen (default 10)")
+    ap.add_argument("--connect-timeout", type=float, default=30.0, metavar="S",
+                    help="seconds to wait for the server (default 30)")
     args = ap.parse_args(argv)
     try:
         out = watch(args.url, args.duration, args.connect_timeout)

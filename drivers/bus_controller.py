@@ -104,10 +104,12 @@ def main(name: str, doc: str, make_ctl, argv: list[str] | None = None) -> int:
 
     p = argparse.ArgumentParser(prog=f"python -m drivers.{name}", description=doc.split("\n\n")[0])
     add_client_arguments(p)
-    p.add_argument("--silent-after", type=positive_seconds, help="stop commanding after this much simulated time, s")
-    p.add_argument("--linger", type=positive_seconds, default=0.25,
+    p.add_argument("--silent-after", type=positive_seconds, metavar="S",
+                   help="stop commanding after this much simulated time, s")
+    p.add_argument("--linger", type=positive_seconds, default=0.25, metavar="S",
                    help="with --silent-after: keep stepping (lockstep) or listening this long, s (default 0.25)")
-    p.add_argument("--manoeuvre", help="(accepted for the demo's interface; the scenario drives the driver)")
+    p.add_argument("--manoeuvre", metavar="NAME",
+                   help="(accepted for the demo's interface; the scenario drives the driver)")
     args = p.parse_args(argv)
     try:
         ctl = make_ctl()

@@ -316,15 +316,16 @@ def field(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--set", choices=("heldout", "tuning", "issue"), default="heldout")
-    p.add_argument("--limit", type=int, help="the first N cases of the set")
+    p.add_argument("--limit", type=int, metavar="N", help="the first N cases of the set")
     p.add_argument("--reduced", action="store_true", help="the reduced form (a few held-out cases and the issue's)")
-    p.add_argument("--cases", help="comma-separated case ids")
-    p.add_argument("--workers", type=int, default=2, help="the workflow's worker processes")
+    p.add_argument("--cases", metavar="ID,...", help="comma-separated case ids")
+    p.add_argument("--workers", type=int, default=2, metavar="N", help="the workflow's worker processes")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
-    p.add_argument("--out", type=Path, help="reports and bench.json (default: a temporary folder)")
+    p.add_argument("--out", type=Path, metavar="DIR", help="reports and bench.json (default: a temporary folder)")
     p.add_argument("--prepare-only", action="store_true", help="only generate the runs and truths into the cache")
     p.add_argument("--straight-line", action="store_true", help="the seed's straight line instead (--effect)")
-    p.add_argument("--effect", default="brake_friction=0.85", help="with --straight-line: hidden model effect "
+    p.add_argument("--effect", default="brake_friction=0.85", metavar="NAME=VALUE",
+                   help="with --straight-line: hidden model effect "
                    "NAME=VALUE (its first parameter), or 'none'")
     args = p.parse_args(argv)
     if args.straight_line:
