@@ -81,3 +81,29 @@ def test_the_rule_catches_a_derived_placeholder():
     assert INTERNAL.findall(p.format_help())
     flagged = [a for a in p._actions if a.option_strings and _takes_value(a) and a.metavar is None]
     assert len(flagged) == 2
+
+
+#: the developer entry points docs/commands.md lists, each with its own parser
+MODULES = ("drivers.ecu_demo", "drivers.eps_demo", "drivers.rider_assist_demo", "rtsim.validate.bench",
+           "bridge.payloads", "bridge.foxglove_client")
+
+
+def derived_placeholders(usage: str) -> list[str]:
+    """`--flag VALUE` pairs of a usage text whose VALUE is just the flag's name upper-cased."""
+    return [f"--{flag} {value}" for flag, value in re.findall(r"--([a-z][a-z0-9-]*) ([A-Z][A-Z0-9_]*)\b", usage)
+            if value == flag.upper().replace("-", "_") and value not in KIND_WORDS]
+
+
+def test_the_usage_rule_catches_a_derived_placeholder():
+    assert derived_placeholders("[--can-channel CAN_CHANNEL] [--port PORT] [--dt S]") == ["--can-channel CAN_CHANNEL"]
+
+
+@pytest.mark.parametrize("module", MODULES)
+def test_module_entry_points_name_values_by_kind(module):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    text = proc.stdout
+    assert not INTERNAL.findall(text) and not derived_placeholders(text), (module, derived_placeholders(text))
