@@ -420,7 +420,7 @@ def test_mcap_recording_reads_like_csv(tmp_path):
     rows = np.column_stack([t, *[ch[c] for c in cols[1:]]])
     write_run(tmp_path / "run.mcap", cols, rows, "xbw")
     csv = write(tmp_path / "run.csv", t, {c: ch[c] for c in cols[1:]})
-    from bridge.mcap_recorder import read_recording
+    from bridge.mcap_recorder import read_recording         # the command's reader (the bridge, a layer above)
     a, b = load_run(tmp_path / "run.mcap", read_mcap=read_recording), load_run(csv)
     assert set(a.channels) == set(b.channels)
     np.testing.assert_allclose(a.time, b.time, atol=1e-9)
@@ -429,3 +429,8 @@ def test_mcap_recording_reads_like_csv(tmp_path):
     with pytest.raises(ConfigError, match="not an MCAP file"):
         (tmp_path / "bad.mcap").write_bytes(b"hello")
         load_run(tmp_path / "bad.mcap", read_mcap=read_recording)
+    # without a reader (the workflow called without the command's), an MCAP run is left out saying why
+    runs, rejected = load_runs([tmp_path / "run.mcap", csv])
+    assert [r.path.name for r in runs] == ["run.csv"]
+    assert [r.line for r in rejected] == [
+        "run.mcap: no MCAP reader was given (the rtsim validate command passes the bridge's); give the run as CSV"]
