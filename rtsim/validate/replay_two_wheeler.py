@@ -19,9 +19,9 @@ the way a rider does, and the quantities a rider closes it on are the inputs:
   vehicle's engine and gearbox) and the caliper pressures ``brake_pressure_front`` / ``_rear`` (as
   the actuators' outputs they act directly; no actuator lag is applied twice).
 
-Everything else is compared (its validation profile, rtsim.vehicle.motorcycle.validation): the steering torque the lean loop
-needs and the steer angle it gives, yaw, roll and pitch rates, the accelerations, wheel speeds, fork and
-shock travel, pitch. The rider's demands (``rider_*``) equal the actuators' outputs without an ECU and
+Everything else is compared (its validation profile, rtsim.vehicle.motorcycle.validation): the steering
+torque the lean loop needs and the steer angle it gives, yaw, roll and pitch rates, the accelerations,
+wheel speeds, fork and shock travel, pitch. The rider's demands (``rider_*``) equal the actuators' outputs without an ECU and
 are neither replayed nor compared. The lean loop is not the field rider: its torque differs from the
 rider's where the roll is tracked imperfectly (fast roll transients), which is structural mismatch the
 workflow reports as such; in steady lean both give the torque the physics needs.
