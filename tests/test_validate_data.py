@@ -206,10 +206,12 @@ def _cells(lines, cells, text):
 
 def _left_out(paths):
     """The one line per run left out that the workflow prints (data.announce), on runs loaded with every
-    numpy or Python warning turned into an error (none may leak)."""
+    numpy or Python warning turned into an error (none may leak); MCAP runs read by the bridge's reader, as
+    the command reads them."""
+    from bridge.mcap_recorder import read_recording
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        runs, rejected = load_runs(paths)
+        runs, rejected = load_runs(paths, read_mcap=read_recording)
         out = io.StringIO()
         announce(rejected, out)
     return runs, out.getvalue().splitlines()
@@ -418,11 +420,17 @@ def test_mcap_recording_reads_like_csv(tmp_path):
     rows = np.column_stack([t, *[ch[c] for c in cols[1:]]])
     write_run(tmp_path / "run.mcap", cols, rows, "xbw")
     csv = write(tmp_path / "run.csv", t, {c: ch[c] for c in cols[1:]})
-    a, b = load_run(tmp_path / "run.mcap"), load_run(csv)
+    from bridge.mcap_recorder import read_recording         # the command's reader (the bridge, a layer above)
+    a, b = load_run(tmp_path / "run.mcap", read_mcap=read_recording), load_run(csv)
     assert set(a.channels) == set(b.channels)
     np.testing.assert_allclose(a.time, b.time, atol=1e-9)
     for c in a.channels:
         np.testing.assert_allclose(a.channels[c], b.channels[c], rtol=1e-9, atol=1e-9)
     with pytest.raises(ConfigError, match="not an MCAP file"):
         (tmp_path / "bad.mcap").write_bytes(b"hello")
-        load_run(tmp_path / "bad.mcap")
+        load_run(tmp_path / "bad.mcap", read_mcap=read_recording)
+    # without a reader (the workflow called without the command's), an MCAP run is left out saying why
+    runs, rejected = load_runs([tmp_path / "run.mcap", csv])
+    assert [r.path.name for r in runs] == ["run.csv"]
+    assert [r.line for r in rejected] == [
+        "run.mcap: no MCAP reader was given (the rtsim validate command passes the bridge's); give the run as CSV"]

@@ -114,10 +114,10 @@ def test_cli_frame_mismatch_is_an_error(tmp_path, capsys):
 
 def test_mcap_metadata_declares_the_frame(tmp_path):
     """A recording's metadata record with the key accel_frame declares it, as a CSV comment does."""
-    from bridge.mcap_recorder import Recorder
+    from bridge.mcap_recorder import Recorder, read_recording
     from bridge.payloads import encode_json
     with Recorder(tmp_path / "run.mcap", "xbw", metadata={"logger": {"accel_frame": "level"}}) as rec:
         for k in range(20):
             rec.record("sensors", k * 10_000_000, encode_json({"time": k * 0.01, "accel_y": 0.1 * k}))
-    run = load_run(tmp_path / "run.mcap")
+    run = load_run(tmp_path / "run.mcap", read_mcap=read_recording)
     assert run.accel_frame == "level" and run.channels["accel_y"].size == 20

@@ -221,9 +221,11 @@ def _best_delay(t: np.ndarray, model: np.ndarray, data: np.ndarray, delays: np.n
 
 def _bench(paths: list[Path], replayer=None):
     """The benchmark `rtsim validate` builds of `paths` with its default options."""
+    from rtsim.vehicle.registry import open_vehicle
     opts = Options(VEHICLE, paths, Path("."))
-    runs, rejected = load_runs(paths, _sensor_names(opts, replayer))
-    return build_benchmark(runs, rejected, opts.rate, opts.align, opts.compare)
+    profile = replayer.profile if replayer is not None else open_vehicle(VEHICLE).validation
+    runs, rejected = load_runs(paths, _sensor_names(profile, replayer))
+    return build_benchmark(runs, rejected, opts.rate, opts.align, opts.compare, profile)
 
 
 def _apply(name: str, t: np.ndarray, y: np.ndarray, value: float) -> np.ndarray:

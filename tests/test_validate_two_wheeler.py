@@ -39,15 +39,6 @@ class _Runs(dict):
         return self[key]
 
 
-@pytest.fixture(autouse=True)
-def _car_profile_after():
-    """The workflow leaves its vehicle's profile active (the report and the config writer read it):
-    later tests that build benchmarks directly expect the car's."""
-    yield
-    from rtsim.validate.profile import activate
-    activate("car")
-
-
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     base = tmp_path_factory.mktemp("moto_field")
@@ -96,9 +87,7 @@ def test_fall_during_replay_is_a_clear_failure(runs, tmp_path):
     SimulationError naming the fall and its time, never a NaN or a crash."""
     from rtsim.validate.benchmark import build_benchmark
     from rtsim.validate.data import load_runs
-    from rtsim.validate.profile import activate
     from rtsim.validate.replay_two_wheeler import TwoWheelerReplayer
-    activate("two_wheeler")
     src = np.genfromtxt(runs[1]["none"][0], delimiter=",", names=True)
     names = src.dtype.names
     data = np.column_stack([src[n] for n in names])
@@ -108,8 +97,8 @@ def test_fall_during_replay_is_a_clear_failure(runs, tmp_path):
     p = tmp_path / "fall.csv"
     np.savetxt(p, data, delimiter=",", header=",".join(names), comments="")
     loaded, rej = load_runs([p], field.NAMES)
-    bench = build_benchmark(loaded, rej)
     rp = TwoWheelerReplayer(field.VEHICLE)
+    bench = build_benchmark(loaded, rej, profile=rp.profile)
     with pytest.raises(SimulationError, match="fell"):
         rp.simulate(rp.inputs(bench), [])
 
@@ -123,7 +112,6 @@ def test_effects_change_the_model_through_its_parameters(runs):
     from rtsim.validate.benchmark import build_benchmark
     from rtsim.validate.data import load_runs
     from rtsim.validate.effectset import Effect
-    from rtsim.validate.profile import activate
     from rtsim.validate.replay_two_wheeler import TwoWheelerReplayer
     base = runs[0]
     old = field.NOISE_ON
@@ -132,10 +120,9 @@ def test_effects_change_the_model_through_its_parameters(runs):
         path = field.ride(base / "clean", "straight", 1)
     finally:
         field.NOISE_ON = old
-    activate("two_wheeler")
     loaded, rej = load_runs([path], field.NAMES)
-    bench = build_benchmark(loaded, rej)
     rp = TwoWheelerReplayer(field.VEHICLE)
+    bench = build_benchmark(loaded, rej, profile=rp.profile)
     inp = rp.inputs(bench)
     cfg = rp.config
     total = sum(b.mass_kg for b in (cfg.rear_frame, cfg.rider, cfg.swingarm, cfg.upper_fork, cfg.lower_fork,

@@ -15,12 +15,13 @@ import numpy as np
 from rtsim.validate.data import Rejected
 from rtsim.validate.effectset import Effect
 from rtsim.validate.identify import Candidate
-from rtsim.validate.profile import activate
 from rtsim.validate.report import displayed_adjustment
 from rtsim.validate.verdict import GLOSSARY, ChannelLine, Verdict, build, contradictions
 from rtsim.validate.workflow import Iteration, Options, Result
+from rtsim.vehicle.registry import open_vehicle
 
-activate("car")
+#: the car's validation profile (its effect catalogue gives the parameters' units)
+PROFILE = open_vehicle("xbw").validation
 
 
 def _cand(effect: Effect, note: str, signature=(), kind=None) -> Candidate:
@@ -38,7 +39,7 @@ def _result(effects, channels, candidates, min_runs=3, runs=7, rejected=(), conf
                             rejected=list(rejected))
     it = Iteration(1, [], 3.0, {}, [], candidates, None, None, "selection text", 0.1)
     return Result(Options(Path("xbw.toml"), [], Path("."), min_runs=min_runs), bench, None, None, None, None, [],
-                  effects, {}, {}, [it], "selection text", channels=channels, confounded=list(confounded))
+                  effects, {}, {}, [it], "selection text", PROFILE, channels=channels, confounded=list(confounded))
 
 
 BIAS_NOTE = "its evidence on gyro_z stays below what five effective samples of smooth scatter can show"

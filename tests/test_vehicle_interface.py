@@ -77,6 +77,7 @@ def test_the_validation_workflow_reads_a_vehicles_own_channels(tmp_path, fwd_mod
     says columns were ignored."""
     from bridge.mcap_log import write_run
     from rtsim.vehicle.offline import prepare, run, write_csv
+    from bridge.mcap_recorder import read_recording
     from rtsim.validate.data import load_run
 
     sim, sc = prepare(FWD, ROOT / "configs" / "scenarios" / "step_steer_80kph.toml")
@@ -86,7 +87,7 @@ def test_the_validation_workflow_reads_a_vehicles_own_channels(tmp_path, fwd_mod
     write_run(mcap_path, res.columns, res.data, "xbw_fwd", sim.vm.channels)
     names = fwd_model.channels.sensor_names
     for path in (csv_path, mcap_path):
-        r = load_run(path, names)
+        r = load_run(path, names, read_recording)
         assert set(r.channels) == set(names)
         assert np.allclose(r.channels["wheel_torque_fl"], res.column("wheel_torque_fl"), rtol=1e-8, atol=1e-9)   # CSV: 9 digits
     rear = load_run(csv_path)

@@ -17,6 +17,7 @@ Offsets are returned as the run time at which the aligned time is zero.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,7 +25,6 @@ import numpy as np
 from rtsim.errors import ConfigError
 
 from .data import Run
-from .profile import active
 from .signals import box_average
 
 XCORR_RATE = 100.0          # Hz
@@ -38,12 +38,21 @@ class Alignment:
     reference: int = 0
 
 
-def varying_inputs(runs: list[Run]) -> list[str]:
+@functools.cache
+def default_profile():
+    """The default vehicle's validation profile (rtsim.vehicle.registry.DEFAULT_VEHICLE), for a caller
+    that names none (the workflow always passes its vehicle's)."""
+    from rtsim.vehicle.registry import open_vehicle
+    return open_vehicle(None).validation
+
+
+def varying_inputs(runs: list[Run], profile=None) -> list[str]:
     """Inputs present in every run that vary across the manoeuvre: the range of the signal smoothed
     over 0.1 s exceeds the vehicle profile's min_range and ten times the sample noise (estimated from
-    second differences), in every run. A channel that only carries noise would make the correlation meaningless."""
+    second differences), in every run. A channel that only carries noise would make the correlation meaningless.
+    `profile`: the vehicle's validation profile (rtsim.vehicle.validation; None: the default vehicle's)."""
     out = []
-    prof = active()
+    prof = profile or default_profile()
     for name in prof.inputs:
         if not all(name in r.channels for r in runs):
             continue
@@ -105,11 +114,12 @@ def _best_lag(a: np.ndarray, b: np.ndarray, max_lag: int) -> tuple[float, float]
     return lag, float(r[k])
 
 
-def align_xcorr(runs: list[Run], names: list[str], fs: float = XCORR_RATE) -> Alignment:
+def align_xcorr(runs: list[Run], names: list[str], fs: float = XCORR_RATE, profile=None) -> Alignment:
     """Offsets by cross-correlation of the varying inputs `names` (see the module docstring)."""
     if not names:
         raise ConfigError("cannot align the runs by cross-correlation: no input channel varies "
-                          f"(looked for {', '.join(active().inputs)}); use --align event:<channel>")
+                          f"(looked for {', '.join((profile or default_profile()).inputs)}); use --align "
+                          "event:<channel>")
     scales = {}
     for n in names:
         allv = np.concatenate([r.channels[n] for r in runs])
@@ -134,7 +144,7 @@ def align_xcorr(runs: list[Run], names: list[str], fs: float = XCORR_RATE) -> Al
                      f"{runs[ref].name}", offsets, [float(cor[ref, i]) for i in range(nr)], ref)
 
 
-def event_time(run: Run, channel: str, fraction: float = 0.5) -> float:
+def event_time(run: Run, channel: str, fraction: float = 0.5, profile=None) -> float:
     """First time the channel crosses `fraction` of the way from its initial to its extreme value."""
     if channel not in run.channels:
         raise ConfigError(f"{run.path}: alignment event channel {channel!r} missing")
@@ -142,7 +152,7 @@ def event_time(run: Run, channel: str, fraction: float = 0.5) -> float:
     x0 = float(np.median(x[t <= t[0] + 0.2]))
     k = int(np.argmax(np.abs(x - x0)))
     ext = float(x[k])
-    if abs(ext - x0) < active().min_range.get(channel, 1e-9):
+    if abs(ext - x0) < (profile or default_profile()).min_range.get(channel, 1e-9):
         raise ConfigError(f"{run.path}: alignment event channel {channel!r} does not change "
                           f"(initial {x0:.6g}, extreme {ext:.6g})")
     level = x0 + fraction * (ext - x0)
@@ -155,16 +165,17 @@ def event_time(run: Run, channel: str, fraction: float = 0.5) -> float:
     return float(t[i - 1] + (level - x1) / (x2 - x1) * (t[i] - t[i - 1]))
 
 
-def align_event(runs: list[Run], channel: str, fraction: float = 0.5) -> Alignment:
-    times = [event_time(r, channel, fraction) for r in runs]
+def align_event(runs: list[Run], channel: str, fraction: float = 0.5, profile=None) -> Alignment:
+    times = [event_time(r, channel, fraction, profile) for r in runs]
     return Alignment(f"input event: {channel} crossing {fraction:g} of its initial-to-extreme change",
                      times, [], 0)
 
 
-def align(runs: list[Run], method: str = "xcorr") -> Alignment:
-    """Alignment by `method`: "xcorr" or "event:<channel>[:<fraction>]"."""
+def align(runs: list[Run], method: str = "xcorr", profile=None) -> Alignment:
+    """Alignment by `method`: "xcorr" or "event:<channel>[:<fraction>]"; `profile`: the vehicle's
+    validation profile (its inputs and their least ranges; None: the default vehicle's)."""
     if method == "xcorr":
-        return align_xcorr(runs, varying_inputs(runs))
+        return align_xcorr(runs, varying_inputs(runs, profile), profile=profile)
     if method.startswith("event:"):
         parts = method.split(":")
         try:
@@ -173,5 +184,5 @@ def align(runs: list[Run], method: str = "xcorr") -> Alignment:
             raise ConfigError(f"--align {method!r}: fraction {parts[2]!r} is not a number") from None
         if not 0.0 < frac < 1.0:
             raise ConfigError(f"--align {method!r}: fraction must be between 0 and 1")
-        return align_event(runs, parts[1], frac)
+        return align_event(runs, parts[1], frac, profile)
     raise ConfigError(f"--align {method!r}: expected 'xcorr' or 'event:<channel>[:<fraction>]'")

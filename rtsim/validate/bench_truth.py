@@ -53,13 +53,13 @@ def _floor(channel: str) -> float:
     return math.hypot(sd, white) / math.sqrt(generate.N_RUNS)
 
 
-def _bench(case, t, ch, folder: Path, name: str, sensor_names):
+def _bench(case, t, ch, folder: Path, name: str, sensor_names, profile):
     from .benchmark import build_benchmark
     from .data import load_runs
     names = generate.channels(case)
     p = generate.write_csv(folder / f"{name}.csv", t + 10.0, ch, names, generate.accel_frame(case))
     runs, rejected = load_runs([p], sensor_names)
-    return build_benchmark(runs, rejected)
+    return build_benchmark(runs, rejected, profile=profile)
 
 
 def _left_over(diff: dict, data0: dict, t: np.ndarray, moving: np.ndarray, radius: float) -> dict:
@@ -124,7 +124,7 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
         with tempfile.TemporaryDirectory() as tmp:
             folder = Path(tmp)
             t, ch0 = generate.simulate(case, car, None, {})
-            b0 = _bench(case, t, ch0, folder, "clean", names)
+            b0 = _bench(case, t, ch0, folder, "clean", names, replayer.profile)
             model = replayer.reported(replayer.simulate(replayer.inputs(b0), []), b0.t, [])
             compared = list(b0.compared)
             tg = b0.t
@@ -138,7 +138,7 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
                 t1, ch1 = generate.simulate(case, car, None, generate.sim_kwargs({**case, **alone}))
                 for c, eff in generate.sensor_effects({**case, **alone}).items():
                     ch1[c] = scatter.sensor_effect(t1, ch1[c], **eff)
-                b1 = _bench(case, t1, ch1, folder, f"with_{len(effects)}", names)
+                b1 = _bench(case, t1, ch1, folder, f"with_{len(effects)}", names, replayer.profile)
                 if kind(h["effect"]) == "model":      # the residual's change: inputs that feed back (the
                     # speed controller's torques) change the model's replay too
                     model1 = replayer.reported(replayer.simulate(replayer.inputs(b1), []), b1.t, [])

@@ -19,9 +19,8 @@ import numpy as np
 from rtsim.channels import SENSOR_NAMES
 from rtsim.errors import ConfigError
 
-from .align import Alignment, align, varying_inputs
+from .align import Alignment, align, default_profile, varying_inputs
 from .data import Rejected, Run
-from .profile import active
 from .signals import DERIVED, WHEEL_SPEEDS, derive_wheel_speeds, resample
 from .stats import Band, band
 
@@ -56,9 +55,9 @@ class Benchmark:
         return self.bands[channel].mean
 
 
-def _majority_inputs(runs: list[Run], rejected: list[Rejected]) -> list[Run]:
+def _majority_inputs(runs: list[Run], rejected: list[Rejected], profile) -> list[Run]:
     keep = list(runs)
-    for name in active().inputs:
+    for name in profile.inputs:
         have = [r for r in keep if name in r.channels]
         if 0 < len(have) < len(keep) and len(have) > len(keep) / 2:
             for r in keep:
@@ -91,12 +90,12 @@ def _input_deviation(runs: list[Run], al: Alignment, names: list[str]) -> tuple[
     return dev, worst
 
 
-def _screen(runs: list[Run], rejected: list[Rejected], method: str) -> tuple[list[Run], Alignment]:
+def _screen(runs: list[Run], rejected: list[Rejected], method: str, profile) -> tuple[list[Run], Alignment]:
     """Align, leave out the runs that are not repetitions, align the rest again."""
-    al = align(runs, method)
+    al = align(runs, method, profile)
     if len(runs) < 2:
         return runs, al
-    names = varying_inputs(runs)
+    names = varying_inputs(runs, profile)
     dev, worst = _input_deviation(runs, al, names) if names else (np.zeros(len(runs)), [""] * len(runs))
     typical = float(np.median(dev))
     bad = {}
@@ -118,7 +117,7 @@ def _screen(runs: list[Run], rejected: list[Rejected], method: str) -> tuple[lis
         for i, why in bad.items():
             rejected.append(Rejected(runs[i].path, why))
         runs = [r for i, r in enumerate(runs) if i not in bad]
-        al = align(runs, method)
+        al = align(runs, method, profile)
     # coverage of the manoeuvre
     spans = [(r.time[0] - o, r.time[-1] - o) for r, o in zip(runs, al.offsets)]
     med_len = float(np.median([b - a for a, b in spans]))
@@ -132,21 +131,24 @@ def _screen(runs: list[Run], rejected: list[Rejected], method: str) -> tuple[lis
         for i, why in short.items():
             rejected.append(Rejected(runs[i].path, why))
         runs = [r for i, r in enumerate(runs) if i not in short]
-        al = align(runs, method)
+        al = align(runs, method, profile)
     return runs, al
 
 
 def build_benchmark(runs: list[Run], rejected: list[Rejected] | None = None, rate: float = DEFAULT_RATE,
-                    align_method: str = "xcorr", compare: list[str] | None = None) -> Benchmark:
-    """Checked, aligned, resampled runs with their bands (see the module docstring)."""
+                    align_method: str = "xcorr", compare: list[str] | None = None, profile=None) -> Benchmark:
+    """Checked, aligned, resampled runs with their bands (see the module docstring); `profile`: the
+    vehicle's validation profile (rtsim.vehicle.validation: the inputs, the compared channels; None: the
+    default vehicle's)."""
+    prof = profile or default_profile()
     rejected = list(rejected or [])
     if not runs:
         raise ConfigError("no usable run: " + "; ".join(f"{r.path.name}: {r.reason}" for r in rejected)
                           if rejected else "no runs given")
     if not rate > 0:
         raise ConfigError(f"grid rate {rate} Hz must be > 0")
-    runs = _majority_inputs(runs, rejected)
-    runs, al = _screen(runs, rejected, align_method)
+    runs = _majority_inputs(runs, rejected, prof)
+    runs, al = _screen(runs, rejected, align_method, prof)
     notes: list[str] = []
     n = len(runs)
     if n == 1:
@@ -175,7 +177,6 @@ def build_benchmark(runs: list[Run], rejected: list[Rejected] | None = None, rat
         if a in values:
             values[s] = np.stack([derive_wheel_speeds({a: row}, dt)[s] for row in values[a]])
             members[s] = members[a]
-    prof = active()
     inputs = [c for c in prof.inputs if c in values and members[c] == n]
     for c, k in members.items():
         if k < n:

@@ -1,6 +1,9 @@
 """`rtsim validate --vehicle FILE --runs PATH... --report DIR`: repetitions of one manoeuvre (CSV or
 MCAP) against the vehicle model; names the missing effect, writes the model with it and the report.
-Standalone: `python -m rtsim.validate.cli ...`. Heavy imports happen in main (the parser stays cheap)."""
+Standalone: `python -m rtsim.validate.cli ...`. Heavy imports happen in main (the parser stays cheap).
+
+The command is an application (the apps layer): it wires the workflow to what sits above it, the
+bridge's MCAP reader for recorded runs and the batch's Ray executor for `--ray`."""
 from __future__ import annotations
 
 import argparse
@@ -70,14 +73,22 @@ class RichProgress:
 def main(args: argparse.Namespace) -> int:
     from contextlib import nullcontext
 
+    from bridge.mcap_recorder import read_recording
+
     from . import report
     from .configwrite import write_config
     from .data import DataError
+    from .tasks import RayWorkers
     from .workflow import Options, run
 
+    ray = None
+    if args.ray:
+        from rtsim.batch.executors import ray_init, ray_map
+        ray = RayWorkers(args.ray, ray_init, ray_map)
     opts = Options(vehicle=args.vehicle, runs=list(args.runs), report=args.report, road=args.road, rate=args.rate,
-                   align=args.align, max_iterations=args.max_iterations, workers=args.workers, ray=args.ray,
-                   compare=args.compare, accel_frame=args.accel_frame, min_runs=args.min_runs)
+                   align=args.align, max_iterations=args.max_iterations, workers=args.workers, ray=ray,
+                   compare=args.compare, accel_frame=args.accel_frame, min_runs=args.min_runs,
+                   read_mcap=read_recording)
     prog = nullcontext(None) if args.no_progress else RichProgress()
     with prog as pr:
         opts.progress = pr

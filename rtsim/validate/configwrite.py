@@ -5,8 +5,9 @@ The new file is the original text, with relative file references (e.g. `property
 they still point at the same files from the new location (relative when both share a folder below
 the root, absolute otherwise), and the identified effects appended as
 `[effects.<name>]` tables (sensor effects as `[[effects.<name>]]` arrays of tables with `channel`),
-each value with its 95 % half-width in a comment. The result is loaded back with the vehicle config
-loader, so a file the model would reject is never left behind as if it were valid.
+each value with its 95 % half-width in a comment. The result is opened back as a vehicle file
+(rtsim.vehicle.registry.open_vehicle: its kind's loader), so a file the model would reject is never left
+behind as if it were valid.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import tomllib
 from pathlib import Path
 
 from rtsim.errors import ConfigError
-from rtsim.vehicle.car.config import load_vehicle
+from rtsim.vehicle.registry import open_vehicle
 
 from .effectset import Effect
 
@@ -79,12 +80,7 @@ def write_config(original: str | Path, effects: list[Effect], out: str | Path, h
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(new)
     try:
-        from .profile import active
-        if active().kind == "two_wheeler":
-            from rtsim.vehicle.motorcycle.config import load_motorcycle
-            load_motorcycle(out)
-        else:
-            load_vehicle(out)
+        open_vehicle(out)
     except ConfigError as exc:
         bad = out.with_suffix(".rejected.toml")
         out.replace(bad)

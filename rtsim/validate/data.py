@@ -173,9 +173,13 @@ def _read_csv(path: Path) -> _Table:
     return _Table(header, m, junk, _csv_declarations(text))
 
 
-def _read_mcap(path: Path, sensor_names) -> _Table:
-    """The `rtsim/<id>/sensors` topic of an MCAP recording as a table (a row per message)."""
-    from bridge.mcap_recorder import read_recording     # the bridge reads MCAP; imported only when needed
+def _read_mcap(path: Path, sensor_names, read_recording) -> _Table:
+    """The `rtsim/<id>/sensors` topic of an MCAP recording as a table (a row per message); `read_recording`:
+    path -> (messages by topic, info), bridge.mcap_recorder.read_recording (the bridge reads MCAP, a layer
+    above this one: the command passes its reader in)."""
+    if read_recording is None:
+        raise _fail(path, "no MCAP reader was given (the rtsim validate command passes the bridge's); "
+                          "give the run as CSV")
     messages, info = read_recording(path)
     topics = [t for t in messages if t.startswith("rtsim/") and t.endswith("/sensors")]
     if not topics:
@@ -268,9 +272,11 @@ def _check_range(name: str, t: np.ndarray, x: np.ndarray, row: str) -> str | Non
             f"range {p.lo:g} .. {p.hi:g} {u}, the first at {row} {first + 1}): {hint}")
 
 
-def load_run(path: str | Path, sensor_names=SENSOR_NAMES) -> Run:
+def load_run(path: str | Path, sensor_names=SENSOR_NAMES, read_mcap=None) -> Run:
     """Read and check one run (see the module docstring) of a vehicle with the sensor channels
-    `sensor_names` (its channel dictionary's); DataError naming the file and the reason if it cannot be used."""
+    `sensor_names` (its channel dictionary's); DataError naming the file and the reason if it cannot be used.
+    `read_mcap`: how an MCAP recording is read (bridge.mcap_recorder.read_recording; None: MCAP runs are
+    left out, saying so)."""
     path = Path(path)
     if not path.is_file():
         raise _fail(path, "no such file")
@@ -278,7 +284,7 @@ def load_run(path: str | Path, sensor_names=SENSOR_NAMES) -> Run:
     if suffix == ".csv":
         tab = _read_csv(path)
     elif suffix == ".mcap":
-        tab = _read_mcap(path, sensor_names)
+        tab = _read_mcap(path, sensor_names, read_mcap)
     else:
         raise _fail(path, f"unknown run format {path.suffix or '(none)'}; use .csv or .mcap")
     header, m, row = tab.header, tab.m, tab.row
@@ -347,9 +353,10 @@ def load_run(path: str | Path, sensor_names=SENSOR_NAMES) -> Run:
     return Run(path, t, channels, notes, declared.lower() if declared is not None else None)
 
 
-def load_runs(paths: list[str | Path], sensor_names=SENSOR_NAMES) -> tuple[list[Run], list[Rejected]]:
+def load_runs(paths: list[str | Path], sensor_names=SENSOR_NAMES, read_mcap=None) -> tuple[list[Run], list[Rejected]]:
     """Every run that can be read, and the rejected ones with their reasons. Paths may be folders
-    (their *.csv and *.mcap files, sorted by name); `sensor_names`: the vehicle's sensor channels.
+    (their *.csv and *.mcap files, sorted by name); `sensor_names`: the vehicle's sensor channels;
+    `read_mcap`: the MCAP reader (load_run).
     DataError when a path does not exist or a folder holds no run."""
     files: list[Path] = []
     for p in map(Path, paths):
@@ -367,7 +374,7 @@ def load_runs(paths: list[str | Path], sensor_names=SENSOR_NAMES) -> tuple[list[
     runs, rejected = [], []
     for f in files:
         try:
-            runs.append(load_run(f, sensor_names))
+            runs.append(load_run(f, sensor_names, read_mcap))
         except DataError as exc:
             rejected.append(Rejected(f, exc.reason))
     return runs, rejected

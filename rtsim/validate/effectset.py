@@ -1,6 +1,7 @@
-"""Effects as the workflow handles them: a name from the model's catalogue
-(rtsim.vehicle.car.effects.EFFECTS) with its parameter values, and the conversions to the mapping that
-`VehicleSim.set_effects` and the vehicle config's `[effects]` tables take:
+"""Effects as the workflow handles them: a name from the vehicle's effect catalogue (its validation
+profile's, rtsim.vehicle.validation: the car's rtsim.vehicle.car.effects.EFFECTS, the two-wheeler's
+rtsim.vehicle.motorcycle.effects.EFFECTS) with its parameter values, and the conversions to the mapping
+that `VehicleSim.set_effects` and the vehicle config's `[effects]` tables take:
 {"rolling_resistance": {"coefficient": 0.012}, "sensor_bias": [{"channel": "accel_x", "bias": 0.1}]}.
 Model effects go to the model; sensor effects are applied to the model's outputs
 (rtsim.validate.replay.Replayer.reported: the vehicle's one sensor model)."""
@@ -8,30 +9,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from rtsim.errors import ConfigError
-
+#: The sensor effects: those of the one sensor model every vehicle shares (rtsim.vehicle.kit.sensor_model),
+#: the same names in every vehicle's catalogue; every other effect acts on the model.
 SENSOR_EFFECTS = ("sensor_delay", "sensor_bias", "sensor_scale")
 
 
-def catalogue() -> dict:
-    """The validated vehicle's effect catalogue (rtsim.validate.profile.active): name -> EffectSpec
-    (ConfigError when the model has none)."""
-    from .profile import active
-    if active().kind == "two_wheeler":
-        from .two_wheeler_effects import EFFECTS as TW
-        return TW
-    try:
-        from rtsim.vehicle.car.effects import EFFECTS
-    except ImportError as exc:
-        raise ConfigError(f"the vehicle model has no effect catalogue (rtsim.vehicle.car.effects: {exc})") from None
-    return EFFECTS
-
-
 def kind(name: str) -> str:
-    try:
-        return catalogue()[name].kind
-    except ConfigError:
-        return "sensor" if name in SENSOR_EFFECTS else "model"
+    """The effect's kind: "sensor" for an effect of the sensor model, else "model"."""
+    return "sensor" if name in SENSOR_EFFECTS else "model"
 
 
 @dataclass

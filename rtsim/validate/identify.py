@@ -85,7 +85,7 @@ from scipy.optimize import minimize_scalar
 from rtsim.errors import RtsimError
 from rtsim.vehicle.kit.sensor_model import delayed
 
-from .effectset import Effect, catalogue
+from .effectset import Effect
 from .crossval import leave_one_run_out, normalised
 from .objective import MOVING, Objective, _tau
 from .stats import t_critical
@@ -215,6 +215,12 @@ class Context:
     cost: float
     n_runs: int
     deviations: list | None = None      # per run: its replay's normalised outputs minus their mean (crossval)
+
+    @property
+    def catalogue(self) -> dict:
+        """The vehicle's effect catalogue (its validation profile's, carried by the replayer): name ->
+        EffectSpec."""
+        return self.replayer.profile.effects
 
 
 # ------------------------------------------------------------------------------ parameter mapping
@@ -426,7 +432,7 @@ def fit_model_effect(ctx: Context, name: str, budget: int = MAX_SIMS,
                      seed: list[tuple[float, dict]] | None = None) -> Candidate:
     """Fit the model effect `name` by re-simulation (module docstring) with at most `budget`
     simulations in all, continuing from the simulations `seed` ((theta, raw outputs) of a screening)."""
-    spec = catalogue()[name]
+    spec = ctx.catalogue[name]
     params = _numeric_params(spec)
     coord = Coord(params[0])
     obj = ctx.objective
@@ -554,7 +560,7 @@ def _sensor_channels(ctx: Context) -> list[tuple[str, str]]:
 
 def fit_sensor_effects(ctx: Context) -> list[Candidate]:
     """Every sensor effect on every compared channel (no simulation: the sensor model on the current outputs)."""
-    cat = catalogue()
+    cat = ctx.catalogue
     obj = ctx.objective
     t = ctx.inputs.t
     n = t.size

@@ -66,6 +66,7 @@ from rtsim.vehicle.kit.sensor_model import apply_to_series, neutral_params, sens
 from rtsim.vehicle.car.sensors import G_WORLD_Z, NSENSOR
 from rtsim.vehicle.car.sim import VehicleSim
 from rtsim.vehicle.kit.tyre.magic_formula import effective_rolling_radius
+from rtsim.vehicle.registry import open_vehicle
 
 from .benchmark import Benchmark
 from .data import ACCEL_FRAMES
@@ -173,6 +174,7 @@ class Replayer(InputCache):
     def __init__(self, vehicle: str | Path, road: str | Path | None = None, dt: float = 1e-3,
                  fit_dt: float = 2e-3, accel_frame: str = "body"):
         self.vehicle_path = Path(vehicle)
+        self.profile = open_vehicle(self.vehicle_path).validation     # the vehicle's validation profile
         self.config, base = load_vehicle(self.vehicle_path)
         self.model = build_vehicle(self.config, base)
         self.road_path = Path(road) if road is not None else DEFAULT_ROAD

@@ -19,9 +19,9 @@ the way a rider does, and the quantities a rider closes it on are the inputs:
   vehicle's engine and gearbox) and the caliper pressures ``brake_pressure_front`` / ``_rear`` (as
   the actuators' outputs they act directly; no actuator lag is applied twice).
 
-Everything else is compared (rtsim.validate.profile.TWO_WHEELER): the steering torque the lean loop
-needs and the steer angle it gives, yaw, roll and pitch rates, the accelerations, wheel speeds, fork and
-shock travel, pitch. The rider's demands (``rider_*``) equal the actuators' outputs without an ECU and
+Everything else is compared (its validation profile, rtsim.vehicle.motorcycle.validation): the steering
+torque the lean loop needs and the steer angle it gives, yaw, roll and pitch rates, the accelerations,
+wheel speeds, fork and shock travel, pitch. The rider's demands (``rider_*``) equal the actuators' outputs without an ECU and
 are neither replayed nor compared. The lean loop is not the field rider: its torque differs from the
 rider's where the roll is tracked imperfectly (fast roll transients), which is structural mismatch the
 workflow reports as such; in steady lean both give the torque the physics needs.
@@ -40,7 +40,7 @@ differently enough to be mistaken for an effect (on seven braking runs replayed 
 accel_x RMS error 0.22 instead of 0.06 m/s^2, front wheel speed 0.9 rad/s low at the end, a fitted
 brake_friction of 0.89 on data without any effect).
 
-Effects (rtsim.validate.two_wheeler_effects) change the model through its parameters only: an added
+Effects (rtsim.vehicle.motorcycle.effects) change the model through its parameters only: an added
 mass or a grade rebuilds the model (10 ms) and its static pose (cached per value; the IMU then reads
 the tilted gravity, `_tilt`), brake and tyre
 scales change the parameter arrays of that simulation; the stepping loop is one compiled kernel
@@ -72,6 +72,7 @@ from rtsim.vehicle.motorcycle.plant import (C_ASSIST_INVALID, C_BRAKE_FRONT, C_B
                                             plant_step, plant_view)
 from rtsim.vehicle.motorcycle.sim import TwoWheelerSim, static_pose
 from rtsim.vehicle.motorcycle.step import TO_FZ
+from rtsim.vehicle.registry import open_vehicle
 from drivers.rider import RO_TORQUE, RV_DELTADOT, RV_PHI, RV_PHIDOT
 
 from .benchmark import Benchmark
@@ -191,11 +192,10 @@ def _start_rate(t: np.ndarray, w: np.ndarray) -> float:
 class TwoWheelerReplayer(InputCache):
     """The two-wheeler's model, rebuilt per effect set where the effect needs it (module docstring)."""
 
-    kind = "two_wheeler"
-
     def __init__(self, vehicle: str | Path, road: str | Path | None = None, dt: float = 1e-3,
                  fit_dt: float = 2e-3):
         self.vehicle_path = Path(vehicle)
+        self.profile = open_vehicle(self.vehicle_path).validation     # the vehicle's validation profile
         self.config, self.base = load_motorcycle(self.vehicle_path)
         if self.config.tyres.model == "knife_edge":
             raise ConfigError(f"{self.vehicle_path}: knife-edge wheels have no tyre forces to validate; use a "
@@ -208,7 +208,7 @@ class TwoWheelerReplayer(InputCache):
         self._cache: dict = {}
         mm = self._model(0.0, 0.0, self.dt)[0]
         self.model = mm
-        self.sensor_names = tuple(c.name for c in _sensors())
+        self.sensor_names = self.profile.sensor_names
         self.wheel_radius = float(self.config.front_wheel.radius_m)
         q, loads = self._model(0.0, 0.0, self.dt)[1:]
         probe = TwoWheelerSim(mm, dt=self.dt, speed=PROBE_SPEED, q=q)
@@ -216,11 +216,6 @@ class TwoWheelerReplayer(InputCache):
         probe.run(PROBE_TIME)
         # rad/s of the front wheel per m/s rolling freely: the loaded tyre's effective rolling radius
         self._spin_per_speed = float(probe.data.qd[mm.bike.idx[K_PHI_F]]) / probe.velocity[0]
-
-    def __setstate__(self, state):
-        from .profile import activate
-        self.__dict__.update(state)
-        activate("two_wheeler")
 
     # ---- the model with an effect set ------------------------------------------------------------------
     def _model(self, added_mass: float, grade: float, dt: float):
@@ -356,9 +351,3 @@ class TwoWheelerReplayer(InputCache):
         out = dict(raw)
         out.update({n: y[:, k] for k, n in enumerate(names)})
         return out
-
-
-def _sensors():
-    from rtsim.channels import TWO_WHEELER_SENSORS
-    return TWO_WHEELER_SENSORS
-

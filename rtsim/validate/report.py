@@ -32,7 +32,6 @@ import numpy as np  # noqa: E402
 
 from .benchmark import LATERAL  # noqa: E402
 from .data import unit  # noqa: E402
-from .effectset import catalogue  # noqa: E402
 from .identify import evidence_strength  # noqa: E402
 from .verdict import Verdict, build as build_verdict  # noqa: E402
 from .workflow import Result  # noqa: E402
@@ -262,7 +261,7 @@ def write(res: Result, folder: Path) -> dict:
         name = f"channel_{c}.png"
         _plot_channel(res, c, folder / name)
         plots.append((c, name))
-    cat = catalogue()
+    cat = res.profile.effects
     e = html.escape
     parts = [f"<h1>Validation report: {e(res.options.vehicle.name)}</h1>", *_verdict_html(res, verdict),
              f"<p>Accelerations compared in the {e(res.accel_frame)} frame (see Model and replay).</p>"]
@@ -393,8 +392,8 @@ def write(res: Result, folder: Path) -> dict:
             else "no effects in the config")
     kind = ("lateral (steering: " + ", ".join(c for c in bench.compared if c in LATERAL) + " compared)"
             if bench.lateral else "longitudinal (no steering: lateral channels not compared)")
-    if getattr(res.replayer, "kind", "car") == "two_wheeler":
-        kind = "two-wheeler (the recorded roll followed; compared: " + ", ".join(bench.compared) + ")"
+    if res.profile.manoeuvre:                   # the vehicle's own description (its validation profile)
+        kind = res.profile.manoeuvre.format(compared=", ".join(bench.compared))
     steer = ""
     err = res.inputs.steer_error.get(res.replayer.dt)
     if err is not None and math.isfinite(err):

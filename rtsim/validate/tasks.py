@@ -1,11 +1,13 @@
 """The validation workflow's units of parallel work and where they run: forked worker processes that
 inherit the iteration's context (the compiled model is shared, never rebuilt), or Ray tasks that get it
-shipped once per worker (rtsim.batch.executors.ray_map). A task that fails with an RtsimError comes back
+shipped once per worker (`RayWorkers`: the executor the command passes in, rtsim.batch.executors'
+ray_init and ray_map; this layer does not import the batch's). A task that fails with an RtsimError comes back
 as `Failed` (its text), never as an exception the pool would have to unpickle."""
 from __future__ import annotations
 
 import multiprocessing as mp
 from dataclasses import dataclass
+from typing import Callable
 
 from rtsim.errors import RtsimError
 
@@ -72,18 +74,20 @@ def _same(ctx: Context) -> Context:
 
 @dataclass(frozen=True)
 class RayWorkers:
-    """Where `map_tasks` runs its tasks when the workflow runs on Ray: the cluster `address` (connected once
-    by `run`)."""
+    """Where `map_tasks` runs its tasks when the workflow runs on Ray: the cluster `address` ("auto": a
+    local instance on 127.0.0.1), connected once by the workflow's `run` with `init(address)`; `map(fn,
+    tasks, setup, setup_args, address=)` runs the tasks, each worker building its context once with
+    `setup(*setup_args)` (rtsim.batch.executors.ray_init and ray_map)."""
     address: str
+    init: Callable
+    map: Callable
 
 
 def map_tasks(ctx: Context, tasks: list[tuple], workers: int | RayWorkers, progress) -> list:
     """The tasks' results, in order, computed by `workers` forked processes or by Ray tasks."""
     global _CTX
     if isinstance(workers, RayWorkers):
-        from rtsim.batch.executors import ray_map
-
-        out = ray_map(run_task, tasks, _same, (ctx,), address=workers.address)
+        out = workers.map(run_task, tasks, _same, (ctx,), address=workers.address)
         progress.advance(len(out))
         return out
     _CTX = ctx

@@ -115,12 +115,9 @@ class Verdict:
 
 
 # ------------------------------------------------------------------------------------------ building
-def _param_unit(effect, param: str) -> str:
-    try:
-        from .effectset import catalogue
-        spec = catalogue().get(effect.name)
-    except Exception:              # noqa: BLE001 - no catalogue: the unit is left out, the value is kept
-        spec = None
+def _param_unit(effect, param: str, catalogue: dict) -> str:
+    """The unit of an effect's parameter from the vehicle's catalogue (not in it: none; the value is kept)."""
+    spec = catalogue.get(effect.name)
     u = next((p.unit for p in spec.params if p.name == param), "") if spec else ""
     if u.startswith("unit") and effect.channel:
         u = unit(effect.channel)
@@ -131,12 +128,12 @@ def _g(x: float) -> str:
     return f"{x:.4g}"
 
 
-def found(effect) -> Found:
-    """An effect named, with its values and 95 % intervals."""
+def found(effect, catalogue: dict) -> Found:
+    """An effect named, with its values and 95 % intervals (units from the vehicle's `catalogue`)."""
     vals, parts = [], []
     for k, v in effect.values().items():
         h = effect.uncertainty.get(k)
-        u = _param_unit(effect, k)
+        u = _param_unit(effect, k, catalogue)
         us = f" {u}" if u else ""
         ok = h is not None and math.isfinite(h)
         vals.append({"parameter": k, "value": v, "half_width": h if ok else None,
@@ -181,7 +178,7 @@ def _pct(x) -> str:
 def build(res) -> Verdict:
     """The verdict of a workflow Result (see the module docstring)."""
     from .structural import describe_signature
-    named = [found(e) for e in res.effects]
+    named = [found(e, res.profile.effects) for e in res.effects]
     labels = {f.effect for f in named}
     keys = {e.key for e in res.effects}
     down = _turned_down(res, keys)

@@ -28,6 +28,12 @@ every channel is reported as explained, inside the band or structural with its s
 confounded), and the verdict says "no catalogue effect" or "cannot be told apart" when no effect stands
 out from the structural mismatch.
 
+The vehicle's validation profile (rtsim.vehicle.validation, from `open_vehicle(vehicle).validation`)
+says what differs between vehicles: the inputs the replay follows, the compared channels, the effect
+catalogue, the sensor channels read from the runs, the replayer and the report's line on the manoeuvre.
+The workflow takes it once per run and passes it on (the benchmark, the replayer, the result); it holds
+no vehicle of its own between runs.
+
 The loop also stops when every channel's normalised cost (objective) is at most 1, i.e. the model is
 within the data's own uncertainty: a candidate fitted there would fit noise and averaging artefacts.
 
@@ -39,8 +45,9 @@ Gauss-Newton step, halved once when it overshoots), the `REFINE_TOP` best are re
 (_ensemble: they are fitted on the per-run replays averaged, without the mean-input replay's averaging
 artefact, and a sensor winner's per-run values reuse those replays); candidates are fitted in parallel by
 `workers` processes forked after the model is built (the compiled model is shared, never rebuilt), or
-with `ray` (an address, "auto": a local instance on 127.0.0.1) by Ray tasks (rtsim.batch.executors.ray_map:
-the iteration's context shipped once to each worker; the same results, in the same order). Each
+with `ray` (tasks.RayWorkers: an address, "auto" for a local instance on 127.0.0.1, and the executor's
+functions, which the command passes in: rtsim.batch.executors.ray_init and ray_map) by Ray tasks (the
+iteration's context shipped once to each worker; the same results, in the same order). Each
 run's replay inputs (its steering command matched to its measured angle, see replay) are prepared once,
 in parallel, before the first per-run replay. A simulation error in a worker comes back as text
 (tasks.Failed): a per-run replay that fails leaves the mean-input fit and its linearised interval, said so in
@@ -48,6 +55,7 @@ the candidate's note.
 """
 from __future__ import annotations
 
+import importlib
 import math
 import os
 import time
@@ -56,17 +64,17 @@ from pathlib import Path
 
 import numpy as np
 
+from rtsim.vehicle.registry import open_vehicle
+
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import MIN_RUNS, accel_frame, announce, load_runs, require_runs
-from .effectset import Effect, catalogue, from_mapping
+from .effectset import Effect, from_mapping
 from .identify import (CLEAR, LITTLE, MAX_SIMS, Candidate, Context, add_detail, combine_runs, equivalents,
                        fit_sensor_effects, rank, rebase, run_estimate)
 from .crossval import normalised
 from .joint import joint_model
 from .objective import Objective
-from .profile import activate, active, vehicle_kind
 from .replay import Replayer, ReplayInputs
-from .replay_two_wheeler import TwoWheelerReplayer
 from .residuals import Regimes, describe, locate, regimes
 from .stats import error_metrics
 from .structural import channel_report, correlations
@@ -92,12 +100,14 @@ class Options:
     fit_dt: float = 2e-3
     max_iterations: int = 4
     workers: int = 2
-    ray: str | None = None            # re-simulations on Ray: "auto" (local, 127.0.0.1) or a cluster address
+    ray: RayWorkers | None = None     # re-simulations on Ray (its address and executor, given by the command)
     compare: list[str] | None = None
     accel_frame: str | None = None    # "body" or "level": the runs' accelerometer frame (None: as the runs
                                       # declare it, else body; data.accel_frame)
     progress: object = None           # a Progress-like object with .stage(text, total) / .advance()
     min_runs: int = MIN_RUNS          # stop unless this many runs pass the data checks (data.require_runs)
+    read_mcap: object = None          # path -> (messages, info): how MCAP runs are read (the command passes
+                                      # bridge.mcap_recorder.read_recording; None: MCAP runs are refused)
 
 
 @dataclass
@@ -142,6 +152,7 @@ class Result:
     after: dict                       # model outputs after
     iterations: list[Iteration]
     verdict: str
+    profile: object                   # the vehicle's validation profile (rtsim.vehicle.validation)
     timings: dict = field(default_factory=dict)
     mean_input: dict = field(default_factory=dict)   # "before"/"after": the mean-input replays' outputs
     comparison: str = ""              # how `before` and `after` were made
@@ -296,16 +307,17 @@ def _ensemble(ctx: Context, workers: int, cache: dict) -> tuple[Context | None, 
                    ctx.deviations), raws
 
 
-def _sensor_names(opts: Options, replayer: Replayer | None) -> tuple[str, ...]:
+def _sensor_names(profile, replayer: Replayer | None) -> tuple[str, ...]:
     """The validated vehicle's sensor channels (its channel dictionary), without building its model."""
     if replayer is not None:
         return getattr(replayer, "sensor_names", None) or replayer.model.channels.sensor_names
-    if active().kind == "two_wheeler":
-        from rtsim.channels import TWO_WHEELER_SENSORS
-        return tuple(c.name for c in TWO_WHEELER_SENSORS)
-    from rtsim.vehicle.car.build import vehicle_channels
-    from rtsim.vehicle.car.config import load_vehicle
-    return vehicle_channels(load_vehicle(opts.vehicle)[0]).sensor_names
+    return profile.sensor_names
+
+
+def make_replayer(profile, vehicle: Path, road: Path | None, dt: float, fit_dt: float):
+    """The replayer the vehicle's validation profile names ("module:Class"), built on the vehicle file."""
+    module, _, name = profile.replayer.partition(":")
+    return getattr(importlib.import_module(module), name)(vehicle, road, dt, fit_dt)
 
 
 def run(opts: Options, replayer: Replayer | None = None) -> Result:
@@ -315,11 +327,9 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
         return _run(opts, replayer)
     import sys
 
-    from rtsim.batch.executors import ray_init
-
     started = "ray" not in sys.modules or not sys.modules["ray"].is_initialized()
     if started:
-        ray_init(opts.ray)
+        opts.ray.init(opts.ray.address)
     try:
         return _run(opts, replayer)
     finally:
@@ -331,21 +341,20 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     prog = opts.progress or Quiet()
     tm = {}
     t0 = time.perf_counter()
-    kind = getattr(replayer, "kind", None) or vehicle_kind(opts.vehicle)
-    activate(kind)                        # the vehicle's inputs, compared channels and effect catalogue
+    # the vehicle's inputs, compared channels, effect catalogue and replayer
+    profile = replayer.profile if replayer is not None else open_vehicle(opts.vehicle).validation
     prog.stage("loading runs", None)
-    runs, rejected = load_runs(opts.runs, _sensor_names(opts, replayer))
+    runs, rejected = load_runs(opts.runs, _sensor_names(profile, replayer), opts.read_mcap)
     announce(rejected)                    # one line per run left out, on stderr
     require_runs(runs, rejected, opts.min_runs)
     frame = accel_frame(runs, opts.accel_frame)
-    bench = build_benchmark(runs, rejected, opts.rate, opts.align, opts.compare)
+    bench = build_benchmark(runs, rejected, opts.rate, opts.align, opts.compare, profile)
     announce(bench.rejected[len(rejected):])
     require_runs(bench.runs, bench.rejected, opts.min_runs)
     tm["data"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     prog.stage("building the model", None)
-    rp = replayer or (TwoWheelerReplayer if kind == "two_wheeler" else Replayer)(opts.vehicle, opts.road, opts.dt,
-                                                                                  opts.fit_dt)
+    rp = replayer or make_replayer(profile, opts.vehicle, opts.road, opts.dt, opts.fit_dt)
     rp.simulations = 0
     rp.accel_frame = frame
     inp = rp.inputs(bench)
@@ -359,13 +368,13 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     tm["first_simulation"] = (time.perf_counter() - t2) / 2
     obj = Objective.from_benchmark(bench, rp.wheel_radius)
     reg = regimes(bench, rp.wheel_radius)
-    cat = catalogue()
+    cat = profile.effects
     effects: list[Effect] = []
     latest: dict = {}                   # effect key -> the candidate that fitted its current value
     iterations: list[Iteration] = []
     verdict = ""
     replays: dict = {}                  # model effects -> every run's replay (_run_raws)
-    workers = RayWorkers(opts.ray) if opts.ray else max(1, min(opts.workers, os.cpu_count() or 1))
+    workers = opts.ray or max(1, min(opts.workers, os.cpu_count() or 1))
     for k in range(1, opts.max_iterations + 1):
         ti = time.perf_counter()
         current = [*base, *effects]
@@ -542,6 +551,6 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     tm["identification"] = sum(it.seconds for it in iterations)
     tm["simulations"] = rp.simulations
     tm["total"] = time.perf_counter() - t0
-    return Result(opts, bench, inp, rp, obj, reg, base, effects, before, after, iterations, verdict, tm,
+    return Result(opts, bench, inp, rp, obj, reg, base, effects, before, after, iterations, verdict, profile, tm,
                   mean_input=replayed, comparison=comparison, nuisance=obj.nuisance_values(after),
                   channels=chans, correlations=corr, confounded=confounded, accel_frame=frame)

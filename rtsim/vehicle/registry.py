@@ -147,6 +147,11 @@ class VehicleKind:
         scales, the bus command each competes with, the page's groups of them."""
         raise NotImplementedError
 
+    def validation(self, opened: "OpenedVehicle"):
+        """The vehicle's validation profile (rtsim.vehicle.validation.ValidationProfile): what `rtsim
+        validate` replays, compares and fits, and the replayer it re-simulates the vehicle with."""
+        raise NotImplementedError
+
 
 #: the fields `rtsim describe --json` reports for every vehicle (a kind adds its own after them), in SI
 #: units: masses per body (kg), the geometry in the vehicle's design frame (m; wheel_centres one row per
@@ -216,6 +221,11 @@ class OpenedVehicle:
     @property
     def default_scenario(self) -> Path:
         return resolve_scenario(self.kind.default_scenario)
+
+    @property
+    def validation(self):
+        """The vehicle's validation profile (rtsim.vehicle.validation), for `rtsim validate`."""
+        return self.kind.validation(self)
 
 
 def kind_of(data: dict, path: Path) -> VehicleKind:

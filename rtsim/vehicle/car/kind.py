@@ -96,6 +96,12 @@ class CarKind(VehicleKind):
         cfg = opened.config
         return user_inputs(float(cfg.powertrain.throttle.max), float(cfg.brakes.actuator.max))
 
+    def validation(self, opened):
+        """The car's validation profile (rtsim.vehicle.car.validation), its sensor channels the config's."""
+        from .validation import profile
+
+        return profile(opened.config)
+
     def demo(self, opened) -> Demo:
         if opened.config.eps is not None:      # the EPS ECU closes the assist loop: lockstep, its manoeuvre
             return Demo("drivers.eps_demo", "lockstep", EPS_DEMO_SCENARIO, None, True, "eps")

@@ -289,12 +289,12 @@ class MotorcycleConfig(Strict):
     sensors: Sensors = Sensors()
     interface: Interface = Interface()
     effects: dict | None = Field(default=None, description="effects identified by rtsim validate "
-                                 "(rtsim.validate.two_wheeler_effects); applied by its replay")
+                                 "(rtsim.vehicle.motorcycle.effects); applied by its replay")
 
     @model_validator(mode="after")
     def _consistent(self):
         if self.effects is not None:
-            from rtsim.validate.two_wheeler_effects import check_effects
+            from .effects import check_effects
             check_effects(self.effects)
         px, pz = self.geometry.swingarm_pivot_m
         if math.hypot(px, pz - self.rear_wheel.radius_m) < 0.05:

@@ -110,6 +110,12 @@ class TwoWheelerKind(VehicleKind):
 
         return user_inputs(opened.config)
 
+    def validation(self, opened):
+        """The two-wheeler's validation profile (rtsim.vehicle.motorcycle.validation)."""
+        from .validation import PROFILE
+
+        return PROFILE
+
     def demo(self, opened) -> Demo:
         return Demo("drivers.rider_assist_demo", "lockstep", None, DEMO_DURATION, True, "two_wheeler")
 

@@ -1,6 +1,6 @@
-"""The two-wheeler's effect catalogue for the validation workflow: the physical effects a motorcycle
-model may lack, each applied by re-parametrising the model for one simulation
-(rtsim.validate.replay_two_wheeler), and the sensor effects on its channels.
+"""The two-wheeler's effect catalogue (its validation profile's, rtsim.vehicle.motorcycle.validation): the
+physical effects a motorcycle model may lack, each applied by the validation workflow's replay
+re-parametrising the model for one simulation, and the sensor effects on its channels.
 
 Model effects (their parameters, SI):
 
@@ -26,8 +26,9 @@ import math
 from dataclasses import dataclass
 
 from rtsim.channels import TWO_WHEELER_SENSORS
-from rtsim.vehicle.car.effects import EFFECTS as CAR_EFFECTS
-from rtsim.vehicle.car.effects import EffectSpec, ParamSpec
+
+from ..car.effects import EFFECTS as CAR_EFFECTS
+from ..car.effects import EffectSpec, ParamSpec
 
 UNITS = {c.name: c.unit for c in TWO_WHEELER_SENSORS}
 
