@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.channels import ChannelDictionary, two_wheeler_channels
-from drivers.rider import rider as make_rider
+from .rider import rider as make_rider
 
 from .build import MotorcycleModel
 from .config import MotorcycleConfig
