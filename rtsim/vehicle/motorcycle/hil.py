@@ -83,6 +83,12 @@ class TwoWheelerHil:
         self.io = PlantIO(np.zeros(NCOMMAND))
         self.io.commands[[INVALID_SLOTS[n] for n in INVALID_SLOTS]] = 1.0     # no command yet
 
+    @property
+    def drawing(self):
+        """How the two-wheeler is drawn (rtsim.vehicle.motorcycle.drawing)."""
+        from .drawing import two_wheeler_drawing
+        return two_wheeler_drawing(self.vm.config)
+
     def served(self) -> "LoopTwoWheeler":
         """The two-wheeler as the service's compiled step takes it (rtsim.service.vehicles)."""
         return LoopTwoWheeler(self.m, self.data, self.params, self.state, self.rider, self.parts, self.io)

@@ -111,7 +111,15 @@ class TwoWheelerKind(VehicleKind):
         return user_inputs(opened.config)
 
     def demo(self, opened) -> Demo:
-        return Demo("rtsim.vehicle.motorcycle.rider_assist_demo", "lockstep", None, DEMO_DURATION, True, "two_wheeler")
+        return Demo("drivers.rider_assist_demo", "lockstep", None, DEMO_DURATION, True)
+
+    def fuzz_rig(self, opened, dt):
+        from .fuzz import TwoWheelerFuzzRig
+        return TwoWheelerFuzzRig(opened, dt)
+
+    def drawing(self, opened):
+        from .drawing import two_wheeler_drawing
+        return two_wheeler_drawing(opened.config)
 
 
 KIND = TwoWheelerKind()

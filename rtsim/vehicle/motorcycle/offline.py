@@ -359,4 +359,7 @@ def scene_source(mm):
     records it."""
     from types import SimpleNamespace
 
-    return SimpleNamespace(vm=SimpleNamespace(model=mm, channels=CHANNELS), road=None)
+    from .drawing import two_wheeler_drawing
+
+    return SimpleNamespace(vm=SimpleNamespace(model=mm, channels=CHANNELS), road=None,
+                           drawing=two_wheeler_drawing(mm.config))
