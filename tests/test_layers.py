@@ -118,7 +118,8 @@ def test_a_planted_wrong_way_import_fails_the_check():
     # the rules of the vehicle interface: the vehicle never imports its drivers or riders, the core never
     # the bridge
     planted["rtsim.vehicle.motorcycle.planted"] = "from drivers.rider import rider_step\n"
-    planted["rtsim.analyses.planted"] = "def read(p):\n    from bridge.mcap_log import read_run\n    return read_run(p)\n"
+    planted["rtsim.analyses.planted"] = ("def read(p):\n    from bridge.mcap_log import read_run\n"
+                                         "    return read_run(p)\n")
     found = wrong_way(planted) - set(KNOWN)
     assert found == {("rtsim.mbs.planted", "bridge.can_bus"), ("rtsim.vehicle.car.planted", "rtsim.service"),
                      ("drivers.planted", "rtsim.viewer.server"), ("rtsim.vehicle.motorcycle.planted", "drivers.rider"),

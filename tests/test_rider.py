@@ -1,5 +1,5 @@
-"""Motorcycle rider (rtsim/vehicle/motorcycle/rider.py) and reference paths (rtsim/road/paths.py): curvilinear coordinates,
-curvature, lean reference, reaction delay, speed PI on a point mass, and the closed loop on the
+"""Motorcycle rider (rtsim/vehicle/motorcycle/rider.py) and reference paths (rtsim/road/paths.py):
+curvilinear coordinates, curvature, lean reference, reaction delay, speed PI on a point mass, and the closed loop on the
 linearised benchmark bicycle of Meijaard et al. (2007).
 
 Benchmark bicycle in ISO 8855. The paper's axes are x forward, y right, z down: its roll phi_M is

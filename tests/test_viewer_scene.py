@@ -1,7 +1,8 @@
 """What `rtsim view` draws, described from the configuration (rtsim.viewer.scene, the vehicle's drawing:
 rtsim.vehicle.kit.drawing), against the files it comes from: the car's wheel centres from its hardpoints
-relative to its centre of mass, its tyre from the .tir file; the two-wheeler's points from its geometry; the campus road as the survey mesh the service builds (same vertices, triangles, friction);
-a grade's plane; a road file that cannot be read drawn flat with the reason."""
+relative to its centre of mass, its tyre from the .tir file; the two-wheeler's points from its geometry;
+the campus road as the survey mesh the service builds (same vertices, triangles, friction); a grade's plane;
+a road file that cannot be read drawn flat with the reason."""
 from __future__ import annotations
 
 from pathlib import Path

@@ -40,10 +40,10 @@ def car_drawing(cfg, base: str | Path) -> Drawing:
     length, width = x_front - x_rear, max(ys) - min(ys) + 0.15
     z_floor = rel[0][2] - 0.05
     cabin = (x_rear + length * 0.42, 0.0, z_floor + 0.5 + 0.05 + 0.225)
-    pieces = ({"shape": "box", "at": [0.5 * (x_front + x_rear), 0.0, z_floor + 0.25 + 0.05], "size": [length, width, 0.5],
-               "colour": "paint", "carrier": "body"},
+    pieces = ({"shape": "box", "at": [0.5 * (x_front + x_rear), 0.0, z_floor + 0.25 + 0.05],
+               "size": [length, width, 0.5], "colour": "paint", "carrier": "body"},
               {"shape": "box", "at": list(cabin), "size": [length * 0.5, width * 0.86, 0.45], "colour": CABIN_COLOUR,
-               "carrier": "body", "cockpit": False})
+               "carrier": "body", "in_cockpit": False})
     return Drawing("zyx", (0.5 * (front + rear) + 0.1, 0.0, min(r[2] for r in rel) + 0.35),
                    (front - rear + 2.0 * radius + 0.5, max(ys) - min(ys) + 0.05, 0.55), wheels, pieces=pieces,
                    eye=(cabin[0] + length * 0.25 - 0.3, rel[0][1] * 0.45, z_floor + 1.1), chase=(8.5, 3.0))

@@ -17,15 +17,17 @@ radians.
   (turns about the steering axis, slides along it with the fork's travel) or ``"swingarm"``.
 - ``steering``, ``swingarm``: the articulated assemblies (None: none); ``articulate`` places the wheels
   and the assemblies' primitives for a state.
-- ``pieces``: what the page draws of the body besides the wheels (boxes, spheres, cylinders, each
-  carried by the body or the steering, coloured by a role or a colour), its driver's ``eye``, the
-  ``chase`` camera's distance behind and height above, and the ``paint`` a vehicle of the default colour
-  takes instead.
+- ``pieces``: what the page draws of the body besides the wheels, each a dict: ``shape`` ("box" of
+  ``size``, "sphere" of ``radius``, "cylinder" of ``radius`` and ``length`` along ``direction``), its
+  centre ``at``, an optional ``pitch`` (rad, about y), ``colour`` (a colour, or "paint": the vehicle's),
+  ``carrier`` ("body" or "steering") and ``in_cockpit`` (False: hidden from the driver's camera); the
+  driver's ``eye``, the ``chase`` camera's distance behind and height above (m), and the ``paint`` a
+  vehicle drawn in the default colour takes instead.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Callable
 
 Vec = tuple[float, float, float]
@@ -127,7 +129,6 @@ class Drawing:
     chase: tuple[float, float] = (8.5, 3.0)
     paint: str | None = None
     wheel_travel: float = 0.12          # m: how far the page lets a wheel that stands on the road move
-    extra: dict = field(default_factory=dict)
 
     def orientation(self, roll: float, pitch: float, yaw: float):
         """The reference frame's orientation quaternion (x, y, z, w) from the state's angles."""
@@ -181,6 +182,4 @@ class Drawing:
 
     def page(self) -> dict:
         """The description as the viewer's page takes it (JSON: lists for vectors)."""
-        out = asdict(self)
-        out.pop("extra")
-        return out
+        return asdict(self)

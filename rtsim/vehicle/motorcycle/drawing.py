@@ -52,7 +52,8 @@ def two_wheeler_drawing(cfg) -> Drawing:
     rw = (-px, 0.0, rr - pz)
     fw = (g.wheelbase_m - px, 0.0, rf - pz)
     r = rider or cg
-    pieces = [{"shape": "box", "at": [top[0] / 2, 0.0, (top[2] + cg[2]) / 2], "size": [math.hypot(top[0], top[2]) + 0.2, 0.22, 0.28],
+    pieces = [{"shape": "box", "at": [top[0] / 2, 0.0, (top[2] + cg[2]) / 2],
+               "size": [math.hypot(top[0], top[2]) + 0.2, 0.22, 0.28],
                "pitch": -math.atan2(top[2] - cg[2], top[0]) * 0.5, "colour": "paint", "carrier": "body"},
               {"shape": "box", "at": [cg[0] - 0.15, 0.0, cg[2] + 0.25], "size": [0.6, 0.26, 0.1], "colour": DARK,
                "carrier": "body"}]

@@ -1,8 +1,8 @@
 """Offline runs of the motorcycle's scenarios (a scenario file with [rider] and/or [two_wheeler], loaded by
-drivers.scenario and handed in: the vehicle never imports its drivers): the rider or the open-loop
-profiles on the two-wheeler sim, as fast as the machine allows, logged at the scenario's output rate to CSV or MCAP (`CHANNELS`: the car's state names where
-the quantity is the same, `_f`/`_r` for the front and rear wheel), and a summary of what the
-manoeuvre measures against its analytic reference:
+drivers.scenario and handed in: the vehicle never imports its drivers): the rider or the open-loop profiles on
+the two-wheeler sim, as fast as the machine allows, logged at the scenario's output rate to CSV or MCAP
+(`CHANNELS`: the car's state names where the quantity is the same, `_f`/`_r` for the front and rear wheel),
+and a summary of what the manoeuvre measures against its analytic reference:
 
 - every run: status (`ok`, or `fall` with the time and the reason: roll past 70 deg, both tyres off the
   road, pitched over), distance, speeds, peak roll;

@@ -16,8 +16,9 @@ two-wheeler steps (rtsim.vehicle.motorcycle.step), and a fall ends the run with 
 The offline ride (rtsim.vehicle.motorcycle.ride) calls the same view and inputs kernels, with no bus
 commands: a scenario run and a served session form their inputs alike.
 
-The rider (``plant_rider``, rtsim.vehicle.motorcycle.rider) reads the same view as offline (rtsim.vehicle.motorcycle.ride):
-the rear contact point, the pivot's velocity in the heading frame, yaw, roll and steer with their rates.
+The rider (``plant_rider``, rtsim.vehicle.motorcycle.rider) reads the same view as offline
+(rtsim.vehicle.motorcycle.ride): the rear contact point, the pivot's velocity in the heading frame, yaw,
+roll and steer with their rates.
 
 Sensors (``plant_sensors``): the IMU at ``[sensors] imu_position_m`` on the rear frame in the frame's
 axes (x along the ground line at zero pitch, y left, z up): specific force ``R^T (r'' - g)``, angular

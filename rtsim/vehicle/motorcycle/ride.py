@@ -23,8 +23,8 @@ assert (RO_TORQUE, RO_THROTTLE, RO_BRAKE_F, RO_BRAKE_R) == (0, 1, 2, 3)
 
 
 def tyre_lean_ratio(mm: MotorcycleModel) -> float:
-    """k = rho / (h - rho) of the rider's lean feed-forward (rtsim.vehicle.motorcycle.rider): the tyres' mean crown radius
-    rho and the height h of the whole machine's mass centre with the rider on (0 for knife-edge wheels)."""
+    """k = rho / (h - rho) of the rider's lean feed-forward (rtsim.vehicle.motorcycle.rider): the tyres' mean
+    crown radius rho and the height h of the whole machine's mass centre with the rider on (0 for knife-edge wheels)."""
     cfg = mm.config
     if mm.knife_edge:
         return 0.0

@@ -216,14 +216,15 @@ export class Scene3D {
     const local = (c, p) => { const v = new THREE.Vector3(...p); return carrierOf(c) === steering ? v.sub(head) : v; };
     for (const pc of s.pieces) {
       let mesh;
-      if (pc.shape === 'sphere') mesh = new THREE.Mesh(new THREE.SphereGeometry(pc.radius, 16, 12), material(pc.colour));
-      else if (pc.shape === 'cylinder') {
+      if (pc.shape === 'sphere') {
+        mesh = new THREE.Mesh(new THREE.SphereGeometry(pc.radius, 16, 12), material(pc.colour));
+      } else if (pc.shape === 'cylinder') {
         mesh = new THREE.Mesh(new THREE.CylinderGeometry(pc.radius, pc.radius, pc.length, 8), material(pc.colour));
         mesh.quaternion.setFromUnitVectors(new THREE.Vector3(0, 1, 0), new THREE.Vector3(...pc.direction).normalize());
       } else mesh = new THREE.Mesh(new THREE.BoxGeometry(...pc.size), material(pc.colour));
       mesh.position.copy(local(pc.carrier, pc.at));
       if (pc.pitch) mesh.rotation.y = pc.pitch;
-      if (pc.cockpit === false) mesh.userData.hideInCockpit = true;
+      if (pc.in_cockpit === false) mesh.userData.hideInCockpit = true;
       carrierOf(pc.carrier).add(mesh);
     }
     const wheels = [];
