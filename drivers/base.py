@@ -13,10 +13,13 @@ The first three are the ECU's actuator commands (`rtsim.channels.COMMAND_NAMES`)
 only in *torque mode*, the seed validation's way of driving the model: the measured rear wheel torques
 replace the engine (the throttle is then unused).
 
-Inputs. Closed-loop drivers read the vehicle state as a float array laid out as `S_*` below (ISO 8855
+Inputs. Closed-loop drivers read the vehicle state as a float array laid out as `S_*` (ISO 8855
 axes: x forward, y left, yaw positive turning left, from the x axis). The vehicle model fills it each
 step; tests fill it from their own simple models. Position and yaw are those of the vehicle reference
 point the vehicle model reports; the path follower takes the offset to the rear axle as a parameter.
+
+Both layouts are the car's and are declared by it (rtsim.vehicle.car.inputs: the vehicle never imports
+its drivers); this module names them for the drivers.
 """
 from __future__ import annotations
 
