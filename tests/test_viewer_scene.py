@@ -61,18 +61,25 @@ def test_two_wheeler_points_from_its_geometry():
 
 
 @pytest.mark.parametrize("name", [p.stem for p in sorted((ROOT / "configs" / "vehicles").glob("*.toml"))])
-def test_the_page_and_the_scene_draw_one_description(name):
+def test_the_page_and_the_scene_draw_one_description(name, tmp_path):
     """Every vehicle describes how it is drawn (rtsim.vehicle.kit.drawing); the page gets it from the
-    service's config reply (its file, else the reported config) as the Foxglove scene gets it from the
-    served sim."""
+    service's config reply (its file, else the reported config, as JSON: non-finite numbers null) as the
+    Foxglove scene gets it from the served sim."""
+    import json
+
+    from bridge.payloads import encode_json
     from rtsim.vehicle.registry import open_vehicle
     from rtsim.viewer.scene import describe
 
     opened = open_vehicle(ROOT / "configs" / "vehicles" / f"{name}.toml")
     drawing = opened.kind.drawing(opened)
-    config = {"vehicle": opened.config.model_dump(mode="json"), "options": {"vehicle": str(opened.path)}}
+    reported = json.loads(encode_json({"vehicle": opened.config.model_dump(mode="json")}))["vehicle"]
+    config = {"vehicle": reported, "options": {"vehicle": str(opened.path)}}
     assert describe(config)["shape"] == drawing.page()
-    assert vehicle_drawing(config["vehicle"], None) == (opened.name, drawing.page())     # no file: the config
+    elsewhere = tmp_path / "another_machine" / f"{name}.toml"          # a recording made elsewhere
+    assert vehicle_drawing(reported, elsewhere) == (opened.name, drawing.page())
+    if name == "xbw":                                                   # the service's default vehicle
+        assert describe({"vehicle": reported})["shape"] == drawing.page()
     assert [w.name for w in drawing.wheels] and all(w.radius > 0 for w in drawing.wheels)
 
 

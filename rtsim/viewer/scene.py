@@ -18,23 +18,37 @@ from pathlib import Path
 
 
 def vehicle_drawing(vehicle: dict, vehicle_path: Path | None) -> tuple[str, dict]:
-    """(kind name, the page's drawing: rtsim.vehicle.kit.drawing.Drawing.page) of the vehicle: its file when
-    there is one here, else its config as the service reports it (its relative files resolved beside
-    ``vehicle_path``, else beside the default vehicle)."""
-    from rtsim.vehicle.registry import DEFAULT_VEHICLE, kind_of, open_vehicle
+    """(kind name, the page's drawing: rtsim.vehicle.kit.drawing.Drawing.page) of the served vehicle: its file
+    (None: the default vehicle, as the service serves it) when it is here, else its config as the service
+    or the recording reports it (a JSON null, a non-finite number or an unset option, takes the field's
+    default), its relative files beside its path, else beside the shipped vehicles."""
+    from rtsim.vehicle.registry import DEFAULT_VEHICLE, OpenedVehicle, kind_of, open_vehicle
 
-    if vehicle_path is not None and Path(vehicle_path).is_file():
+    path = Path(vehicle_path) if vehicle_path is not None else DEFAULT_VEHICLE
+    if path.is_file():
         try:
-            opened = open_vehicle(vehicle_path)
+            opened = open_vehicle(path)
             return opened.name, opened.kind.drawing(opened).page()
         except Exception:            # noqa: BLE001  (the file changed since: the reported config)
             pass
-    path = Path(vehicle_path) if vehicle_path is not None else DEFAULT_VEHICLE
-    kind = kind_of(vehicle, path)
-    from rtsim.vehicle.registry import OpenedVehicle
+    data = _without_nulls(vehicle)
+    kind = kind_of(data, path)
+    error = None
+    for where in (path, DEFAULT_VEHICLE):
+        try:
+            cfg, base = kind.load(data, where)
+            return kind.name, kind.drawing(OpenedVehicle(where, kind, cfg, base)).page()
+        except Exception as exc:     # noqa: BLE001  (its files are not here: try the shipped ones)
+            error = exc
+    raise error
 
-    cfg, base = kind.load(vehicle, path)
-    return kind.name, kind.drawing(OpenedVehicle(path, kind, cfg, base)).page()
+
+def _without_nulls(d):
+    if isinstance(d, dict):
+        return {k: _without_nulls(v) for k, v in d.items() if v is not None}
+    if isinstance(d, list):
+        return [_without_nulls(v) for v in d]
+    return d
 
 
 BUILDING_COLUMNS = ("x", "y", "length", "width", "height", "yaw_deg")
