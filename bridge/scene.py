@@ -17,19 +17,21 @@ schemas (``foxglove.messages.*.get_schema()``: a FileDescriptorSet, schema encod
   triangles 2 km across around the start with grid lines every 10 m, or the survey mesh as one
   triangle list.
 
-Orientation: the car's angles are Euler z-y-x (yaw, then pitch, then roll: rtsim.channels.STATE); the
-two-wheeler's state angles are yaw, roll, then the frame's pitch (rtsim.vehicle.motorcycle.geometry
-``frame_rotation``; its ``pitch_angle`` is that of the frame's x axis, so the frame's own pitch is
-``asin(sin(pitch_angle) / cos(roll_angle))``). Units SI (m, rad); times are simulation times.
+What is drawn is the vehicle's own description (rtsim.vehicle.kit.drawing.Drawing: ``sim.drawing``): the
+body's box, the wheels (a wheel that carries a tyre load stands on the road at its loaded radius, from
+its design position in the body), the articulated assemblies (a steering and its fork, a swingarm) and
+how the state's angles give the pose's orientation (``attitude``). Units SI (m, rad); times are
+simulation times.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 from foxglove.messages import (ArrowPrimitive, Color, CubePrimitive, CylinderPrimitive, FrameTransform,
                                FrameTransforms, LinePrimitive, LinePrimitiveLineType, Point3, Pose, Quaternion,
                                SceneEntity, SceneUpdate, Timestamp, TriangleListPrimitive, Vector3)
+
+from rtsim.vehicle.kit.drawing import q_axis, q_mul, q_rotate
 
 WORLD = "world"
 SCENE_KEYS = ("scene", "tf", "road")
@@ -53,43 +55,6 @@ def topic_schemas() -> dict[str, tuple[str, str, bytes]]:
     return out
 
 
-# ------------------------------------------------------------------ quaternions (x, y, z, w), pure Python
-
-def q_axis(ax: float, ay: float, az: float, angle: float) -> tuple[float, float, float, float]:
-    """Rotation by `angle` (rad) about the unit axis (ax, ay, az), right-handed."""
-    s = math.sin(0.5 * angle)
-    return (ax * s, ay * s, az * s, math.cos(0.5 * angle))
-
-
-def q_mul(a, b):
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-
-
-def q_rotate(q, v):
-    """The vector v rotated by the unit quaternion q."""
-    x, y, z, w = q
-    vx, vy, vz = v
-    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx)
-
-
-def car_orientation(roll: float, pitch: float, yaw: float):
-    """Euler z-y-x (ISO 8855): yaw about z, then pitch about y, then roll about x."""
-    return q_mul(q_mul(q_axis(0, 0, 1, yaw), q_axis(0, 1, 0, pitch)), q_axis(1, 0, 0, roll))
-
-
-def two_wheeler_orientation(roll: float, pitch: float, yaw: float):
-    """The rear frame: yaw about z, roll about x, then the frame's own pitch about y (see the module
-    docstring for the state's pitch of the frame's x axis)."""
-    c = math.cos(roll)
-    s = math.sin(pitch) / c if abs(c) > 1e-9 else 0.0
-    own = math.asin(max(-1.0, min(1.0, s)))
-    return q_mul(q_mul(q_axis(0, 0, 1, yaw), q_axis(1, 0, 0, roll)), q_axis(0, 1, 0, own))
-
-
 _CYL_Y = q_axis(1, 0, 0, -0.5 * math.pi)     # a cylinder's axis (its z) along y: a wheel's axle
 
 
@@ -102,84 +67,17 @@ def _stamp(t: float) -> Timestamp:
     return Timestamp(ns // 1_000_000_000, ns % 1_000_000_000)
 
 
-# ------------------------------------------------------------------ vehicle shapes
+# ------------------------------------------------------------------ the vehicle's drawing
 
-@dataclass(frozen=True)
-class Wheel:
-    """A wheel in the vehicle's reference frame: centre (m), radius and width (m); `steer` and `spin`
-    name the channels of its steer and spin angles (rad); `load` that of its tyre's vertical load (N),
-    which with `stiffness` (N/m) puts a car's wheel on the road (see SceneBuilder)."""
-    centre: tuple[float, float, float]
-    radius: float
-    width: float
-    spin: str
-    steer: str | None = None
-    load: str | None = None
-    stiffness: float = 0.0
-
-
-@dataclass(frozen=True)
-class Shape:
-    """What the scene draws of a vehicle, in its reference frame (the state's pose: the car's centre of
-    mass, the two-wheeler's swingarm pivot)."""
-    kind: str                                   # "car" or "two_wheeler"
-    body_centre: tuple[float, float, float]
-    body_size: tuple[float, float, float]
-    wheels: tuple[Wheel, ...]
-    design: object = None                       # the two-wheeler's geometry.Design
-
-
-def car_shape(vm, tyre_radius: float, tyre_stiffness: float = 0.0) -> Shape:
-    """A four-wheel car from its model (rtsim.vehicle.car.build.VehicleModel): wheel centres from the
-    design wheel centres relative to the centre of mass; the body spans the wheelbase plus overhangs."""
-    cg = [float(v) for v in vm.config.chassis.cg_m]
-    wc = [[float(v) for v in row] for row in vm.design_wheel_centre]
-    rel = [tuple(c[k] - cg[k] for k in range(3)) for c in wc]
-    xs = [r[0] for r in rel]
-    ys = [r[1] for r in rel]
-    front, rear = max(xs), min(xs)
-    length = front - rear + 2.0 * tyre_radius + 0.5
-    width = max(ys) - min(ys) + 0.05
-    zc = min(r[2] for r in rel) + 0.35
-    body = (0.5 * (front + rear) + 0.1, 0.0, zc)
-    width_t = max(0.12, 0.55 * tyre_radius)
-    names = ("fl", "fr", "rl", "rr")
-    wheels = tuple(Wheel(rel[i], tyre_radius, width_t, f"wheel_angle_{w}",
-                         f"steer_angle_{w}" if w in ("fl", "fr") else None, f"tyre_fz_{w}", tyre_stiffness)
-                   for i, w in enumerate(names))
-    return Shape("car", body, (length, width, 0.55), wheels)
-
-
-def two_wheeler_shape(mm) -> Shape:
-    """A two-wheeler from its model (rtsim.vehicle.motorcycle.build.MotorcycleModel)."""
-    from rtsim.vehicle.motorcycle.geometry import design
-
-    cfg = mm.config
-    des = design(cfg)
-    rr, rf = float(cfg.rear_wheel.radius_m), float(cfg.front_wheel.radius_m)
-    p = [float(v) for v in des.pivot]
-    head = [float(v) for v in des.head]
-    mid = tuple(0.5 * (head[k] + p[k]) - p[k] for k in range(3))
-    length = math.dist(head, p) + 0.3
-    wheels = (Wheel(tuple(float(des.rear_centre[k]) - p[k] for k in range(3)), rr, 0.18, "wheel_angle_rear"),
-              Wheel(tuple(float(des.front_centre[k]) - p[k] for k in range(3)), rf, 0.12, "wheel_angle_front",
-                    "steer_angle"))
-    return Shape("two_wheeler", (mid[0], 0.0, mid[2]), (length, 0.3, 0.3), wheels, des)
-
-
-def shape_of(sim) -> Shape:
-    """The shape of the vehicle a service serves: a car's VehicleSim or a two-wheeler's TwoWheelerHil."""
-    model = getattr(sim.vm, "model", None)
-    if model is not None and hasattr(model, "design"):
-        return two_wheeler_shape(model)
-    from rtsim.vehicle.kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS
-
-    return car_shape(sim.vm, float(sim.tp[P_UNLOADED_RADIUS]), float(sim.tp[P_VERTICAL_STIFFNESS]))
+def shape_of(sim):
+    """How the vehicle a service serves (or an offline run recorded) is drawn: its own description
+    (``sim.drawing``: rtsim.vehicle.kit.drawing.Drawing, built by the vehicle from its config)."""
+    return sim.drawing
 
 
 def scene_for(sim, vehicle_id: str, centre=(0.0, 0.0)) -> tuple["SceneBuilder", bytes]:
-    """(SceneBuilder, road scene bytes) of a car's VehicleSim or a two-wheeler's TwoWheelerHil; `centre`
-    (x, y, m) where the road's plane and grid are drawn around (the start)."""
+    """(SceneBuilder, road scene bytes) of a served or recorded vehicle (its ``drawing``, ``vm.channels`` and
+    ``road``); `centre` (x, y, m) where the road's plane and grid are drawn around (the start)."""
     road = getattr(sim, "road", None)
     return SceneBuilder(vehicle_id, shape_of(sim), sim.vm.channels, road), road_scene(road, centre=centre)
 
@@ -190,8 +88,9 @@ class SceneBuilder:
     """Encodes a vehicle's scene and frame transform from its state (and, for a car's wheel spin and
     steer, its newest sensor sample), and the road's scene. Pure computation; the callers count errors."""
 
-    def __init__(self, vehicle_id: str, shape: Shape, channels, road=None):
-        """`road`: the rtsim.road.model.Road the vehicle drives on (None: the plane z = 0)."""
+    def __init__(self, vehicle_id: str, shape, channels, road=None):
+        """`shape`: the vehicle's rtsim.vehicle.kit.drawing.Drawing; `road`: the rtsim.road.model.Road the
+        vehicle drives on (None: the plane z = 0)."""
         self.vehicle_id = vehicle_id
         self.shape = shape
         self.road = road
@@ -199,7 +98,7 @@ class SceneBuilder:
         st = channels.state_names
         self._pose_idx = tuple(st.index(n) for n in ("pos_x", "pos_y", "pos_z", "roll_angle", "pitch_angle",
                                                      "yaw_angle"))
-        self._orientation = car_orientation if shape.kind == "car" else two_wheeler_orientation
+        self._orientation = shape.orientation
         sens = channels.sensor_names
 
         def where(name):
@@ -212,7 +111,7 @@ class SceneBuilder:
             return None
         self._wheel_src = [(where(w.spin), where(w.steer)) for w in shape.wheels]
         self._wheel_load = [where(w.load) if w.stiffness > 0 else None for w in shape.wheels]
-        self._extra = {n: st.index(n) for n in ("fork_travel", "swingarm_angle", "steer_angle") if n in st}
+        self._extra = {n: st.index(n) for n in shape.channels() if n in st}
 
     def pose(self, state) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
         """(position, orientation quaternion x, y, z, w) of the reference frame from a state sample."""
@@ -232,8 +131,8 @@ class SceneBuilder:
         def value(src):
             if src is None:
                 return 0.0
-            kind, i = src
-            arr = state if kind == "state" else sensors
+            where, i = src
+            arr = state if where == "state" else sensors
             if arr is None:
                 return 0.0
             v = float(arr[i])
@@ -244,13 +143,14 @@ class SceneBuilder:
                                size=Vector3(x=sh.body_size[0], y=sh.body_size[1], z=sh.body_size[2]),
                                color=BODY_COLOUR)]
         cylinders = []
-        if sh.kind == "car":
-            centres = [w.centre for w in sh.wheels]
-            steer_axes = [(0.0, 0.0, 1.0)] * len(sh.wheels)
-        else:
-            centres, steer_axes, fork, arm = self._two_wheeler_parts(state)
-            cylinders.append(fork(world, q))
-            cubes.append(arm(world, q))
+        centres, steer_axes, parts = sh.articulate(self._state_value(state))
+        for form, c, qp, size in parts:           # the assemblies: a fork, a swingarm
+            pose, dims = _pose(world(c), q_mul(q, qp)), Vector3(x=size[0], y=size[1], z=size[2])
+            if form == "cylinder":
+                cylinders.append(CylinderPrimitive(pose=pose, size=dims, bottom_scale=1.0, top_scale=1.0,
+                                                   color=SPOKE_COLOUR))
+            else:
+                cubes.append(CubePrimitive(pose=pose, size=dims, color=SPOKE_COLOUR))
         for w, c, ax, (spin_src, steer_src), load in zip(sh.wheels, centres, steer_axes, self._wheel_src,
                                                           self._wheel_load):
             qs = q_mul(q, q_axis(*ax, value(steer_src)))
@@ -276,46 +176,15 @@ class SceneBuilder:
             translation=Vector3(x=p[0], y=p[1], z=p[2]), rotation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))]).encode()
         return scene, tf
 
-    def _two_wheeler_parts(self, state):
-        """Wheel centres and steer axes in the reference frame, and the fork and swingarm primitives, of
-        a two-wheeler from its fork travel and swingarm angle (geometry of rtsim.vehicle.motorcycle)."""
-        des = self.shape.design
-        zeta = float(state[self._extra["fork_travel"]]) if "fork_travel" in self._extra else des.zeta0
-        swing = float(state[self._extra["swingarm_angle"]]) if "swingarm_angle" in self._extra else 0.0
-        if not math.isfinite(zeta):
-            zeta = des.zeta0
-        if not math.isfinite(swing):
-            swing = 0.0
-        p0 = [float(v) for v in des.pivot]
-        h = (float(des.h[0]), float(des.h[1]), float(des.h[2]))
-        e1 = (float(des.e1[0]), 0.0, float(des.e1[2]))
-        head = [float(des.head[k]) - p0[k] for k in range(3)]
-        # the front wheel centre: down the steering axis by the fork's length, ahead of it by the fork
-        # offset, which steering turns about the axis (e1 turned about h: cos d e1 + sin d (h x e1 = y))
-        ext = -des.fork_length + (zeta - des.zeta0)
-        d = float(state[self._extra["steer_angle"]]) if "steer_angle" in self._extra else 0.0
-        d = d if math.isfinite(d) else 0.0
-        f_u = (math.cos(d) * e1[0], math.sin(d), math.cos(d) * e1[2])
-        wf = tuple(head[k] + ext * h[k] + des.fork_offset * f_u[k] for k in range(3))
-        theta = des.theta0 + swing
-        s_u = (math.cos(theta) * e1[0] + math.sin(theta) * e1[2], 0.0,
-               -math.sin(theta) * e1[0] + math.cos(theta) * e1[2])
-        wr = tuple(des.swingarm_length * s_u[k] for k in range(3))
-        fork_mid = tuple(0.5 * (head[k] + wf[k]) for k in range(3))
-        fork_len = math.dist(head, wf)
-        q_fork = q_axis(0, 1, 0, math.atan2(h[0], h[2]))          # a cylinder's z along the steering axis
-        arm_mid = tuple(0.5 * wr[k] for k in range(3))
-        q_arm = q_axis(0, 1, 0, math.atan2(-wr[2], wr[0]))        # a box's x along the swingarm
-
-        def fork(world, q):
-            return CylinderPrimitive(pose=_pose(world(fork_mid), q_mul(q, q_fork)),
-                                     size=Vector3(x=0.08, y=0.08, z=fork_len), bottom_scale=1.0, top_scale=1.0,
-                                     color=SPOKE_COLOUR)
-
-        def arm(world, q):
-            return CubePrimitive(pose=_pose(world(arm_mid), q_mul(q, q_arm)),
-                                 size=Vector3(x=des.swingarm_length, y=0.08, z=0.06), color=SPOKE_COLOUR)
-        return (wr, wf), ((0.0, 0.0, 1.0), h), fork, arm
+    def _state_value(self, state):
+        """``value(channel, default)`` of a state sample for the drawing's articulation."""
+        def value(name, default):
+            i = self._extra.get(name)
+            if i is None:
+                return default
+            v = float(state[i])
+            return v if math.isfinite(v) else default
+        return value
 
 
 def _height_fn(road):

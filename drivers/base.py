@@ -13,36 +13,27 @@ The first three are the ECU's actuator commands (`rtsim.channels.COMMAND_NAMES`)
 only in *torque mode*, the seed validation's way of driving the model: the measured rear wheel torques
 replace the engine (the throttle is then unused).
 
-Inputs. Closed-loop drivers read the vehicle state as a float array laid out as `S_*` below (ISO 8855
+Inputs. Closed-loop drivers read the vehicle state as a float array laid out as `S_*` (ISO 8855
 axes: x forward, y left, yaw positive turning left, from the x axis). The vehicle model fills it each
 step; tests fill it from their own simple models. Position and yaw are those of the vehicle reference
 point the vehicle model reports; the path follower takes the offset to the rear axle as a parameter.
+
+Both layouts are the car's and are declared by it (rtsim.vehicle.car.inputs: the vehicle never imports
+its drivers); this module names them for the drivers.
 """
 from __future__ import annotations
 
 import hashlib
-import math
 from pathlib import Path
 
 import rtsim.jit
-from rtsim.channels import BY_NAME, COMMAND_NAMES
+from rtsim.channels import BY_NAME
 
-# --- vehicle state read by closed-loop drivers -----------------------------------------------------
-S_SPEED = 0   # m/s, longitudinal speed of the reference point (forward positive)
-S_X = 1       # m, position x in the road frame
-S_Y = 2       # m, position y in the road frame
-S_YAW = 3     # rad, yaw angle from the road x axis, positive turning left
-NSTATE = 4
-STATE_NAMES = ("speed", "x", "y", "yaw")
+# the layouts of the vehicle state a closed-loop driver reads (S_*) and of its outputs (I_*): the car's,
+# declared by the vehicle (rtsim.vehicle.car.inputs)
+from rtsim.vehicle.car.inputs import (I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR,  # noqa: F401
+                                      INPUT_NAMES, NINPUT, NSTATE, S_SPEED, S_X, S_Y, S_YAW, STATE_NAMES)
 
-# --- driver outputs ---------------------------------------------------------------------------------
-I_THROTTLE = 0
-I_BRAKE = 1
-I_STEER = 2
-I_TORQUE_RL = 3
-I_TORQUE_RR = 4
-NINPUT = 5
-INPUT_NAMES: tuple[str, ...] = (*COMMAND_NAMES, "wheel_torque_rl", "wheel_torque_rr")
 INPUT_INDEX = {name: i for i, name in enumerate(INPUT_NAMES)}
 INPUT_UNITS = {name: BY_NAME[name].unit for name in INPUT_NAMES}
 TORQUE_NAMES = INPUT_NAMES[3:]

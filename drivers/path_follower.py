@@ -8,7 +8,7 @@ adjacent segments) are interpolated along each segment, so the path heading is c
 Nearest point. The driver keeps the index of the segment it was nearest to at the previous call and
 walks from there to the neighbour segments while the distance decreases: O(1) per call amortised,
 and it cannot jump to another branch of a path that crosses itself. The first call searches the
-whole path once. (The geometry and these kernels live in `drivers.paths`, shared with the rider.)
+whole path once. (The geometry and these kernels live in `rtsim.road.paths`, shared with the rider.)
 
 Laws (rear axle at P_r = position - rear_offset * heading; wheelbase l):
 
@@ -43,7 +43,7 @@ from rtsim.configfile import Strict, check_ranges, range_fields
 from rtsim.jit import inline_kernel, kernel
 
 from .base import I_STEER, S_SPEED, S_X, S_Y, S_YAW
-from .paths import circle_points, nearest_segment, on_segment, point_ahead, polyline, seg_project, wrap_angle
+from rtsim.road.paths import circle_points, nearest_segment, on_segment, point_ahead, polyline, seg_project, wrap_angle
 
 __all__ = ["PathFollower", "PathFollowerParams", "PATH_FOLLOWER_RANGES", "path_follower", "path_follower_step",
            "reset", "circle_points"]

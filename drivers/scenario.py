@@ -106,7 +106,7 @@ from .driver import Driver
 from .path_follower import PATH_FOLLOWER_RANGES, PathFollowerParams, path_follower
 from .profiles import Profile, pack, sample
 from . import profiles as P
-from .paths import circle_points, double_lane_change, figure_eight
+from rtsim.road.paths import circle_points, double_lane_change, figure_eight
 from .replay import Recording, parse_column, read_csv_table, read_recording, replay_profiles
 from .rider import RIDER_RANGES, Rider, RiderParams, rider
 from .speed_follower import SPEED_FOLLOWER_RANGES, SpeedFollowerParams, speed_follower
@@ -547,6 +547,15 @@ class Scenario:
     def rider(self) -> Rider | None:
         """A fresh motorcycle rider for the scenario's [rider] section (None without one)."""
         return None if self.spec.rider is None else self.spec.rider.build()
+
+    def open_loop(self) -> dict:
+        """The [two_wheeler] section's open-loop commands: channel name -> its value (SI) as a function of
+        time t (s)."""
+        out = {}
+        for name, prof in self.two_wheeler_profiles.items():
+            packed = pack({0: prof}, nch=1)
+            out[name] = (lambda p: lambda t: P.eval_channel(p, 0, t))(packed)
+        return out
 
     def driver(self) -> Driver:
         """A fresh driver (its own controller state) for this scenario."""

@@ -183,7 +183,8 @@ def _model_fault_exit(fault, rows: int, out) -> int:
 
 
 def _energy(args) -> int:
-    from rtsim.vehicle.car.energy import read_energy, summarise
+    from bridge.run_files import read_energy
+    from rtsim.vehicle.car.energy import summarise
 
     try:
         t, series = read_energy(args.run)
@@ -197,7 +198,7 @@ def _feel(args) -> int:
     from pathlib import Path
 
     from rtsim.analyses.feel import steering_feel, table
-    from rtsim.analyses.figures import read_recorded
+    from bridge.run_files import read_recorded
 
     for flag, value in (("--at", args.at), ("--half-width", args.half_width)):
         if not (value > 0 and math.isfinite(value)):
@@ -221,7 +222,7 @@ def _feel(args) -> int:
 def _plot(args) -> int:
     from pathlib import Path
 
-    from rtsim.analyses.figures import read_recorded
+    from bridge.run_files import read_recorded
 
     columns, data = read_recorded(args.run)
     _write_figures(columns, data, args.out, args.run, Path(args.run).stem)
@@ -367,7 +368,7 @@ _DELEGATED = (
     ("eigen", "rtsim.analyses.eigen_cli", "a two-wheeler's modes against speed in straight running (root locus, JSON)"),
     ("batch", "rtsim.batch.cli", "run a plan of scenarios x vehicles x parameters (grid or random) x seeds on a "
      "local pool or Ray: results table, metrics, pass/fail, HTML summary; resumable"),
-    ("inverse", "rtsim.vehicle.motorcycle.inverse", "a motorcycle's inverse dynamics: the steering and drive "
+    ("inverse", "rtsim.analyses.inverse", "a motorcycle's inverse dynamics: the steering and drive "
      "torques that follow a path at a speed"),
 )
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq, fsolve
 
+from drivers.scenario import load_scenario
 from drivers.base import I_BRAKE, I_THROTTLE, NSTATE, S_SPEED
 from drivers.driver import Driver
 from drivers.speed_follower import speed_follower
@@ -73,13 +74,13 @@ def test_model_size_and_static_wheel_loads(model):
 
 @pytest.fixture(scope="module")
 def life_situation_1(model):
-    sim, sc = prepare(VEHICLE, SCENARIOS / "step_steer_80kph.toml")
+    sim, sc = prepare(VEHICLE, load_scenario(SCENARIOS / "step_steer_80kph.toml", check_files=True))
     return sim, run(sim, sc)
 
 
 @pytest.fixture(scope="module")
 def life_situation_2(model):
-    sim, sc = prepare(VEHICLE, SCENARIOS / "step_steer_braking_80kph.toml")
+    sim, sc = prepare(VEHICLE, load_scenario(SCENARIOS / "step_steer_braking_80kph.toml", check_files=True))
     return sim, run(sim, sc)
 
 

@@ -24,6 +24,7 @@ import pytest
 
 from bridge.can_codec import Codec
 from bridge.mcap_recorder import read_recording
+from drivers.scenario import load_scenario
 from drivers.eps_demo import EPS_FRAMES, EpsController
 from rtsim.service.loop import HilLoop
 from rtsim.service.rings import H_TX, RingReader
@@ -88,7 +89,7 @@ def bench():
 
 @pytest.fixture(scope="module")
 def offline_ls1():
-    sim, sc = prepare(VEHICLE, LS1)
+    sim, sc = prepare(VEHICLE, load_scenario(LS1, check_files=True))
     res = run(sim, sc)
     return res
 

@@ -277,3 +277,12 @@ KIND = SledKind()
     sled.write_text('name = "Sled"\nassembly = "kindless_assembly"\n')
     code, _, err = _cli(capsys, "describe", "--vehicle", sled)
     _one_line_refusal(code, err, "defines no KIND")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_vehicle_demo_has_its_ecus_closing_report(name):
+    """`rtsim demo` closes with the report of the ECU the vehicle's demo runs (rtsim.service.demo.REPORTS,
+    keyed by the ECU, not by the kind of vehicle)."""
+    from rtsim.service.demo import REPORTS
+
+    assert open_vehicle(ROOT / "configs" / "vehicles" / f"{name}.toml").demo.ecu in REPORTS

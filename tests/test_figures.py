@@ -9,7 +9,8 @@ import pytest
 
 from bridge.mcap_log import read_run, write_run
 from drivers.scenario import load_scenario
-from rtsim.analyses.figures import default_dir, read_recorded, write_run_figures
+from bridge.run_files import read_recorded
+from rtsim.analyses.figures import default_dir, write_run_figures
 from rtsim.cli import main
 from rtsim.errors import ConfigError
 from rtsim.vehicle.offline import prepare, run, write_csv

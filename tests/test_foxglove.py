@@ -22,6 +22,7 @@ import pytest
 import websockets.sync.client as websockets_sync
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
+from drivers.scenario import load_scenario
 from bridge.can_bus import LoopbackHub
 from rtsim.errors import ConfigError
 from rtsim.service.server import ServeOptions, Service
@@ -254,7 +255,7 @@ def test_offline_run_recording_holds_the_scene(tmp_path):
     from rtsim.service.server import resolve_scenario
     from rtsim.vehicle.offline import prepare, run
 
-    sim, sc = prepare(None, resolve_scenario("step_steer_80kph"))
+    sim, sc = prepare(None, load_scenario(resolve_scenario("step_steer_80kph"), check_files=True))
     res = run(sim, sc)
     path = tmp_path / "run.mcap"
     write_run(path, res.columns, res.data, sim.vm.config.id, sim.vm.channels, sim=sim)
@@ -339,13 +340,14 @@ def test_offline_two_wheeler_recording_holds_the_scene(tmp_path):
     """`rtsim run` of a motorcycle scenario to MCAP: the two-wheeler's scene every 10 ms with the pose of
     its state row, the wheels about a radius above the road, and the counter-steer's turn in the yaw."""
     from rtsim.service.server import resolve_scenario
-    from rtsim.vehicle.motorcycle.offline import prepare, run, write_mcap
+    from bridge.mcap_log import write_run
+    from rtsim.vehicle.motorcycle.offline import CHANNELS, prepare, run, scene_source
 
-    ride, sc = prepare(None, resolve_scenario("motorcycle_counter_steer"))
+    ride, sc = prepare(None, load_scenario(resolve_scenario("motorcycle_counter_steer"), check_files=True))
     res = run(ride, sc)
     vid = ride.sim.mm.config.id
     path = tmp_path / "moto.mcap"
-    write_mcap(res, path, vid, mm=ride.sim.mm)
+    write_run(path, res.columns, res.data, vid, CHANNELS, sim=scene_source(ride.sim.mm))
     scenes, tfs, states, schemas = recorded_scenes(path, vid)
     assert schemas[f"rtsim/{vid}/scene"] == ("foxglove.SceneUpdate", "protobuf", "protobuf")
     assert len(scenes) == len(tfs) == pytest.approx(sc.duration / 0.01, abs=2)

@@ -41,7 +41,7 @@ def _assert_survives(name: str, ride: Ride) -> None:
     assert res.energy_ratio <= 1.0, where
     assert res.outcome in ("ok", "fell"), where
     if res.outcome == "fell":
-        assert target(name).kind == "two_wheeler", where
+        assert target(name).can_fall, where
 
 
 # ---- the command space is the DBC's --------------------------------------------------------------------
@@ -114,7 +114,7 @@ def test_regression_ride_survives(vehicle, ride):
 def test_drawn_command_sequences_never_break_the_model(vehicle):
     t = target(vehicle)
     strategy = ride_strategy(t.space, t.roads, t.top_speed, max_segment_s=0.5, max_segments=3,
-                             two_wheeler=t.kind == "two_wheeler", eps=t.eps)
+                             rider_optional=t.rig.rider_optional, eps_optional=t.eps)
 
     # no shrinking: a failure is reported as drawn (its ride JSON replays it), in bounded time
     @settings(max_examples=CI_RIDES, derandomize=True, deadline=None, database=None,

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from bridge.can_codec import Codec
+from drivers.scenario import load_scenario
 from drivers.rider import P_TYRE_LEAN, RO_THROTTLE
 from rtsim.service.loop import HilLoop
 from rtsim.service.server import build_sim
@@ -224,4 +225,4 @@ def test_identified_effects_stop_the_service_and_the_offline_ride(tmp_path):
     with pytest.raises(ConfigError, match=r"\[effects\] \(brake_friction\).*not yet by the service"):
         build_sim(ROOT / "configs" / "scenarios" / "motorcycle_hil.toml", out, models={})
     with pytest.raises(ConfigError, match=r"\[effects\] \(brake_friction\).*not yet by the offline ride"):
-        prepare(out, ROOT / "configs" / "scenarios" / "motorcycle_steady_turn.toml")
+        prepare(out, load_scenario(ROOT / "configs" / "scenarios" / "motorcycle_steady_turn.toml", check_files=True))

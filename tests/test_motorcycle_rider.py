@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.paths import double_lane_change, figure_eight
+from rtsim.road.paths import double_lane_change, figure_eight
 from drivers.rider import rider
 from rtsim.configfile import load_toml, validate
 from rtsim.vehicle.motorcycle.build import build_motorcycle

@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from drivers.scenario import load_scenario
 from rtsim.cli import main
-from rtsim.vehicle.motorcycle.inverse import InverseDynamics
+from rtsim.analyses.inverse import InverseDynamics
 from rtsim.vehicle.motorcycle.offline import prepare, run
 from rtsim.vehicle.motorcycle.ride import tyre_lean_ratio
 
@@ -74,7 +75,7 @@ def test_hard_braking_within_the_limits(tmp_path):
 
 @pytest.fixture(scope="module")
 def steady_turn():
-    ride, sc = prepare(None, SCEN / "motorcycle_steady_turn.toml")
+    ride, sc = prepare(None, load_scenario(SCEN / "motorcycle_steady_turn.toml", check_files=True))
     res = run(ride, sc)
     assert res.status == "ok"
     return ride, sc, res

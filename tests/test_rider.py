@@ -1,5 +1,5 @@
-"""Motorcycle rider (drivers/rider.py) and reference paths (drivers/paths.py): curvilinear coordinates,
-curvature, lean reference, reaction delay, speed PI on a point mass, and the closed loop on the
+"""Motorcycle rider (rtsim/vehicle/motorcycle/rider.py) and reference paths (rtsim/road/paths.py):
+curvilinear coordinates, curvature, lean reference, reaction delay, speed PI on a point mass, and the closed loop on the
 linearised benchmark bicycle of Meijaard et al. (2007).
 
 Benchmark bicycle in ISO 8855. The paper's axes are x forward, y right, z down: its roll phi_M is
@@ -20,7 +20,7 @@ from scipy.linalg import expm
 from scipy.spatial import cKDTree
 
 from drivers import rider as R
-from drivers.paths import circle_points, double_lane_change, figure_eight, polyline, vertex_curvature
+from rtsim.road.paths import circle_points, double_lane_change, figure_eight, polyline, vertex_curvature
 from drivers.rider import (NRO, NRV, RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_DELTA, RV_DELTADOT,
                            RV_PHI, RV_PHIDOT, RV_R, RV_T, RV_U, RV_X, RV_Y, RV_YAW, rider, rider_step)
 

@@ -12,8 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from drivers.scenario import load_scenario
 from rtsim.analyses.feel import crossings, mechanical_power, steady_window, steering_feel
-from rtsim.analyses.figures import G, read_recorded
+from bridge.run_files import read_recorded
+from rtsim.analyses.figures import G
 from rtsim.cli import main
 from rtsim.errors import ConfigError
 
@@ -134,7 +136,7 @@ def weave(tmp_path_factory):
     from bridge.mcap_log import write_run
     from rtsim.vehicle.offline import prepare, run
 
-    sim, sc = prepare(None, SCENARIOS / "on_centre_weave_100kph.toml")
+    sim, sc = prepare(None, load_scenario(SCENARIOS / "on_centre_weave_100kph.toml", check_files=True))
     assert sim.has_eps and sim.vm.config.id == "eps_car"
     res = run(sim, sc)
     path = tmp_path_factory.mktemp("feel") / "weave.mcap"
@@ -226,7 +228,7 @@ def test_slow_ramp_steer_is_quasi_static(weave):
     weave's steering rate), its angle gradient the weave's within 5 %."""
     from rtsim.vehicle.offline import prepare, run
 
-    sim, sc = prepare(None, SCENARIOS / "slow_ramp_steer_100kph.toml")
+    sim, sc = prepare(None, load_scenario(SCENARIOS / "slow_ramp_steer_100kph.toml", check_files=True))
     res = run(sim, sc)
     f = steering_feel(res.columns, res.data)
     assert 0.35 <= f.ay_peak_g <= 0.45

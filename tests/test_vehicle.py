@@ -9,6 +9,7 @@ import pytest
 
 from pathlib import Path
 
+from drivers.scenario import load_scenario
 from rtsim.errors import ConfigError
 from rtsim.road.model import make_grade, make_plane
 from rtsim.vehicle.car.config import load_vehicle, validate, VehicleConfig, load_toml
@@ -122,7 +123,7 @@ def test_steady_turn_is_kinematically_consistent():
     the lateral acceleration of the centre of mass (horizontal, normal to its velocity) equals yaw
     rate x speed within 2 %, and the outer (right) wheels carry more load than the inner ones."""
     from rtsim.vehicle.offline import prepare, run
-    sim, sc = prepare(None, "configs/scenarios/step_steer_80kph.toml")
+    sim, sc = prepare(None, load_scenario("configs/scenarios/step_steer_80kph.toml", check_files=True))
     run(sim, sc)
     d = sim.data
     model = sim.vm

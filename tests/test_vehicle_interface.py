@@ -11,6 +11,7 @@ import pytest
 from bridge.can_codec import Codec
 from bridge.can_pack import SensorDecoder
 from bridge.payloads import schemas_for
+from drivers.scenario import load_scenario
 from rtsim.channels import CAR, car_channels
 from rtsim.errors import ConfigError
 from rtsim.vehicle.car.build import build_vehicle
@@ -80,7 +81,7 @@ def test_the_validation_workflow_reads_a_vehicles_own_channels(tmp_path, fwd_mod
     from bridge.mcap_recorder import read_recording
     from rtsim.validate.data import load_run
 
-    sim, sc = prepare(FWD, ROOT / "configs" / "scenarios" / "step_steer_80kph.toml")
+    sim, sc = prepare(FWD, load_scenario(ROOT / "configs" / "scenarios" / "step_steer_80kph.toml", check_files=True))
     res = run(sim, sc)
     csv_path, mcap_path = tmp_path / "run.csv", tmp_path / "run.mcap"
     write_csv(res, csv_path)

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from drivers.scenario import load_scenario
 from rtsim.vehicle.kit.linkages import (OUT_AXIS, OUT_CENTRE, OUT_ROT_S, VerticalSlider, _solve_vertical_slider,
                                         rack_direction, solve_corner)
 from rtsim.vehicle.offline import prepare, run
@@ -59,7 +60,7 @@ def test_steered_slider_follows_the_crank_rod_law():
 
 
 def test_front_wheel_drive_car_pulls_with_its_front_wheels():
-    sim, sc = prepare(FWD, "configs/scenarios/straight_line.toml")
+    sim, sc = prepare(FWD, load_scenario("configs/scenarios/straight_line.toml", check_files=True))
     res = run(sim, sc)
     t, v = res.column("time"), res.column("speed")
     accelerating = (np.gradient(v, t) > 0.5) & (v > 1.0)

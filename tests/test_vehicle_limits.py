@@ -7,6 +7,7 @@ against the linear single-track model computed from the model's own parameters."
 import numpy as np
 import pytest
 
+from drivers.scenario import load_scenario
 from rtsim.mbs.model import ST_MAX_PHI, ST_MAX_PHID
 from rtsim.road.model import make_plane
 from rtsim.vehicle.car.config import load_vehicle
@@ -70,7 +71,7 @@ def test_wheels_leave_the_ground_and_land(model):
 
 
 def test_braking_in_a_turn_shifts_load_to_the_front():
-    sim, sc = prepare(None, "configs/scenarios/step_steer_braking_80kph.toml")
+    sim, sc = prepare(None, load_scenario("configs/scenarios/step_steer_braking_80kph.toml", check_files=True))
     res = run(sim, sc)
     t = res.column("time")
     before = (t > 4.0) & (t < 4.9)
@@ -86,7 +87,7 @@ def test_steady_circle_yaw_gain_matches_the_single_track_model(model):
     """At low lateral acceleration (< 2 m/s^2) the yaw-rate gain per mean front road-wheel angle is
     within 5 % of the linear single-track model V / (L (1 + K V^2)) with the understeer gradient
     K = m/L (b/C_f - a/C_r) from the model's own mass, weight split and axle cornering stiffnesses."""
-    sim, sc = prepare(None, "configs/scenarios/steady_circle.toml")
+    sim, sc = prepare(None, load_scenario("configs/scenarios/steady_circle.toml", check_files=True))
     info = describe(model, VehicleSim(model, make_plane(), 1e-3))
     res = run(sim, sc)
     t = res.column("time")

@@ -4,6 +4,7 @@ oscillation at standstill)."""
 import numpy as np
 import pytest
 
+from drivers.scenario import load_scenario
 from rtsim.vehicle.offline import prepare, run, write_csv, COLUMNS
 
 SEED_DISTANCE = 63.5      # m, xbw-vehicle-mbs-validation sec. 2.3
@@ -12,7 +13,7 @@ SEED_PEAK_SPEED = 23 / 3.6  # m/s
 
 @pytest.fixture(scope="module")
 def straight_line():
-    sim, sc = prepare(None, "configs/scenarios/straight_line.toml")
+    sim, sc = prepare(None, load_scenario("configs/scenarios/straight_line.toml", check_files=True))
     return run(sim, sc), sim
 
 
@@ -88,9 +89,9 @@ noise_std = 0.01
     vfile.write_text(text.replace('[tyres]\nproperty_file = "../tyres/', f'[tyres]\nproperty_file = "{(tmp_path / "tyres").as_posix()}/') + extra)
     shutil.copytree("configs/tyres", tmp_path / "tyres")
     assert tomllib.loads(vfile.read_text())["sensors"]["channels"]["accel_x"]["bias"] == 0.5
-    base_sim, sc = prepare(None, "configs/scenarios/step_steer_80kph.toml")
+    base_sim, sc = prepare(None, load_scenario("configs/scenarios/step_steer_80kph.toml", check_files=True))
     base = run(base_sim, sc)
-    sim, sc = prepare(vfile, "configs/scenarios/step_steer_80kph.toml")
+    sim, sc = prepare(vfile, load_scenario("configs/scenarios/step_steer_80kph.toml", check_files=True))
     res = run(sim, sc, seed=1)
     c = res.columns.index
     assert np.allclose(res.data[:, c("accel_x")], base.data[:, c("accel_x")] + 0.5, atol=1e-9)
@@ -110,7 +111,7 @@ def test_every_scenario_runs_within_the_constraint_bar(scenario, vehicle):
     |Phi_q qd + Phi_t| <= 1e-6 after every step, on the prototype and on its second assembly from the
     same kit (front-wheel drive, vertical sliders: a config file only)."""
     from rtsim.mbs.model import ST_MAX_PHI, ST_MAX_PHID, ST_STEPS
-    sim, sc = prepare(vehicle, f"configs/scenarios/{scenario}.toml")
+    sim, sc = prepare(vehicle, load_scenario(f"configs/scenarios/{scenario}.toml", check_files=True))
     res = run(sim, sc)
     st = sim.data.stats
     assert st[ST_STEPS] == round(sc.duration / sc.dt)

@@ -1,7 +1,8 @@
-"""What `rtsim view` draws, described from the configuration (rtsim.viewer.scene), against the files it
-comes from: the car's wheel centres from its hardpoints relative to its centre of mass, its tyre from the
-.tir file; the campus road as the survey mesh the service builds (same vertices, triangles, friction);
-a grade's plane; a road file that cannot be read drawn flat with the reason."""
+"""What `rtsim view` draws, described from the configuration (rtsim.viewer.scene, the vehicle's drawing:
+rtsim.vehicle.kit.drawing), against the files it comes from: the car's wheel centres from its hardpoints
+relative to its centre of mass, its tyre from the .tir file; the two-wheeler's points from its geometry;
+the campus road as the survey mesh the service builds (same vertices, triangles, friction); a grade's plane;
+a road file that cannot be read drawn flat with the reason."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -12,22 +13,29 @@ import pytest
 from rtsim.road.config import read_road_config
 from rtsim.road.survey import read_survey, survey_to_mesh
 from rtsim.vehicle.car.config import load_vehicle
-from rtsim.viewer.scene import car_shape, road_description, two_wheeler_shape
+from rtsim.vehicle.car.drawing import car_drawing
+from rtsim.vehicle.motorcycle.drawing import two_wheeler_drawing
+from rtsim.viewer.scene import road_description, vehicle_drawing
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_car_shape_from_its_config():
+def test_car_drawing_from_its_config():
     path = ROOT / "configs" / "vehicles" / "xbw.toml"
-    cfg, _ = load_vehicle(path)
+    cfg, base = load_vehicle(path)
     d = cfg.model_dump(mode="json")
-    s = car_shape(d, path)
+    s = car_drawing(cfg, base)
     cg = np.array(d["chassis"]["cg_m"])
     wc = np.array(d["front"]["hardpoints"]["wheel_centre"])
-    assert s["wheels"]["fl"] == pytest.approx(list(wc - cg))
-    assert s["wheels"]["fr"] == pytest.approx([wc[0] - cg[0], -wc[1] - cg[1], wc[2] - cg[2]])
-    assert s["wheel_radius"] == 0.289 and s["tyre_kz"] == 165000.0      # michelin_155_80_r13.tir
-    assert s["body"]["x_front"] > s["wheels"]["fl"][0] > s["wheels"]["rl"][0] > s["body"]["x_rear"]
+    wheels = {w.name: w for w in s.wheels}
+    assert wheels["fl"].centre == pytest.approx(list(wc - cg))
+    assert wheels["fr"].centre == pytest.approx([wc[0] - cg[0], -wc[1] - cg[1], wc[2] - cg[2]])
+    assert (wheels["fl"].radius, wheels["fl"].stiffness) == (0.289, 165000.0)      # michelin_155_80_r13.tir
+    assert (wheels["fl"].steer, wheels["rl"].steer, wheels["rr"].load) == ("steer_angle_fl", None, "tyre_fz_rr")
+    lower = s.pieces[0]
+    x_front, x_rear = lower["at"][0] + lower["size"][0] / 2, lower["at"][0] - lower["size"][0] / 2
+    assert x_front > wheels["fl"].centre[0] > wheels["rl"].centre[0] > x_rear
+    assert s.steering is None and s.attitude == "zyx"
 
 
 def test_two_wheeler_points_from_its_geometry():
@@ -35,16 +43,44 @@ def test_two_wheeler_points_from_its_geometry():
 
     cfg, _ = load_motorcycle(ROOT / "configs" / "vehicles" / "motorcycle.toml")
     d = cfg.model_dump(mode="json")
-    s = two_wheeler_shape(d)
+    s = two_wheeler_drawing(cfg)
+    rear, front = s.wheels
     px, pz = d["geometry"]["swingarm_pivot_m"]
-    assert s["front_wheel"][0] - s["rear_wheel"][0] == pytest.approx(d["geometry"]["wheelbase_m"])
-    assert s["rear_wheel"] == pytest.approx([-px, 0.0, d["rear_wheel"]["radius_m"] - pz])
+    assert front.centre[0] - rear.centre[0] == pytest.approx(d["geometry"]["wheelbase_m"])
+    assert rear.centre == pytest.approx([-px, 0.0, d["rear_wheel"]["radius_m"] - pz])
     # the steering axis leans back by the caster angle and meets the ground one trail ahead of the front contact
-    ax = np.array(s["steer_axis"])
+    ax = np.array(s.steering.axis)
     assert np.degrees(np.arctan2(-ax[0], ax[2])) == pytest.approx(d["geometry"]["caster_deg"])
-    head = np.array(s["steer_head"]) + [px, 0.0, pz]
+    head = np.array(s.steering.head) + [px, 0.0, pz]
     ground_x = head[0] - head[2] * ax[0] / ax[2]
     assert ground_x == pytest.approx(d["geometry"]["wheelbase_m"] + d["geometry"]["trail_m"])
+    # the articulation at the design position puts the wheels at their design centres
+    centres, axes, parts = s.articulate(lambda name, default: default)
+    assert centres[0] == pytest.approx(rear.centre, abs=1e-9) and centres[1] == pytest.approx(front.centre, abs=1e-9)
+    assert axes[1] == pytest.approx(ax) and [p[0] for p in parts] == ["cylinder", "box"]
+
+
+@pytest.mark.parametrize("name", [p.stem for p in sorted((ROOT / "configs" / "vehicles").glob("*.toml"))])
+def test_the_page_and_the_scene_draw_one_description(name, tmp_path):
+    """Every vehicle describes how it is drawn (rtsim.vehicle.kit.drawing); the page gets it from the
+    service's config reply (its file, else the reported config, as JSON: non-finite numbers null) as the
+    Foxglove scene gets it from the served sim."""
+    import json
+
+    from bridge.payloads import encode_json
+    from rtsim.vehicle.registry import open_vehicle
+    from rtsim.viewer.scene import describe
+
+    opened = open_vehicle(ROOT / "configs" / "vehicles" / f"{name}.toml")
+    drawing = opened.kind.drawing(opened)
+    reported = json.loads(encode_json({"vehicle": opened.config.model_dump(mode="json")}))["vehicle"]
+    config = {"vehicle": reported, "options": {"vehicle": str(opened.path)}}
+    assert describe(config)["shape"] == drawing.page()
+    elsewhere = tmp_path / "another_machine" / f"{name}.toml"          # a recording made elsewhere
+    assert vehicle_drawing(reported, elsewhere) == (opened.name, drawing.page())
+    if name == "xbw":                                                   # the service's default vehicle
+        assert describe({"vehicle": reported})["shape"] == drawing.page()
+    assert [w.name for w in drawing.wheels] and all(w.radius > 0 for w in drawing.wheels)
 
 
 def test_roads_as_drawn(tmp_path):

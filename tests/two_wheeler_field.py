@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drivers.scenario import load_scenario
 from rtsim.channels import TWO_WHEELER_SENSORS
 from rtsim.vehicle.motorcycle.offline import prepare
 from drivers.rider import RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE
@@ -86,7 +87,7 @@ def ride(folder: Path, kind: str, seed: int, added_mass: float = 0.0, bias: dict
         text = LANE_CHANGE.format(vehicle=vehicle.as_posix(), road=ROAD.as_posix(), duration=duration, v0=v0 + 3.0, a=18.0 + dv)
     sc = folder / f"scenario_{kind}_{seed}.toml"
     sc.write_text(text)
-    r, _ = prepare(None, sc)
+    r, _ = prepare(None, load_scenario(sc, check_files=True))
     s = r.sim
     p = s.parts
     start = LEAD_IN + int(rng.integers(0, 50))    # ms of riding before the logger starts

@@ -1,7 +1,7 @@
 """Steering feel, measured: the steering-wheel torque against the lateral acceleration of a recorded run
 (an on-centre weave, a slow ramp steer) and what the power-steering motor spent on it.
 
-Channels (a run of `rtsim run`, CSV or MCAP, read by rtsim.analyses.figures.read_recorded):
+Channels (a run of `rtsim run`, CSV or MCAP, read by bridge.run_files.read_recorded):
 
     accel_y               m/s^2  the lateral accelerometer (body frame, at the IMU: what a test's
                                  measuring unit reads; shown in g, 1 g = 9.81 m/s^2)

@@ -5,12 +5,10 @@ steering-column torque in N m, each against time in s. PNG files drawn by matplo
 out when it has none of them.
 
 The table is an offline run's (rtsim.vehicle.offline.RunResult: columns and data) or a recording's,
-read by :func:`read_recorded` from CSV (header row of column names) or MCAP (bridge.mcap_log.read_run).
+read from CSV or MCAP by bridge.run_files.read_recorded (the outside world's formats are the bridge's).
 """
 from __future__ import annotations
 
-import csv
-import math
 from pathlib import Path
 
 import numpy as np
@@ -106,37 +104,3 @@ def _finish(ax, ylabel: str) -> None:
 
 
 _DRAW = {"lateral_acceleration": _lateral, "tyre_vertical_forces": _tyre_forces, "steering": _steering}
-
-
-def read_recorded(path: str | Path) -> tuple[tuple[str, ...], np.ndarray]:
-    """Columns and (n, ncol) values of a recorded run: CSV with a header row (as `rtsim run` writes;
-    empty or non-numeric cells become NaN) or MCAP (bridge.mcap_log.read_run). ConfigError otherwise."""
-    path = Path(path)
-    kind = path.suffix.lower()
-    if kind == ".mcap":
-        from bridge.mcap_log import read_run     # the bridge reads MCAP; imported only when needed
-        return read_run(path)
-    if kind != ".csv":
-        raise ConfigError(f"{path}: unknown run format {path.suffix or '(none)'}; use .csv or .mcap")
-    try:
-        with path.open(newline="") as fh:
-            rows = [r for r in csv.reader(fh) if r]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or exc})") from None
-    if not rows:
-        raise ConfigError(f"{path}: empty file (no header row)")
-    columns = tuple(c.strip() for c in rows[0])
-    if all(len(r) == len(columns) for r in rows[1:]):
-        try:                               # a clean numeric table
-            return columns, np.array(rows[1:], dtype=float).reshape(-1, len(columns))
-        except ValueError:
-            pass
-    data = [[_number(r[j]) if j < len(r) else math.nan for j in range(len(columns))] for r in rows[1:]]
-    return columns, np.array(data, dtype=float).reshape(-1, len(columns))
-
-
-def _number(cell: str) -> float:
-    try:
-        return float(cell)
-    except ValueError:
-        return math.nan

@@ -166,7 +166,7 @@ def run_motorcycle(steps: int = 3000) -> dict:
     The step's cost is the median of the steps' own costs (each timed with the processor's cycle
     counter inside the loop): the bar is a median, and on a shared machine the steps the process lost
     its core in are outliers, not the step's cost. The mean over the run's wall time is given beside it."""
-    from drivers.paths import figure_eight
+    from rtsim.road.paths import figure_eight
     from drivers.rider import NRO, NRV, RV_U, rider
     from rtsim.vehicle.motorcycle.build import build_motorcycle
     from rtsim.vehicle.motorcycle.config import load_motorcycle

@@ -25,7 +25,7 @@ def fuzz_vehicle(target: FuzzTarget, count: int, seed: int = 0, failures=None, p
 
     summary = FuzzSummary(target.name)
     strategy = ride_strategy(target.space, target.roads, target.top_speed, segment_s, segments,
-                             two_wheeler=target.kind == "two_wheeler", eps=target.eps)
+                             rider_optional=target.rig.rider_optional, eps_optional=target.eps)
     t0 = time.perf_counter()
 
     @hseed(seed)

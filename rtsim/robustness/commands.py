@@ -179,10 +179,11 @@ def segment_strategy(space: CommandSpace, max_frames: int):
 
 
 def ride_strategy(space: CommandSpace, roads: tuple[str, ...], top_speed: float, max_segment_s: float = 1.0,
-                  max_segments: int = 5, two_wheeler: bool = False, eps: bool = False):
+                  max_segments: int = 5, rider_optional: bool = False, eps_optional: bool = False):
     """Rides (``Ride``) on ``roads`` from standstill to ``top_speed`` (m/s) with at most ``max_segments``
-    segments of at most ``max_segment_s`` seconds each (in command periods of the space); the kind's
-    options drawn where they apply."""
+    segments of at most ``max_segment_s`` seconds each (in command periods of the space); the vehicle's
+    options drawn where they apply: with or without its rider (``rider_optional``), the EPS motor current
+    from the bus or the built-in law (``eps_optional``)."""
     from hypothesis import strategies as st
 
     max_frames = max(1, int(round(max_segment_s / space.frame_s)))
@@ -190,5 +191,5 @@ def ride_strategy(space: CommandSpace, roads: tuple[str, ...], top_speed: float,
     speed = st.one_of(st.sampled_from((0.0, top_speed)), st.floats(0.0, top_speed, allow_nan=False))
     segs = st.lists(segment_strategy(space, max_frames), min_size=1, max_size=max_segments).map(tuple)
     return st.builds(Ride, road=st.sampled_from(roads), speed=speed, segments=segs,
-                     rider=st.booleans() if two_wheeler else st.just(True),
-                     eps_external=st.booleans() if eps else st.just(True))
+                     rider=st.booleans() if rider_optional else st.just(True),
+                     eps_external=st.booleans() if eps_optional else st.just(True))

@@ -213,7 +213,7 @@ def main(args) -> int:
     ecu.wait(5.0)
     if ecu.returncode != 0:
         return _fail(ecu.describe_end())
-    return REPORTS[demo.report](args, svc, summary, ecu.result)
+    return REPORTS[demo.ecu](args, svc, summary, ecu.result)
 
 
 def recorded_eps(path: Path, vehicle_id: str) -> dict:
@@ -274,8 +274,8 @@ def recorded_ride(path: Path, vehicle_id: str) -> dict:
             "peak_assist": float(np.max(np.abs(d["assist_torque"])))}
 
 
-def _report_two_wheeler(args, svc: Service, summary: dict, result: dict) -> int:
-    """The closing lines of a two-wheeler demo: what the rider, the motorcycle and the ECU did."""
+def _report_ride(args, svc: Service, summary: dict, result: dict) -> int:
+    """The closing lines of a rider-assist demo: what the rider, the two-wheeler and the ECU did."""
     rec = recorded_ride(Path(args.record), svc.vehicle_id)
     accepted = summary.get("accepted_frames", 0) or 0
     print(f"rtsim demo: rider-assist ECU sent {result.get('commands_sent', 0)} commands over "
@@ -312,5 +312,5 @@ def _report(args, svc: Service, summary: dict, result: dict) -> int:
     return 0
 
 
-#: the closing report of each vehicle's demo (rtsim.vehicle.registry.Demo.report)
-REPORTS = {"car": _report, "eps": _report_eps, "two_wheeler": _report_two_wheeler}
+#: the closing report of each demo ECU (the vehicle's ``Demo.ecu``): what that ECU did and reported
+REPORTS = {"drivers.ecu_demo": _report, "drivers.eps_demo": _report_eps, "drivers.rider_assist_demo": _report_ride}

@@ -1,4 +1,5 @@
-"""Offline runs: a vehicle, a road and a scenario's driver, as fast as the machine allows, logged at
+"""Offline runs: a vehicle, a road and a scenario's driver (the scenario loaded by drivers.scenario and
+handed in: the vehicle never imports its drivers), as fast as the machine allows, logged at
 the scenario's output rate (column `time`, then the vehicle's sensor channels as reported, then its
 state channels: the names of its channel dictionary, then the power audit's rtsim.channels.ENERGY) to
 CSV or, through bridge.mcap_log, to MCAP."""
@@ -12,8 +13,6 @@ from typing import Callable
 
 import numpy as np
 
-from drivers.base import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, NSTATE
-from drivers.scenario import Scenario, load_scenario
 from rtsim.channels import CAR, ChannelDictionary
 from rtsim.errors import ConfigError, SimulationError
 from rtsim.model_fault import ModelFault, describe_error, force_failure, test_fault_step, test_fault_time
@@ -22,6 +21,7 @@ from rtsim.road.config import load_road
 from .car.build import build_vehicle
 from .car.energy import ENERGY_NAMES, energy_row
 from .car.config import load_vehicle
+from .car.inputs import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, NSTATE
 from .car.observer import driver_view, vehicle_state_values
 from .car.sim import VehicleSim
 from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT
@@ -59,14 +59,15 @@ def default_vehicle_path() -> Path:
     return Path(__file__).resolve().parents[2] / "configs" / "vehicles" / "xbw.toml"
 
 
-def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario) -> tuple[VehicleSim, Scenario]:
-    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, check_files=True)
+def prepare(vehicle: str | Path | None, sc) -> tuple[VehicleSim, object]:
+    """The car (argument, else the scenario's, else the default) at the start of the scenario ``sc`` (a
+    loaded drivers.scenario.Scenario), and the scenario."""
     vpath = Path(vehicle) if vehicle is not None else (sc.vehicle_path or default_vehicle_path())
     cfg, base = load_vehicle(vpath)
     return sim_for(build_vehicle(cfg, base), sc), sc
 
 
-def sim_for(model, sc: Scenario) -> VehicleSim:
+def sim_for(model, sc) -> VehicleSim:
     """The built car `model` at the scenario's start on its road, the brake at the driver's first command."""
     road = load_road(sc.road_path)
     ini = sc.spec.initial
@@ -80,11 +81,11 @@ def sim_for(model, sc: Scenario) -> VehicleSim:
 
 
 def vehicle_state(sim: VehicleSim, out: np.ndarray) -> None:
-    """Speed, x, y, yaw of the centre of mass for the closed-loop drivers (drivers.base.S_*)."""
+    """Speed, x, y, yaw of the centre of mass for the closed-loop drivers (rtsim.vehicle.car.inputs S_*)."""
     driver_view(sim.data, sim.vm.vehicle, out)
 
 
-def run(sim: VehicleSim, sc: Scenario, progress: Callable[[float], None] | None = None,
+def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
         seed: int = 0) -> RunResult:
     """Run the scenario to its duration; rows at the scenario's output rate. Sensor channels are what the
     sensors report (the vehicle's sensor model: the config's [sensors.channels] and sensor effects);

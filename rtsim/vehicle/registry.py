@@ -98,13 +98,12 @@ class OfflineRun:
 class Demo:
     """What `rtsim demo` runs against a vehicle: the ECU module, the loop's mode, the scenario (None: the
     service's default for the vehicle), the duration (None: the ECU's own), whether the ECU may fall
-    silent (``--silent-after``) and the report's name (rtsim.service.demo.REPORTS)."""
+    silent (``--silent-after``). The closing report is the ECU's (rtsim.service.demo.REPORTS)."""
     ecu: str
     mode: str = "realtime"
     scenario: str | None = None
     duration: float | None = None
     silent_after: bool = False
-    report: str = "car"
 
 
 class VehicleKind:
@@ -150,6 +149,17 @@ class VehicleKind:
     def validation(self, opened: "OpenedVehicle"):
         """The vehicle's validation profile (rtsim.vehicle.validation.ValidationProfile): what `rtsim
         validate` replays, compares and fits, and the replayer it re-simulates the vehicle with."""
+        raise NotImplementedError
+
+    def drawing(self, opened: "OpenedVehicle"):
+        """How the vehicle is drawn (rtsim.vehicle.kit.drawing.Drawing: the 3D scene's and the viewer's
+        description), from its config."""
+        raise NotImplementedError
+
+    def fuzz_rig(self, opened: "OpenedVehicle", dt: float):
+        """What the command fuzzing (rtsim.robustness.harness) needs of the vehicle: its DBC, command slots,
+        energy bound's terms, roads, the vehicle at a ride's start and its steps (rtsim.vehicle.car.fuzz
+        states the interface)."""
         raise NotImplementedError
 
 

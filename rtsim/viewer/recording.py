@@ -87,12 +87,8 @@ class Recording:
         vehicle = raw
         if vpath is not None and vpath.is_file():
             try:
-                if raw.get("kind") == "two_wheeler":
-                    from rtsim.vehicle.motorcycle.config import load_motorcycle
-                    vehicle = load_motorcycle(vpath)[0].model_dump(mode="json")
-                else:
-                    from rtsim.vehicle.car.config import load_vehicle
-                    vehicle = load_vehicle(vpath)[0].model_dump(mode="json")
+                from rtsim.vehicle.registry import open_vehicle
+                vehicle = open_vehicle(vpath).config.model_dump(mode="json")
             except Exception:  # noqa: BLE001  (the file changed since: the recorded text)
                 vehicle = raw
         if not vehicle:

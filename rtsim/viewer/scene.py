@@ -1,5 +1,6 @@
-"""What the page draws, described once from the service's configuration: the vehicle's shape (wheel
-centres, radii, tyre stiffness, body size: from its config file as the service reports it), the road
+"""What the page draws, described once from the service's configuration: the vehicle's drawing (its
+wheels, body pieces, steering and camera points: rtsim.vehicle.kit.drawing, built by the vehicle from its
+config, the same description the Foxglove scene draws), the road
 (plane, grade, or the survey mesh with its per-triangle friction), and the vehicle's controls and default
 plots as the vehicle describes them (rtsim.vehicle.kit.user_inputs). All in SI units and ISO 8855 axes
 (x forward, y left, z up), as the state channels.
@@ -13,58 +14,41 @@ swingarm pivot; its points are given relative to the pivot in the frame's (x, z)
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 
 
+def vehicle_drawing(vehicle: dict, vehicle_path: Path | None) -> tuple[str, dict]:
+    """(kind name, the page's drawing: rtsim.vehicle.kit.drawing.Drawing.page) of the served vehicle: its file
+    (None: the default vehicle, as the service serves it) when it is here, else its config as the service
+    or the recording reports it (a JSON null, a non-finite number or an unset option, takes the field's
+    default), its relative files beside its path, else beside the shipped vehicles."""
+    from rtsim.vehicle.registry import DEFAULT_VEHICLE, OpenedVehicle, kind_of, open_vehicle
 
-def _tir_value(path: Path, key: str, default: float) -> float:
-    """A number of a .tir tyre property file (KEY = value $ comment), or the default."""
-    try:
-        m = re.search(rf"^\s*{key}\s*=\s*([-+0-9.eE]+)", path.read_text(errors="replace"), re.MULTILINE)
-    except OSError:
-        return default
-    return float(m.group(1)) if m else default
-
-
-def car_shape(vehicle: dict, vehicle_path: Path | None) -> dict:
-    """Wheel centres relative to the centre of mass (m), radius and vertical stiffness of the tyre, a body
-    box around the wheels, from the car's config (as dumped by the service's ``config`` query)."""
-    cg = vehicle["chassis"]["cg_m"]
-    wheels = {}
-    for axle, corners in (("front", ("fl", "fr")), ("rear", ("rl", "rr"))):
-        wc = vehicle[axle]["hardpoints"]["wheel_centre"]
-        for c, side in zip(corners, (1.0, -1.0)):
-            wheels[c] = [wc[0] - cg[0], side * wc[1] - cg[1], wc[2] - cg[2]]
-    radius, kz = 0.29, 2.0e5
-    tir = (vehicle.get("tyres") or {}).get("property_file")
-    if tir and vehicle_path is not None:
-        p = (vehicle_path.parent / tir).resolve()
-        radius = _tir_value(p, "UNLOADED_RADIUS", radius)
-        kz = _tir_value(p, "VERTICAL_STIFFNESS", kz)
-    xs = [w[0] for w in wheels.values()]
-    track = max(w[1] for w in wheels.values()) - min(w[1] for w in wheels.values())
-    return {"kind": "car", "wheels": wheels, "wheel_radius": radius, "wheel_width": 0.16, "tyre_kz": kz,
-            "body": {"x_front": max(xs) + 0.75, "x_rear": min(xs) - 0.65, "width": track + 0.15,
-                     "z_floor": wheels["fl"][2] - 0.05, "z_roof": wheels["fl"][2] + 1.15}}
+    path = Path(vehicle_path) if vehicle_path is not None else DEFAULT_VEHICLE
+    if path.is_file():
+        try:
+            opened = open_vehicle(path)
+            return opened.name, opened.kind.drawing(opened).page()
+        except Exception:            # noqa: BLE001  (the file changed since: the reported config)
+            pass
+    data = _without_nulls(vehicle)
+    kind = kind_of(data, path)
+    error = None
+    for where in (path, DEFAULT_VEHICLE):
+        try:
+            cfg, base = kind.load(data, where)
+            return kind.name, kind.drawing(OpenedVehicle(where, kind, cfg, base)).page()
+        except Exception as exc:     # noqa: BLE001  (its files are not here: try the shipped ones)
+            error = exc
+    raise error
 
 
-def two_wheeler_shape(vehicle: dict) -> dict:
-    """Points of a two-wheeler relative to its swingarm pivot in the rear frame's (x, z) plane (m): the
-    rear wheel centre on the swingarm, the front wheel centre, the steering axis (a point and its
-    direction), radii; from its config's geometry."""
-    g = vehicle["geometry"]
-    px, pz = g["swingarm_pivot_m"]
-    rr, rf = vehicle["rear_wheel"]["radius_m"], vehicle["front_wheel"]["radius_m"]
-    wb, trail, caster = g["wheelbase_m"], g["trail_m"], math.radians(g["caster_deg"])
-    ground = wb + trail                      # the steering axis meets the ground here (x)
-    axis = [-math.sin(caster), 0.0, math.cos(caster)]
-    head = [ground + axis[0] * 1.0 - px, 0.0, axis[2] * 1.0 - pz]
-    return {"kind": "two_wheeler", "rear_wheel": [-px, 0.0, rr - pz], "front_wheel": [wb - px, 0.0, rf - pz],
-            "rear_radius": rr, "front_radius": rf, "steer_axis": axis, "steer_head": head,
-            "rider": ([vehicle["rider"]["cg_m"][0] - px, 0.0, vehicle["rider"]["cg_m"][1] - pz]
-                      if vehicle.get("rider") else None),          # (the benchmark bicycle has none)
-            "cg": [vehicle["rear_frame"]["cg_m"][0] - px, 0.0, vehicle["rear_frame"]["cg_m"][1] - pz]}
+def _without_nulls(d):
+    if isinstance(d, dict):
+        return {k: _without_nulls(v) for k, v in d.items() if v is not None}
+    if isinstance(d, list):
+        return [_without_nulls(v) for v in d]
+    return d
 
 
 BUILDING_COLUMNS = ("x", "y", "length", "width", "height", "yaw_deg")
@@ -138,7 +122,6 @@ def road_description(road_path: Path | None) -> dict:
 def describe(config: dict) -> dict:
     """The page's scene description from the service's ``config`` reply."""
     vehicle = config["vehicle"]
-    kind = "two_wheeler" if vehicle.get("kind") == "two_wheeler" else "car"
     road_path = vehicle_path = None
     scen = (config.get("scenario") or {}).get("path")
     if scen:
@@ -157,10 +140,7 @@ def describe(config: dict) -> dict:
             vehicle_path = resolve_vehicle(opt)
         except Exception:            # noqa: BLE001
             pass
-    if vehicle_path is None and kind == "car":
-        from rtsim.vehicle.offline import default_vehicle_path
-        vehicle_path = default_vehicle_path()
-    shape = car_shape(vehicle, vehicle_path) if kind == "car" else two_wheeler_shape(vehicle)
+    kind, shape = vehicle_drawing(vehicle, vehicle_path)
     return {
         "vehicle_id": config.get("vehicle_id"), "name": vehicle.get("name"), "kind": kind, "dt": config.get("dt"),
         "mode": (config.get("options") or {}).get("mode"),

@@ -102,39 +102,6 @@ def energy_row(sim, out: np.ndarray) -> None:
         out[k:] = 0.0
 
 
-def read_energy(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """The power audit of a recorded run: time (s) and the ENERGY channels, from an MCAP file's
-    ``energy`` topic or a CSV's columns. Raises ValueError when the run has no audit."""
-    from pathlib import Path
-
-    path = Path(path)
-    if path.suffix.lower() == ".csv":
-        import csv
-
-        with path.open(newline="") as fh:
-            rows = list(csv.reader(fh))
-        head, body = rows[0], np.array(rows[1:], dtype=float)
-        if "time" not in head or not set(ENERGY_NAMES) <= set(head):
-            raise ValueError(f"{path}: no power audit columns (work_*, stored_*) in this CSV")
-        return body[:, head.index("time")], {n: body[:, head.index(n)] for n in ENERGY_NAMES}
-    from bridge.mcap_log import read_messages
-
-    msgs = [m for _t, m in read_messages(path, _energy_topic(path))]
-    if not msgs:
-        raise ValueError(f"{path}: no power audit (topic rtsim/<vehicle>/energy) in this recording")
-    return (np.array([m["time"] for m in msgs]),
-            {n: np.array([m.get(n, np.nan) for m in msgs]) for n in ENERGY_NAMES})
-
-
-def _energy_topic(path) -> str:
-    from mcap.reader import make_reader
-
-    with open(path, "rb") as fh:
-        summary = make_reader(fh).get_summary()
-    topics = [c.topic for c in (summary.channels.values() if summary else []) if c.topic.endswith("/energy")]
-    return topics[0] if topics else "rtsim/energy"
-
-
 def summarise(t: np.ndarray, series: dict[str, np.ndarray]) -> str:
     """The audit of a run as text: every port's energy (J) and peak power (W), the stored energies'
     change, and the balance with its residual relative to the energy exchanged."""

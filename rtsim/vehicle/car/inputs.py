@@ -1,5 +1,7 @@
-"""The car's driving inputs: the ranges of its input channels (what a driver, a replay or a person may
-command, SI) and what a person may drive of it (rtsim.vehicle.kit.user_inputs).
+"""The car's driving inputs: the layouts a driver reads and writes (``S_*``: the driver's view of the car;
+``I_*``: its outputs, the car's input channels; declared here once, drivers.base names them for the
+drivers), the ranges of its input channels (what a driver, a replay or a person may command, SI) and
+what a person may drive of it (rtsim.vehicle.kit.user_inputs).
 
 The person drives the ECU's own commands, the value written into the command slot. The pedals are one
 group (either key takes the throttle and the brake, so a car nobody else drives is not held by the
@@ -12,7 +14,26 @@ from __future__ import annotations
 
 import math
 
+from rtsim.channels import COMMAND_NAMES
+
 from ..kit.user_inputs import ControlGroup, UserChannel, UserInputs
+
+# --- the driver's view of the car: the state a closed-loop driver reads (drivers.base), ISO 8855 --------
+S_SPEED = 0   # m/s, longitudinal speed of the reference point (forward positive)
+S_X = 1       # m, position x in the road frame
+S_Y = 2       # m, position y in the road frame
+S_YAW = 3     # rad, yaw angle from the road x axis, positive turning left
+NSTATE = 4
+STATE_NAMES = ("speed", "x", "y", "yaw")
+
+# --- the driver's outputs: one float per input channel of the car, in the order of INPUT_NAMES ---------
+I_THROTTLE = 0
+I_BRAKE = 1
+I_STEER = 2
+I_TORQUE_RL = 3
+I_TORQUE_RR = 4
+NINPUT = 5
+INPUT_NAMES: tuple[str, ...] = (*COMMAND_NAMES, "wheel_torque_rl", "wheel_torque_rr")
 
 #: input channel -> (lo, hi), SI: rad, kPa, rad, N m, N m
 LIMITS: dict[str, tuple[float, float]] = {

@@ -104,8 +104,16 @@ class CarKind(VehicleKind):
 
     def demo(self, opened) -> Demo:
         if opened.config.eps is not None:      # the EPS ECU closes the assist loop: lockstep, its manoeuvre
-            return Demo("drivers.eps_demo", "lockstep", EPS_DEMO_SCENARIO, None, True, "eps")
+            return Demo("drivers.eps_demo", "lockstep", EPS_DEMO_SCENARIO, None, True)
         return Demo("drivers.ecu_demo")
+
+    def fuzz_rig(self, opened, dt):
+        from .fuzz import CarFuzzRig
+        return CarFuzzRig(opened, dt)
+
+    def drawing(self, opened):
+        from .drawing import car_drawing
+        return car_drawing(opened.config, opened.base)
 
 
 KIND = CarKind()

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 from math import asin, atan2, sqrt
 
-from drivers.base import S_SPEED, S_X, S_Y, S_YAW
 from rtsim.channels import STATE_NAMES, WHEELS
 from rtsim.jit import kernel
 
+from .inputs import S_SPEED, S_X, S_Y, S_YAW
 from .step import TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_KAPPA
 from .layout import CI_PHI, STEER_RACK
 from .sensors import SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_SW_ANGLE, SG_THROTTLE
@@ -32,7 +32,7 @@ assert NSTATE_OUT == X_PHI + 1 and len(WHEELS) == 4
 
 @kernel
 def driver_view(d, veh, out):
-    """What the closed-loop drivers read (drivers.base.S_*: speed m/s along the heading, x, y m and yaw
+    """What the closed-loop drivers read (rtsim.vehicle.car.inputs S_*: speed m/s along the heading, x, y m and yaw
     rad of the centre of mass) into out[0:4]."""
     q, qd = d.q, d.qd
     ci = veh.chassis_idx

@@ -162,6 +162,12 @@ class VehicleSim:
         self.vd.drive[right] = io.pt_out[PO_TORQUE_RIGHT]
 
     @property
+    def drawing(self):
+        """How the car is drawn (rtsim.vehicle.car.drawing: the 3D scene's and the viewer's description)."""
+        from .drawing import car_drawing
+        return car_drawing(self.vm.config, self.vm.base)
+
+    @property
     def effects(self) -> dict:
         """The active effects (canonical mapping of rtsim.vehicle.car.effects.validate_effects; a copy)."""
         return {k: ([dict(r) for r in v] if isinstance(v, list) else dict(v)) for k, v in self._effects.items()}

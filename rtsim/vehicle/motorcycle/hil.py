@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.channels import ChannelDictionary, two_wheeler_channels
-from drivers.rider import rider as make_rider
+from .rider import rider as make_rider
 
 from .build import MotorcycleModel
 from .config import MotorcycleConfig
@@ -82,6 +82,12 @@ class TwoWheelerHil:
         self.params, self.state = make_plant(mm, self.rider_on)
         self.io = PlantIO(np.zeros(NCOMMAND))
         self.io.commands[[INVALID_SLOTS[n] for n in INVALID_SLOTS]] = 1.0     # no command yet
+
+    @property
+    def drawing(self):
+        """How the two-wheeler is drawn (rtsim.vehicle.motorcycle.drawing)."""
+        from .drawing import two_wheeler_drawing
+        return two_wheeler_drawing(self.vm.config)
 
     def served(self) -> "LoopTwoWheeler":
         """The two-wheeler as the service's compiled step takes it (rtsim.service.vehicles)."""

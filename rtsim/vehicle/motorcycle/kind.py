@@ -70,7 +70,7 @@ class TwoWheelerKind(VehicleKind):
     def service_sim(self, opened, sc, dt, models, rider):
         """On the flat road of the scenario (the two-wheeler's tyres run on the plane z = 0 only), its
         friction scale the tyres' road friction; with the scenario's rider unless ``rider`` is False."""
-        from drivers.rider import P_TYRE_LEAN
+        from .rider import P_TYRE_LEAN
         from rtsim.errors import ConfigError
         from rtsim.road.config import FlatRoadConfig, read_road_config
 
@@ -117,7 +117,15 @@ class TwoWheelerKind(VehicleKind):
         return PROFILE
 
     def demo(self, opened) -> Demo:
-        return Demo("drivers.rider_assist_demo", "lockstep", None, DEMO_DURATION, True, "two_wheeler")
+        return Demo("drivers.rider_assist_demo", "lockstep", None, DEMO_DURATION, True)
+
+    def fuzz_rig(self, opened, dt):
+        from .fuzz import TwoWheelerFuzzRig
+        return TwoWheelerFuzzRig(opened, dt)
+
+    def drawing(self, opened):
+        from .drawing import two_wheeler_drawing
+        return two_wheeler_drawing(opened.config)
 
 
 KIND = TwoWheelerKind()

@@ -1,8 +1,8 @@
-"""Offline runs of the motorcycle's scenarios (a scenario file with [rider] and/or [two_wheeler], see
-drivers.scenario): the rider or the open-loop profiles on the two-wheeler sim, as fast as the machine
-allows, logged at the scenario's output rate to CSV or MCAP (`CHANNELS`: the car's state names where
-the quantity is the same, `_f`/`_r` for the front and rear wheel), and a summary of what the
-manoeuvre measures against its analytic reference:
+"""Offline runs of the motorcycle's scenarios (a scenario file with [rider] and/or [two_wheeler], loaded by
+drivers.scenario and handed in: the vehicle never imports its drivers): the rider or the open-loop profiles on
+the two-wheeler sim, as fast as the machine allows, logged at the scenario's output rate to CSV or MCAP
+(`CHANNELS`: the car's state names where the quantity is the same, `_f`/`_r` for the front and rear wheel),
+and a summary of what the manoeuvre measures against its analytic reference:
 
 - every run: status (`ok`, or `fall` with the time and the reason: roll past 70 deg, both tyres off the
   road, pitched over), distance, speeds, peak roll;
@@ -27,9 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.profiles import eval_channel, pack
-from drivers.rider import ST_N, ST_PHI_REF
-from drivers.scenario import Scenario, load_scenario
+from .rider import ST_N, ST_PHI_REF
 from rtsim.channels import TWO_WHEELER_STATE, Channel, ChannelDictionary
 from rtsim.errors import ConfigError, SimulationError
 from rtsim.model_fault import ModelFault, describe_error, force_failure, test_fault_step, test_fault_time
@@ -80,7 +78,7 @@ class MotorcycleRun:
         return self.data[:, self.columns.index(name)]
 
 
-def check_flat_road(sc: Scenario) -> float:
+def check_flat_road(sc) -> float:
     """The road's friction scale; ConfigError unless it is the flat plane z = 0 (the two-wheeler's
     contact is computed on that plane only)."""
     from rtsim.road.config import FlatRoadConfig, read_road_config
@@ -92,12 +90,12 @@ def check_flat_road(sc: Scenario) -> float:
     return cfg.mu
 
 
-def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario, mm=None) -> tuple[Ride, Scenario]:
-    """The ride of a motorcycle scenario: the vehicle (argument, else the scenario's), its static pose
-    with the rider on, straight running at the initial speed from the origin heading +x, the rider
-    (its tyre-crown lean ratio from the vehicle unless the scenario sets `tyre_lean`) and the profiles.
-    ``mm``: the vehicle's model when already built (rtsim.vehicle.registry), else built from its file."""
-    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, check_files=True)
+def prepare(vehicle: str | Path | None, sc, mm=None) -> tuple[Ride, object]:
+    """The ride of a motorcycle scenario ``sc`` (a loaded drivers.scenario.Scenario): the vehicle
+    (argument, else the scenario's), its static pose with the rider on, straight running at the initial
+    speed from the origin heading +x, the rider (its tyre-crown lean ratio from the vehicle unless the
+    scenario sets `tyre_lean`) and the open-loop profiles. ``mm``: the vehicle's model when already built
+    (rtsim.vehicle.registry), else built from its file."""
     if not sc.two_wheeler:
         raise ConfigError(f"{sc.path}: not a two-wheeler scenario (no [rider] or [two_wheeler])")
     ini = sc.spec.initial
@@ -124,11 +122,7 @@ def prepare(vehicle: str | Path | None, scenario: str | Path | Scenario, mm=None
             else spec.build()
     tw = sc.spec.two_wheeler
     gear = None if tw is None else tw.gear
-    open_loop = {}
-    for name, prof in sc.two_wheeler_profiles.items():
-        packed = pack({0: prof}, nch=1)
-        open_loop[name] = (lambda p: lambda t: eval_channel(p, 0, t))(packed)
-    ride = Ride(sim, rider, gear=gear, open_loop=open_loop)
+    ride = Ride(sim, rider, gear=gear, open_loop=sc.open_loop())
     ride.pitch0 = _pitch(sim)
     ride.static_loads = loads
     sim.parts.tyre[:, TO_FZ] = loads       # the first row's loads: the static pose's
@@ -157,7 +151,7 @@ def _row(ride: Ride, row: np.ndarray) -> None:
                    u[U_BRAKE_FRONT], u[U_BRAKE_REAR], st[ST_PHI_REF] if st is not None else 0.0)
 
 
-def run(ride: Ride, sc: Scenario, progress=None) -> MotorcycleRun:
+def run(ride: Ride, sc, progress=None) -> MotorcycleRun:
     """Run to the scenario's duration or a fall; rows at the output rate; the summary filled in."""
     dt = sc.dt
     nsteps = int(round(sc.duration / dt))
@@ -215,7 +209,7 @@ def _f(x, nd=4):
     return None if x is None or not math.isfinite(x) else round(float(x), nd)
 
 
-def summarise(res: MotorcycleRun, ride: Ride, sc: Scenario) -> dict:
+def summarise(res: MotorcycleRun, ride: Ride, sc) -> dict:
     c = res.column
     t = c("time")
     out: dict = {"scenario": sc.name, "status": res.status, "simulated_s": _f(t[-1] if t.size else 0.0, 3)}
@@ -365,11 +359,7 @@ def scene_source(mm):
     records it."""
     from types import SimpleNamespace
 
-    return SimpleNamespace(vm=SimpleNamespace(model=mm, channels=CHANNELS), road=None)
+    from .drawing import two_wheeler_drawing
 
-
-def write_mcap(res: MotorcycleRun, path: str | Path, vehicle_id: str, mm=None) -> None:
-    """The run's rows as an MCAP file; with the built two-wheeler `mm` also its 3D scene."""
-    from bridge.mcap_log import write_run
-
-    write_run(path, res.columns, res.data, vehicle_id, CHANNELS, sim=None if mm is None else scene_source(mm))
+    return SimpleNamespace(vm=SimpleNamespace(model=mm, channels=CHANNELS), road=None,
+                           drawing=two_wheeler_drawing(mm.config))

@@ -16,8 +16,9 @@ two-wheeler steps (rtsim.vehicle.motorcycle.step), and a fall ends the run with 
 The offline ride (rtsim.vehicle.motorcycle.ride) calls the same view and inputs kernels, with no bus
 commands: a scenario run and a served session form their inputs alike.
 
-The rider (``plant_rider``, drivers.rider) reads the same view as offline (rtsim.vehicle.motorcycle.ride):
-the rear contact point, the pivot's velocity in the heading frame, yaw, roll and steer with their rates.
+The rider (``plant_rider``, rtsim.vehicle.motorcycle.rider) reads the same view as offline
+(rtsim.vehicle.motorcycle.ride): the rear contact point, the pivot's velocity in the heading frame, yaw,
+roll and steer with their rates.
 
 Sensors (``plant_sensors``): the IMU at ``[sensors] imu_position_m`` on the rear frame in the frame's
 axes (x along the ground line at zero pitch, y left, z up): specific force ``R^T (r'' - g)``, angular
@@ -38,7 +39,7 @@ import numpy as np
 
 from rtsim.channels import TWO_WHEELER_SENSORS, TWO_WHEELER_STATE
 from rtsim.jit import inline_kernel, kernel
-from drivers.rider import (RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_DELTA, RV_DELTADOT, RV_PHI,
+from .rider import (RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_DELTA, RV_DELTADOT, RV_PHI,
                            RV_PHIDOT, RV_R, RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, NRO, NRV, ST_N, rider_step)
 
 from ..kit.layout import offsets
@@ -180,7 +181,7 @@ def plant_rider(d, idx, pp, rider, view, out):
 
 @kernel
 def plant_view(d, idx, pp, view):
-    """The rider's view (drivers.rider RV_*): the rear contact point, the pivot's velocity in the
+    """The rider's view (rtsim.vehicle.motorcycle.rider RV_*): the rear contact point, the pivot's velocity in the
     heading frame, yaw, roll and steer with their rates."""
     q, qd = d.q, d.qd
     kv, kw = idx[K_V], idx[K_W_R]

@@ -1,4 +1,4 @@
-"""The rider (drivers.rider) on the two-wheeler: each step the rider reads the motorcycle's view and
+"""The rider (rtsim.vehicle.motorcycle.rider) on the two-wheeler: each step the rider reads the motorcycle's view and
 its commands act on the handlebars, the rear wheel and the brakes, through the same kernels as in the
 HIL service (rtsim.vehicle.motorcycle.plant, with no bus commands): the throttle drives the engine and
 gearbox of the vehicle file's [powertrain] (rtsim.vehicle.motorcycle.engine), whose rear-wheel torque
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivers.rider import (ST_KAPPA, ST_N, ST_PHI_FF, RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_PHI,
+from .rider import (ST_KAPPA, ST_N, ST_PHI_FF, RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_PHI,
                            RV_DELTA, RV_U, RV_X, RV_Y, rider_step)
 
 from .build import MotorcycleModel, combine
@@ -17,14 +17,14 @@ from .plant import INVALID_SLOTS, MAX_WHEEL_TORQUE, NCOMMAND, PP_MAX_DRIVE, make
 from .sim import TwoWheelerSim
 
 
-#: The commands a rider (or an open-loop profile) gives, in the order of drivers.rider's RO_* outputs.
+#: The commands a rider (or an open-loop profile) gives, in the order of rtsim.vehicle.motorcycle.rider's RO_* outputs.
 COMMANDS = ("steering_torque", "throttle", "brake_front", "brake_rear")
 assert (RO_TORQUE, RO_THROTTLE, RO_BRAKE_F, RO_BRAKE_R) == (0, 1, 2, 3)
 
 
 def tyre_lean_ratio(mm: MotorcycleModel) -> float:
-    """k = rho / (h - rho) of the rider's lean feed-forward (drivers.rider): the tyres' mean crown radius
-    rho and the height h of the whole machine's mass centre with the rider on (0 for knife-edge wheels)."""
+    """k = rho / (h - rho) of the rider's lean feed-forward (rtsim.vehicle.motorcycle.rider): the tyres' mean
+    crown radius rho and the height h of the whole machine's mass centre with the rider on (0 for knife-edge wheels)."""
     cfg = mm.config
     if mm.knife_edge:
         return 0.0

@@ -36,6 +36,7 @@ function softwareGL() {
   } catch { return false; }
 }
 
+const DEFAULT_COLOUR = '#c0282d';   // the followed vehicle's paint (a drawing may choose its own)
 const TILE = 5.0;         // m per grid texture tile
 const GROUND = 400.0;     // m, side of the ground plane that follows the vehicle
 
@@ -93,7 +94,7 @@ export class Scene3D {
     this.info = info;
     this.road = info.road;
     this.buildRoad(info.road);
-    this.vehicle = this.buildVehicle(info, '#c0282d');
+    this.vehicle = this.buildVehicle(info, DEFAULT_COLOUR);
     this.scene.add(this.vehicle.group);
     this.arrows = [];
     for (const w of this.vehicle.wheels) {
@@ -105,7 +106,7 @@ export class Scene3D {
   }
 
   buildVehicle(info, colour) {
-    return info.kind === 'two_wheeler' ? this.buildTwoWheeler(info.shape, colour) : this.buildCar(info.shape, colour);
+    return this.buildDrawing(info.shape, colour);
   }
 
   // a second vehicle (a second recording played beside the first)
@@ -199,86 +200,46 @@ export class Scene3D {
     return spin;
   }
 
-  buildCar(s, colour) {
+  // a vehicle from its drawing (rtsim.vehicle.kit.drawing, in its reference frame): the body's pieces, the
+  // steering assembly turning about its axis through its head, the wheels on the body or the steering
+  buildDrawing(s, colour) {
     const group = new THREE.Group();
-    const b = s.body;
-    const paint = new THREE.MeshLambertMaterial({ color: colour });
-    const len = b.x_front - b.x_rear, lowH = 0.5;
-    const lower = new THREE.Mesh(new THREE.BoxGeometry(len, b.width, lowH), paint);
-    lower.position.set((b.x_front + b.x_rear) / 2, 0, b.z_floor + lowH / 2 + 0.05);
-    group.add(lower);
-    const cabin = new THREE.Mesh(new THREE.BoxGeometry(len * 0.5, b.width * 0.86, 0.45),
-      new THREE.MeshLambertMaterial({ color: '#36414d' }));
-    cabin.position.set(b.x_rear + len * 0.42, 0, b.z_floor + lowH + 0.05 + 0.225);
-    group.add(cabin);
+    const paint = new THREE.MeshLambertMaterial({ color: colour === DEFAULT_COLOUR && s.paint ? s.paint : colour });
+    const material = (c) => c === 'paint' ? paint : new THREE.MeshLambertMaterial({ color: c });
+    let steering = null, axis = null, head = null;
+    if (s.steering) {
+      head = new THREE.Vector3(...s.steering.head);
+      axis = new THREE.Vector3(...s.steering.axis).normalize();
+      steering = new THREE.Group(); steering.position.copy(head); group.add(steering);
+    }
+    const carrierOf = (c) => (c === 'steering' && steering) ? steering : group;
+    const local = (c, p) => { const v = new THREE.Vector3(...p); return carrierOf(c) === steering ? v.sub(head) : v; };
+    for (const pc of s.pieces) {
+      let mesh;
+      if (pc.shape === 'sphere') {
+        mesh = new THREE.Mesh(new THREE.SphereGeometry(pc.radius, 16, 12), material(pc.colour));
+      } else if (pc.shape === 'cylinder') {
+        mesh = new THREE.Mesh(new THREE.CylinderGeometry(pc.radius, pc.radius, pc.length, 8), material(pc.colour));
+        mesh.quaternion.setFromUnitVectors(new THREE.Vector3(0, 1, 0), new THREE.Vector3(...pc.direction).normalize());
+      } else mesh = new THREE.Mesh(new THREE.BoxGeometry(...pc.size), material(pc.colour));
+      mesh.position.copy(local(pc.carrier, pc.at));
+      if (pc.pitch) mesh.rotation.y = pc.pitch;
+      if (pc.in_cockpit === false) mesh.userData.hideInCockpit = true;
+      carrierOf(pc.carrier).add(mesh);
+    }
     const wheels = [];
-    for (const c of ['fl', 'fr', 'rl', 'rr']) {
-      const p = s.wheels[c];
+    for (const w of s.wheels) {
       const mount = new THREE.Group();          // at the design wheel centre; moves with the suspension
-      mount.position.set(p[0], p[1], p[2]);
+      const design = local(w.carrier, w.centre);
+      mount.position.copy(design);
       const steer = new THREE.Group();
-      const spin = this.wheelMesh(s.wheel_radius, s.wheel_width);
-      steer.add(spin); mount.add(steer); group.add(mount);
-      wheels.push({ corner: c, design: new THREE.Vector3(p[0], p[1], p[2]), mount, steer, spin, angle: 0 });
+      const spin = this.wheelMesh(w.radius, w.width);
+      steer.add(spin); mount.add(steer); carrierOf(w.carrier).add(mount);
+      wheels.push({ spec: w, corner: w.name, design, mount, steer, spin, angle: 0,
+                    onSteering: carrierOf(w.carrier) === steering });
     }
-    const eye = new THREE.Object3D();        // the driver's eyes: behind the cabin's front, above the hood
-    eye.position.set(cabin.position.x + len * 0.25 - 0.3, s.wheels.fl[1] * 0.45, b.z_floor + 1.1);
-    group.add(eye);
-    cabin.userData.hideInCockpit = true;
-    return { kind: 'car', group, wheels, eye, shape: s };
-  }
-
-  buildTwoWheeler(s, colour) {
-    const group = new THREE.Group();                 // origin: the swingarm pivot, rear frame axes
-    const paint = new THREE.MeshLambertMaterial({ color: colour === '#c0282d' ? '#1f5fbf' : colour });
-    const dark = new THREE.MeshLambertMaterial({ color: '#2a2a2e' });
-    const head = new THREE.Vector3(...s.steer_head), cg = new THREE.Vector3(...s.cg);
-    const frameLen = head.clone().setY(0).length();
-    const frame = new THREE.Mesh(new THREE.BoxGeometry(frameLen + 0.2, 0.22, 0.28), paint);
-    frame.position.set(head.x / 2, 0, (head.z + cg.z) / 2);
-    frame.rotation.y = -Math.atan2(head.z - cg.z, head.x) * 0.5;
-    group.add(frame);
-    const seat = new THREE.Mesh(new THREE.BoxGeometry(0.6, 0.26, 0.1), dark);
-    seat.position.set(cg.x - 0.15, 0, cg.z + 0.25);
-    group.add(seat);
-    const r = new THREE.Vector3(...(s.rider || s.cg));   // the rider's centre (the cockpit camera's reference)
-    if (s.rider) {                       // (a machine without a rider, the benchmark bicycle: none drawn)
-      const rider = new THREE.Mesh(new THREE.BoxGeometry(0.32, 0.4, 0.62), new THREE.MeshLambertMaterial({ color: '#e0a030' }));
-      rider.position.set(r.x, 0, r.z + 0.05);
-      rider.rotation.y = 0.45;
-      group.add(rider);
-      const helmet = new THREE.Mesh(new THREE.SphereGeometry(0.14, 16, 12), dark);
-      helmet.position.set(r.x + 0.22, 0, r.z + 0.45);
-      group.add(helmet);
-    }
-    const rw = new THREE.Vector3(...s.rear_wheel);
-    const swing = new THREE.Mesh(new THREE.BoxGeometry(rw.length(), 0.06, 0.06), dark);
-    swing.position.set(rw.x / 2, 0.08, rw.z / 2);
-    swing.rotation.y = Math.atan2(-rw.z, rw.x) + Math.PI;
-    group.add(swing);
-    const rearMount = new THREE.Group(); rearMount.position.copy(rw);
-    const rearSteer = new THREE.Group(); rearMount.add(rearSteer);
-    const rearSpin = this.wheelMesh(s.rear_radius, 0.18); rearSteer.add(rearSpin);
-    group.add(rearMount);
-    // the front assembly turns about the steering axis through the head
-    const axis = new THREE.Vector3(...s.steer_axis).normalize();
-    const fork = new THREE.Group(); fork.position.copy(head); group.add(fork);
-    const fw = new THREE.Vector3(...s.front_wheel).sub(head);           // front wheel centre from the head
-    const frontMount = new THREE.Group(); frontMount.position.copy(fw); fork.add(frontMount);
-    const frontSpin = this.wheelMesh(s.front_radius, 0.14); frontMount.add(frontSpin);
-    const tubeLen = fw.length();
-    for (const y of [0.1, -0.1]) {
-      const tube = new THREE.Mesh(new THREE.CylinderGeometry(0.025, 0.025, tubeLen, 8), new THREE.MeshLambertMaterial({ color: '#b8bcc2' }));
-      tube.quaternion.setFromUnitVectors(new THREE.Vector3(0, 1, 0), fw.clone().normalize());
-      tube.position.copy(fw.clone().multiplyScalar(0.5)).setY(y);
-      fork.add(tube);
-    }
-    const bar = new THREE.Mesh(new THREE.BoxGeometry(0.05, 0.7, 0.04), dark);
-    bar.position.set(-0.05, 0, 0.05); fork.add(bar);
-    const eye = new THREE.Object3D(); eye.position.set(r.x + 0.3, 0, r.z + 0.5); group.add(eye);
-    return { kind: 'two_wheeler', group, fork, axis, frontMount, frontDesign: fw.clone(), eye, shape: s,
-             wheels: [{ corner: 'front', spin: frontSpin, mount: frontMount, angle: 0 },
-                      { corner: 'rear', spin: rearSpin, mount: rearMount, angle: 0 }] };
+    const eye = new THREE.Object3D(); eye.position.set(...s.eye); group.add(eye);
+    return { group, steering, axis, wheels, eye, shape: s };
   }
 
   // ---- one sample ---------------------------------------------------------------------------------------
@@ -293,8 +254,7 @@ export class Scene3D {
     this.poses[k] = { t: st.time, x: st.pos_x, y: st.pos_y, z: st.pos_z, roll: st.roll_angle, pitch: st.pitch_angle,
                       yaw: st.yaw_angle, speed: st.speed };
     const arrows = k === 0;
-    if (v.kind === 'car') this.updateCar(v, st, sens || {}, dt, arrows);
-    else this.updateTwoWheeler(v, st, dt, arrows);
+    this.updateDrawing(v, st, sens || {}, dt, arrows);
     if (k !== 0) return;
     this.pose = this.poses[0];
     // the ground plane follows the vehicle (in whole tiles, so the grid stays put on the road)
@@ -302,36 +262,45 @@ export class Scene3D {
     this.ground.position.set(gx, gy, this.road.type === 'mesh' ? this.groundZ : this.roadHeight(gx, gy) - 0.002);
   }
 
-  updateCar(v, st, sens, dt, arrows) {
-    const s = v.shape, inv = new THREE.Matrix4().copy(v.group.matrixWorld).invert();
-    for (const w of v.wheels) {
-      // the wheel stands on the road: its centre at the road height + the loaded radius, in the body frame
-      const p = w.design.clone().applyMatrix4(v.group.matrixWorld);
-      const fz = st['tyre_fz_' + w.corner];
-      const r = s.wheel_radius - Math.max(0, Number.isFinite(fz) ? fz : 0) / s.tyre_kz;
-      p.z = this.roadHeight(p.x, p.y) + r;
-      const local = p.applyMatrix4(inv);
-      w.mount.position.z = Math.min(w.design.z + 0.12, Math.max(w.design.z - 0.12, local.z));
-      const steer = sens['steer_angle_' + w.corner];
-      w.steer.rotation.z = Number.isFinite(steer) ? steer : 0;
-      const ang = sens['wheel_angle_' + w.corner];
-      if (Number.isFinite(ang)) w.angle = ang;
-      else w.angle += (st['wheel_speed_' + w.corner] || 0) * dt;
-      w.spin.rotation.y = w.angle;
-    }
-    if (arrows) this.updateArrows(v, st, ['fl', 'fr', 'rl', 'rr']);
+  // a channel's value: the sensors' (as measured) where they have it, else the state's
+  channel(st, sens, name) {
+    if (!name) return NaN;
+    const m = sens[name];
+    return Number.isFinite(m) ? m : (Number.isFinite(st[name]) ? st[name] : NaN);
   }
 
-  updateTwoWheeler(v, st, dt, arrows) {
-    v.fork.quaternion.setFromAxisAngle(v.axis, st.steer_angle || 0);
-    // fork travel shortens the fork along the steering axis (the wheel moves towards the head)
-    v.frontMount.position.copy(v.frontDesign).addScaledVector(v.axis, st.fork_travel || 0);
-    const [f, r] = v.wheels;
-    f.angle = Number.isFinite(st.wheel_angle_front) ? st.wheel_angle_front : f.angle + (st.wheel_speed_front || 0) * dt;
-    r.angle = Number.isFinite(st.wheel_angle_rear) ? st.wheel_angle_rear : r.angle + (st.wheel_speed_rear || 0) * dt;
-    f.spin.rotation.y = f.angle;
-    r.spin.rotation.y = r.angle;
-    if (arrows) this.updateArrows(v, st, ['front', 'rear']);
+  updateDrawing(v, st, sens, dt, arrows) {
+    const s = v.shape;
+    if (v.steering) {
+      const d = st[s.steering.angle];
+      v.steering.quaternion.setFromAxisAngle(v.axis, Number.isFinite(d) ? d : 0);
+    }
+    const inv = new THREE.Matrix4().copy(v.group.matrixWorld).invert();
+    for (const w of v.wheels) {
+      const spec = w.spec;
+      if (spec.load) {
+        // the wheel stands on the road: its centre at the road height + the loaded radius, in the body frame
+        const p = w.design.clone().applyMatrix4(v.group.matrixWorld);
+        const fz = st[spec.load];
+        const r = spec.radius - Math.max(0, Number.isFinite(fz) ? fz : 0) / spec.stiffness;
+        p.z = this.roadHeight(p.x, p.y) + r;
+        const l = p.applyMatrix4(inv);
+        w.mount.position.z = Math.min(w.design.z + s.wheel_travel, Math.max(w.design.z - s.wheel_travel, l.z));
+      }
+      if (w.onSteering) {
+        // the fork's travel slides the wheel along the steering axis (towards the head)
+        const t = st[s.steering.travel];
+        w.mount.position.copy(w.design).addScaledVector(v.axis, Number.isFinite(t) ? t : 0);
+      } else if (spec.steer) {
+        const steer = this.channel(st, sens, spec.steer);
+        w.steer.rotation.z = Number.isFinite(steer) ? steer : 0;
+      }
+      const ang = this.channel(st, sens, spec.spin);
+      if (Number.isFinite(ang)) w.angle = ang;
+      else w.angle += (st[spec.spin_rate] || 0) * dt;
+      w.spin.rotation.y = w.angle;
+    }
+    if (arrows) this.updateArrows(v, st, v.wheels.map((w) => w.corner));
   }
 
   updateArrows(v, st, corners) {
@@ -368,7 +337,7 @@ export class Scene3D {
       const cam = this.camera;
       for (const o of v.group.children) if (o.userData.hideInCockpit) o.visible = this.cameraMode !== 'cockpit';
       if (this.cameraMode === 'chase') {
-        const back = v.kind === 'car' ? 8.5 : 5.5, up = v.kind === 'car' ? 3.0 : 2.0;
+        const [back, up] = v.shape.chase;
         const want = new THREE.Vector3(p.x - back * Math.cos(p.yaw), p.y - back * Math.sin(p.yaw), p.z + up);
         if (!this._chase) this._chase = want.clone();
         this._chase.lerp(want, Math.min(1, 4 * dt));    // a little lag: the car's yaw shows

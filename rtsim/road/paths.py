@@ -1,5 +1,6 @@
-"""Reference paths shared by the lateral drivers: polyline geometry, nearest-segment tracking, curvature,
-and generators of the manoeuvres' paths (circle, figure-eight, double lane change).
+"""Reference paths on the road, shared by the lateral drivers and the two-wheeler's rider: polyline
+geometry, nearest-segment tracking, curvature, and generators of the manoeuvres' paths (circle,
+figure-eight, double lane change).
 
 Geometry. `polyline(x, y, closed)` checks the points (m, road frame) and returns the arrays the kernels
 use: vertices `px, py` (a closed path repeats its first point at the end), arc length `ps` at each

@@ -8,7 +8,7 @@ is under-actuated (two inputs for eleven degrees of freedom). The roll angle, ho
 steering torque directly (torque left, lean right, from the first instant), and the path fixes the
 roll it needs: the quasi-steady lean of the curvature ahead. So the problem is split as a rider does:
 
-1. Reference from the path (drivers.rider's tracking, its gains): the lean
+1. Reference from the path (the rider's tracking, rtsim.vehicle.motorcycle.rider, its gains): the lean
    phi_ref = -atan(u^2 kappa(s + preview) / g) + asin(k sin(.)) (the tyres' crown correction) plus a
    small lean correction from the lateral and heading errors (which keeps the path error bounded: the
    roll reference alone would let it drift), and the target speed u_ref.
@@ -34,12 +34,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.rider import (NRO, NRV, ST_N, ST_PHI_REF, ST_V_REF, RV_DELTA, RV_DELTADOT, RV_PHI, RV_PHIDOT, RV_R,
-                           RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, Rider, rider_step)
 from rtsim.errors import SimulationError
-
-from .sim import TwoWheelerSim, rear_contact
-from .step import U_BRAKE_FRONT, U_BRAKE_REAR, U_DRIVE_TORQUE, U_STEER_TORQUE
+from rtsim.vehicle.motorcycle.rider import (NRO, NRV, ST_N, ST_PHI_REF, ST_V_REF, RV_DELTA, RV_DELTADOT, RV_PHI,
+                                            RV_PHIDOT, RV_R, RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, Rider, rider_step)
+from rtsim.vehicle.motorcycle.sim import TwoWheelerSim, rear_contact
+from rtsim.vehicle.motorcycle.step import U_BRAKE_FRONT, U_BRAKE_REAR, U_DRIVE_TORQUE, U_STEER_TORQUE
 
 COLUMNS = ("time", "steering_torque", "drive_torque", "roll_angle", "roll_reference", "steer_angle", "speed",
            "speed_reference", "lateral_error", "roll_residual")
@@ -185,14 +184,14 @@ def main(args) -> int:
     from pathlib import Path
 
     from drivers.replay import parse_column, read_csv_table
-    from drivers.rider import rider as make_rider
+    from rtsim.vehicle.motorcycle.rider import rider as make_rider
     from drivers.scenario import load_scenario
     from rtsim.errors import ConfigError
 
-    from .build import build_motorcycle
-    from .config import load_motorcycle
-    from .ride import tyre_lean_ratio
-    from .sim import static_pose
+    from rtsim.vehicle.motorcycle.build import build_motorcycle
+    from rtsim.vehicle.motorcycle.config import load_motorcycle
+    from rtsim.vehicle.motorcycle.ride import tyre_lean_ratio
+    from rtsim.vehicle.motorcycle.sim import static_pose
 
     sc = None
     if args.scenario:
