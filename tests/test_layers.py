@@ -45,6 +45,9 @@ KNOWN = {
     ("rtsim.vehicle.motorcycle.hil", "drivers.rider"): "rider inside the two-wheeler's step",
     ("rtsim.vehicle.motorcycle.ride", "drivers.rider"): "rider inside the two-wheeler's step",
     ("rtsim.vehicle.motorcycle.kind", "drivers.rider"): "the scenario rider's tyre-lean slot",
+    # the two-wheeler's served stages (moved down from rtsim.service.vehicles with the rider's layout)
+    ("rtsim.vehicle.motorcycle.served", "drivers.rider"): "rider inside the two-wheeler's step",
+    ("rtsim.vehicle.motorcycle.served", "drivers.lean_demand"): "the user's lean demand: the rider's lean loop",
     ("rtsim.vehicle.motorcycle.offline", "drivers.rider"): "rider state read for the offline rows",
     ("rtsim.vehicle.motorcycle.offline", "drivers.profiles"): "offline runner: belongs above drivers",
     ("rtsim.vehicle.motorcycle.offline", "drivers.scenario"): "offline runner: belongs above drivers",
