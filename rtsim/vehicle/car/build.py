@@ -237,6 +237,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         susp[i, SP_L0] = length0
         susp[i, SP_PARTNER] = i ^ 1
         if axle.rigid:                  # no spring, damper, bar, axle reaction or stops: zero forces
+            spring_tab[i] = damper_tab[i] = table_1d([-1.0, 1.0], [0.0, 0.0])
             continue
         spring_tab[i], damper_tab[i] = _spring_damper_tables(axle.spring, length0, f_static)
         susp[i, SP_ARB] = axle.anti_roll_bar_n_per_m
