@@ -284,3 +284,26 @@ def test_batch_runs_a_plan_of_two_kart_runs(tmp_path):
     d = [float(r["distance"]) for r in rows]
     assert 0 < d[0] < d[1], d
     assert not math.isnan(d[1])
+
+
+def test_a_rigid_axle_is_a_locked_slider_without_spring(tmp_path):
+    """The car assembly's rigid mount (what the kart's corners are) is checked on load, in one line naming the
+    file, the key and the value: only a vertical slider can be locked, a rigid axle has no spring, a
+    suspended one needs its spring."""
+    import tomllib
+
+    from rtsim.errors import ConfigError
+    from rtsim.vehicle.car.config import load_vehicle
+
+    src = ROOT / "configs" / "vehicles" / "xbw.toml"
+    base = tomllib.loads(src.read_text())
+    cases = [("front", {"rigid": True}, "front.rigid = True: a rigid mount is a locked vertical_slider"),
+             ("rear", {"spring": None}, "rear.spring = None: a suspended axle needs its [spring]")]
+    for axle, change, words in cases:
+        data = json.loads(json.dumps(base))
+        data[axle].update(change)
+        if change.get("spring", 0) is None:
+            del data[axle]["spring"]
+        with pytest.raises(ConfigError) as err:
+            load_vehicle(src, data)
+        assert str(err.value).startswith(f"{src}: {words}") and "\n" not in str(err.value), str(err.value)
