@@ -41,6 +41,7 @@ G = 9.81                 # m/s^2, the model's gravity (rtsim.vehicle.car.layout.
 T_DRIVE = 20.0           # N m on each rear wheel while driving
 P_BRAKE = 300.0          # kPa line pressure while braking (below the proportioning knee: rear = line)
 T_SWITCH = 2.5           # s: drive torque off, brake on
+THROTTLE = 0.15          # rad, the served kart's throttle command from the test's ECU
 
 
 def _cli(capsys, *args) -> tuple[int, str, str]:
@@ -190,10 +191,13 @@ def test_run_accelerates_and_stops_as_the_force_balance_says(tmp_path, capsys):
 
 
 def test_serve_over_can_and_zenoh_view_and_resim(tmp_path):
-    """`rtsim serve` of the kart in real time, CAN on a loopback hub, Zenoh on tcp/127.0.0.1, recorded: the test
-    as the ECU opens the throttle over CAN; the sensor frames on the bus and the state samples over Zenoh show
+    """`rtsim serve` of the kart in lockstep, CAN on a loopback hub, Zenoh on tcp/127.0.0.1, recorded: the test
+    as the lockstep ECU on the bus (throttle, brake and steering commands, then SIM_STEP_REQ, then its
+    SIM_STEP_ACK) steps it in a thread; the sensor frames on the bus and the state samples over Zenoh show
     simulated time advancing and the kart moving off; the `rtsim view` page draws frames while simulated
     time advances; `rtsim resim` of the recording is identical."""
+    import threading
+
     import can
     import playwright.sync_api as playwright_api
 
@@ -211,61 +215,81 @@ def test_serve_over_can_and_zenoh_view_and_resim(tmp_path):
     codec = Codec(model.dbc, model.channels)
     rec = tmp_path / "kart.mcap"
     endpoint = f"tcp/127.0.0.1:{free_port()}"
+    stop, acks, failures = threading.Event(), [], []
+
+    def ecu(bus):
+        """10 steps per cycle, commands every cycle (every 10 ms of simulated time: none times out)."""
+        ctr = [0, 0, 0, 0]
+        try:
+            while not stop.is_set():
+                send_lockstep_cycle(bus, codec, ctr, (THROTTLE, 0.0, 0.0), 10)
+                deadline = time.monotonic() + EVENT
+                while True:
+                    msg = bus.recv(1.0)
+                    if msg is not None and msg.arbitration_id == codec.step_ack.frame_id:
+                        t, c = codec.decode_step_ack(msg.data)
+                        if c == ctr[3]:
+                            acks.append(t)
+                            break
+                    if time.monotonic() > deadline:
+                        raise AssertionError(f"no SIM_STEP_ACK within {EVENT:g} s")
+                time.sleep(0.005)
+        except Exception as exc:  # noqa: BLE001  (reported by the test's thread)
+            failures.append(exc)
+
     with can_segment() as (iface, channel):
         svc = ServiceProcess(iface, channel, "--vehicle", str(KART), "--zenoh-listen", endpoint,
-                             "--record", str(rec), "--mode", "realtime")
-        bus = client = view = pw = browser = listener = None
+                             "--record", str(rec), "--mode", "lockstep")
+        opened = []
         try:
-            bus = can.Bus(interface=iface, channel=channel)
-            listener = Listener(bus, [f.frame_id for f in codec.sensor_frames])
+            ecu_bus = can.Bus(interface=iface, channel=channel)
+            opened.append(ecu_bus.shutdown)
+            listener = Listener(can.Bus(interface=iface, channel=channel), [f.frame_id for f in codec.sensor_frames])
+            opened += [listener.bus.shutdown, listener.close]
             client = ZenohClient("kart", connect=(endpoint,))
+            opened.append(client.close)
             state: list[dict] = []
             client.subscribe("state", state.append)
+            stepper = threading.Thread(target=ecu, args=(ecu_bus,), daemon=True)
+            stepper.start()
+            opened.append(lambda: (stop.set(), stepper.join(EVENT)))
             view = ViewThread("kart", [endpoint])
+            opened.append(view.close)
             pw = playwright_api.sync_playwright().start()
+            opened.append(pw.stop)
             browser = launch(pw)
+            opened.append(browser.close)
             pg, logs = open_page(browser, view.url)
-            t0 = sim_time(pg)
-            frames0 = pg.evaluate("rtsimView.frames")
-            ctr = [0, 0, 0, 0]
-            # the ECU: a light throttle, no brake, straight ahead, every 10 ms of wall time for 2 s of
-            # simulated time as the page shows it (the frames' counters and CRCs as the DBC says)
-            deadline = time.monotonic() + EVENT
-            while sim_time(pg) < t0 + 2.0 and time.monotonic() < deadline:
-                send_lockstep_cycle(bus, codec, ctr, (0.25, 0.0, 0.0), 1)
-                time.sleep(0.01)
+            t0, frames0 = sim_time(pg), pg.evaluate("rtsimView.frames")
             wait_sim(pg, t0 + 2.0)
             frames1 = pg.evaluate("rtsimView.frames")
             assert frames1 > frames0, f"no frame drawn over 2 s of simulated time ({frames0} -> {frames1})"
-            # over CAN: the sensor frames' simulated time stamps advance with the page's
-            assert listener.sim_ms is not None and listener.sim_ms >= 1000 * (t0 + 1.5), listener.sim_ms
             assert not [m for m in logs if m[0] in ("error", "pageerror")], logs
-            wait_sim(pg, sim_time(pg) + 1.5)               # the recorder closes a chunk every second
+            # over CAN: the sensor frames' simulated time stamps advance with the page's
+            assert listener.sim_ms is not None and listener.sim_ms >= 1000 * (t0 + 2.0) - 10, listener.sim_ms
         finally:
-            for closer in (lambda: browser.close(), lambda: pw.stop(), lambda: view.close(),
-                           lambda: client.close(), lambda: listener.close(), lambda: bus.shutdown()):
-                try:
-                    closer()
-                except Exception:  # noqa: BLE001  (not opened: nothing to close)
-                    pass
+            for close in reversed(opened):
+                close()
             rc, _ = svc.stop()
             svc.close()
+        assert not failures, failures
         assert rc == 0, svc.output
-    # over Zenoh: state samples at advancing simulated times, the kart moving off under the ECU's throttle
-    assert state, "no state sample over Zenoh"
+    # the ECU's SIM_STEP_ACKs: 10 steps of 1 ms each, none lost
+    assert len(acks) > 200 and np.allclose(np.diff(acks), 0.010, atol=1e-9), acks[:5]
+    # over Zenoh: state samples at advancing simulated times
     times = [s["time"] for s in state]
-    assert all(b > a for a, b in zip(times, times[1:])) and times[-1] - times[0] > 1.5
-    msgs, info = read_recording(rec)
+    assert len(times) > 100 and all(b > a for a, b in zip(times, times[1:])), times[:5]
+    # the recording: the kart drove off under the ECU's throttle, with no command timed out
+    msgs, _info = read_recording(rec)
     rec_state = [m.data for m in msgs["rtsim/kart/state"]]
-    assert max(s["speed"] for s in rec_state) > 0.3, "the ECU's throttle never moved the kart"
-    assert max(s["throttle_angle"] for s in rec_state) > 0.2
-    sensors = msgs["rtsim/kart/sensors"]
-    assert len(sensors) > 500                      # 500 Hz of simulated time, sent as CAN frames too
+    assert max(s["throttle_angle"] for s in rec_state) == pytest.approx(THROTTLE, abs=0.01)
+    assert max(s["speed"] for s in rec_state) > 1.0, "the ECU's throttle never moved the kart"
+    assert len(msgs["rtsim/kart/sensors"]) > 1000                    # 500 Hz of simulated time
     p = subprocess.run([sys.executable, "-m", "rtsim.cli", "resim", str(rec), "--json"], cwd=ROOT,
                        capture_output=True, text=True, timeout=900)
     assert p.returncode == 0, p.stdout + p.stderr
     report = json.loads(p.stdout[:p.stdout.rindex("}") + 1])
-    assert report["sensors"]["matched"] > 500 and report["identical"], report
+    assert report["sensors"]["matched"] > 1000 and report["identical"], report
 
 
 def test_batch_runs_a_plan_of_two_kart_runs(tmp_path):
