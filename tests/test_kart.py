@@ -331,3 +331,13 @@ def test_a_rigid_axle_is_a_locked_slider_without_spring(tmp_path):
         with pytest.raises(ConfigError) as err:
             load_vehicle(src, data)
         assert str(err.value).startswith(f"{src}: {words}") and "\n" not in str(err.value), str(err.value)
+
+
+def test_an_assembly_file_that_is_missing_is_refused_in_one_line(tmp_path, capsys):
+    """``assembly = "file.py"`` is read relative to the vehicle file; a missing one is one line naming it."""
+    bad = tmp_path / "bad_kart.toml"
+    bad.write_text(KART.read_text().replace('assembly = "kart_assembly.py"', 'assembly = "no_such_assembly.py"'))
+    code, _, err = _cli(capsys, "describe", "--vehicle", bad)
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert code == 2 and len(lines) == 1 and "assembly = 'no_such_assembly.py'" in lines[0], err
+    assert "cannot import it" in lines[0] and str(tmp_path / "no_such_assembly.py") in lines[0], err
