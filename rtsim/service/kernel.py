@@ -28,8 +28,9 @@ frozen, time going on, the watchdog, SIM_STATUS and SIM_DIAG at their period, no
 One call instead of several matters: each call from Python unboxes the model and state tuples (about
 a hundred arrays, several microseconds), more than the checks, the sensors and the packing cost.
 Times are simulation times: ``k`` steps of ``dt`` s. The vehicle is any the service can serve: one
-named tuple of its model, data and parts (``sim.served()``); the calls into it are in
-rtsim.service.vehicles.
+named tuple of its model, data and parts (``sim.served()``); the calls into it are the stages of
+rtsim.vehicle.kit.served, which each vehicle implements for its own tuple (rtsim.service.vehicles wraps
+them).
 """
 from __future__ import annotations
 

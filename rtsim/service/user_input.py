@@ -3,12 +3,12 @@ steering wheel), through the service's Zenoh ``drive`` control op.
 
 The user drives the channels the served vehicle declares (its ``user_inputs``,
 rtsim.vehicle.kit.user_inputs: a car's own ECU commands; a two-wheeler's throttle, caliper pressures and
-a lean demand that a lean loop in the step, drivers.lean_demand, turns into handlebar torque), SI units,
+a lean demand that a lean loop in the step, rtsim.vehicle.motorcycle.lean_demand, turns into handlebar torque), SI units,
 ISO 8855 signs.
 
-Priority, applied inside the compiled step after the watchdog (rtsim.service.vehicles.vehicle_user): a
-user channel replaces the in-loop driver's (the scenario's driver, the rider) always, and the bus ECU's
-command only where the bus has no valid command (never received or timed out) or while the user has
+Priority, applied inside the compiled step after the watchdog (rtsim.service.vehicles.vehicle_user, then
+the vehicle's ``served_user``): a user channel replaces the in-loop driver's (the scenario's driver, the
+rider) always, and the bus ECU's command only where the bus has no valid command (never received or timed out) or while the user has
 taken over (``takeover``: then a two-wheeler's assist torque is ignored too). A user channel is held
 until the next request; ``null`` hands it back; every channel lapses ``USER_HOLD`` s of wall time after
 the last request (a page that went away stops driving).

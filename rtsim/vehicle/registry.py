@@ -2,8 +2,9 @@
 
 ``open_vehicle(path)`` reads the file once, takes its ``kind`` (a car when it has none) and hands the
 validated config to that kind's assembly (``KINDS``: the kind's name -> the module of its
-``VehicleKind``). A file may name its own assembly module instead (``assembly = "package.module"``, a
-module defining ``KIND``), so a new vehicle is one config plus one assembly module, with no change here.
+``VehicleKind``). A file may name its own assembly module instead (``assembly = "package.module"``, or
+a Python file relative to the vehicle file, ``assembly = "my_assembly.py"``; a module defining ``KIND``),
+so a new vehicle is one config plus one assembly module, with no change here.
 
 What differs between vehicles is an attribute or a method of its ``VehicleKind`` (how it is built and
 described, the scenarios it accepts, how the service and the offline runner step it, its demo, which
@@ -250,13 +251,39 @@ def kind_of(data: dict, path: Path) -> VehicleKind:
         raise ConfigError(f"{path}: kind = {name!r}: unknown vehicle kind (allowed: {', '.join(KINDS)}; or name "
                           f"an assembly module with assembly = \"package.module\")")
     try:
-        module = importlib.import_module(module_name)
+        module = _assembly_file(path, module_name) if module_name.endswith(".py") else \
+            importlib.import_module(module_name)
     except ImportError as exc:
         raise ConfigError(f"{path}: {key} = {module_name!r}: cannot import it ({exc})") from None
     kind = getattr(module, "KIND", None)
     if not isinstance(kind, VehicleKind):
         raise ConfigError(f"{path}: {key} = {module_name!r}: the module defines no KIND (a VehicleKind)")
     return kind
+
+
+def _assembly_file(vehicle_file: Path, name: str):
+    """The assembly module of a Python file named relative to the vehicle file, loaded once per process
+    (kept in sys.modules under a name made from its resolved path, so opening the vehicle again reuses
+    it and the vehicle's compiled stages are registered once)."""
+    import hashlib
+    import importlib.util
+    import sys
+
+    file = (Path(vehicle_file).parent / name).resolve()
+    if not file.is_file():
+        raise ImportError(f"no such file {file}")
+    mod_name = f"_rtsim_assembly_{file.stem}_{hashlib.sha1(str(file).encode()).hexdigest()[:10]}"
+    module = sys.modules.get(mod_name)
+    if module is None:
+        spec = importlib.util.spec_from_file_location(mod_name, file)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[mod_name] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[mod_name]
+            raise
+    return module
 
 
 def open_vehicle(path: str | Path | None) -> OpenedVehicle:

@@ -203,6 +203,8 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
             b.scalar_inertia(steer, axle.pivot_inertia_kgm2)
             b.crank_rod(steer, rack, name=f"tie rod {name}", **crank_rod_constants(_geometry(axle, i % 2 == 1)))
         b.poly_point(wc, r, (u, v, w), path, full_exps, z, steer, name=f"suspension {name}")
+        if axle.rigid:                  # no suspension: the travel held at the design height
+            b.linear([(1.0, z, 0)], 0.0, name=f"rigid mount {name}")
         phi = b.angle(f"spin_{name}", 0.0, velocity=0.0)
         b.scalar_inertia(phi, axle.wheel_spin_inertia_kgm2)
         zs.append(z)
@@ -232,10 +234,13 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         dl = _spring_slope(spring_coef[i], full_exps)
         length0 = spring_coef[i] @ _basis(full_exps, 0.0, 0.0)
         f_static = sprung[i] / max(-dl, 1e-6)          # spring compression force at design height
-        spring_tab[i], damper_tab[i] = _spring_damper_tables(axle.spring, length0, f_static)
         susp[i, SP_L0] = length0
-        susp[i, SP_ARB] = axle.anti_roll_bar_n_per_m
         susp[i, SP_PARTNER] = i ^ 1
+        if axle.rigid:                  # no spring, damper, bar, axle reaction or stops: zero forces
+            spring_tab[i] = damper_tab[i] = table_1d([-1.0, 1.0], [0.0, 0.0])
+            continue
+        spring_tab[i], damper_tab[i] = _spring_damper_tables(axle.spring, length0, f_static)
+        susp[i, SP_ARB] = axle.anti_roll_bar_n_per_m
         susp[i, SP_BX] = r_wheel / axle.anti_pitch_arm_m if axle.anti_pitch_arm_m else 0.0
         susp[i, SP_BY] = r_wheel / axle.anti_roll_arm_m if axle.anti_roll_arm_m else 0.0
         susp[i, SP_CFY] = axle.compliance_steer_rad_per_n

@@ -151,7 +151,10 @@ class Axle(Strict):
     static_toe_rad: float = Field(default=0.0, ge=-0.05, le=0.05, description="positive: toe-in")
     unsprung_mass_kg: float = Field(gt=1, le=200, description="per corner")
     wheel_spin_inertia_kgm2: float = Field(gt=0.05, le=20, description="per wheel, incl. brake and shaft")
-    spring: SpringDamper
+    spring: SpringDamper | None = Field(default=None, description="the spring and damper (not with rigid)")
+    rigid: bool = Field(default=False, description=(
+        "no suspension: the wheel's carrier is bolted to the chassis (a vertical slider whose travel a "
+        "constraint holds at the design height); no spring, damper, anti-roll bar or travel stops"))
     anti_roll_bar_n_per_m: float = Field(default=0.0, ge=0, le=1e6,
                                          description="force per metre of left-right travel difference")
     travel_m: tuple[float, float] = Field(default=(-0.08, 0.08), description="rebound, bump limits of the fit")
@@ -181,6 +184,17 @@ class Axle(Strict):
     def _hardpoints_match(self):
         if not isinstance(self.hardpoints, SUSPENSIONS[self.suspension]):
             raise ValueError(f"hardpoints do not match suspension '{self.suspension}'")
+        return self
+
+    @model_validator(mode="after")
+    def _spring_or_rigid(self):
+        if self.rigid:
+            if self.suspension != "vertical_slider":
+                raise bad("rigid", True, f"a rigid mount is a locked vertical_slider, not a {self.suspension}")
+            if self.spring is not None or self.anti_roll_bar_n_per_m:
+                raise bad("spring", "given", "a rigid mount has no spring, damper or anti-roll bar")
+        elif self.spring is None:
+            raise bad("spring", None, "a suspended axle needs its [spring] (or rigid = true: no suspension)")
         return self
 
     @model_validator(mode="after")

@@ -50,7 +50,7 @@ def _align_z(n: np.ndarray) -> np.ndarray:
 
 
 class LoopCar(NamedTuple):
-    """The car in the service's compiled step (rtsim.service.vehicles): the multibody model and data,
+    """The car in the service's compiled step (rtsim.vehicle.car.served): the multibody model and data,
     the compiled vehicle and its data, the road, the parts' parameters, their states, the IO arrays."""
     m: object
     d: object
@@ -220,9 +220,12 @@ class VehicleSim:
             fill_history(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, ss, np.zeros(self.nsensor))
         self.states = self.states._replace(sensors=ss)
 
-    # ---- what the HIL service's loop needs of a vehicle (rtsim.service.vehicles) ------------------------
+    # ---- what the HIL service's loop needs of a vehicle (rtsim.vehicle.kit.served) ----------------------
     def served(self) -> "LoopCar":
-        """The car as the service's compiled step takes it (rtsim.service.vehicles): one named tuple."""
+        """The car as the service's compiled step takes it: one named tuple, whose stages
+        rtsim.vehicle.car.served registers (imported here, so whoever serves the tuple has them)."""
+        from . import served as _stages  # noqa: F401  (registers the car's stages)
+
         return LoopCar(self.m, self.data, self.vm.vehicle, self.vd, self.road, self.parts, self.states, self.io)
 
     command_slots = COMMAND_SLOTS     # where each bus command's value goes in io.commands

@@ -46,7 +46,7 @@ def place(mm: MotorcycleModel, q: np.ndarray, x: float, y: float, yaw: float) ->
 
 
 class LoopTwoWheeler(NamedTuple):
-    """The two-wheeler in the service's compiled step (rtsim.service.vehicles): the multibody model and
+    """The two-wheeler in the service's compiled step (rtsim.vehicle.motorcycle.served): the multibody model and
     data, its plant's parameters and state (rtsim.vehicle.motorcycle.plant), the rider, the parts, the IO."""
     m: object
     d: object
@@ -90,7 +90,10 @@ class TwoWheelerHil:
         return two_wheeler_drawing(self.vm.config)
 
     def served(self) -> "LoopTwoWheeler":
-        """The two-wheeler as the service's compiled step takes it (rtsim.service.vehicles)."""
+        """The two-wheeler as the service's compiled step takes it, whose stages
+        rtsim.vehicle.motorcycle.served registers (imported here, so whoever serves the tuple has them)."""
+        from . import served as _stages  # noqa: F401  (registers the two-wheeler's stages)
+
         return LoopTwoWheeler(self.m, self.data, self.params, self.state, self.rider, self.parts, self.io)
 
     def seed_sensor_noise(self, seed: int) -> None:

@@ -2,13 +2,13 @@
 
 What a person driving a motorcycle from a keyboard or a gamepad asks for (rtsim.service.user_input):
 not a steering torque (nobody balances a motorcycle through a key) but a lean angle, which this loop
-holds by counter-steering, as the rider's inner loop does (drivers.rider, with its gains):
+holds by counter-steering, as the rider's inner loop does (rtsim.vehicle.motorcycle.rider, with its gains):
 
     phi_r' = clip((phi_d - phi_r) / h, +-max_roll_rate),  |phi_r| <= max_roll
     tau = p_roll (phi_r - phi) - d_roll phi' + I - d_steer delta',   I' = i_roll (phi_r - phi), |I| <= i_roll_max
     |tau| <= max_torque
 
-Signs as drivers.rider: roll positive leaning right, torque positive steering left (to lean right a
+Signs as rtsim.vehicle.motorcycle.rider: roll positive leaning right, torque positive steering left (to lean right a
 rider first steers left). The reference starts at the measured roll when the loop is switched on, so
 taking over a leaning motorcycle does not jerk the bars.
 """
