@@ -1,6 +1,6 @@
 """The four-wheel car's stages in the service's compiled step (rtsim.vehicle.kit.served), for its tuple
-``LoopCar`` (rtsim.vehicle.car.sim: m, d, vehicle, data, road, parts, states, io). Imported by
-``VehicleSim.served``, so any assembly that serves a ``LoopCar`` has them.
+``LoopCar`` (declared here: m, d, vehicle, data, road, parts, states, io). rtsim.vehicle.car.sim imports
+the tuple from here, so any assembly that serves a ``LoopCar`` has the stages registered.
 
 - drive: no driver of its own; the scenario's driver reads the car's speed, position and yaw;
 - user: a user channel replaces its command where the bus has no valid command or the user took over;
@@ -8,14 +8,28 @@
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 from numba.extending import overload
 
 from ..kit.served import (JIT, of_type, served_advance, served_drive, served_observe, served_sensors,
                           served_user)
 from .effect_kernels import sensor_stage
 from .observer import driver_view, vehicle_state_values
-from .sim import LoopCar
 from .step import vehicle_step
+
+
+class LoopCar(NamedTuple):
+    """The car in the service's compiled step (rtsim.vehicle.car.served): the multibody model and data,
+    the compiled vehicle and its data, the road, the parts' parameters, their states, the IO arrays."""
+    m: object
+    d: object
+    vehicle: object
+    data: object
+    road: object
+    parts: object
+    states: object
+    io: object
 
 
 @overload(served_drive, jit_options=JIT)

@@ -5,7 +5,6 @@ with `set_effects`, without rebuilding the model."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
@@ -35,6 +34,7 @@ from .inputs import USER_INPUTS as CAR_USER_INPUTS
 from .observer import NSTATE_OUT
 from .step import (CMD_BRAKE, COMMAND_SLOTS, EX_SELECTOR, INVALID_SLOTS, Parts, States, make_io, make_vehicle_data,
                    vehicle_advance)
+from .served import LoopCar  # the served tuple; importing it registers the car's stages
 
 
 def _align_z(n: np.ndarray) -> np.ndarray:
@@ -49,17 +49,6 @@ def _align_z(n: np.ndarray) -> np.ndarray:
     return np.eye(3) + sin_a * kx + (1 - cos_a) * kx @ kx
 
 
-class LoopCar(NamedTuple):
-    """The car in the service's compiled step (rtsim.vehicle.car.served): the multibody model and data,
-    the compiled vehicle and its data, the road, the parts' parameters, their states, the IO arrays."""
-    m: object
-    d: object
-    vehicle: object
-    data: object
-    road: object
-    parts: object
-    states: object
-    io: object
 
 
 class VehicleSim:
@@ -222,10 +211,8 @@ class VehicleSim:
 
     # ---- what the HIL service's loop needs of a vehicle (rtsim.vehicle.kit.served) ----------------------
     def served(self) -> "LoopCar":
-        """The car as the service's compiled step takes it: one named tuple, whose stages
-        rtsim.vehicle.car.served registers (imported here, so whoever serves the tuple has them)."""
-        from . import served as _stages  # noqa: F401  (registers the car's stages)
-
+        """The car as the service's compiled step takes it: one named tuple (rtsim.vehicle.car.served, which
+        registers its stages)."""
         return LoopCar(self.m, self.data, self.vm.vehicle, self.vd, self.road, self.parts, self.states, self.io)
 
     command_slots = COMMAND_SLOTS     # where each bus command's value goes in io.commands

@@ -4,7 +4,6 @@ rider (or none: ``--rider off``) inside the compiled step (rtsim.vehicle.motorcy
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +17,7 @@ from .inputs import USER_INPUTS
 from .layout import NAMES, POINTS, VECTORS
 from .plant import COMMAND_SLOTS, FALL_ROLL, FELL, INVALID_SLOTS, NCOMMAND, PlantIO, make_plant
 from .sim import Fall, TwoWheelerSim
+from .served import LoopTwoWheeler  # the served tuple; importing it registers the stages
 
 
 @dataclass(frozen=True)
@@ -45,16 +45,6 @@ def place(mm: MotorcycleModel, q: np.ndarray, x: float, y: float, yaw: float) ->
     return out
 
 
-class LoopTwoWheeler(NamedTuple):
-    """The two-wheeler in the service's compiled step (rtsim.vehicle.motorcycle.served): the multibody model and
-    data, its plant's parameters and state (rtsim.vehicle.motorcycle.plant), the rider, the parts, the IO."""
-    m: object
-    d: object
-    params: object
-    plant: object
-    rider: object
-    parts: object
-    io: object
 
 
 class TwoWheelerHil:
@@ -90,10 +80,8 @@ class TwoWheelerHil:
         return two_wheeler_drawing(self.vm.config)
 
     def served(self) -> "LoopTwoWheeler":
-        """The two-wheeler as the service's compiled step takes it, whose stages
-        rtsim.vehicle.motorcycle.served registers (imported here, so whoever serves the tuple has them)."""
-        from . import served as _stages  # noqa: F401  (registers the two-wheeler's stages)
-
+        """The two-wheeler as the service's compiled step takes it: one named tuple
+        (rtsim.vehicle.motorcycle.served, which registers its stages)."""
         return LoopTwoWheeler(self.m, self.data, self.params, self.state, self.rider, self.parts, self.io)
 
     def seed_sensor_noise(self, seed: int) -> None:

@@ -1,14 +1,16 @@
 """The two-wheeler's stages in the service's compiled step (rtsim.vehicle.kit.served), for its tuple
-``LoopTwoWheeler`` (rtsim.vehicle.motorcycle.hil: m, d, params, plant, rider, parts, io). Imported by
-``TwoWheelerHil.served``.
+``LoopTwoWheeler`` (declared here: m, d, params, plant, rider, parts, io); rtsim.vehicle.motorcycle.hil
+imports the tuple from here, so whoever serves it has the stages registered.
 
 - drive: its own rider, inside the step (the scenario's driver never acts);
 - user: throttle and caliper pressures in place of the rider's outputs; the lean demand through the
-  lean loop (rtsim.vehicle.motorcycle.lean_demand) as handlebar torque; while the user has taken over, the bus command's
-  invalid flag is set so the rider's input (the user's) acts;
+  lean loop (rtsim.vehicle.motorcycle.lean_demand) as handlebar torque; while the user has taken
+  over, the bus command's invalid flag is set so the rider's input (the user's) acts;
 - advance, sensors, observe: the plant's step, sensors and state.
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 from numba.extending import overload
 
@@ -17,9 +19,20 @@ from .rider import RO_THROTTLE, RO_TORQUE
 
 from ..kit.served import (JIT, of_type, served_advance, served_drive, served_observe, served_sensors,
                           served_user)
-from .hil import LoopTwoWheeler
 from .plant import (PP_RIDER, plant_rider, plant_sensors, plant_state, plant_step, plant_view,
                     rider_offset_kernel)
+
+
+class LoopTwoWheeler(NamedTuple):
+    """The two-wheeler in the service's compiled step (rtsim.vehicle.motorcycle.served): the multibody model and
+    data, its plant's parameters and state (rtsim.vehicle.motorcycle.plant), the rider, the parts, the IO."""
+    m: object
+    d: object
+    params: object
+    plant: object
+    rider: object
+    parts: object
+    io: object
 
 
 @overload(served_drive, jit_options=JIT)
