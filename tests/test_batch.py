@@ -47,6 +47,14 @@ def _rows(path: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
+def _journal_ids(path: Path) -> list[str]:
+    """The run ids of a journal (JSON lines after the header line), in the order they arrived; a last line
+    cut off by a kill (no line break yet) left out."""
+    import json
+
+    return [json.loads(line)["run_id"] for line in path.read_text().split("\n")[1:-1]]
+
+
 def _identity(rows: list[dict]) -> list[dict]:
     return [{k: v for k, v in r.items() if k not in VOLATILE} for r in rows]
 
@@ -56,7 +64,7 @@ def local(tmp_path_factory):
     """The plan on the local pool, killed (SIGKILL to its process group) after 4 journalled rows, then
     resumed: (output folder, rows before the kill, the resumed run's output)."""
     out = tmp_path_factory.mktemp("batch_local")
-    journal = out / "journal.csv"
+    journal = out / "journal.jsonl"
     p = _batch("--out", str(out), "--no-report", start_new_session=True)
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and p.poll() is None:
@@ -66,7 +74,7 @@ def local(tmp_path_factory):
     assert p.poll() is None, "the batch ended before it could be interrupted:\n" + p.stdout.read()
     os.killpg(p.pid, signal.SIGKILL)
     p.wait()
-    before = [r["run_id"] for r in _rows(journal)]
+    before = _journal_ids(journal)
     r = _batch("--out", str(out))
     text, _ = r.communicate(timeout=300)
     assert r.returncode == 1, text            # some runs fail or error by design
@@ -103,7 +111,7 @@ def test_resume_runs_only_what_was_missing(local):
     out, before, text = local
     assert 4 <= len(before) < 12
     assert f"{len(before)} already in" in text and f"{12 - len(before)} to run" in text
-    journal = [r["run_id"] for r in _rows(out / "journal.csv")]
+    journal = _journal_ids(out / "journal.jsonl")
     assert len(journal) == 12 and len(set(journal)) == 12 and journal[:len(before)] == before
 
 
@@ -223,7 +231,7 @@ def test_a_killed_pool_worker_loses_no_run(local, tmp_path):
     import psutil
 
     out = tmp_path / "pool"
-    journal = out / "journal.csv"
+    journal = out / "journal.jsonl"
     p = _batch("--out", str(out), "--no-report")
     killed = None
     while killed is None and p.poll() is None:

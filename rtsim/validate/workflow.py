@@ -315,9 +315,9 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
         return _run(opts, replayer)
     import sys
 
-    from rtsim.batch.executors import ray_init
+    from rtsim.batch.executors import ray_init, ray_started
 
-    started = "ray" not in sys.modules or not sys.modules["ray"].is_initialized()
+    started = not ray_started()
     if started:
         ray_init(opts.ray)
     try:
