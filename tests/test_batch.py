@@ -146,7 +146,8 @@ def _ray_processes(temp_dir: str, port: int):
 def test_ray_cluster_gives_the_same_table_and_loses_no_run(local, tmp_path):
     ray_bin = shutil.which("ray", path=str(Path(sys.executable).parent))
     if ray_bin is None:
-        pytest.fail("ray is a dependency (pyproject.toml) but its `ray` command is not installed")
+        pytest.fail("ray is a test dependency (the rtsim[ray] extra that tools/setup installs) but its `ray` "
+                    "command is not installed")
     import psutil
     from tests.service_harness import free_port
 
@@ -250,3 +251,104 @@ def test_a_killed_pool_worker_loses_no_run(local, tmp_path):
     assert p.returncode == 1, text
     assert killed is not None, "the batch ended before a worker could be killed:\n" + text
     assert _identity(_rows(out / "results.csv")) == _identity(_rows(local[0] / "results.csv"))
+
+
+def _plan_file(tmp_path, body: str) -> Path:
+    plan = tmp_path / "plan.toml"
+    plan.write_text(body)
+    return plan
+
+
+def _run_plan(plan: Path, *args, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "rtsim.cli", "batch", str(plan), *args], cwd=ROOT, env=ENV,
+                          capture_output=True, text=True, timeout=600, **kw)
+
+
+def _table(path: Path) -> list[list[str]]:
+    """The CSV table's cells, the volatile columns left out (multi-line cells kept whole)."""
+    with path.open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    keep = [i for i, c in enumerate(rows[0]) if c not in VOLATILE]
+    return [[r[i] for i in keep] for r in rows]
+
+
+def test_a_resumed_batch_gives_the_table_of_an_uninterrupted_one_with_multi_line_errors(tmp_path):
+    """Runs whose error text holds line breaks, a tab, quotes and non-ASCII characters (a vehicle kind
+    that fails every run, tests/batch_failing_kind.py): a batch stopped after 2 runs and resumed writes
+    the report byte for byte and the results table cell for cell (wall time and worker aside) as the
+    batch run straight through, each error text exactly as raised."""
+    from tests.batch_failing_kind import MESSAGE
+
+    (tmp_path / "failing.toml").write_text('assembly = "tests.batch_failing_kind"\nname = "failing"\n')
+    scen = (ROOT / "configs" / "scenarios" / "step_steer_80kph.toml").as_posix()
+    plan = _plan_file(tmp_path, f'name = "multiline"\nmetrics = ["peak_roll"]\n[[cases]]\nscenario = "{scen}"\n'
+                      'vehicle = "failing.toml"\n[grid]\n"scenario.duration" = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0]\n')
+    straight, resumed = tmp_path / "straight", tmp_path / "resumed"
+    r = _run_plan(plan, "--workers", "1", "--out", str(straight))
+    assert r.returncode == 1, r.stdout + r.stderr
+    r = _run_plan(plan, "--workers", "1", "--out", str(resumed), "--limit", "2")
+    assert r.returncode == 1 and "2 to run" in r.stderr, r.stdout + r.stderr
+    r = _run_plan(plan, "--workers", "1", "--out", str(resumed))
+    assert r.returncode == 1 and "2 already in" in r.stderr and "4 to run" in r.stderr, r.stdout + r.stderr
+    assert (resumed / "report.html").read_bytes() == (straight / "report.html").read_bytes()
+    table = _table(resumed / "results.csv")
+    assert table == _table(straight / "results.csv") and len(table) == 7
+    errors = [row[table[0].index("error")] for row in table[1:]]
+    assert all(e.startswith(f"RuntimeError: {MESSAGE} (batch_failing_kind.py:") for e in errors), errors
+
+
+def test_a_sigkilled_batch_leaves_no_worker_or_resource_tracker_behind(tmp_path):
+    """`rtsim batch` with 2 pool workers on slow runs, in a session of its own: once its first row is
+    back, SIGKILL to the batch process alone (not its group). Every process it had started (the pool's
+    workers and multiprocessing's resource tracker) ends by itself."""
+    import psutil
+
+    scen = (ROOT / "configs" / "scenarios" / "step_steer_80kph.toml").as_posix()
+    veh = (ROOT / "configs" / "vehicles" / "xbw.toml").as_posix()
+    plan = _plan_file(tmp_path, f'name = "slow"\nmetrics = ["peak_roll"]\n[[cases]]\nscenario = "{scen}"\n'
+                      f'vehicle = "{veh}"\n[grid]\n"scenario.duration" = [60.0, 60.5, 61.0, 61.5, 62.0, 62.5]\n')
+    out = tmp_path / "out"
+    p = subprocess.Popen([sys.executable, "-m", "rtsim.cli", "batch", str(plan), "--workers", "2", "--out", str(out),
+                          "--no-report"], cwd=ROOT, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         start_new_session=True)
+    started: list = []
+    try:
+        deadline = time.monotonic() + 600
+        journal = out / "journal.jsonl"
+        while p.poll() is None and time.monotonic() < deadline:
+            if journal.exists() and len(journal.read_text().split("\n")) >= 3:      # header + 1 row
+                break
+            time.sleep(0.05)
+        assert p.poll() is None, "the batch ended before it could be killed"
+        started = psutil.Process(p.pid).children(recursive=True)
+        cmd = {c.pid: " ".join(c.cmdline()) for c in started}
+        workers = [pid for pid, c in cmd.items() if "spawn_main" in c]
+        trackers = [pid for pid, c in cmd.items() if "resource_tracker" in c]
+        assert len(workers) == 2 and len(trackers) == 1, cmd
+        os.kill(p.pid, signal.SIGKILL)
+        p.wait()
+
+        def alive() -> list:
+            out = []
+            for c in started:
+                try:
+                    if c.is_running() and c.status() != psutil.STATUS_ZOMBIE:
+                        out.append(c)
+                except psutil.NoSuchProcess:
+                    pass
+            return out
+        deadline = time.monotonic() + 60
+        while alive() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not alive(), [cmd[c.pid] for c in alive()]
+    finally:
+        for c in started:
+            try:
+                c.kill()
+            except psutil.Error:
+                pass
+        try:
+            os.killpg(p.pid, signal.SIGKILL)
+        except OSError:
+            pass
+        p.wait()
