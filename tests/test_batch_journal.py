@@ -47,6 +47,7 @@ def _tables(rows: list[dict], cols: list[str], out: Path) -> tuple[bytes, bytes]
     return (out / "results.csv").read_bytes(), (out / "report.html").read_bytes()
 
 
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")     # the report's axes at 1.8e308
 def test_a_resumed_journal_gives_byte_identical_tables(tmp_path):
     """Rows journalled, the journal cut off mid-row (a kill), read back and completed: the CSV table and
     the HTML report are byte for byte those of the rows written straight through, and each text (line
