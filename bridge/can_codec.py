@@ -61,6 +61,7 @@ from typing import Iterable, Mapping, NamedTuple, Sequence
 import numpy as np
 
 from rtsim.channels import CAR, ChannelDictionary
+from rtsim.configfile import note_read
 from rtsim.errors import ConfigError
 
 from . import can_e2e as e2e
@@ -209,6 +210,7 @@ class Codec:
         where = str(dbc_path)
         self.channels = channels
         sensor_names, command_names = channels.sensor_names, channels.command_names
+        note_read(dbc_path)
         try:
             self.db = cantools.database.load_file(str(dbc_path), strict=True)
         except Exception as exc:  # noqa: BLE001  (cantools raises many types)

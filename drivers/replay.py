@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rtsim.configfile import note_read
 from rtsim.errors import ConfigError
 
 from .base import INPUT_INDEX, INPUT_UNITS, LIMITS, SENSOR_ALIASES, input_name
@@ -88,6 +89,7 @@ def read_csv_table(path: str | Path) -> tuple[tuple[str, ...], list[list[str]], 
     """Header, data rows (as strings) and their file line numbers of a CSV file; blank lines and
     lines starting with '#' skipped. ConfigError if unreadable, headerless or with duplicate columns."""
     path = Path(path)
+    note_read(path)
     try:
         fh = open(path, newline="")
     except OSError as exc:

@@ -11,6 +11,10 @@ in the message); checks across keys raise `bad(key, value, reason)` inside a mod
 after validation (files that must exist, sampled profiles) raise `problem(source, key, value, reason)`.
 Vehicles, roads, scenarios, drivers and the service's settings all load through here, so `overrides`
 (a batch's grid point: dotted keys set in a file's table as it is read) is checked like the file itself.
+
+Every reader of an input file (TOML here, and the tyre, survey, recorded-input and DBC readers) calls
+`note_read(path)`; inside `recording_reads()` those paths are collected, so a caller learns the resolved
+set of files a load (or a whole run) read, nested files included (a batch's run ids hash their contents).
 """
 from __future__ import annotations
 
@@ -281,9 +285,38 @@ def set_dotted(data: dict, dotted: str, value: Any) -> None:
     here[keys[-1]] = copy.deepcopy(value)
 
 
+#: the set collecting the resolved paths of the input files read (None: not recording)
+_READS: contextvars.ContextVar[set | None] = contextvars.ContextVar("rtsim_config_reads", default=None)
+
+
+@contextmanager
+def recording_reads():
+    """Collect the resolved path of every input file read while active (the set it yields; nested
+    recordings each collect everything read inside them). A file is noted before it is opened, so a
+    missing or unreadable file is in the set too."""
+    outer = _READS.get()
+    seen: set[Path] = set()
+    token = _READS.set(seen)
+    try:
+        yield seen
+    finally:
+        _READS.reset(token)
+        if outer is not None:
+            outer |= seen
+
+
+def note_read(path: str | Path) -> None:
+    """Tell the active `recording_reads` (if any) that the input file `path` is read. Every reader of a
+    config or data file a run depends on calls this (TOML, .tir, survey CSV, recorded inputs, DBC)."""
+    seen = _READS.get()
+    if seen is not None:
+        seen.add(Path(path).resolve())
+
+
 def load_toml(path: str | Path) -> dict:
     """A TOML file's table (with the active `overrides` for it); ConfigError naming the file otherwise."""
     path = Path(path)
+    note_read(path)
     data = _read_toml(path)
     for key, value in _OVERRIDES.get().get(path.resolve(), {}).items():
         try:

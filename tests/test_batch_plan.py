@@ -86,3 +86,89 @@ def test_metrics_against_analytic_runs():
     assert m["peak_lateral_acceleration"] == pytest.approx(v0 * 0.2)
     assert m["yaw_rate_overshoot"] == pytest.approx(0.0, abs=1e-12)
     assert math.isnan(m["path_error_rms"])          # the run has no path_offset channel
+
+
+# ---- run ids hash every file a run reads ----------------------------------------------------------
+def _configs(tmp_path) -> Path:
+    """A copy of the shipped configs (vehicles, tyres, roads, scenarios, can) to edit."""
+    import shutil
+
+    dst = tmp_path / "configs"
+    for sub in ("vehicles", "tyres", "roads", "scenarios", "can"):
+        shutil.copytree(ROOT / "configs" / sub, dst / sub)
+    (dst / "batch").mkdir()
+    return dst
+
+
+def _ids(plan: Path) -> list[str]:
+    return [s["run_id"] for s in expand(*load_plan(plan))]
+
+
+def _edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text(encoding="latin-1")
+    assert text.count(old) >= 1, (path, old)
+    path.write_text(text.replace(old, new, 1), encoding="latin-1")
+
+
+def test_editing_a_nested_file_gives_new_run_ids_and_an_unrelated_file_does_not(tmp_path):
+    """A case with its own vehicle file, and one whose vehicle is the one its scenario names; a mesh road
+    (its survey CSV read through the road file). Every nested file is in the ids; other files are not."""
+    cfg = _configs(tmp_path)
+    plan = cfg / "batch" / "p.toml"
+    plan.write_text('name = "t"\nmetrics = ["peak_roll"]\nrepetitions = 2\n'
+                    '[[cases]]\nscenario = "../scenarios/step_steer_80kph.toml"\nvehicle = "../vehicles/xbw.toml"\n'
+                    '[[cases]]\nscenario = "../scenarios/on_centre_weave_100kph.toml"\n'
+                    '[[cases]]\nscenario = "../scenarios/straight_line.toml"\nvehicle = "../vehicles/xbw.toml"\n'
+                    '[grid]\n"scenario.duration" = [0.5, 1.0]\n')
+    base = _ids(plan)
+    assert len(base) == 12 and len(set(base)) == 12
+    specs = expand(*load_plan(plan))
+    read = {Path(f).relative_to(cfg).as_posix() for s in specs for f in s["inputs"]}
+    assert {"tyres/michelin_155_80_r13.tir", "tyres/midsize_205_60_r15.tir", "vehicles/eps_car.toml",
+            "roads/flat.toml", "roads/campus.toml", "roads/campus_survey.csv"} <= read
+
+    # unrelated files: another vehicle, a DBC no batch run reads, another scenario, the plan folder
+    _edit(cfg / "vehicles" / "motorcycle.toml", "[sensors]", "# edited\n[sensors]")
+    _edit(cfg / "can" / "xbw.dbc", "VERSION", 'CM_ "edited";\nVERSION')
+    _edit(cfg / "scenarios" / "steady_circle.toml", "road", "# edited\nroad")
+    (cfg / "batch" / "notes.txt").write_text("unrelated")
+    assert _ids(plan) == base
+
+    def changed(before: list[str], after: list[str]) -> list[int]:
+        return [i for i, (a, b) in enumerate(zip(before, after)) if a != b]
+
+    # the xbw's tyre file (read through the vehicle file): the cases on the xbw change, the EPS car's do not
+    _edit(cfg / "tyres" / "michelin_155_80_r13.tir", "= 2800 ", "= 2900 ")
+    after_tyre = _ids(plan)
+    assert changed(base, after_tyre) == [0, 1, 2, 3, 8, 9, 10, 11]
+    # the vehicle file the second case's scenario names, and the tyre file that vehicle names
+    _edit(cfg / "vehicles" / "eps_car.toml", "[sensors]", "# edited\n[sensors]")
+    after_veh = _ids(plan)
+    assert changed(after_tyre, after_veh) == [4, 5, 6, 7]
+    _edit(cfg / "tyres" / "midsize_205_60_r15.tir", "= 4000 ", "= 4100 ")
+    after_tyre2 = _ids(plan)
+    assert changed(after_veh, after_tyre2) == [4, 5, 6, 7]
+    # the survey CSV of the mesh road the third case's scenario names
+    _edit(cfg / "roads" / "campus_survey.csv", "\n", "\n# edited\n")
+    assert changed(after_tyre2, _ids(plan)) == [8, 9, 10, 11]
+    # the same bytes again: the same ids (content, not modification time)
+    _edit(cfg / "roads" / "campus_survey.csv", "\n# edited\n", "\n")
+    assert _ids(plan) == after_tyre2
+
+
+def test_a_run_reads_no_file_outside_its_id(tmp_path):
+    """What the loaders record while a real (short) run runs, model build included, is within the files
+    its id hashes: the resolved set is the one the run uses, for a car and a two-wheeler."""
+    from rtsim.batch.run import run_one
+    from rtsim.configfile import recording_reads
+
+    plan = ROOT / "configs" / "batch" / "smoke.toml"
+    specs = expand(*load_plan(plan))
+    job = {"metrics": ["peak_roll"], "param_keys": [], "per_run": "none", "criteria": []}
+    for case in (0, 2):
+        spec = next(s for s in specs if s["case"] == case and s["params"]["scenario.duration"] == 0.5)
+        spec = {**spec, "overrides": {**spec["overrides"], "scenario.duration": 0.05}}
+        with recording_reads() as seen:
+            row = run_one(spec, job)
+        assert row["status"] == "ok", row["error"]
+        assert seen and {str(p) for p in seen} <= set(spec["inputs"]), sorted(seen)

@@ -1,7 +1,11 @@
 """`rtsim batch PLAN.toml`: expand the plan, skip the runs the output folder's journal already holds,
 run the rest on the local pool (default) or Ray (--ray auto|ADDRESS), journal each row as it arrives
 with progress and an ETA on stderr, then write results.parquet, results.csv (sorted by run id) and
-report.html. Exit status 0 when every run passes, 1 when any fails or errors."""
+report.html. Exit status 0 when every run passes, 1 when any fails or errors.
+
+Runs that differ only by their seed while nothing in them draws from it (rtsim.batch.inputs: no sensor
+noise) are simulated once, and the others get a copy of its row with `copy_of` naming it; one line at
+the start says so."""
 from __future__ import annotations
 
 import os
@@ -31,40 +35,112 @@ def add_arguments(p) -> None:
 
 def columns(plan, params: list[str]) -> list[str]:
     return ["run_id", "case", "scenario", "vehicle", "seed", *params, "status", "verdict", "failed", "error",
-            "simulated_s", *plan.metrics, "wall_s", "worker"]
+            "simulated_s", *plan.metrics, "wall_s", "worker", "copy_of"]
+
+
+def same_runs(specs: list[dict]) -> dict[str, str]:
+    """run id -> the id of the run simulated for it: itself, or, for a run that differs from an earlier
+    one of the plan only by its seed while nothing in it draws from the seed (spec "random" == []), the
+    first such run (lowest seed)."""
+    import json
+
+    first: dict[str, str] = {}
+    out = {}
+    for s in specs:
+        if s.get("random") == []:
+            key = json.dumps([s["case"], s["overrides"]], sort_keys=True, default=str)
+            out[s["run_id"]] = first.setdefault(key, s["run_id"])
+        else:
+            out[s["run_id"]] = s["run_id"]
+    return out
+
+
+def seed_note(plan, specs: list[dict], rep: dict[str, str]) -> str | None:
+    """One line when the plan sweeps seeds and some runs draw nothing from theirs (None otherwise)."""
+    copies = sum(rep[s["run_id"]] != s["run_id"] for s in specs)
+    if plan.repetitions < 2 or copies == 0:
+        return None
+    simulated = f"{len(specs) - copies} of the {len(specs)} runs are simulated, the others are copies (column copy_of)"
+    if all(s.get("random") == [] for s in specs):
+        return (f"{plan.name}: note: the plan runs each point with {plan.repetitions} seeds, but no run has anything "
+                f"random (no sensor noise): the seeds change nothing, so each point is simulated once: {simulated}")
+    seedless = sum(s.get("random") == [] for s in specs)
+    return (f"{plan.name}: note: the plan runs each point with {plan.repetitions} seeds, but {seedless} runs have "
+            f"nothing random (no sensor noise): their seeds change nothing, so those are simulated once per point: "
+            f"{simulated}")
+
+
+def copy_row(row: dict, spec: dict, job: dict) -> dict:
+    """The row of `spec`, a run identical to the simulated run of `row` but for its seed: that row, with
+    its own id and seed, no wall time or worker of its own, and `copy_of` naming the simulated run (its
+    per-run file, if any, copied too)."""
+    if job.get("per_run", "none") != "none" and job.get("out_dir"):
+        import shutil
+
+        folder = Path(job["out_dir"]) / "runs"
+        src = folder / f"{row['run_id']}.{job['per_run']}"
+        if src.is_file():
+            shutil.copyfile(src, folder / f"{spec['run_id']}.{job['per_run']}")
+    return {**row, "run_id": spec["run_id"], "seed": spec["seed"], "wall_s": 0.0, "worker": "",
+            "copy_of": row["run_id"]}
 
 
 def main(args) -> int:
     from rtsim.errors import RtsimError
 
+    from .progress import eta_seconds, eta_text
+
     plan, base = load_plan(args.plan)
     if args.workers is not None and args.workers < 1:
         raise RtsimError(f"--workers must be >= 1, got {args.workers}")
+    if args.ray:
+        from .executors import require_ray
+        require_ray()
     specs = expand(plan, base)
     params = list(dict.fromkeys([*plan.grid, *(plan.random.params if plan.random else {})]))
     out = Path(args.out or f"batch_{plan.name}")
     out.mkdir(parents=True, exist_ok=True)
     cols = columns(plan, params)
-    journal = Journal(out / "journal.csv", cols)
-    todo = [s for s in specs if s["run_id"] not in journal.rows]
-    if args.limit is not None:
-        todo = todo[:max(0, args.limit)]
+    journal = Journal(out / "journal.jsonl", cols)
     job = {"metrics": list(plan.metrics), "param_keys": params, "per_run": plan.per_run, "out_dir": str(out.resolve()),
            "criteria": [(c.metric, c.min, c.max) for c in plan.criteria]}
-    done0 = len(specs) - len([s for s in specs if s["run_id"] not in journal.rows])
-    where = f"Ray {args.ray}" if args.ray else f"{args.workers or os.cpu_count()} local workers"
+    rep = same_runs(specs)
+    note = seed_note(plan, specs, rep)
+    if note:
+        print(note, file=sys.stderr)
+    missing = [s for s in specs if s["run_id"] not in journal.rows]
+    waiting: dict[str, list[dict]] = {}          # simulated run id -> the runs to copy from its row
+    for s in missing:
+        r = rep[s["run_id"]]
+        if r == s["run_id"]:
+            continue
+        if r in journal.rows:                    # the simulated run is back already: copied now
+            journal.append(copy_row(journal.rows[r], s, job))
+        else:
+            waiting.setdefault(r, []).append(s)
+    todo = [s for s in missing if rep[s["run_id"]] == s["run_id"]]
+    if args.limit is not None:
+        todo = todo[:max(0, args.limit)]
+    done0 = len(specs) - len(missing)
+    workers = min(args.workers or os.cpu_count() or 1, max(1, len(todo)))
+    where = f"Ray {args.ray}" if args.ray else f"{workers} local workers"
     print(f"{plan.name}: {len(specs)} runs, {done0} already in {journal.path}, {len(todo)} to run ({where})",
           file=sys.stderr)
     t0 = time.perf_counter()
     n = [0]
+    times: list[tuple[str, float]] = []
 
     def on_row(row: dict) -> None:
         journal.append(row)
+        for s in waiting.pop(row["run_id"], ()):
+            journal.append(copy_row(row, s, job))
         n[0] += 1
+        times.append((row["worker"], row["wall_s"]))
         el = time.perf_counter() - t0
-        eta = el / n[0] * (len(todo) - n[0])
+        width = len({w for w, _ in times if w}) if args.ray else workers
+        eta = eta_seconds(times, len(todo) - n[0], width, skip_first=bool(args.ray))
         print(f"[{n[0]}/{len(todo)}] {row['run_id']} {row['scenario']} {row['status']} {row['verdict']}"
-              f"  elapsed {el:.0f} s, ETA {eta:.0f} s", file=sys.stderr, flush=True)
+              f"  elapsed {el:.0f} s, {eta_text(eta)}", file=sys.stderr, flush=True)
     try:
         if todo:
             if args.ray:

@@ -2,12 +2,15 @@
 result row as it arrives (any order); results do not depend on the executor or the worker (each run is
 seeded by its spec).
 
-- `local_pool`: concurrent.futures.ProcessPoolExecutor, one worker per core by default; each worker's
+- `local_pool`: concurrent.futures.ProcessPoolExecutor, one worker per core by default; each worker
+  dies with the batch process (`die_with_parent`: a SIGKILLed batch leaves no worker behind, and then
+  no resource tracker either: it ends when the last holder of its pipe does); its
   initializer loads the numba kernels once (a 20 ms run of each kind of vehicle in the plan), not per
   run; on an empty cache the workers compile different kinds side by side (`_init`). A worker that dies
   (BrokenProcessPool) takes the pool with it: the runs not yet back are submitted again to a fresh pool,
   up to `retries` times.
-- `ray_cluster`: Ray tasks (`max_retries`: a lost worker's run is run again elsewhere); `address="auto"`
+- `ray_cluster`: Ray (an optional extra, `pip install 'rtsim[ray]'`; `require_ray` says so in one line)
+  tasks (`max_retries`: a lost worker's run is run again elsewhere); `address="auto"`
   starts a Ray instance on this machine bound to 127.0.0.1 with usage statistics off, else connects to
   the cluster at `address`.
 """
@@ -22,13 +25,42 @@ from typing import Callable
 
 from .run import lost_row, run_one, warm
 
-def _init(warm_specs: list[dict], job: dict, turn=None, lock_dir: str | None = None) -> None:
-    """Load (or compile) the kernels of every kind of vehicle in the plan. Worker k starts with warm
+def die_with_parent(parent: int) -> None:
+    """End this process when its parent (pid `parent`) ends, however it ends (SIGKILL included): on
+    Linux the kernel sends it SIGKILL when its parent dies (prctl PR_SET_PDEATHSIG); on every system a
+    daemon thread also checks os.getppid() each second. A parent already gone ends it at once."""
+    import signal
+    import threading
+
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass                                  # the thread below still does it
+    if os.getppid() != parent:
+        os._exit(1)
+
+    def watch() -> None:
+        import time
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+    threading.Thread(target=watch, name="rtsim-parent-watch", daemon=True).start()
+
+
+def _init(warm_specs: list[dict], job: dict, turn=None, lock_dir: str | None = None, parent: int | None = None) -> None:
+    """Die with the batch process (`parent`, first thing), then load (or compile) the kernels of every
+    kind of vehicle in the plan. Worker k starts with warm
     spec k (``turn``: a shared counter) and warms each spec holding that spec's file lock in
     ``lock_dir``: on an empty numba cache the workers compile different vehicles side by side instead
     of the same ones twice, and a worker that reaches a spec another one is compiling waits for it
     and loads the result from the cache (measured in one process: the car's kernels about 82 s of
     CPU, the motorcycle's 20 s more)."""
+    if parent is not None:
+        die_with_parent(parent)
     if turn is None or lock_dir is None or len(warm_specs) < 2:
         for spec in warm_specs:
             warm(spec, job)
@@ -68,7 +100,8 @@ def local_pool(specs: list[dict], job: dict, on_row: Callable[[dict], None], wor
             if not pending:
                 return
             pool = ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx, initializer=_init,
-                                       initargs=(warm_specs(list(pending.values())), job, ctx.Value("i", 0), lock_dir))
+                                       initargs=(warm_specs(list(pending.values())), job, ctx.Value("i", 0), lock_dir,
+                                                 os.getpid()))
             try:
                 futures = {pool.submit(run_one, s, job): rid for rid, s in pending.items()}
                 while futures:
@@ -109,9 +142,34 @@ def ray_environment(address: str) -> None:
             os.environ.setdefault("RAY_AUTH_TOKEN", secrets.token_hex(16))
 
 
+RAY_MISSING = "Ray is not installed; it is an optional extra of rtsim: pip install 'rtsim[ray]'"
+
+
+def require_ray() -> None:
+    """RtsimError (one line: how to install it) when Ray cannot be imported; Ray itself is not imported
+    (its environment must be set first, `ray_environment`)."""
+    import importlib.util
+
+    from rtsim.errors import RtsimError
+
+    try:
+        found = importlib.util.find_spec("ray") is not None
+    except (ImportError, ValueError):
+        found = False
+    if not found:
+        raise RtsimError(RAY_MISSING)
+
+
+def ray_started() -> bool:
+    """Whether this process is connected to Ray already (then it is not ours to shut down)."""
+    ray = sys.modules.get("ray")
+    return ray is not None and ray.is_initialized()
+
+
 def ray_init(address: str):
     """Connect Ray: "auto" starts a local instance on 127.0.0.1 (no dashboard, usage statistics off);
-    anything else is a cluster address (host:port, ray://...)."""
+    anything else is a cluster address (host:port, ray://...). RtsimError when Ray is not installed."""
+    require_ray()
     ray_environment(address)
     import ray
     if address == "auto" and ray._private.ray_constants.ENABLE_RAY_CLUSTER:
@@ -127,7 +185,7 @@ def ray_init(address: str):
 
 def ray_cluster(specs: list[dict], job: dict, on_row: Callable[[dict], None], address: str = "auto",
                 retries: int = 3) -> None:
-    started = "ray" not in sys.modules or not sys.modules["ray"].is_initialized()
+    started = not ray_started()
     if started:
         ray_init(address)
     import ray
@@ -176,7 +234,7 @@ def ray_map(fn: Callable, tasks: list, setup: Callable, setup_args: tuple = (), 
     Connects as `ray_cluster` does when Ray is not yet initialised (and shuts it down after)."""
     import hashlib
 
-    started = "ray" not in sys.modules or not sys.modules["ray"].is_initialized()
+    started = not ray_started()
     if started:
         ray_init(address)
     import ray

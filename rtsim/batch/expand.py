@@ -1,21 +1,22 @@
 """A plan expanded into run specs: cases x (grid points x random samples) x repetitions, each spec a
 plain dict (picklable, JSON-able) that names its files, its dotted-path overrides and its seed, and a
-run id: a hash of what determines the run's result (the files' contents, the overrides, the seed), so a
-resumed batch recognises the runs it already has and a changed config file makes new ones."""
+run id: a hash of what determines the run's result (the content of every file the run reads, nested ones
+included: rtsim.batch.inputs; the overrides; the seed), so a resumed batch recognises the runs it already
+has and a changed config file, a tyre or road file among them, makes new ones."""
 from __future__ import annotations
 
 import hashlib
 import itertools
 import json
+import os
 from pathlib import Path
 
 import numpy as np
 
+from .inputs import run_inputs, split_overrides
 from .plan import Plan
 
-
-def _digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+__all__ = ["expand", "points", "split_overrides"]
 
 
 def points(plan: Plan) -> list[dict]:
@@ -39,29 +40,25 @@ def points(plan: Plan) -> list[dict]:
 
 
 def expand(plan: Plan, base: Path) -> list[dict]:
-    """Every run of the plan, in plan order."""
+    """Every run of the plan, in plan order. Each spec holds its id, its files, overrides, swept
+    parameters and seed, the files it reads (`inputs`: resolved path -> sha256) and what its seed draws
+    (`random`: names; [] nothing; None not known)."""
     specs = []
     pts = points(plan)
+    roads: dict = {}
     for ci, case in enumerate(plan.cases):
         scen = (base / case.scenario).resolve()
         veh = (base / case.vehicle).resolve() if case.vehicle else None
-        files = {"scenario": _digest(scen), "vehicle": _digest(veh) if veh else None}
         for p in pts:
+            overrides = {**case.overrides, **p}
+            inputs = run_inputs(scen, veh, overrides, roads)
+            files = {Path(os.path.relpath(f, base)).as_posix(): h for f, h in inputs.files.items()}
             for rep in range(plan.repetitions):
                 seed = plan.seed_base + rep
-                overrides = {**case.overrides, **p}
                 ident = {"case": [case.scenario, case.vehicle], "files": files, "overrides": overrides, "seed": seed}
                 run_id = hashlib.sha256(json.dumps(ident, sort_keys=True, default=str).encode()).hexdigest()[:16]
                 specs.append({"run_id": run_id, "case": ci, "scenario": str(scen),
                               "vehicle": None if veh is None else str(veh), "overrides": overrides,
-                              "params": dict(p), "seed": seed})
+                              "params": dict(p), "seed": seed, "inputs": dict(inputs.files),
+                              "random": None if inputs.random is None else list(inputs.random)})
     return specs
-
-
-def split_overrides(overrides: dict) -> tuple[dict, dict]:
-    """(vehicle overrides, scenario overrides), the `vehicle.` / `scenario.` prefix removed."""
-    veh, scen = {}, {}
-    for k, v in overrides.items():
-        head, _, rest = k.partition(".")
-        (veh if head == "vehicle" else scen)[rest] = v
-    return veh, scen

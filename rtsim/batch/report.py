@@ -49,7 +49,7 @@ def write_report(rows: list[dict], plan, params: list[str], path: Path) -> Path:
     count = {v: sum(r["verdict"] == v for r in rows) for v in ("pass", "fail", "error")}
     parts = [f"<!doctype html><meta charset='utf-8'><title>{e(plan.name)}</title>",
              "<style>body{font-family:sans-serif;margin:1.5em}td,th{border:1px solid #ccc;padding:2px 6px;"
-             "font-size:13px}table{border-collapse:collapse}img{margin:4px}</style>",
+             "font-size:13px}table{border-collapse:collapse}img{margin:4px}td.why{white-space:pre-wrap}</style>",
              f"<h1>Batch {e(plan.name)}</h1><p>{e(plan.description)}</p>",
              f"<p>{len(rows)} runs: {count['pass']} pass, {count['fail']} fail, {count['error']} error</p>",
              "<h2>Metrics</h2><table><tr><th>metric</th><th>unit</th><th>definition</th></tr>"]
@@ -66,7 +66,7 @@ def write_report(rows: list[dict], plan, params: list[str], path: Path) -> Path:
     for r in bad:
         parts.append(f"<tr><td>{e(r['run_id'])}</td><td>{e(r['scenario'])}</td><td>{e(r['vehicle'])}</td>"
                      + "".join(f"<td>{e(str(r.get(p)))}</td>" for p in params)
-                     + f"<td>{r['seed']}</td><td>{e(r['status'])}</td><td>{e(r['error'] or r['failed'])}</td></tr>")
+                     + f"<td>{r['seed']}</td><td>{e(r['status'])}</td><td class='why'>{e(r['error'] or r['failed'])}</td></tr>")
     parts.append("</table>")
-    path.write_text("\n".join(parts))
+    path.write_text("\n".join(parts), encoding="utf-8", errors="backslashreplace")
     return path

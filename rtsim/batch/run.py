@@ -16,28 +16,13 @@ from pathlib import Path
 
 from rtsim.errors import ConfigError, SimulationError
 
-from rtsim.configfile import overrides
-
-from .expand import split_overrides
+from .inputs import open_run
 from .metrics import compute
 
 def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object]:
     """(status, message, columns, data, writer) of the spec's run, on the vehicle the registry opens
     (rtsim.vehicle.registry: the spec's vehicle, else the scenario's, else the default car)."""
-    from drivers.scenario import load_scenario
-    from rtsim.vehicle.registry import DEFAULT_VEHICLE, open_vehicle
-
-    scen = Path(spec["scenario"])
-    veh_over, scen_over = split_overrides(spec["overrides"])
-    files = {scen.resolve(): scen_over}
-    with overrides(files):
-        sc = load_scenario(scen, check_files=True)
-        vpath = Path(spec["vehicle"]) if spec["vehicle"] else (sc.vehicle_path or DEFAULT_VEHICLE)
-        files[vpath.resolve()] = veh_over
-        vehicle = open_vehicle(vpath)
-        vehicle.refuse("batch")
-        vehicle.check_scenario(sc)
-        vehicle.model                   # built under the overrides (their values are read on load)
+    sc, vehicle = open_run(spec["scenario"], spec["vehicle"], spec["overrides"])
     res = vehicle.run_offline(sc, seed=spec["seed"])
     from bridge.mcap_log import write_offline
     write = {"csv": lambda p: write_offline(res, Path(p).with_suffix(".csv")),

@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
+from rtsim.configfile import note_read
 from rtsim.errors import ConfigError
 from rtsim.road.model import MU_RANGE, RR_RANGE
 
@@ -70,6 +71,7 @@ class Survey:
 def read_survey(path) -> Survey:
     """Read and check a survey CSV file. Raises ConfigError naming the file, line and value."""
     path = Path(path)
+    note_read(path)
     src = str(path)
     try:
         text = path.read_text(encoding="utf-8")

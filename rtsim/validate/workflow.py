@@ -327,7 +327,8 @@ def run(opts: Options, replayer: Replayer | None = None) -> Result:
         return _run(opts, replayer)
     import sys
 
-    started = "ray" not in sys.modules or not sys.modules["ray"].is_initialized()
+    ray = sys.modules.get("ray")                # None: not imported, or blocked as missing
+    started = ray is None or not ray.is_initialized()
     if started:
         opts.ray.init(opts.ray.address)
     try:

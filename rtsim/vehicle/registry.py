@@ -139,6 +139,12 @@ class VehicleKind:
         """The vehicle at the scenario's start as the service steps it (its ``served()`` tuple)."""
         raise NotImplementedError
 
+    def random_elements(self, opened: "OpenedVehicle", sc) -> list[str] | None:
+        """What the seed of an offline run (``run_offline(seed=)``) draws in this vehicle driven by this
+        scenario, one name each ("sensor noise on yaw_rate"); [] when nothing is random, so every seed
+        gives the same run (a batch then simulates it once); None: not known, the seed may matter."""
+        return None
+
     def demo(self, opened: "OpenedVehicle") -> Demo:
         raise NotImplementedError
 

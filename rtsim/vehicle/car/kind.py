@@ -58,6 +58,12 @@ class CarKind(VehicleKind):
             return "it is a two-wheeler's scenario ([rider] or [two_wheeler]); give a car's ([inputs] or a driver)"
         return None
 
+    def random_elements(self, opened, sc) -> list[str]:
+        """The seed draws the sensor model's noise (rtsim.vehicle.kit.sensor_model), which only the
+        config's [sensors.channels.<name>] noise_std sets; nothing else of an offline run is random."""
+        return [f"sensor noise on {name}" for name, spec in opened.config.sensors.channels.items()
+                if spec.noise_std > 0.0]
+
     def run_offline(self, opened, sc, progress=None, seed=0) -> OfflineRun:
         from ..offline import run, sim_for
 

@@ -55,6 +55,11 @@ class TwoWheelerKind(VehicleKind):
             return "it is a car's scenario; give a two-wheeler's ([rider] or [two_wheeler])"
         return None
 
+    def random_elements(self, opened, sc) -> list[str]:
+        """Nothing: the two-wheeler's sensors are ideal and its rider deterministic (the offline ride
+        takes no seed)."""
+        return []
+
     def run_offline(self, opened, sc, progress=None, seed=0) -> OfflineRun:
         from .offline import CHANNELS, prepare, run, scene_source
 

@@ -49,6 +49,7 @@ from typing import Mapping
 
 import numpy as np
 
+from rtsim.configfile import note_read
 from rtsim.errors import ConfigError
 
 # ---- index constants of the packed parameter array (the one place they are defined) ----------------
@@ -518,6 +519,7 @@ def parse_tir(text: str, source: str = "<string>") -> TyreProperties:
 def load_tir(path: str | Path) -> TyreProperties:
     """Read and parse a .tir file (ConfigError if it is missing, unreadable or invalid)."""
     path = Path(path)
+    note_read(path)
     try:
         text = path.read_text(encoding="utf-8", errors="strict")
     except FileNotFoundError:
