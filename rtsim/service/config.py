@@ -1,4 +1,4 @@
-"""`rtsim serve`'s settings, declared once: each is a field of `ServeOptions` with its type, default, range,
+"""`rtsim serve`'s settings, declared once (and the file's ``[[faults]]``, rtsim.faults.spec): each is a field of `ServeOptions` with its type, default, range,
 help text, its key in the settings file (configs/service.toml documents every key and the embedded
 defaults) and its command-line flag. The file's sections, the flags and the validation are derived from
 these declarations; flags override the file; errors name the file (or the flag), the key, the value and
@@ -104,6 +104,9 @@ class ServeOptions(BaseModel):
     duration: Optional[WallTime] = setting(
         None, "stop after this many seconds of wall time", None)
     dbc: Optional[Path] = setting(None, "DBC of the CAN interface (default: the vehicle's [interface] dbc)", None)
+    faults: list[Path] = setting([], "a TOML file of [[faults]] to arm in the session (see `rtsim faults --list`; "
+                                 "repeatable)", None, "--faults")
+    fault_tables: list[dict] = setting([], "the settings file's own [[faults]] (checked when it is read)", None, "")
 
     def check(self) -> None:
         """Checks across settings (each value was checked on assignment)."""
@@ -144,10 +147,15 @@ def _file_schema() -> type[BaseModel]:
 def load_service_config(path: str | Path) -> dict:
     """ServeOptions keyword arguments from a settings file (only the keys it sets; relative paths
     against its folder); errors name the file and the section.key."""
+    from rtsim.faults.spec import load_fault_specs
+
     path = Path(path)
     raw = load_toml(path)
+    faults = raw.pop("faults", None)
     validate(_file_schema(), raw, str(path))
     out = {}
+    if faults is not None:
+        out["fault_tables"] = [s.table() for s in load_fault_specs(faults, path)]
     for name, f, key, _flag in _declared():
         if not key:
             continue

@@ -62,6 +62,26 @@ def build_sim(scenario: Path | None, vehicle: Path | None = None, dt: float | No
     return opened.service_sim(sc, dt, models, rider), sc
 
 
+def session_faults(o: ServeOptions) -> tuple[list, list]:
+    """The faults of a session (rtsim.faults.spec): the settings file's ``[[faults]]``, then each ``--faults``
+    file's; and where each was read (source, key) for the errors of arming them on the vehicle."""
+    from rtsim.faults.spec import FaultSpec, load_fault_file
+
+    specs, where = [], []
+    for n, t in enumerate(o.fault_tables):
+        specs.append(FaultSpec.model_validate(t))
+        where.append(("service settings", f"faults[{n}]"))
+    for path in o.faults:
+        for n, spec in enumerate(load_fault_file(path)):
+            specs.append(spec)
+            where.append((str(path), f"faults[{n}]"))
+    ids = [s.id for s in specs]
+    dup = next((i for i in ids if ids.count(i) > 1), None)
+    if dup is not None:
+        raise ConfigError(f"faults: the id {dup!r} is given twice ({', '.join(w[0] for s, w in zip(specs, where) if s.id == dup)})")
+    return specs, where
+
+
 class Service:
     """The assembled service (see the module docstring). ``out`` prints the start-up lines."""
 
@@ -91,6 +111,7 @@ class Service:
         from rtsim.model_fault import test_fault_time
         self.test_fault_at = test_fault_time()      # the test-only hook (rtsim.model_fault), from the environment
         self.sim, self.sc = build_sim(self.scenario_path, o.vehicle, o.dt, self.models, o.rider == "on")
+        self.fault_specs, self.fault_where = session_faults(o)
         self.model = self.sim.vm
         self.vehicle_id = o.vehicle_id or self.model.config.id
         ch = self.model.channels
@@ -112,7 +133,7 @@ class Service:
         self.loop = HilLoop(self.sim, self.codec, self.rings, mode=o.mode, state_rate=o.state_rate,
                             hold_pressure=o.hold_pressure, inbox=self.inbox, health=self.health,
                             scenario_name=self.sc.name, driver=self.sc.driver(), user_input=o.user_input,
-                            test_fault_at=self.test_fault_at)
+                            test_fault_at=self.test_fault_at, faults=self.fault_specs, fault_where=self.fault_where)
         self.loop.port = self.port
         self.loop.on_model_fault = self._on_model_fault
         scene, road = self._foxglove()
@@ -192,6 +213,8 @@ class Service:
             "rtsim.scenario": {"path": str(self.scenario_path.resolve()), "toml": self.scenario_path.read_text()},
             "rtsim.vehicle": {"path": str(vpath.resolve()), "toml": vpath.read_text()},
             "rtsim.dbc": {"path": str(self.codec.path.resolve()), "text": self.codec.path.read_text()},
+            **({} if not self.fault_specs else
+               {"rtsim.faults": {"faults": json.dumps([s.table() for s in self.fault_specs])}}),
         }
 
     def _on_model_fault(self, fault) -> None:

@@ -9,7 +9,9 @@ returns: each vehicle's own fields, named for what they hold) and calls, per ste
   command array, a two-wheeler's in place of the rider's outputs (the lean demand through the lean loop,
   drivers.lean_demand);
 - ``vehicle_advance``: one step of the vehicle (its inputs from ``v.io.commands``, which the watchdog filled);
-- ``vehicle_sensors`` and ``vehicle_observe``: the sensor channels and the observer state.
+- ``vehicle_sensors`` and ``vehicle_observe``: the sensor channels and the observer state;
+- ``vehicle_fault_arrays``: the arrays an actuator fault writes into (rtsim.faults), indexed as the vehicle's
+  ``fault_actuators`` declare (a tuple of float64 arrays).
 
 Each vehicle registers its own implementation of each call for the type of its tuple (numba
 ``overload``: an implementation answers only for its vehicle's type), so each vehicle gets its own
@@ -62,6 +64,10 @@ def vehicle_sensors(v, out):
 
 def vehicle_observe(v, out):
     """The observer state channels into out."""
+
+
+def vehicle_fault_arrays(v):
+    """The arrays actuator faults write into (``fault_actuators`` of the vehicle sim indexes them)."""
 
 
 # ---- the car ---------------------------------------------------------------------------------------
@@ -125,6 +131,14 @@ def _car_observe(v, out):
     def car(v, out):
         vehicle_state_values(v.d, v.vehicle, v.data, v.io.signals, out)
     return car
+
+
+@overload(vehicle_fault_arrays, jit_options=JIT)
+def _car_fault_arrays(v):
+    if not _of(v, LoopCar):
+        return None
+    # rtsim.vehicle.car.sim.FAULT_ARRAYS: commands, brake parameters, steering (or EPS) parameters and state
+    return lambda v: (v.io.commands, v.parts.brake, v.parts.steering, v.states.steering)
 
 
 # ---- the two-wheeler --------------------------------------------------------------------------------
@@ -194,3 +208,10 @@ def _two_wheeler_observe(v, out):
         plant_state(v.d, v.parts.idx, v.parts.par, v.params.pp, v.parts.tyre, v.plant.inp, v.plant.es,
                     rider_offset_kernel(v.rider, v.params.pp), out)
     return two_wheeler
+
+
+@overload(vehicle_fault_arrays, jit_options=JIT)
+def _two_wheeler_fault_arrays(v):
+    if not _of(v, LoopTwoWheeler):
+        return None
+    return lambda v: (v.io.commands,)          # (it declares no actuator fault yet)
