@@ -82,3 +82,24 @@ def test_cli_lists_and_checks(tmp_path, capsys):
     assert main(["faults", str(f)]) == 2
     err = capsys.readouterr().err
     assert "faults[0].rate = 1e+12: out of range" in err or "faults[0].rate = 1000000000000.0" in err, err
+
+
+def test_scenario_and_service_settings_take_faults_sections(tmp_path):
+    from drivers.scenario import load_scenario
+    from rtsim.service.config import load_service_config
+
+    shipped = (__import__("pathlib").Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "hil_flat.toml")
+    text = shipped.read_text().replace('road = "../roads/flat.toml"', f'road = "{shipped.parent.parent}/roads/flat.toml"')
+    sc = tmp_path / "sc.toml"
+    sc.write_text(text + '\n[[faults]]\nid = "a"\nkind = "offset"\ntarget = "accel_x"\noffset = 1.0\nat = 0.5\n')
+    assert [f.id for f in load_scenario(sc).spec.faults] == ["a"]
+    sc.write_text(text + '\n[[faults]]\nid = "a"\nkind = "offset"\ntarget = "accel_x"\noffset = "x"\n')
+    with pytest.raises(ConfigError, match=r"sc.toml: faults\[0\].offset = 'x': must be a number"):
+        load_scenario(sc)
+    svc = tmp_path / "service.toml"
+    svc.write_text('[simulation]\nmode = "lockstep"\n[[faults]]\nid = "b"\nkind = "bus_off"\ntarget = "bus"\n'
+                   'at = 1.0\nduration = 0.0\n')
+    with pytest.raises(ConfigError, match=r"service.toml: faults\[0\].duration = 0.0: out of range"):
+        load_service_config(svc)
+    svc.write_text('[simulation]\nmode = "lockstep"\n[[faults]]\nid = "b"\nkind = "bus_off"\ntarget = "bus"\n')
+    assert load_service_config(svc)["faults"] == [svc]

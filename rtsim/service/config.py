@@ -104,9 +104,8 @@ class ServeOptions(BaseModel):
     duration: Optional[WallTime] = setting(
         None, "stop after this many seconds of wall time", None)
     dbc: Optional[Path] = setting(None, "DBC of the CAN interface (default: the vehicle's [interface] dbc)", None)
-    faults: list[Path] = setting([], "a TOML file of [[faults]] to arm in the session (see `rtsim faults --list`; "
-                                 "repeatable)", None, "--faults")
-    fault_tables: list[dict] = setting([], "the settings file's own [[faults]] (checked when it is read)", None, "")
+    faults: list[Path] = setting([], "a TOML file whose [[faults]] to arm in the session (see `rtsim faults --list`; "
+                                 "repeatable; a settings file's own [[faults]] come first)", None, "--faults")
 
     def check(self) -> None:
         """Checks across settings (each value was checked on assignment)."""
@@ -155,7 +154,8 @@ def load_service_config(path: str | Path) -> dict:
     validate(_file_schema(), raw, str(path))
     out = {}
     if faults is not None:
-        out["fault_tables"] = [s.table() for s in load_fault_specs(faults, path)]
+        load_fault_specs(faults, path)            # checked now: errors name this file and faults[i].key
+        out["faults"] = [path]
     for name, f, key, _flag in _declared():
         if not key:
             continue
@@ -211,4 +211,6 @@ def options(args) -> ServeOptions:
         kw.update(load_service_config(args.config))
     flags = {name: getattr(args, f"opt_{name}") for name, *_ in _declared()
              if getattr(args, f"opt_{name}", None) is not None}
+    if "faults" in kw and "faults" in flags:         # the file's own [[faults]], then the --faults files
+        flags["faults"] = [*kw["faults"], *flags["faults"]]
     return validate(ServeOptions, {**kw, **flags}, "rtsim serve")

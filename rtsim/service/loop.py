@@ -466,6 +466,8 @@ class HilLoop:
             return {"ok": True, "sim_time": self.sim_time, "steps": self.k}
         if op in ("reset", "load_scenario", "_install"):
             sim, name = args["_sim"], args.get("_name")
+            if "_faults" in args:               # a new scenario's session faults (server.session_faults)
+                self.fault_specs, self.fault_where = (list(x) for x in args["_faults"])
             self._install(sim, args.get("_driver"))
             self.scenario_name = name or self.scenario_name
             self.run_state = "running"

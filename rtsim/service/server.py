@@ -62,17 +62,19 @@ def build_sim(scenario: Path | None, vehicle: Path | None = None, dt: float | No
     return opened.service_sim(sc, dt, models, rider), sc
 
 
-def session_faults(o: ServeOptions) -> tuple[list, list]:
-    """The faults of a session (rtsim.faults.spec): the settings file's ``[[faults]]``, then each ``--faults``
-    file's; and where each was read (source, key) for the errors of arming them on the vehicle."""
-    from rtsim.faults.spec import FaultSpec, load_fault_file
+def session_faults(o: ServeOptions, sc) -> tuple[list, list]:
+    """The faults of a session (rtsim.faults.spec): the scenario's ``[[faults]]``, then those of each file of
+    ``faults`` (the settings file's own first, then the ``--faults`` files); and where each was read (file,
+    key) for the errors of arming them on the vehicle."""
+    from rtsim.configfile import load_toml
+    from rtsim.faults.spec import load_fault_specs
 
     specs, where = [], []
-    for n, t in enumerate(o.fault_tables):
-        specs.append(FaultSpec.model_validate(t))
-        where.append(("service settings", f"faults[{n}]"))
+    for n, spec in enumerate(sc.spec.faults):
+        specs.append(spec)
+        where.append((str(sc.path), f"faults[{n}]"))
     for path in o.faults:
-        for n, spec in enumerate(load_fault_file(path)):
+        for n, spec in enumerate(load_fault_specs(load_toml(path).get("faults", []), path)):
             specs.append(spec)
             where.append((str(path), f"faults[{n}]"))
     ids = [s.id for s in specs]
@@ -111,7 +113,7 @@ class Service:
         from rtsim.model_fault import test_fault_time
         self.test_fault_at = test_fault_time()      # the test-only hook (rtsim.model_fault), from the environment
         self.sim, self.sc = build_sim(self.scenario_path, o.vehicle, o.dt, self.models, o.rider == "on")
-        self.fault_specs, self.fault_where = session_faults(o)
+        self.fault_specs, self.fault_where = session_faults(o, self.sc)
         self.model = self.sim.vm
         self.vehicle_id = o.vehicle_id or self.model.config.id
         ch = self.model.channels
@@ -261,6 +263,8 @@ class Service:
                     from bridge.scene import scene_for
                     self.outbox.replace_scene(*scene_for(sim, self.vehicle_id, (sc.spec.initial.x, sc.spec.initial.y)))
             args = {"_sim": sim, "_name": sc.name, "_driver": sc.driver()}
+            if op == "load_scenario":       # the new scenario's faults replace the old one's
+                args["_faults"] = session_faults(self.opts, sc)
         req = Request(op, args)
         self.inbox.put(("ctl", req))
         timeout = 120.0 if op == "step" else 10.0
