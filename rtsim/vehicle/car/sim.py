@@ -23,7 +23,8 @@ from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZ
 from ..kit.sensor_model import ST_ON as SM_ST_ON, ST_SLOTS as SM_ST_SLOTS
 from ..kit.sensor_model import copy_noise_state, neutral_params as sm_neutral, seed_noise, sensor_params, sensor_state
 from ..kit.eps import EP_KT, ES_FAULT, ES_GAIN, ES_STAGE, eps_state, eps_params, external_mode, stage_off
-from ..kit.steering import SP_TM_MAX, steering_config, steering_params, steering_state
+from ..kit.actuators import LAG_HI, LAG_LO
+from ..kit.steering import SP_MOTOR, steering_config, steering_params, steering_state
 from ..kit.tyre.magic_formula import effective_rolling_radius
 from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
 from .build import VehicleModel
@@ -249,8 +250,9 @@ class VehicleSim:
             out["eps_power_stage"] = ("power_stage", {"power_stage_off": (
                 (A_STEERING_STATE, ES_STAGE, "zero", 0.0), (A_STEERING_STATE, ES_FAULT, "value", 1.0))})
         else:
+            # the rack motor's torque limits both zero: the motor block's output (its torque) is held at 0
             out["steering_motor"] = ("steering_motor", {"steering_motor_failure": (
-                (A_STEERING, SP_TM_MAX, "zero", 0.0),)})
+                (A_STEERING, SP_MOTOR + LAG_LO, "zero", 0.0), (A_STEERING, SP_MOTOR + LAG_HI, "zero", 0.0))})
         return out
 
     def raise_status(self, status: int, step: int) -> None:
