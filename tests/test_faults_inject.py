@@ -274,7 +274,7 @@ class Stepper:
 
     def __init__(self, models, faults, probe, steps=STEPS, scenario=MOVING, feed=None):
         from rtsim.vehicle.registry import resolve_scenario
-        sim, sc = build_sim(resolve_scenario(scenario), None, models=models)
+        sim, sc = build_sim(resolve_scenario(scenario) if scenario else None, None, models=models)
         specs = [validate(FaultSpec, f, "test") for f in faults]
         loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode="lockstep", driver=sc.driver(), faults=specs)
         self.at = {}
@@ -319,7 +319,8 @@ def test_caliper_stuck_holds_one_wheels_torque_while_the_pressure_changes(models
     run = Stepper(models, [dict(id="c", kind="caliper_stuck", target="brake_rl", at=0.1, duration=0.1)], probe,
                   feed=feed)
     held = run.at[ON][2]
-    assert held > 1000.0 and run.at[ON + 1][2] == held
+    assert held > 100.0 and run.at[ON + 1][2] == held
+    assert run.at[119][3] > held                # the pressure still rose: the other rear wheel followed it
     for k in range(ON + 1, end + 1):
         assert run.at[k][2] == held, k
     assert run.at[end][3] < 0.5 * held          # the other rear wheel followed the release
@@ -361,8 +362,8 @@ def test_steering_motor_failure_gives_no_motor_torque(models):
         if k <= ON:
             assert run.at[k] == base.at[k], k
         elif k <= OFF:
-            assert run.at[k] == 0.0 and abs(base.at[k]) > 0.01, k
-    assert abs(run.at[OFF + 1]) > 0.01
+            assert run.at[k] == 0.0 and abs(base.at[k]) > 0.0, k
+    assert abs(run.at[OFF + 1]) > 0.0          # ended: the motor's torque builds up again
     assert CMD_STEER >= 0
 
 
@@ -379,7 +380,7 @@ def test_condition_on_a_state_channel_starts_at_the_first_sample_that_holds(mode
     v0 = base.state_value(10, "speed")
     limit = v0 - 0.3
     first = next(k for k in sorted(base.state) if base.state_value(k, "speed") < limit)
-    run = Run(models, [dict(id="w", kind="offset", target="accel_x", offset=1.0, when=f"speed < {limit!r}",
+    run = Run(models, [dict(id="w", kind="offset", target="accel_x", offset=1.0, when=f"speed < {float(limit)!r}",
                             duration=0.02)], scenario=MOVING)
     assert run.events[0] == ("w", "onset", first)
     for k in samples(base):
@@ -393,7 +394,7 @@ def test_condition_on_a_sensor_magnitude_and_a_follower(models):
     mags = [abs(base.value(k, "accel_x")) for k in ks]
     limit = 0.5 * (max(mags[5:]) + min(mags[5:]))
     first = next(k for k, m in zip(ks, mags) if k > 0 and m > limit)
-    run = Run(models, [dict(id="w", kind="dropout", target="gyro_x", when=f"abs(accel_x) > {limit!r}",
+    run = Run(models, [dict(id="w", kind="dropout", target="gyro_x", when=f"abs(accel_x) > {float(limit)!r}",
                             duration=0.01),
                        dict(id="f", kind="stuck_value", target="roll", value=0.1, after="w", after_delay=0.004,
                             duration=0.002)], scenario=MOVING)

@@ -113,7 +113,7 @@ class FaultTable:
                 ri[FI_TRIG], ri[FI_AFTER], ri[FI_AFTER_DELAY] = TRIG_AFTER, n, 0
             fi[n + j] = ri
             ff[n + j] = rf
-            self.state.si[n + j, SI_RNG] = np.int64(ri[FI_SEED] * 0x2545F4914F6CDD1D & 0x7FFFFFFFFFFFFFFF)
+            self.state.si[n + j, SI_RNG] = (int(ri[FI_SEED]) * 0x2545F4914F6CDD1D) & 0x7FFFFFFFFFFFFFFF
             self._row_of[n + j] = spec.id
         self.armed[spec.id] = Armed(spec, list(range(n, n + len(rows))), k)
         self.plan.n[0] = n + len(rows)
