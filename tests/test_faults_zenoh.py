@@ -42,7 +42,8 @@ def test_inject_and_clear_over_zenoh_and_resim(tmp_path):
         assert r["ok"], r
         assert client.control("step", n=30, timeout=EVENT)["ok"]
         st = svc.loop.status()["injected_faults"]["faults"]
-        assert [(f["id"], f["state"], f["onset_time"]) for f in st] == [("g", "active", 0.051), ("n", "ended", 0.051)]
+        assert [(f["id"], f["state"], f["onset_time"]) for f in st] == [("g", "active", 51 * 0.001),
+                                                                         ("n", "ended", 51 * 0.001)]
         bad = client.control("clear_fault", timeout=EVENT, id="nope")
         assert not bad["ok"] and "no fault 'nope'" in bad["error"]
         r = client.control("clear_fault", timeout=EVENT, id="g")
