@@ -54,7 +54,7 @@ id = "moving"
 kind = "drift"
 target = "pitch"
 rate = 0.01
-when = "speed > 0.5"
+when = "brake_pressure > 1500"
 duration = 0.3
 
 [[faults]]
@@ -98,10 +98,10 @@ def test_a_recorded_session_with_faults_resimulates_bit_identically(tmp_path):
     moving = [e for e in ev if e[0] == "moving"]
     wheel = [e for e in ev if e[0] == "wheel"]
     assert moving and moving[0][1] == "onset" and wheel[0] == ("wheel", "onset", moving[0][2] + 100)
-    # the speed crossed 0.5 m/s at the state sample the fault started at, not before
-    state = messages["rtsim/xbw/state"]
-    first = next(m.data["time"] for m in state if m.data["speed"] > 0.5)
-    assert moving[0][2] == round(first * 1000)
+    # the brake pressure (the ECU's 2.5 MPa hold) crossed 1.5 MPa at the sensor sample the fault started at
+    sensors = messages["rtsim/xbw/sensors"]
+    first = next(m.data["time"] for m in sensors if m.data["brake_pressure"] > 1500)
+    assert moving[0][2] == round(first * 1000) > 0
     rep = resim(rec)
     print(f"\nresim with faults: {rep['sensors']['matched']} sensor samples, faults {rep['faults']}")
     assert rep["faults"]["identical"] and rep["faults"]["recorded"] == len(ev) >= 12
