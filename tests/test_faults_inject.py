@@ -425,3 +425,17 @@ def test_live_injection_and_clear_act_from_the_next_step(models):
     ctl = [e["op"] for t, e in loop.event_log if t == "control"]
     assert ctl == ["inject_fault", "clear_fault"]
     assert math.isclose(loop.status()["injected_faults"]["faults"][0]["onset_time"], 0.1)
+
+
+def test_a_frame_fault_leaves_extended_frames_to_the_format_check(models):
+    from bridge.can_e2e import C_FORMAT, FLAG_EXTENDED
+    feed_classic = _brake_feed()
+
+    def feed(loop, k):
+        feed_classic(loop, k)
+        if k == ON + 5:                   # the brake command's id as an extended-id frame: never applied
+            fid, data = loop.codec.encode_command("brake_pressure_cmd", 9000.0, 15)
+            loop.rx_writer.put(fid, data, FLAG_EXTENDED)
+    run = Run(models, [dict(id="d", kind="frame_delay", target="BRAKE_CMD", delay=0.004, **AT)], feed=feed)
+    assert run.loop.rx.state.counts[C_FORMAT] == 1
+    assert [k for k, kind, _ in run.cmd if kind == 0] == [k + 4 if ON <= k < OFF else k for k in range(0, STEPS, 10)]

@@ -301,14 +301,19 @@ def fault_out(fp, fs, k, fid, frame, word):
 
 
 @kernel
-def fault_in(fp, fs, k, fid, data, dlc, crc_table):
+def fault_in(fp, fs, k, fid, classic, data, dlc, crc_table):
     """What happens to a received frame ``fid`` (payload ``data``, ``dlc`` bytes) taken at step k: 0 taken
-    (its bytes possibly corrupted in place), 1 lost (bus off, loss), 2 delayed (queued, first 8 bytes)."""
+    (its bytes possibly corrupted in place), 1 lost (bus off, loss), 2 delayed (queued, first 8 bytes).
+    A frame fault targets the classic standard-id data frame of its id: an extended-id, remote or CAN FD
+    frame (``classic`` False) goes through untouched (the receiver rejects it as a format error), unless
+    the bus is off."""
     if fs.g[G_ACTIVE] == 0:
         return 0
     if fs.g[G_BUS_OFF] > 0:
         fs.g[G_LOST_IN] += 1
         return 1
+    if not classic:
+        return 0
     si, fi = fs.si, fp.fi
     for i in range(fp.n[0]):
         if si[i, SI_PHASE] != PH_ACTIVE or fi[i, FI_DIR] != DIR_IN or fi[i, FI_TARGET] != fid:

@@ -220,7 +220,8 @@ def take_frames(lp, ls, rg):
             li[LI_PENDING_STEPS] = steps
             li[LI_PENDING_COUNTER] = counter
             break
-        if lp.faults.n[0] > 0 and fault_in(lp.faults, ls.faults, li[LI_K], fid, data, dlc, lp.rx.crc) != 0:
+        if lp.faults.n[0] > 0 and fault_in(lp.faults, ls.faults, li[LI_K], fid, (flags & NOT_CLASSIC) == 0, data,
+                                           dlc, lp.rx.crc) != 0:
             continue                                  # lost on the bus, or delayed (rtsim.faults)
         if (flags & (FLAG_EXTENDED | FLAG_REMOTE)) == 0 and _own_id(lp, fid):
             rx.counts[C_FOREIGN] += 1

@@ -123,10 +123,6 @@ class Service:
         from .rings import make_rings
         self.rings = make_rings(len(ch.sensors), len(self.codec.sensor_frames), len(ch.state), len(ch.commands))
         self._open_can()
-        if o.record is not None:
-            from bridge.mcap_recorder import Recorder
-            self.recorder = Recorder(o.record, self.vehicle_id, metadata=self.session_metadata(),
-                                     poll_interval=0.005, channels=ch)
         if o.zenoh:
             from bridge.zenoh_link import ZenohLink
             self.zenoh = ZenohLink(self.vehicle_id, listen=tuple(o.zenoh_listen),
@@ -138,6 +134,10 @@ class Service:
                             test_fault_at=self.test_fault_at, faults=self.fault_specs, fault_where=self.fault_where)
         self.loop.port = self.port
         self.loop.on_model_fault = self._on_model_fault
+        if o.record is not None:         # (after the loop: a fault that does not fit the vehicle leaves no file)
+            from bridge.mcap_recorder import Recorder
+            self.recorder = Recorder(o.record, self.vehicle_id, metadata=self.session_metadata(),
+                                     poll_interval=0.005, channels=ch)
         scene, road = self._foxglove()
         from .outbox import Outbox
         self.outbox = Outbox(self.rings, self.loop.lp.sensor_ids, zenoh=self.zenoh, recorder=self.recorder,
