@@ -164,13 +164,9 @@ def _status_props() -> dict:
         # (optional: absent from recordings made before the user command source existed)
         "injected_faults": {"type": "object", "description": "the faults armed in the session (rtsim.faults)",
                             "properties": {
-                                "faults": {"type": "array", "items": {"type": "object", "properties": {
-                                    "id": {"type": "string"}, "kind": {"type": "string"},
-                                    "target": {"type": ["string", "integer"]},
-                                    "state": {"type": "string", "enum": ["armed", "active", "ended"]},
-                                    "onset_time": _seconds("simulation time of its onset"),
-                                    "end_time": _seconds("simulation time of its end")},
-                                    "required": ["id", "kind", "target", "state", "onset_time", "end_time"]}},
+                                "faults": {"type": "array", "description": "one object per fault: id, kind, "
+                                           "target, state (armed, active, ended), onset_time and end_time (s, "
+                                           "null until they happened)"},
                                 "lost_out": _count("frames the simulator did not send because of a fault"),
                                 "lost_in": _count("received frames a fault took (lost, bus off)")},
                             "required": ["faults", "lost_out", "lost_in"]},

@@ -169,6 +169,8 @@ class FaultTable:
                 if abs(n - round(n)) > 1e-6:
                     raise err("delay", p["delay"], f"not a whole number of the channel's sample periods ({period:g} s)")
                 ri[FI_LAG] = int(round(n))
+                if ri[FI_LAG] >= RING:
+                    raise err("delay", p["delay"], f"more samples than the delay ring holds ({RING})")
             if kind.code == K_OUT_OF_RANGE:
                 lo, hi = tg.ranges[t]
                 if lo <= p["value"] <= hi:
