@@ -10,8 +10,10 @@ import sys
 
 import pytest
 
+from bridge.can_bus import open_bus
+from bridge.can_codec import Codec
 from bridge.mcap_recorder import read_recording
-from service_harness import ROOT, ServiceProcess, can_segment
+from service_harness import ROOT, Listener, ServiceProcess, can_segment
 from waits import EVENT, PROCESS
 
 FAULTS = """
@@ -78,14 +80,25 @@ def test_a_recorded_session_with_faults_resimulates_bit_identically(tmp_path):
     with can_segment() as (iface, chan):
         svc = ServiceProcess(iface, chan, "--no-zenoh", "--mode", "lockstep", "--record", str(rec),
                              "--faults", str(faults))
+        gyro = Codec().frames["SIM_IMU_GYRO"].frame_id
+        bus = open_bus(iface, chan)
+        listener = Listener(bus, sensor_ids=(gyro,))
         try:
             ecu = subprocess.run([sys.executable, "-m", "drivers.ecu_demo", "--can-interface", iface,
                                   "--can-channel", chan, "--lockstep", "--duration", str(duration), "--manoeuvre",
                                   "straight_line", "--timeout", str(EVENT)],
                                  cwd=ROOT, capture_output=True, text=True, timeout=PROCESS)
+            seen_all = listener.wait_sim_ms(int(duration * 1000))
             rc, _ = svc.stop(signal.SIGTERM)
         finally:
             svc.close()
+            listener.close()
+            bus.shutdown()
+    assert seen_all
+    # on the bus: SIM_IMU_GYRO (every 2 ms) lost 1 of every 3 from 0.2 s to 0.7 s, every one outside
+    stamps = [int.from_bytes(d[0:2], "little") for _, i, d in listener.frames if i == gyro]
+    assert stamps[-1] >= duration * 1000
+    assert stamps == [ms for ms in range(2, stamps[-1] + 1, 2) if not (200 <= ms < 700 and ((ms - 200) // 2) % 3 == 0)]
     assert ecu.returncode == 0, ecu.stderr
     assert rc == 0, svc.output
     messages, info = read_recording(rec)
