@@ -305,6 +305,9 @@ class Service:
         if self.foxglove is not None:
             lines.append(f"  Foxglove: {self.foxglove.url} (open it in the Foxglove app: Open connection)")
         lines.append(f"  record: {self.recorder.path}" if self.recorder is not None else "  record: off")
+        if self.fault_specs:
+            lines.append(f"  faults: {len(self.fault_specs)} armed ({', '.join(s.id for s in self.fault_specs)}); "
+                         f"live: control ops inject_fault, clear_fault")
         lines.append("  stop with Ctrl-C (SIGINT) or SIGTERM")
         return lines
 
