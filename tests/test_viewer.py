@@ -296,6 +296,40 @@ def test_axis_tick_labels_tell_ticks_apart(page):
     assert drawn and len(set(drawn)) == len(drawn), drawn
 
 
+def test_the_fault_panel_arms_and_clears_a_fault_in_the_service(page, service):
+    """The faults panel (the catalogue from the service): a bad target is refused with the service's one-line
+    reason; a valid fault is armed (control op inject_fault), then cleared (clear_fault); the recording has its
+    onset and end; the panel still fits its box with the longest reply."""
+    from bridge.mcap_recorder import read_recording
+
+    pg, _logs, _view = page
+    _, _, rec = service
+    kinds = pg.evaluate("[...document.querySelectorAll('#fault-kind option')].map(o => o.value)")
+    assert "stuck_value" in kinds and "bus_off" in kinds and "power_stage_off" in kinds
+    pg.select_option("#fault-kind", "offset")
+    pg.fill("#fault-target", "accel_q")
+    pg.fill("#fault-params", "offset=2.5")
+    pg.click("#fault-arm")
+    pg.wait_for_function("document.getElementById('fault-reply').textContent.includes('accel_q')", timeout=EVENT * 1000)
+    assert "not a sensor channel" in pg.text_content("#fault-reply")
+    assert _fits(pg) == []
+    pg.fill("#fault-target", "accel_x")
+    pg.fill("#fault-params", "offset=2.5 duration=30")
+    pg.click("#fault-arm")
+    pg.wait_for_function("document.getElementById('fault-reply').textContent.includes('(offset on accel_x)')",
+                         timeout=EVENT * 1000)
+    fid = pg.input_value("#fault-id")
+    assert fid.startswith("view-") and "armed" in pg.text_content("#fault-reply")
+    wait_sim(pg, sim_time(pg) + 0.5)
+    pg.click("#fault-clear")
+    pg.wait_for_function("document.getElementById('fault-reply').textContent.includes('ended')", timeout=EVENT * 1000)
+    t = sim_time(pg)
+    wait_sim(pg, t + 1.5)                               # the recorder closes a chunk every second
+    msgs, _ = read_recording(rec)
+    ev = [(m.data["id"], m.data["event"]) for m in msgs["rtsim/xbw/faults"]]
+    assert ev == [(fid, "onset"), (fid, "end")]
+
+
 def test_no_console_errors(page):
     pg, logs, _view = page
     errors = [text for kind, text in logs if kind in ("error", "pageerror")]
