@@ -21,6 +21,11 @@
    sending at its own period; the observer state; the SIM_STATUS frame and, right after it, SIM_DIAG;
 3. (``ack_counter >= 0``) the SIM_STEP_ACK frame.
 
+Injected faults (rtsim.faults; ``LoopParams.faults`` the compiled table, ``LoopState.faults`` its state) act
+inside these steps, exactly at their steps: on the frames taken (loss, delay, corruption, bus off), on the
+vehicle's actuators before its step, on the sensor sample before it is packed, and on every frame sent;
+with no fault armed each hook is one comparison.
+
 After a failed vehicle step (``LI_MODEL_FAULT`` holds its status) step 2 is ``fault_step``: the vehicle
 frozen, time going on, the watchdog, SIM_STATUS and SIM_DIAG at their period, no sensor frame or sample
 (the model-fault state, rtsim.service.loop).

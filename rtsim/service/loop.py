@@ -20,6 +20,10 @@ SIM_DIAG (``model_fault_reason``) keep their period, the sensor frames stop (the
 lockstep SIM_STEP_REQ is still run (time advances by its steps) and acknowledged, until a ``reset`` or
 ``load_scenario``. ``on_model_fault`` (optional) is called once with the ModelFault, on the loop thread.
 Bus errors are counted by the BusPort and flagged in the status frame.
+
+Faults (rtsim.faults): the session's (``faults``: armed at every start, a reset too) and those armed live
+(control ops ``inject_fault``, ``clear_fault``) live in ``fault_table``; their onsets and ends go to the
+recording on the ``faults`` topic, their states to the status (``injected_faults``).
 """
 from __future__ import annotations
 
