@@ -194,8 +194,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append", metavar="ENDPOINT",
                            help=f.description)
         elif f.annotation == list[Path]:
-            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append", metavar="FOLDER",
-                           type=Path, help=f.description)
+            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append",
+                           metavar="FILE" if name == "faults" else "FOLDER", type=Path, help=f.description)
         else:
             option = flag or f"--{name.replace('_', '-')}"
             p.add_argument(option, dest=dest, type=_arg_type(f.annotation), help=f.description,
