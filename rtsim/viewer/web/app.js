@@ -96,7 +96,7 @@ function start(i, source) {
 function loaded(m) {
   const times = Float64Array.from(m.state, (s) => s.time);
   replay.recs[m.index] = { state: m.state, sensors: m.sensors, status: m.status, times, file: m.file,
-    damage: m.damage };
+    damage: m.damage, faults: m.faults || [] };
   if (m.damage && m.damage.damaged) {        // what the file lost and how its session ended, in view
     $('files').textContent += ` · ${m.index ? 'B' : 'A'}: ${m.health}`;
     $('files').style.color = '#b00020';
@@ -105,6 +105,7 @@ function loaded(m) {
   replay.t0 = Math.min(...all.map((r) => r.times[0]));
   replay.t1 = Math.max(...all.map((r) => r.times[r.times.length - 1]));
   if (m.index === 0) replay.t = replay.t0;
+  faultMarks();
   refill();
   view.replayLoaded = all.length;
 }
@@ -146,6 +147,34 @@ function showReplay(dt) {
   plots.dirty = true;
   if (!view.scrubbing) $('scrub').value = String(Math.round(1000 * (R.t - R.t0) / Math.max(1e-9, R.t1 - R.t0)));
   $('ttext').textContent = `${R.t.toFixed(2)} / ${R.t1.toFixed(2)} s`;
+  const on = activeFaults(R.t);
+  $('tfaults').textContent = on.length ? `faults: ${on.join(', ')}` : '';
+  view.activeFaults = on;
+}
+
+// the first recording's injected faults: a mark per onset (red) and end (grey) on the time bar, and the
+// faults active at the time shown
+function faultMarks() {
+  const r = replay.recs[0], box = $('fault-marks');
+  box.innerHTML = '';
+  if (!r) return;
+  const span = Math.max(1e-9, replay.t1 - replay.t0);
+  for (const e of r.faults) {
+    const el = document.createElement('span');
+    el.className = e.event === 'end' ? 'end' : 'onset';
+    el.style.left = `${(100 * Math.min(1, Math.max(0, (e.time - replay.t0) / span))).toFixed(2)}%`;
+    el.title = `${e.id} (${e.kind} on ${e.target}) ${e.event} at ${e.time.toFixed(3)} s`;
+    box.appendChild(el);
+  }
+}
+function activeFaults(t) {
+  const r = replay.recs[0], on = new Set();
+  if (!r) return [];
+  for (const e of r.faults) {                   // in recorded order: onsets and ends up to t
+    if (e.time > t + 1e-9) break;
+    if (e.event === 'onset') on.add(e.id); else on.delete(e.id);
+  }
+  return [...on];
 }
 
 // tests and scripts: show time t (s) of the recording(s), paused
