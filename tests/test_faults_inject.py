@@ -439,3 +439,20 @@ def test_a_frame_fault_leaves_extended_frames_to_the_format_check(models):
     run = Run(models, [dict(id="d", kind="frame_delay", target="BRAKE_CMD", delay=0.004, **AT)], feed=feed)
     assert run.loop.rx.state.counts[C_FORMAT] == 1
     assert [k for k, kind, _ in run.cmd if kind == 0] == [k + 4 if ON <= k < OFF else k for k in range(0, STEPS, 10)]
+
+
+def test_a_bus_off_ends_on_time_in_the_model_fault_state(models):
+    """The model fails (the test-only hook) while the bus is off: the faults' clock goes on, the bus-off ends
+    at its step and SIM_STATUS resumes at its period (the model-fault state's bus contract)."""
+    sim, sc = build_sim(None, None, models=models)
+    loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode="lockstep", driver=sc.driver(), test_fault_at=0.15,
+                   faults=[validate(FaultSpec, dict(id="off", kind="bus_off", target="bus", at=0.1, duration=0.2),
+                                    "test")])
+    loop.advance(600)
+    assert loop.run_state == "model_fault" and loop.k == 600
+    r = loop.rings
+    st = loop.codec.status_frame.frame_id
+    sent = [int(round(r.tx_t[j] / sim.dt)) for j in range(int(r.heads[H_TX])) if r.tx_id[j] == st]
+    assert sent == [100 * n for n in range(1, 7) if not 100 <= 100 * n < 300]
+    ev = [(e["id"], e["event"], e["step"]) for t, e in loop.event_log if t == "faults"]
+    assert ev == [("off", "onset", 100), ("off", "end", 300)]

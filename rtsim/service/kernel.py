@@ -277,7 +277,8 @@ def fault_step(lp, ls, rg, commands):
     frozen at its last good step while simulation time goes on, so the bus contract holds: the watchdog
     keeps judging the commands (its time-outs flagged, its mask changes recorded), SIM_STATUS (with
     ``fault_model``) and SIM_DIAG (with ``model_fault_reason``) go out at their period; no sensor frame is
-    sent (every shipped DBC's rule for its sensor frames: they stop) and no sample is published."""
+    sent (every shipped DBC's rule for its sensor frames: they stop) and no sample is published. The faults'
+    clock goes on (a bus-off ends on time: SIM_STATUS resumes)."""
     li = ls.li
     h = lp.dt[0]
     k = li[LI_K]
@@ -287,6 +288,8 @@ def fault_step(lp, ls, rg, commands):
         _command_event(rg, lp.rx, k * h, CMD_MASK, mask, commands, True)
     k += 1
     li[LI_K] = k
+    if lp.faults.n[0] > 0:
+        fault_clock(lp.faults, ls.faults, k)
     if k % lp.ints[PI_STATUS_EVERY] == 0:
         _status_frame(lp, ls, rg, k * h)
         li[LI_SENT] += 1
