@@ -24,7 +24,7 @@ from rtsim.channels import CAR, ENERGY, SENSOR_NAMES, STATE_NAMES, ChannelDictio
 from rtsim.errors import RtsimError
 
 TOPIC_KEYS = ("sensors", "state", "status", "commands", "can/rx", "can/tx")
-EVENT_TOPIC_KEYS = ("user", "control")   # recorded by the service only (not published on Zenoh)
+EVENT_TOPIC_KEYS = ("user", "control", "faults")   # recorded by the service only (not published on Zenoh)
 OFFLINE_TOPIC_KEYS = ("energy",)    # recorded by offline runs only (rtsim.vehicle.car.energy)
 MODES = ("realtime", "lockstep", "fast")
 RUN_STATES = ("running", "paused", "model_fault")    # model_fault: rtsim.service.loop's model-fault state
@@ -35,9 +35,11 @@ REJECTIONS = ("dlc", "crc", "counter", "range", "unknown_id")
 E2E_REJECTIONS = ("repeated", "jump", "sync", "format")
 SIM_FAULTS = ("model", "second_sim")   # the simulator's own fault flags besides bus_error (SIM_STATUS)
 USER_CAUSES = ("drive", "release", "lapse")
-CONTROL_OPS = ("pause", "resume", "step", "driver", "reset", "load_scenario")   # recorded (rtsim.service.loop)
+CONTROL_OPS = ("pause", "resume", "step", "driver", "reset", "load_scenario", "inject_fault",
+               "clear_fault")   # recorded (rtsim.service.loop)
+FAULT_EVENTS = ("onset", "end")    # a fault's events (rtsim.faults)
 DRIVER_SOURCES = ("user", "ecu", "scenario", "rider", "safe", "none", "user+ecu", "rider+ecu", "none+ecu")
-STATUS_OPTIONAL = ("wall_time", "drivers", "user", "foreign_frames", "model_fault")
+STATUS_OPTIONAL = ("wall_time", "drivers", "user", "foreign_frames", "model_fault", "injected_faults")
 
 # ----------------------------------------------------------------------------------------- schemas
 
@@ -160,6 +162,14 @@ def _status_props() -> dict:
                                                       "coordinate the failure names, empty if none"}},
                         "required": ["reason_code", "reason", "message", "step", "sim_time", "coordinate"]},
         # (optional: absent from recordings made before the user command source existed)
+        "injected_faults": {"type": "object", "description": "the faults armed in the session (rtsim.faults)",
+                            "properties": {
+                                "faults": {"type": "array", "description": "one object per fault: id, kind, "
+                                           "target, state (armed, active, ended), onset_time and end_time (s, "
+                                           "null until they happened)"},
+                                "lost_out": _count("frames the simulator did not send because of a fault"),
+                                "lost_in": _count("received frames a fault took (lost, bus off)")},
+                            "required": ["faults", "lost_out", "lost_in"]},
     }
 
 
@@ -206,7 +216,18 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
         "step": {"type": "integer", "minimum": 0, "description": "the loop's step count when it took the request"},
         "op": {"type": "string", "enum": list(CONTROL_OPS), "description": "the control op (rtsim serve's control key)"},
         "args": {"type": "object", "description": "the request's arguments: step {n}; driver {channel: value | null} "
-                                                  "(SI units); reset and load_scenario {scenario: name}"},
+                                                  "(SI units); reset and load_scenario {scenario: name}; "
+                                                  "inject_fault: a fault spec ([[faults]] keys); clear_fault {id}"},
+        "order": order,
+    }
+    faults = {
+        "time": {"type": "number", "description": "simulation time of the onset or end (step * dt) [s]"},
+        "step": {"type": "integer", "minimum": 0, "description": "the step of the onset or end"},
+        "id": {"type": "string", "description": "the fault's id"},
+        "kind": {"type": "string", "description": "its kind (rtsim faults --list)"},
+        "target": {"type": ["string", "integer"], "description": "its target: channel, frame, bus or actuator"},
+        "event": {"type": "string", "enum": list(FAULT_EVENTS), "description": "onset: it acts from this step on; "
+                                                                             "end: from this step on no more"},
         "order": order,
     }
     return {
@@ -223,6 +244,8 @@ def schemas_for(channels: ChannelDictionary = CAR) -> dict[str, tuple[str, dict]
                                     [k for k in user if k != "order"])),
         "control": ("rtsim.control", _obj("rtsim control requests that changed the run (pause, resume, step, driver, "
                                           "reset, load_scenario)", control, list(control))),
+        "faults": ("rtsim.faults", _obj("rtsim injected faults: onsets and ends (rtsim.faults)", faults,
+                                        list(faults))),
         "energy": ("rtsim.energy", _obj("rtsim power audit (offline runs)", energy, ["time"])),
     }
 

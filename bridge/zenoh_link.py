@@ -27,7 +27,7 @@ import zenoh
 from bridge.payloads import TOPIC_KEYS, decode, encode_json
 from rtsim.errors import RtsimError
 
-CONTROL_OPS = ("reset", "pause", "resume", "load_scenario", "step", "driver", "drive")
+CONTROL_OPS = ("reset", "pause", "resume", "load_scenario", "step", "driver", "drive", "inject_fault", "clear_fault")
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 _VID = re.compile(r"[A-Za-z0-9_\-]+\Z")
 _LOOPBACK_NAMES = ("localhost",)

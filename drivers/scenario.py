@@ -98,6 +98,7 @@ import numpy as np
 from pydantic import Field, StrictBool, create_model, model_validator
 
 from rtsim.configfile import Range, Strict, bad, load, problem, range_fields
+from rtsim.faults.spec import FaultSpec
 from rtsim.errors import ConfigError
 
 from .base import INPUT_NAMES, INPUT_UNITS, LIMITS, NSTATE, S_SPEED, S_X, S_Y
@@ -466,9 +467,15 @@ class ScenarioSpec(_Model):
     rider: Optional[RiderSpec] = None
     two_wheeler: Optional[TwoWheelerSpec] = None
     reference: dict[str, Num] = {}
+    #: faults the service arms when it serves this scenario (rtsim.faults: docs/faults.md)
+    faults: list[FaultSpec] = []
 
     @model_validator(mode="after")
     def _check(self):
+        ids = [f.id for f in self.faults]
+        for n, i in enumerate(ids):
+            if i in ids[:n]:
+                raise _bad(f"faults[{n}].id", i, f"used by faults[{ids.index(i)}] too (ids are unique)")
         if self.output_rate * self.dt > 1.0 + 1e-9:
             raise _bad("output_rate", self.output_rate, f"must be <= 1/dt = {1.0 / self.dt:g} Hz")
         if self.duration < self.dt:

@@ -11,6 +11,7 @@
     rtsim eigen    a two-wheeler's modes against speed     rtsim statics  a two-wheeler at rest, rider on
     rtsim inverse  a motorcycle's steering and drive torques for a path and speed
     rtsim batch    a plan of runs (scenarios x vehicles x parameters x seeds), local pool or Ray
+    rtsim faults   the fault catalogue (--list) and fault-file checks
 """
 from __future__ import annotations
 
@@ -59,7 +60,7 @@ def _bench(args) -> int:
         res = run_service_bench(args.duration, record=not args.no_record, zenoh=not args.no_zenoh, ecu=args.ecu,
                                 spin=args.spin, foxglove=args.foxglove, pages=args.pages,
                                 pages_nice=args.pages_nice, ws_clients=args.ws_clients, loop_cpu=args.loop_cpu,
-                                loop_priority=args.loop_priority,
+                                loop_priority=args.loop_priority, faults=args.faults or (),
                                 pages_cpus=_cpu_list(args.pages_cpus) if args.pages_cpus else None)
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
@@ -281,6 +282,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--failures", metavar="FILE",
                    help="fuzz suite: append each failing ride, as drawn, as a JSON line to FILE")
     b.add_argument("--duration", type=float, default=60.0, metavar="S", help="service suite: wall seconds to run (60)")
+    b.add_argument("--faults", action="append", metavar="FILE",
+                   help="service suite: arm the [[faults]] of this file in the service (repeatable)")
     b.add_argument("--no-record", action="store_true", help="service suite: without the MCAP recording")
     b.add_argument("--no-zenoh", action="store_true", help="service suite: without Zenoh")
     b.add_argument("--foxglove", action="store_true",
@@ -368,6 +371,8 @@ _DELEGATED = (
     ("eigen", "rtsim.analyses.eigen_cli", "a two-wheeler's modes against speed in straight running (root locus, JSON)"),
     ("batch", "rtsim.batch.cli", "run a plan of scenarios x vehicles x parameters (grid or random) x seeds on a "
      "local pool or Ray: results table, metrics, pass/fail, HTML summary; resumable"),
+    ("faults", "rtsim.faults.cli", "the fault catalogue (--list): sensor, bus and actuator faults a session can "
+     "inject; or check fault files"),
     ("inverse", "rtsim.analyses.inverse", "a motorcycle's inverse dynamics: the steering and drive "
      "torques that follow a path at a speed"),
 )

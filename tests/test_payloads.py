@@ -26,7 +26,8 @@ STATUS_FIELDS = ["time", "vehicle_id", "mode", "run_state", "sim_time", "steps",
                  "accepted_frames", "bus_errors", "recorder", "zenoh_dropped", "scenario", "message"]
 STATUS_OPTIONAL = ["wall_time", "drivers", "user",     # the user command source's (absent from older recordings)
                    "foreign_frames",                   # the second-simulator check's (likewise)
-                   "model_fault"]                      # the model-fault state's details
+                   "model_fault",                      # the model-fault state's details
+                   "injected_faults"]                  # the session's faults (rtsim.faults)
 
 
 def strict_loads(b: bytes):
@@ -93,7 +94,7 @@ def test_write_schemas_command(tmp_path):
                for p in tmp_path.rglob("*") if p.is_file()}
     assert written == P.schema_files()
     assert set(written) == {"sensors.json", "state.json", "status.json", "commands.json",
-                            "can/rx.json", "can/tx.json", "user.json", "control.json"}
+                            "can/rx.json", "can/tx.json", "user.json", "control.json", "faults.json"}
 
 
 def test_recorder_registers_the_same_schemas(tmp_path):

@@ -296,6 +296,70 @@ def test_axis_tick_labels_tell_ticks_apart(page):
     assert drawn and len(set(drawn)) == len(drawn), drawn
 
 
+def test_the_fault_panel_arms_and_clears_a_fault_in_the_service(page, service):
+    """The faults panel (the catalogue from the service): a bad target is refused with the service's one-line
+    reason; a valid fault is armed (control op inject_fault), then cleared (clear_fault); the recording has its
+    onset and end; the panel still fits its box with the longest reply."""
+    from bridge.mcap_recorder import read_recording
+
+    pg, _logs, _view = page
+    _, _, rec = service
+    kinds = pg.evaluate("[...document.querySelectorAll('#fault-kind option')].map(o => o.value)")
+    assert "stuck_value" in kinds and "bus_off" in kinds and "power_stage_off" in kinds
+    pg.select_option("#fault-kind", "offset")
+    pg.fill("#fault-target", "accel_q")
+    pg.fill("#fault-params", "offset=2.5")
+    pg.click("#fault-arm")
+    pg.wait_for_function("document.getElementById('fault-reply').textContent.includes('accel_q')", timeout=EVENT * 1000)
+    assert "not a sensor channel" in pg.text_content("#fault-reply")
+    assert _fits(pg) == []
+    pg.fill("#fault-target", "accel_x")
+    pg.fill("#fault-params", "offset=2.5 duration=30")
+    pg.click("#fault-arm")
+    pg.wait_for_function("document.getElementById('fault-reply').textContent.includes('(offset on accel_x)')",
+                         timeout=EVENT * 1000)
+    fid = pg.input_value("#fault-id")
+    assert fid.startswith("view-") and "armed" in pg.text_content("#fault-reply")
+    wait_sim(pg, sim_time(pg) + 0.5)
+    pg.click("#fault-clear")
+    pg.wait_for_function("document.getElementById('fault-reply').textContent.includes('ended')", timeout=EVENT * 1000)
+    t = sim_time(pg)
+    wait_sim(pg, t + 1.5)                               # the recorder closes a chunk every second
+    msgs, _ = read_recording(rec)
+    ev = [(m.data["id"], m.data["event"]) for m in msgs["rtsim/xbw/faults"]]
+    assert ev == [(fid, "onset"), (fid, "end")]
+
+
+def test_a_replay_marks_the_faults_on_its_time_bar(page, service):
+    """The recording of the fault the panel armed (the test before): a replay shows its onset and end on the
+    time bar and names it while it is active."""
+    from bridge.mcap_recorder import read_recording
+
+    pg, logs, _view = page
+    _, _, rec = service
+    msgs, _ = read_recording(rec)
+    ev = [m.data for m in msgs["rtsim/xbw/faults"]]
+    assert [e["event"] for e in ev] == ["onset", "end"]
+    replay = ViewThread(recordings=[rec])
+    pg2 = pg.context.browser.new_page(viewport={"width": 1280, "height": 720})
+    pg2.on("console", lambda m: logs.append((m.type, m.text)))
+    pg2.on("pageerror", lambda e: logs.append(("pageerror", str(e))))
+    try:
+        pg2.goto(replay.url)
+        pg2.wait_for_function("window.rtsimView && rtsimView.replayLoaded === 1", timeout=EVENT * 1000)
+        marks = pg2.evaluate("[...document.querySelectorAll('#fault-marks span')].map(e => [e.className, e.title])")
+        assert [c for c, _ in marks] == ["onset", "end"] and ev[0]["id"] in marks[0][1]
+        for t, want in ((0.5 * (ev[0]["time"] + ev[1]["time"]), [ev[0]["id"]]), (ev[0]["time"] - 0.2, []),
+                        (ev[1]["time"] + 0.2, [])):
+            pg2.evaluate(f"rtsimView.seek({t!r})")
+            pg2.wait_for_function(f"JSON.stringify(rtsimView.activeFaults) === {str(want).replace(chr(39), chr(34))!r}",
+                                  timeout=EVENT * 1000)
+        assert _fits(pg2) == []
+    finally:
+        pg2.close()
+        replay.close()
+
+
 def test_no_console_errors(page):
     pg, logs, _view = page
     errors = [text for kind, text in logs if kind in ("error", "pageerror")]

@@ -88,6 +88,10 @@ async def _drive_and_reset(url):
         drive = (await _next(ws, "drive_ack"))["reply"]
         await ws.send(json.dumps({"type": "reset"}))
         reset = (await _next(ws, "reset_ack"))["reply"]
+        await ws.send(json.dumps({"type": "fault", "op": "inject_fault",
+                                  "args": {"id": "f", "kind": "bus_off", "target": "bus"}}))
+        fault = (await _next(ws, "fault_ack"))["reply"]
+        assert fault["ok"] is (hello["may_drive"] is True) and (fault["ok"] or "no valid session token" in fault["error"])
         await ws.send(json.dumps({"type": "pull"}))
         await _next(ws, "data")                            # watching is not refused
     return hello["may_drive"], drive, reset
@@ -108,11 +112,11 @@ def test_driving_needs_the_session_token(capsys):
         assert may is False, name
         for r in (drive, reset):
             assert r["ok"] is False and "no valid session token" in r["error"], (name, r)
-    assert got["refused"] == 6
+    assert got["refused"] == 9
     may, drive, reset = got["right"]
     assert may is True and drive["ok"] and reset["ok"], got["right"]
     # only the page with the token reached the service
-    assert [op for op, _ in relay.client.calls] == ["drive", "reset"]
+    assert [op for op, _ in relay.client.calls] == ["drive", "reset", "inject_fault"]
     assert relay.client.calls[0][1] == {"seq": 1, "throttle_angle_cmd": 0.1}
     log = [line for line in capsys.readouterr().err.splitlines() if "refused a" in line]
     assert len(log) == 3 and all("no valid session token" in line for line in log), log   # one line per page
@@ -127,6 +131,8 @@ def test_without_a_token_every_page_drives_as_before():
     server, relay = _serve_and_talk(None, talk)
     may, drive, reset = got["r"]
     assert may is True and drive["ok"] and reset["ok"] and server.refused == 0
+    assert [op for op, _ in relay.client.calls] == ["drive", "reset", "inject_fault"]
+    assert relay.client.calls[2][1] == {"id": "f", "kind": "bus_off", "target": "bus"}
 
 
 def test_bind_policy():

@@ -20,6 +20,7 @@ After ``duration`` s of wall time it reports:
 * lateness of the step starts (p50 / p99 / max), overruns, stalls, catch-up and skipped steps, and the
   machine's steal time over the run (/proc/stat), which explains the stalls on a virtual machine.
 
+``faults`` (fault files, rtsim.faults) arms their faults in the service: the budget with faults armed.
 ``pages=N`` adds `rtsim view` in its own process and N pages of it in headless Chromium (Playwright with
 Debian's chromium, rtsim.viewer.browser), drawing the live car all along; the report then has the pages'
 frame rates too. Run it with and without pages to see what they cost the loop (same machine, same minute).
@@ -218,7 +219,7 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
                       progress=None, record: bool = True, zenoh: bool = True, ecu: str = "light",
                       spin: float = 0.0002, foxglove: bool = False, pages: int = 0, pages_nice: int = 19,
                       ws_clients: int = 0, loop_cpu: int | None = None, pages_cpus=None,
-                      loop_priority: int | None = None) -> dict:
+                      loop_priority: int | None = None, faults=()) -> dict:
     from bridge.can_bus import LoopbackHub
     from rtsim.jit import cycles_per_second
     from rtsim.service.server import ServeOptions, Service
@@ -243,7 +244,7 @@ def run_service_bench(duration: float = 60.0, can_interface: str | None = None, 
         svc = Service(ServeOptions(can_interface=can_interface, can_channel=can_channel, start_hub=False,
                                    zenoh=zenoh, zenoh_listen=["tcp/127.0.0.1:0"], record=rec if record else None,
                                    duration=duration, spin=spin, foxglove_port=0 if foxglove else None,
-                                   loop_cpu=loop_cpu, loop_priority=loop_priority),
+                                   loop_cpu=loop_cpu, loop_priority=loop_priority, faults=list(faults)),
                       out=lambda *a: None)
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         sub = None

@@ -1,4 +1,4 @@
-"""`rtsim serve`'s settings, declared once: each is a field of `ServeOptions` with its type, default, range,
+"""`rtsim serve`'s settings, declared once (and the file's ``[[faults]]``, rtsim.faults.spec): each is a field of `ServeOptions` with its type, default, range,
 help text, its key in the settings file (configs/service.toml documents every key and the embedded
 defaults) and its command-line flag. The file's sections, the flags and the validation are derived from
 these declarations; flags override the file; errors name the file (or the flag), the key, the value and
@@ -104,6 +104,8 @@ class ServeOptions(BaseModel):
     duration: Optional[WallTime] = setting(
         None, "stop after this many seconds of wall time", None)
     dbc: Optional[Path] = setting(None, "DBC of the CAN interface (default: the vehicle's [interface] dbc)", None)
+    faults: list[Path] = setting([], "a TOML file whose [[faults]] to arm in the session (see `rtsim faults --list`; "
+                                 "repeatable; a settings file's own [[faults]] come first)", None, "--faults")
 
     def check(self) -> None:
         """Checks across settings (each value was checked on assignment)."""
@@ -144,10 +146,16 @@ def _file_schema() -> type[BaseModel]:
 def load_service_config(path: str | Path) -> dict:
     """ServeOptions keyword arguments from a settings file (only the keys it sets; relative paths
     against its folder); errors name the file and the section.key."""
+    from rtsim.faults.spec import load_fault_specs
+
     path = Path(path)
     raw = load_toml(path)
+    faults = raw.pop("faults", None)
     validate(_file_schema(), raw, str(path))
     out = {}
+    if faults is not None:
+        load_fault_specs(faults, path)            # checked now: errors name this file and faults[i].key
+        out["faults"] = [path]
     for name, f, key, _flag in _declared():
         if not key:
             continue
@@ -196,7 +204,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append", metavar="ENDPOINT",
                            help=f.description)
         elif f.annotation == list[Path]:
-            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append", metavar="FOLDER",
+            p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, action="append", metavar="FILE" if name == "faults" else "FOLDER",
                            type=Path, help=f.description)
         elif typing.get_args(f.annotation) and all(isinstance(c, str) for c in typing.get_args(f.annotation)):
             p.add_argument(flag or f"--{name.replace('_', '-')}", dest=dest, choices=typing.get_args(f.annotation),
@@ -215,4 +223,6 @@ def options(args) -> ServeOptions:
         kw.update(load_service_config(args.config))
     flags = {name: getattr(args, f"opt_{name}") for name, *_ in _declared()
              if getattr(args, f"opt_{name}", None) is not None}
+    if "faults" in kw and "faults" in flags:         # the file's own [[faults]], then the --faults files
+        flags["faults"] = [*kw["faults"], *flags["faults"]]
     return validate(ServeOptions, {**kw, **flags}, "rtsim serve")

@@ -20,8 +20,12 @@ from typing import Annotated, Iterable, Optional
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 
+import math
+
 from drivers.base import INPUT_NAMES
-from rtsim.errors import RtsimError
+from rtsim.configfile import validate
+from rtsim.errors import ConfigError, RtsimError
+from rtsim.faults.spec import FaultSpec
 
 from .user_input import USER_CHANNEL_NAMES
 
@@ -65,10 +69,17 @@ DriveArgs = create_model(
     takeover=(Optional[bool], None), release=(bool, False), seq=(Optional[int], None),
     **{name: (Optional[Finite], None) for name in USER_CHANNEL_NAMES})
 
-#: op -> its arguments' model (the ops of bridge.zenoh_link.CONTROL_OPS)
+class ClearFaultArgs(_Args):
+    """clear_fault."""
+    id: str = Field(min_length=1, description="the id of an armed fault")
+
+
+#: op -> its arguments' model (the ops of bridge.zenoh_link.CONTROL_OPS); inject_fault's is the fault spec
+#: (rtsim.faults.spec.FaultSpec: the keys of a [[faults]] table), checked by the one config formatter
 OP_ARGS: dict[str, type[BaseModel]] = {
     "reset": NoArgs, "pause": NoArgs, "resume": NoArgs, "load_scenario": LoadScenarioArgs,
-    "step": StepArgs, "driver": DriverArgs, "drive": DriveArgs,
+    "step": StepArgs, "driver": DriverArgs, "drive": DriveArgs, "inject_fault": FaultSpec,
+    "clear_fault": ClearFaultArgs,
 }
 
 
@@ -98,6 +109,14 @@ def check_request(op: object, args: dict) -> dict:
     if not isinstance(op, str) or op not in OP_ARGS:
         raise ControlError(f"unknown op {op!r}; ops: {', '.join(OP_ARGS)}")
     model = OP_ARGS[op]
+    if model is FaultSpec:
+        for k, v in args.items():
+            if isinstance(v, float) and not math.isfinite(v):
+                raise ControlError(f"{op}: {k} = {v!r} is not a finite number")
+        try:
+            return validate(FaultSpec, dict(args), op).table()
+        except ConfigError as exc:
+            raise ControlError(str(exc)) from None
     bad = [k for k in args if not isinstance(k, str) or k.startswith("_")]
     if bad:
         raise ControlError(f"{op}: unknown argument {bad[0]!r} (its arguments: {', '.join(model.model_fields) or 'none'})")

@@ -21,6 +21,11 @@
    sending at its own period; the observer state; the SIM_STATUS frame and, right after it, SIM_DIAG;
 3. (``ack_counter >= 0``) the SIM_STEP_ACK frame.
 
+Injected faults (rtsim.faults; ``LoopParams.faults`` the compiled table, ``LoopState.faults`` its state) act
+inside these steps, exactly at their steps: on the frames taken (loss, delay, corruption, bus off), on the
+vehicle's actuators before its step, on the sensor sample before it is packed, and on every frame sent;
+with no fault armed each hook is one comparison.
+
 After a failed vehicle step (``LI_MODEL_FAULT`` holds its status) step 2 is ``fault_step``: the vehicle
 frozen, time going on, the watchdog, SIM_STATUS and SIM_DIAG at their period, no sensor frame or sample
 (the model-fault state, rtsim.service.loop).
@@ -42,13 +47,18 @@ from bridge.can_e2e import (C_ACCEPTED, C_COUNTER, C_CRC, C_DLC, C_FOREIGN, C_FO
                             C_REPEATED, C_STEP_IGNORED, C_STEP_REJECTED, C_SYNC, FLAG_EXTENDED, FLAG_REMOTE,
                             FV_VALUE, G_FOREIGN_T, IV_TIMED_OUT, NOT_CLASSIC, RP_SLOT, SECOND_SIM_HOLD,
                             TIME_EPS, RxPlan, RxState, pack_frames, rx_frame, rx_watchdog, step_request)
+from rtsim.faults.catalog import K_BABBLE, K_FRAME_DELAY
+from rtsim.faults.kernels import (DIR_IN, DIR_OUT, FI_DIR, FI_KIND, FI_PAYLOAD, FI_TARGET, G_BUS_OFF, SRC_SENSOR,
+                                  SRC_STATE, FaultPlan, FaultState, fault_actuators, fault_babbles, fault_clock,
+                                  fault_condition, fault_due, fault_in, fault_out, fault_sensors)
 from rtsim.jit import inline_kernel, kernel, read_cycles
 from rtsim.mbs.model import OK
 from drivers.path_follower import PathFollower
 from drivers.profiles import Packed
 from drivers.speed_follower import SpeedFollower
 
-from .vehicles import vehicle_advance, vehicle_drive, vehicle_observe, vehicle_sensors, vehicle_user
+from .vehicles import (vehicle_advance, vehicle_drive, vehicle_fault_arrays, vehicle_observe, vehicle_sensors,
+                       vehicle_user)
 from .rings import (CMD_ACCEPTED, CMD_MASK, H_CMD, H_LOG, H_RX, H_RX_TAIL, H_SENSOR, H_STATE, H_TX, LOG_RX,
                     LOG_TX, RX_DATA)
 
@@ -98,6 +108,7 @@ class LoopParams(NamedTuple):
     usr_slot: np.ndarray         # per user channel (rtsim.service.user_input): its command slot (a car's) or
                                  # the slot of its bus command's invalid flag (a two-wheeler's), -1 none
     usr_rx: np.ndarray           # per user channel: the index of the bus command it competes with, -1 none
+    faults: FaultPlan            # the session's compiled fault table (rtsim.faults; rows armed between steps)
 
 
 class LoopState(NamedTuple):
@@ -116,6 +127,7 @@ class LoopState(NamedTuple):
     usr: np.ndarray              # (user_input.NUSR,) the user's commands (``drive`` control), NaN: not driven
     usr_mode: np.ndarray         # (1,) int64: 1 while the user has taken over from the bus
     usr_work: np.ndarray         # (user_input.NWORK,) the user source's own state (a two-wheeler's lean loop)
+    faults: FaultState           # the faults' state (rtsim.faults.kernels)
 
 
 @inline_kernel
@@ -214,6 +226,9 @@ def take_frames(lp, ls, rg):
             li[LI_PENDING_STEPS] = steps
             li[LI_PENDING_COUNTER] = counter
             break
+        if lp.faults.n[0] > 0 and fault_in(lp.faults, ls.faults, li[LI_K], fid, (flags & NOT_CLASSIC) == 0, data,
+                                           dlc, lp.rx.crc) != 0:
+            continue                                  # lost on the bus, or delayed (rtsim.faults)
         if (flags & (FLAG_EXTENDED | FLAG_REMOTE)) == 0 and _own_id(lp, fid):
             rx.counts[C_FOREIGN] += 1
             rx.g[G_FOREIGN_T] = t
@@ -250,8 +265,11 @@ def _status_frame(lp, ls, rg, t):
     sv[nf + ST_FOREIGN] = cnt[C_FOREIGN]
     sv[nf + ST_ACCEPTED] = cnt[C_ACCEPTED]
     pack_frames(sv, 0.0, lp.no_stamp, lp.no_stamp, lp.status_sig_int, lp.status_sig_float, ls.frame_word)
-    _send_logged(rg, lp.ints[PI_STATUS_ID], ls.frame_word[0], t)
-    _send_logged(rg, lp.ints[PI_DIAG_ID], ls.frame_word[1], t)
+    k = li[LI_K]
+    if fault_out(lp.faults, ls.faults, k, lp.ints[PI_STATUS_ID], -1, ls.frame_word[0]) == 0:
+        _send_logged(rg, lp.ints[PI_STATUS_ID], ls.frame_word[0], t)
+    if fault_out(lp.faults, ls.faults, k, lp.ints[PI_DIAG_ID], -1, ls.frame_word[1]) == 0:
+        _send_logged(rg, lp.ints[PI_DIAG_ID], ls.frame_word[1], t)
 
 
 @inline_kernel
@@ -260,7 +278,8 @@ def fault_step(lp, ls, rg, commands):
     frozen at its last good step while simulation time goes on, so the bus contract holds: the watchdog
     keeps judging the commands (its time-outs flagged, its mask changes recorded), SIM_STATUS (with
     ``fault_model``) and SIM_DIAG (with ``model_fault_reason``) go out at their period; no sensor frame is
-    sent (every shipped DBC's rule for its sensor frames: they stop) and no sample is published."""
+    sent (every shipped DBC's rule for its sensor frames: they stop) and no sample is published. The faults'
+    clock goes on (a bus-off ends on time: SIM_STATUS resumes)."""
     li = ls.li
     h = lp.dt[0]
     k = li[LI_K]
@@ -270,18 +289,67 @@ def fault_step(lp, ls, rg, commands):
         _command_event(rg, lp.rx, k * h, CMD_MASK, mask, commands, True)
     k += 1
     li[LI_K] = k
+    if lp.faults.n[0] > 0:
+        fault_clock(lp.faults, ls.faults, k)
     if k % lp.ints[PI_STATUS_EVERY] == 0:
         _status_frame(lp, ls, rg, k * h)
         li[LI_SENT] += 1
 
 
+@inline_kernel
+def _fault_inbox(lp, ls, rg, k, t):
+    """Received frames a frame-delay fault held back, due at step k: taken now (time t) as any frame."""
+    fp, fs = lp.faults, ls.faults
+    for i in range(fp.n[0]):
+        if fp.fi[i, FI_KIND] != K_FRAME_DELAY or fp.fi[i, FI_DIR] != DIR_IN:
+            continue
+        while True:
+            j = fault_due(fs, i, k)
+            if j < 0:
+                break
+            w = fs.q_word[i, j]
+            dlc = fs.q_dlc[i, j]
+            for b in range(8):
+                fs.buf[b] = (w >> (8 * b)) & 0xFF
+            c = rx_frame(lp.rx, ls.rx, fp.fi[i, FI_TARGET], 0, fs.buf, dlc, t)
+            if c >= 0:
+                _command_event(rg, lp.rx, t, CMD_ACCEPTED, c, ls.rx.fv[:, FV_VALUE], False)
+
+
+@inline_kernel
+def _fault_outbox(lp, ls, rg, k, t):
+    """Frames a fault sends at step k (time t): a babbling id's, and sent frames a frame-delay fault held
+    back that are due now (lost while the bus is off)."""
+    fp, fs = lp.faults, ls.faults
+    for i in range(fp.n[0]):
+        kind = fp.fi[i, FI_KIND]
+        if kind == K_BABBLE:
+            if fault_babbles(fp, fs, i, k) and fs.g[G_BUS_OFF] == 0:
+                _send_logged(rg, fp.fi[i, FI_TARGET], fp.fi[i, FI_PAYLOAD], t)
+        elif kind == K_FRAME_DELAY and fp.fi[i, FI_DIR] == DIR_OUT:
+            while True:
+                j = fault_due(fs, i, k)
+                if j < 0:
+                    break
+                if fs.g[G_BUS_OFF] == 0:
+                    _send_logged(rg, fp.fi[i, FI_TARGET], fs.q_word[i, j], t)
+
+
 @kernel
 def one_step(v, lp, ls, rg):
-    """Step 2 of the module docstring, once. Returns the vehicle step's status."""
+    """Step 2 of the module docstring, once. Returns the vehicle step's status. With faults armed
+    (rtsim.faults.kernels has the timing): frames a delay held back are taken first, actuator faults act
+    on the model's step, the clock starts and ends faults at the new step, condition triggers look at
+    its samples (the state sample before the sensor sample), sensor faults change the sensor sample
+    before it is packed, and every frame goes out through the bus faults."""
     li = ls.li
     h = lp.dt[0]
     k = li[LI_K]
     t = k * h
+    fp, fs = lp.faults, ls.faults
+    nf = fp.n[0]
+    if nf > 0:
+        _fault_inbox(lp, ls, rg, k, t)
     if lp.ints[PI_DRIVER]:
         vehicle_drive(v, lp, ls, t, h)
     mask = rx_watchdog(lp.rx, ls.rx, t, v.io.commands)
@@ -289,6 +357,8 @@ def one_step(v, lp, ls, rg):
         li[LI_MASK] = mask
         _command_event(rg, lp.rx, t, CMD_MASK, mask, v.io.commands, True)
     vehicle_user(v, lp, ls, h)
+    if nf > 0:
+        fault_actuators(fp, fs, vehicle_fault_arrays(v))
     status = vehicle_advance(v, h)
     if status != OK:
         return status
@@ -296,28 +366,40 @@ def one_step(v, lp, ls, rg):
     li[LI_K] = k
     t1 = k * h
     ints = lp.ints
+    if nf > 0:
+        fault_clock(fp, fs, k)
+    if k % ints[PI_STATE_EVERY] == 0:
+        vehicle_observe(v, ls.state)
+        if nf > 0:
+            fault_condition(fp, fs, k, SRC_STATE, ls.state)
+        j = rg.heads[H_STATE] % rg.state_t.shape[0]
+        rg.state_t[j] = t1
+        for c in range(ls.state.shape[0]):
+            rg.state_v[j, c] = ls.state[c]
+        rg.heads[H_STATE] += 1
     if k % ints[PI_SENSOR_EVERY] == 0:
         vehicle_sensors(v, ls.values)
         vals = ls.values
+        if nf > 0:
+            fault_condition(fp, fs, k, SRC_SENSOR, vals)
+            fault_sensors(fp, fs, k, h, vals)
         pack_frames(vals, t1, lp.sensor_time_start, lp.sensor_time_mask, lp.sensor_sig_int,
                     lp.sensor_sig_float, ls.words)
         j = rg.heads[H_SENSOR] % rg.sensor_t.shape[0]
         rg.sensor_t[j] = t1
         for c in range(vals.shape[0]):
             rg.sensor_v[j, c] = vals[c]
+        sent = 0
         for f in range(ls.words.shape[0]):
             rg.sensor_words[j, f] = ls.words[f]
-            if k % lp.frame_every[f] == 0:
+            if k % lp.frame_every[f] == 0 and fault_out(fp, fs, k, lp.sensor_ids[f], f, ls.words[f]) == 0:
                 _send(rg, lp.sensor_ids[f], ls.words[f], t1)
+                sent |= 1 << f
+        rg.sensor_sent[j] = sent
         rg.heads[H_SENSOR] += 1
         li[LI_SENT] += 1
-    if k % ints[PI_STATE_EVERY] == 0:
-        vehicle_observe(v, ls.state)
-        j = rg.heads[H_STATE] % rg.state_t.shape[0]
-        rg.state_t[j] = t1
-        for c in range(ls.state.shape[0]):
-            rg.state_v[j, c] = ls.state[c]
-        rg.heads[H_STATE] += 1
+    if nf > 0:
+        _fault_outbox(lp, ls, rg, k, t1)
     if k % ints[PI_STATUS_EVERY] == 0:
         _status_frame(lp, ls, rg, t1)
         li[LI_SENT] += 1

@@ -20,6 +20,10 @@ SIM_DIAG (``model_fault_reason``) keep their period, the sensor frames stop (the
 lockstep SIM_STEP_REQ is still run (time advances by its steps) and acknowledged, until a ``reset`` or
 ``load_scenario``. ``on_model_fault`` (optional) is called once with the ModelFault, on the loop thread.
 Bus errors are counted by the BusPort and flagged in the status frame.
+
+Faults (rtsim.faults): the session's (``faults``: armed at every start, a reset too) and those armed live
+(control ops ``inject_fault``, ``clear_fault``) live in ``fault_table``; their onsets and ends go to the
+recording on the ``faults`` topic, their states to the status (``injected_faults``).
 """
 from __future__ import annotations
 
@@ -38,7 +42,10 @@ from bridge.payloads import CONTROL_OPS
 from drivers.base import INPUT_NAMES, INPUT_UNITS, LIMITS, NINPUT, NSTATE
 from drivers.driver import Driver
 from rtsim.boundcall import bind
-from rtsim.errors import RtsimError
+from rtsim.errors import ConfigError, RtsimError
+from rtsim.faults.kernels import G_EV_HEAD
+from rtsim.faults.spec import FaultSpec
+from rtsim.faults.table import FaultTable
 from rtsim.mbs.model import OK
 from rtsim.model_fault import ModelFault, describe, force_failure, test_fault_step
 from rtsim.realtime.health import LoopHealth
@@ -48,6 +55,7 @@ from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_MODEL_FAULT, LI_OVERRUNS, L
                      PI_DIAG_ID, PI_DRIVER, PI_LOCKSTEP, PI_MODE_CODE, PI_SENSOR_EVERY, PI_STATE_EVERY,
                      PI_STATUS_EVERY, PI_STATUS_ID, PI_STEP_REQ_ID, ST_BUS_ERROR, ST_FAULT0, ST_RANGE, LoopParams,
                      LoopState, loop_run)
+from .faults import fault_targets
 from .rings import Rings, RxWriter, make_rings
 from .user_input import NUSR, NWORK, USER_HOLD, check_value
 
@@ -107,8 +115,15 @@ class HilLoop:
     def __init__(self, sim, codec: Codec, rings: Rings | None = None, *, mode: str = "realtime",
                  state_rate: float = 100.0, hold_pressure: float | None = None, inbox=None,
                  health: LoopHealth | None = None, scenario_name: str | None = None, on_chunk=None,
-                 driver: Driver | None = None, user_input: bool = True, test_fault_at: float | None = None):
+                 driver: Driver | None = None, user_input: bool = True, test_fault_at: float | None = None,
+                 faults=(), fault_where=None):
         self.codec = codec
+        #: the session's faults (rtsim.faults.FaultSpec), armed at every start of the session (a reset too);
+        #: ``fault_where``: per fault (file, key) where it was read (errors name them)
+        self.fault_specs: list[FaultSpec] = list(faults)
+        self.fault_where = list(fault_where) if fault_where is not None else [
+            ("faults", f"faults[{n}]") for n in range(len(self.fault_specs))]
+        self.fault_table: FaultTable | None = None
         self.port = None                 # set by the service: bus state for the status, writer wake-up
         self.outbox = None               # set by the service: recorder/Zenoh figures for the status
         self.mode = mode
@@ -199,17 +214,21 @@ class HilLoop:
         assert sources[ST_FAULT0 + len(faults) + ST_BUS_ERROR] == "fault_bus_error"
         assert sources[ST_FAULT0 + len(faults) + ST_RANGE] == "rejected_range"
         assert len(sources) + len(DIAG_SOURCES) == ST_FAULT0 + len(faults) + NST_AFTER_FAULTS
+        self.fault_table = table = FaultTable(fault_targets(sim, c, self))
+        for spec, (source, key) in zip(self.fault_specs, self.fault_where):
+            table.arm(spec, 0, source, key)
+        self._fault_ev_seen = 0
         self.lp = LoopParams(self.rx.plan, ints, np.array([self.dt]), lay["frame_id"], lay["time_start"],
                              lay["time_mask"], lay["sig_int"], lay["sig_float"], status["sig_int"],
                              status["sig_float"], ack["sig_int"], ack["sig_float"], np.zeros(2, dtype=np.int64),
                              np.array([sources.index(f"fault_{f}") for f in faults], dtype=np.int64),
                              self.frame_every, self.driver.packed, self.driver.speed, self.driver.path,
-                             self.driver.flags, drv_slot, usr_slot, usr_rx)
+                             self.driver.flags, drv_slot, usr_slot, usr_rx, table.plan)
         self.ls = LoopState(self.rx.state, self.li, np.zeros(sim.nsensor), np.zeros(sim.nstate),
                             np.zeros(len(sources) + len(DIAG_SOURCES) + 1), np.zeros(3),
                             np.zeros(len(lay["frame_id"]), dtype=np.int64), np.zeros(2, dtype=np.int64),
                             self.cycles, np.zeros(NSTATE), np.zeros(NINPUT), np.full(NINPUT, np.nan),
-                            np.full(NUSR, np.nan), np.zeros(1, dtype=np.int64), np.zeros(NWORK))
+                            np.full(NUSR, np.nan), np.zeros(1, dtype=np.int64), np.zeros(NWORK), table.state)
         self._usr_deadline = None
         self._usr_last = None
         li = self.li
@@ -280,12 +299,20 @@ class HilLoop:
             force_failure(self.sim)           # the test-only hook (rtsim.model_fault)
         status = self._loop_run(frames, nsteps, ack_counter)
         self.k = int(self.li[LI_K])
+        if self.fault_table.state.g[G_EV_HEAD] != self._fault_ev_seen:
+            self._fault_events()
         if self.on_chunk is not None:
             self.on_chunk()
         if status != OK:
             self._model_failed(int(status))
             return False
         return True
+
+    def _fault_events(self) -> None:
+        """The fault onsets and ends of the last compiled call, for the recording (topic ``faults``)."""
+        self._fault_ev_seen = int(self.fault_table.state.g[G_EV_HEAD])
+        for ev in self.fault_table.events():
+            self._log_event("faults", ev)
 
     def _model_failed(self, status: int) -> None:
         """The step numbered ``k`` (the kernel ran its period in the fault state) returned ``status``."""
@@ -443,17 +470,52 @@ class HilLoop:
             return {"ok": True, "sim_time": self.sim_time, "steps": self.k}
         if op in ("reset", "load_scenario", "_install"):
             sim, name = args["_sim"], args.get("_name")
+            if "_faults" in args:               # a new scenario's session faults (server.session_faults)
+                self.fault_specs, self.fault_where = (list(x) for x in args["_faults"])
             self._install(sim, args.get("_driver"))
             self.scenario_name = name or self.scenario_name
             self.run_state = "running"
             self.message = f"{op}: {self.scenario_name} at t = 0"
             return {"ok": True, "scenario": self.scenario_name, "sim_time": 0.0}
+        if op == "inject_fault":
+            return self._inject_fault(args)
+        if op == "clear_fault":
+            return self._clear_fault(args)
         if op == "driver":
             return self._live_driver(args)
         if op == "drive":
             return self._drive(args)
         return {"ok": False, "error": f"unknown op {op!r}; ops: reset, pause, resume, load_scenario, step, driver, "
-                                     f"drive"}
+                                     f"drive, inject_fault, clear_fault"}
+
+    # -- faults (rtsim.faults) -----------------------------------------------------------------------
+    def _inject_fault(self, args: dict) -> dict:
+        """The ``inject_fault`` op: a fault spec (``[[faults]]`` keys), armed now (step k): with no trigger it
+        starts at step k + 1, with ``at`` at the step of that time (the next step if it has passed)."""
+        from rtsim.configfile import validate
+        try:
+            spec = validate(FaultSpec, dict(args), "inject_fault")
+            self.fault_table.arm(spec, self.k, "inject_fault")
+        except ConfigError as exc:
+            return {"ok": False, "error": str(exc)}
+        return {"ok": True, "sim_time": self.sim_time, "fault": self.fault_table.describe(spec.id)}
+
+    def _clear_fault(self, args: dict) -> dict:
+        """The ``clear_fault`` op: ``{"id": ...}`` ends that fault at the current step."""
+        fid = args.get("id")
+        if fid not in self.fault_table.armed:
+            return {"ok": False, "error": f"clear_fault: no fault {fid!r} (armed: "
+                                          f"{', '.join(self.fault_table.armed) or 'none'})"}
+        desc = self.fault_table.clear(fid, self.k)
+        self._fault_events()
+        return {"ok": True, "sim_time": self.sim_time, "fault": desc}
+
+    def faults_status(self) -> dict:
+        """The faults armed in the session (status ``injected_faults``): each one's state and times, and the
+        frames the faults took."""
+        from rtsim.faults.kernels import G_LOST_IN, G_LOST_OUT
+        g = self.fault_table.state.g
+        return {"faults": self.fault_table.status(), "lost_out": int(g[G_LOST_OUT]), "lost_in": int(g[G_LOST_IN])}
 
     # -- the user's command source (rtsim.service.user_input) ---------------------------------------
     def _drive(self, args: dict) -> dict:
@@ -631,5 +693,6 @@ class HilLoop:
             "wall_time": time.time(),
             "drivers": self.drivers(),
             "user": self.user_status(),
+            "injected_faults": self.faults_status(),
         }
 

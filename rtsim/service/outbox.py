@@ -39,12 +39,6 @@ from .rings import CMD_ACCEPTED, H_CMD, H_LOG, H_SENSOR, H_STATE, LOG_RX, RingRe
 SCENE_RATE = 100.0
 
 
-def _multiple(t: float, period: float) -> bool:
-    """Whether simulation time t (s) is a whole number of periods."""
-    n = t / period
-    return abs(n - round(n)) < 1e-6
-
-
 class RingDrain:
     """Reads the publisher's rings in order and calls ``emit(key, t, payload)`` per message: ``key``
     'sensors', 'state' or 'commands' with JSON bytes; 'can/rx' or 'can/tx' with (id, payload bytes), or
@@ -54,9 +48,8 @@ class RingDrain:
 
     def __init__(self, rings: Rings, frame_ids, emit=None, raw=None, frames: bool = True,
                  channels: ChannelDictionary = CAR, frame_periods=None):
-        """``frame_periods``: per sensor frame, its period in s (default: every sample carries every
-        frame); a frame is recorded as 'can/tx' at the samples it was sent at (simulation times that are
-        multiples of its period)."""
+        """A sensor frame is recorded as 'can/tx' at the samples the step sent it at (``Rings.sensor_sent``:
+        its period came and no fault took it); ``frame_periods`` (per sensor frame, s) is kept for callers."""
         self.r = rings
         self.channels = channels
         self._encode_sensors = functools.partial(payloads.encode_sensors, names=channels.sensor_names)
@@ -136,8 +129,9 @@ class RingDrain:
                 emit(key, t, encode(t, values[j]))
                 if words is not None:
                     row = words[j].tobytes()
+                    sent = int(self.r.sensor_sent[j])
                     for k, fid in enumerate(self.frame_ids):
-                        if self.frame_periods is None or _multiple(t, self.frame_periods[k]):
+                        if (sent >> k) & 1:
                             emit("can/tx", t, (fid, row[8 * k:8 * k + 8]))
         return len(todo)
 

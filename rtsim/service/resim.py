@@ -212,9 +212,11 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
         notes.append(f"the recorded channels differ from the vehicle's: {diff}")
     mode = session["mode"]
     forced = session.get(TEST_FAULT_METADATA)         # rtsim.model_fault's test-only hook, as recorded
+    specs = recorded_faults(meta, path)
     loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode=mode, state_rate=float(session.get("state_rate", 100.0)),
                    hold_pressure=float(session["hold_pressure"]), driver=sc.driver(),
-                   test_fault_at=None if forced is None else float(forced))
+                   test_fault_at=None if forced is None else float(forced), faults=specs,
+                   fault_where=[(f"{path} (rtsim.faults)", f"faults[{n}]") for n in range(len(specs))])
     col = Collector(loop)
     rx = messages.get(f"rtsim/{vid}/can/rx", [])
     rec_sensors = messages.get(f"rtsim/{vid}/sensors", [])
@@ -253,11 +255,40 @@ def resim(path: str | Path, vehicle: Path | None = None, scenario: Path | None =
               "sim_time": loop.sim_time, "run_state": loop.run_state, "message": loop.message,
               "sensors": _compare(rec_sensors, col.sensors, sim.vm.channels.sensor_names),
               "state": _compare(rec_state, col.state, sim.vm.channels.state_names)}
-    report["identical"] = bool(report["sensors"]["identical"] and report["state"]["identical"])
+    report["faults"] = _compare_faults(messages.get(f"rtsim/{vid}/faults", []), loop)
+    report["identical"] = bool(report["sensors"]["identical"] and report["state"]["identical"]
+                               and report["faults"]["identical"])
     report["health"] = info.health_line()
     report["damage"] = info.damage
     report.update(_model_faults(messages.get(f"rtsim/{vid}/status", []), meta.get(SESSION_END_METADATA), loop))
     return report
+
+
+def recorded_faults(meta: dict, path) -> list:
+    """The faults the session armed from its settings (the ``rtsim.faults`` metadata): re-armed as recorded.
+    (Faults armed live are ``inject_fault`` requests on the control topic: repeated at their steps.)"""
+    from rtsim.faults.spec import load_fault_specs
+
+    rec = meta.get("rtsim.faults")
+    if rec is None:
+        return []
+    try:
+        tables = json.loads(rec["faults"])
+    except (KeyError, ValueError) as exc:
+        raise ConfigError(f"{path}: the rtsim.faults metadata is malformed: {exc}") from None
+    return load_fault_specs(tables, f"{path} (rtsim.faults)")
+
+
+def _compare_faults(recorded: list, loop) -> dict:
+    """The recorded fault events (onsets, ends) against the rerun's, by (id, event, step)."""
+    def key(e):
+        return (e["id"], e["event"], int(e["step"]))
+    rec = [key(m.data) for m in _before_restart(recorded)]
+    got = [key(e) for topic, e in loop.event_log if topic == "faults"]
+    upto = loop.k           # the rerun's last step: events after it were not re-run
+    return {"recorded": len(rec), "rerun": len(got),
+            "identical": [e for e in rec if e[2] <= upto] == [e for e in got if e[2] <= upto],
+            "events": [{"id": i, "event": ev, "step": st} for i, ev, st in got[:50]]}
 
 
 def _model_faults(status: list, end: dict | None, loop) -> dict:
@@ -403,6 +434,10 @@ def main(args) -> int:
               f"{rep['user_changes_applied']} of {rep['user_changes']} user-command changes and "
               f"{rep['control_ops_applied']} of {rep['control_ops']} control requests replayed in "
               f"{rep['mode']} mode, {rep['sim_time']:.3f} s simulated ({'; '.join(rep['files'])})")
+        f = rep["faults"]
+        if f["recorded"] or f["rerun"]:
+            print(f"  faults: {f['recorded']} recorded onsets/ends, {f['rerun']} in the rerun, "
+                  f"{'the same steps' if f['identical'] else 'DIFFERENT'}")
         for part in ("sensors", "state"):
             c = rep[part]
             diff = ", ".join(f"{n} {d:.3g}" for n, d in sorted(c["max_abs_diff"].items(), key=lambda x: -x[1])[:6])

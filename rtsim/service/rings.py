@@ -14,7 +14,8 @@ Writers and readers:
   step reads (``H_RX_TAIL``). A full ring drops new frames (counted in ``H_RX_DROPPED``).
 * ``tx_*``: frames to send (id, 8-byte payload as a little-endian word, time stamp s); the step writes,
   the CAN writer thread reads.
-* ``sensor_*``: sensor samples (time s, values in the vehicle's sensor channels' order, the packed sensor frames);
+* ``sensor_*``: sensor samples (time s, values in the vehicle's sensor channels' order, the packed sensor frames,
+  which of them were sent);
   ``state_*``: observer state samples; the step writes, the publisher (Zenoh, MCAP) reads.
 * ``log_*``: every frame the step took (direction RX) or sent besides the sensor frames (status, lockstep
   acknowledgement; direction TX), for the MCAP ``can/rx`` / ``can/tx`` topics.
@@ -45,6 +46,8 @@ class Rings(NamedTuple):
     sensor_t: np.ndarray     # (cap,) float64, s
     sensor_v: np.ndarray     # (cap, nsensor) float64
     sensor_words: np.ndarray  # (cap, nframes) int64
+    sensor_sent: np.ndarray  # (cap,) int64: bit f set when sensor frame f was sent at the sample (its period
+                             # came and no fault took it: rtsim.faults)
     state_t: np.ndarray      # (cap,) float64, s
     state_v: np.ndarray      # (cap, nstate) float64
     log_t: np.ndarray        # (cap,) float64, s
@@ -62,6 +65,7 @@ def make_rings(nsensor: int, nframes: int, nstate: int, ncmd: int, *, rx: int = 
     return Rings(z(NHEADS, dtype=np.int64), z((rx, 3), dtype=np.int64), z((rx, RX_DATA), dtype=np.uint8),
                  z(tx, dtype=np.int64), z(tx, dtype=np.int64), z(tx),
                  z(samples), z((samples, nsensor)), z((samples, nframes), dtype=np.int64),
+                 z(samples, dtype=np.int64),
                  z(samples), z((samples, nstate)),
                  z(log), z((log, 4), dtype=np.int64), z((log, RX_DATA), dtype=np.uint8),
                  z(cmd), z((cmd, 2), dtype=np.int64), z((cmd, ncmd)))

@@ -62,6 +62,28 @@ def build_sim(scenario: Path | None, vehicle: Path | None = None, dt: float | No
     return opened.service_sim(sc, dt, models, rider), sc
 
 
+def session_faults(o: ServeOptions, sc) -> tuple[list, list]:
+    """The faults of a session (rtsim.faults.spec): the scenario's ``[[faults]]``, then those of each file of
+    ``faults`` (the settings file's own first, then the ``--faults`` files); and where each was read (file,
+    key) for the errors of arming them on the vehicle."""
+    from rtsim.configfile import load_toml
+    from rtsim.faults.spec import load_fault_specs
+
+    specs, where = [], []
+    for n, spec in enumerate(sc.spec.faults):
+        specs.append(spec)
+        where.append((str(sc.path), f"faults[{n}]"))
+    for path in o.faults:
+        for n, spec in enumerate(load_fault_specs(load_toml(path).get("faults", []), path)):
+            specs.append(spec)
+            where.append((str(path), f"faults[{n}]"))
+    ids = [s.id for s in specs]
+    dup = next((i for i in ids if ids.count(i) > 1), None)
+    if dup is not None:
+        raise ConfigError(f"faults: the id {dup!r} is given twice ({', '.join(w[0] for s, w in zip(specs, where) if s.id == dup)})")
+    return specs, where
+
+
 class Service:
     """The assembled service (see the module docstring). ``out`` prints the start-up lines."""
 
@@ -91,6 +113,7 @@ class Service:
         from rtsim.model_fault import test_fault_time
         self.test_fault_at = test_fault_time()      # the test-only hook (rtsim.model_fault), from the environment
         self.sim, self.sc = build_sim(self.scenario_path, o.vehicle, o.dt, self.models, o.rider == "on")
+        self.fault_specs, self.fault_where = session_faults(o, self.sc)
         self.model = self.sim.vm
         self.vehicle_id = o.vehicle_id or self.model.config.id
         ch = self.model.channels
@@ -100,10 +123,6 @@ class Service:
         from .rings import make_rings
         self.rings = make_rings(len(ch.sensors), len(self.codec.sensor_frames), len(ch.state), len(ch.commands))
         self._open_can()
-        if o.record is not None:
-            from bridge.mcap_recorder import Recorder
-            self.recorder = Recorder(o.record, self.vehicle_id, metadata=self.session_metadata(),
-                                     poll_interval=0.005, channels=ch)
         if o.zenoh:
             from bridge.zenoh_link import ZenohLink
             self.zenoh = ZenohLink(self.vehicle_id, listen=tuple(o.zenoh_listen),
@@ -112,9 +131,13 @@ class Service:
         self.loop = HilLoop(self.sim, self.codec, self.rings, mode=o.mode, state_rate=o.state_rate,
                             hold_pressure=o.hold_pressure, inbox=self.inbox, health=self.health,
                             scenario_name=self.sc.name, driver=self.sc.driver(), user_input=o.user_input,
-                            test_fault_at=self.test_fault_at)
+                            test_fault_at=self.test_fault_at, faults=self.fault_specs, fault_where=self.fault_where)
         self.loop.port = self.port
         self.loop.on_model_fault = self._on_model_fault
+        if o.record is not None:         # (after the loop: a fault that does not fit the vehicle leaves no file)
+            from bridge.mcap_recorder import Recorder
+            self.recorder = Recorder(o.record, self.vehicle_id, metadata=self.session_metadata(),
+                                     poll_interval=0.005, channels=ch)
         scene, road = self._foxglove()
         from .outbox import Outbox
         self.outbox = Outbox(self.rings, self.loop.lp.sensor_ids, zenoh=self.zenoh, recorder=self.recorder,
@@ -192,6 +215,8 @@ class Service:
             "rtsim.scenario": {"path": str(self.scenario_path.resolve()), "toml": self.scenario_path.read_text()},
             "rtsim.vehicle": {"path": str(vpath.resolve()), "toml": vpath.read_text()},
             "rtsim.dbc": {"path": str(self.codec.path.resolve()), "text": self.codec.path.read_text()},
+            **({} if not self.fault_specs else
+               {"rtsim.faults": {"faults": json.dumps([s.table() for s in self.fault_specs])}}),
         }
 
     def _on_model_fault(self, fault) -> None:
@@ -238,6 +263,8 @@ class Service:
                     from bridge.scene import scene_for
                     self.outbox.replace_scene(*scene_for(sim, self.vehicle_id, (sc.spec.initial.x, sc.spec.initial.y)))
             args = {"_sim": sim, "_name": sc.name, "_driver": sc.driver()}
+            if op == "load_scenario":       # the new scenario's faults replace the old one's
+                args["_faults"] = session_faults(self.opts, sc)
         req = Request(op, args)
         self.inbox.put(("ctl", req))
         timeout = 120.0 if op == "step" else 10.0
@@ -278,6 +305,9 @@ class Service:
         if self.foxglove is not None:
             lines.append(f"  Foxglove: {self.foxglove.url} (open it in the Foxglove app: Open connection)")
         lines.append(f"  record: {self.recorder.path}" if self.recorder is not None else "  record: off")
+        if self.fault_specs:
+            lines.append(f"  faults: {len(self.fault_specs)} armed ({', '.join(s.id for s in self.fault_specs)}); "
+                         f"live: control ops inject_fault, clear_fault")
         lines.append("  stop with Ctrl-C (SIGINT) or SIGTERM")
         return lines
 

@@ -6,7 +6,9 @@ the vehicle's own stages, identically for every vehicle.
   of the commands the bus does not carry (a live ``driver`` control value replaces the scenario's);
 - ``vehicle_user``: which of the user's channels the bus holds a valid, timely command for (the
   watchdog's view, bridge.can_e2e), then the vehicle's ``served_user``;
-- ``vehicle_advance``, ``vehicle_sensors``, ``vehicle_observe``: the vehicle's own stages.
+- ``vehicle_advance``, ``vehicle_sensors``, ``vehicle_observe``: the vehicle's own stages;
+- ``vehicle_fault_arrays``: the arrays an actuator fault writes into (rtsim.faults), the vehicle's
+  ``served_fault_arrays``, indexed as its sim's ``fault_actuators()`` declare.
 
 The vehicles' implementations live with the vehicles (rtsim.vehicle.car.served,
 rtsim.vehicle.motorcycle.served, or a new assembly's own module): nothing here names a vehicle.
@@ -16,7 +18,8 @@ from __future__ import annotations
 from bridge.can_e2e import IV_HAS_VALUE, IV_TIMED_OUT
 from drivers.driver import driver_step
 from rtsim.jit import inline_kernel
-from rtsim.vehicle.kit.served import served_advance, served_drive, served_observe, served_sensors, served_user
+from rtsim.vehicle.kit.served import (served_advance, served_drive, served_fault_arrays, served_observe, served_sensors,
+                                      served_user)
 
 
 @inline_kernel
@@ -59,3 +62,9 @@ def vehicle_sensors(v, out):
 def vehicle_observe(v, out):
     """The observer state channels into out."""
     served_observe(v, out)
+
+
+@inline_kernel
+def vehicle_fault_arrays(v):
+    """The arrays actuator faults write into (a tuple of float64 arrays; see the module docstring)."""
+    return served_fault_arrays(v)

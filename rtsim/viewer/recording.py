@@ -28,7 +28,7 @@ class Recording:
         from bridge.mcap_recorder import read_topics
 
         self.path = Path(path)
-        kinds = ("state", "sensors", "status")
+        kinds = ("state", "sensors", "status", "faults")
         msgs, info = read_topics(self.path, lambda t: t.startswith("rtsim/") and t.rsplit("/", 1)[-1] in kinds
                                  and t.count("/") == 2)
         self.health = info.health_line()     # what the file lost, how the session ended (one line)
@@ -47,6 +47,8 @@ class Recording:
         self.times = state.log_time_ns * 1e-9          # s, the state samples' simulation times
         self._state = state.data
         self.status = [json.loads(m) for m in msgs[topics["status"]].data] if topics["status"] in msgs else []
+        #: the injected faults' onsets and ends (rtsim.faults), for the timeline's marks
+        self.faults = [json.loads(m) for m in msgs[topics["faults"]].data] if topics["faults"] in msgs else []
         sensors = msgs.get(topics["sensors"])
         self._sensors = self._at_state_times(state, sensors.log_time_ns.tolist() if sensors else [],
                                              sensors.data if sensors else [])
@@ -104,7 +106,8 @@ class Recording:
         """The page's ``recording`` message (JSON text): every sample, the file's name and completeness; the
         samples' text is spliced in as recorded."""
         head = json.dumps({"type": "recording", "index": index, "file": self.path.name, "complete": self.complete,
-                           "health": self.health, "damage": self.damage, "status": self.status},
+                           "health": self.health, "damage": self.damage, "status": self.status,
+                           "faults": self.faults},
                           separators=(",", ":"), default=str)
         return "".join((head[:-1], ',"state":[', b",".join(self._state).decode(), '],"sensors":[',
                         b",".join(self._sensors).decode(), "]}"))

@@ -16,10 +16,12 @@ file (rtsim.viewer.recording), then only answers pings: the page plays them with
   ``pong`` (the server's clock, for the page's clock offset);
 - page -> server: ``pull`` (once per drawn frame: the page sets its own rate), ``drive`` (the user's
   commands, rtsim.service.user_input channels), ``reset`` (the service's reset op: the scenario's start
-  again), ``ping``.
+  again), ``fault`` (the faults panel: ``{"op": "inject_fault" | "clear_fault", "args": {...}}``, the
+  service's control op of that name, answered ``fault_ack`` with its reply; ``hello`` carries the fault
+  catalogue as ``faults``), ``ping``.
 
 Driving guard: a server given a session ``token`` (``rtsim view`` makes one, random, whenever it binds an
-address off loopback: ``--web-allow-remote``) takes ``drive`` and ``reset`` only from a page whose
+address off loopback: ``--web-allow-remote``) takes ``drive``, ``reset`` and ``fault`` only from a page whose
 WebSocket URL carries it (``/ws?token=...``: the page passes on its own URL's query, and the URL printed
 at start has it). Any other page may watch; its driving requests are answered ``ok: false`` with the
 reason, counted in ``refused`` and logged (one line per page). Without a token (loopback) every page
@@ -39,6 +41,7 @@ import urllib.parse
 from pathlib import Path
 
 from rtsim.errors import RtsimError
+from rtsim.faults.cli import catalogue_json
 
 from .relay import DriveSender, Relay, encode
 from .scene import describe
@@ -160,7 +163,20 @@ class ViewServer:
                   f"token in its URL ({self.refused} refused so far)", file=sys.stderr, flush=True)
         reply = {"ok": False, "error": f"{kind} refused: this page's URL has no valid session token (open the "
                                        f"URL `rtsim view` printed)"}
-        await ws.send(encode({"type": "drive_ack" if kind == "drive" else "reset_ack", "seq": None, "reply": reply}))
+        await ws.send(encode({"type": f"{kind}_ack", "seq": None, "reply": reply}))
+
+    async def _fault(self, msg: dict) -> dict:
+        """A faults-panel request relayed to the service's control op (which checks its arguments)."""
+        op, args = msg.get("op"), msg.get("args")
+        if op not in ("inject_fault", "clear_fault") or not isinstance(args, dict):
+            return {"ok": False, "error": "fault: give op inject_fault or clear_fault and args (an object)"}
+        if "op" in args or "timeout" in args:
+            return {"ok": False, "error": f"{op}: unknown argument {'op' if 'op' in args else 'timeout'!r}"}
+        try:
+            return await asyncio.get_running_loop().run_in_executor(
+                None, lambda: self.relay.client.control(op, timeout=10.0, **args))
+        except RtsimError as exc:
+            return {"ok": False, "error": f"{op}: {exc}"}
 
     async def _page(self, ws) -> None:
         self.pages += 1
@@ -172,6 +188,7 @@ class ViewServer:
             info = await asyncio.get_running_loop().run_in_executor(None, self.info)
             source = "live" if self.relay is not None else "replay"
             await ws.send(encode({"type": "hello", "source": source, "info": info, "server_time": time.time(),
+                                  "faults": catalogue_json() if self.relay is not None else [],
                                   "may_drive": driver}))
             for i, rec in enumerate(self.recordings):
                 await ws.send(rec.payload(i))
@@ -188,13 +205,15 @@ class ViewServer:
                     continue                        # a recording: the page plays it by itself
                 if kind == "pull":
                     await ws.send(self.relay.batch(last))
-                elif kind in ("drive", "reset") and not driver:
+                elif kind in ("drive", "reset", "fault") and not driver:
                     await self._refuse(ws, kind, logged)
                 elif kind == "drive":
                     token = next(self._tokens)
                     self._drive_from[token] = ws
                     msg["_ws"] = token
                     self.drive.submit(msg)
+                elif kind == "fault":               # the faults panel: the service's inject/clear ops
+                    await ws.send(encode({"type": "fault_ack", "reply": await self._fault(msg)}))
                 elif kind == "reset":               # the page's reset button (after a fall, say)
                     reply = await asyncio.get_running_loop().run_in_executor(
                         None, lambda: self.relay.client.control("reset", timeout=30.0))

@@ -42,8 +42,8 @@ import numpy as np
 
 from rtsim.jit import inline_kernel, kernel
 
-from ..kit.brake import BO_TAU_BREAK, BO_TAU_SLIDE, BP_BREAK_RATIO, BP_GAIN, BS_P_FRONT, BS_P_REAR, BS_TAU_BREAK, \
-    BS_TAU_SLIDE
+from ..kit.brake import BO_TAU_BREAK, BO_TAU_SLIDE, BP_BREAK_RATIO, BP_GAIN, BP_STUCK, BS_P_FRONT, BS_P_REAR, \
+    BS_TAU_BREAK, BS_TAU_SLIDE
 from ..kit.layout import offsets
 from ..kit.sensor_model import sensor_apply, sensor_fill, sensor_next_row
 from .layout import CI_PHI
@@ -139,6 +139,10 @@ def effects_brake(fx, fs, bp, bs, out):
     scale = fx[FX_B_SCALE]
     t_break = fx[FX_B_BREAK]
     for i in range(4):
+        if bp[BP_STUCK + i] > 0.5:          # a stuck caliper (rtsim.faults): its torques stay
+            out[BO_TAU_SLIDE + i] = bs[BS_TAU_SLIDE + i]
+            out[BO_TAU_BREAK + i] = bs[BS_TAU_BREAK + i]
+            continue
         pw = bs[BS_P_FRONT] if i < 2 else bs[BS_P_REAR]
         gain = bp[BP_GAIN + i]
         target = gain * pw

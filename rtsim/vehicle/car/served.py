@@ -12,8 +12,8 @@ from typing import NamedTuple
 
 from numba.extending import overload
 
-from ..kit.served import (JIT, of_type, served_advance, served_drive, served_observe, served_sensors,
-                          served_user)
+from ..kit.served import (JIT, of_type, served_advance, served_drive, served_fault_arrays, served_observe,
+                          served_sensors, served_user)
 from .effect_kernels import sensor_stage
 from .observer import driver_view, vehicle_state_values
 from .step import vehicle_step
@@ -84,3 +84,11 @@ def _observe(v, out):
     def car(v, out):
         vehicle_state_values(v.d, v.vehicle, v.data, v.io.signals, out)
     return car
+
+
+@overload(served_fault_arrays, jit_options=JIT)
+def _fault_arrays(v):
+    if not of_type(v, LoopCar):
+        return None
+    # rtsim.vehicle.car.sim.FAULT_ARRAYS: commands, brake parameters, steering (or EPS) parameters and state
+    return lambda v: (v.io.commands, v.parts.brake, v.parts.steering, v.states.steering)

@@ -15,14 +15,15 @@ from rtsim.mbs.model import OK
 from rtsim.road.model import Road
 from rtsim.road.query import NQUERY, Q_NX, Q_NZ, Q_Z, road_query
 
-from ..kit.brake import BP_GAIN, BS_P_FRONT, BS_P_REAR, brake_config, brake_params, brake_state
+from ..kit.brake import BP_GAIN, BP_STUCK, BS_P_FRONT, BS_P_REAR, brake_config, brake_params, brake_state
 from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT,
                               PP_MEASURED, powertrain_config, powertrain_params, powertrain_state_rolling,
                               powertrain_step)
 from ..kit.sensor_model import ST_ON as SM_ST_ON, ST_SLOTS as SM_ST_SLOTS
 from ..kit.sensor_model import copy_noise_state, neutral_params as sm_neutral, seed_noise, sensor_params, sensor_state
-from ..kit.eps import ES_FAULT, ES_GAIN, ES_STAGE, eps_state, eps_params, external_mode, stage_off
-from ..kit.steering import steering_config, steering_params, steering_state
+from ..kit.eps import EP_KT, ES_FAULT, ES_GAIN, ES_STAGE, eps_state, eps_params, external_mode, stage_off
+from ..kit.actuators import LAG_HI, LAG_LO
+from ..kit.steering import SP_MOTOR, steering_config, steering_params, steering_state
 from ..kit.tyre.magic_formula import effective_rolling_radius
 from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
 from .build import VehicleModel
@@ -32,7 +33,7 @@ from .effects import pack_effects, validate_effects
 from .layout import CI_PHI, WHEELS
 from .inputs import USER_INPUTS as CAR_USER_INPUTS
 from .observer import NSTATE_OUT
-from .step import (CMD_BRAKE, COMMAND_SLOTS, EX_SELECTOR, INVALID_SLOTS, Parts, States, make_io, make_vehicle_data,
+from .step import (CMD_BRAKE, CMD_THROTTLE, COMMAND_SLOTS, EX_SELECTOR, INVALID_SLOTS, Parts, States, make_io, make_vehicle_data,
                    vehicle_advance)
 from .served import LoopCar  # the served tuple; importing it registers the car's stages
 
@@ -49,6 +50,13 @@ def _align_z(n: np.ndarray) -> np.ndarray:
     return np.eye(3) + sin_a * kx + (1 - cos_a) * kx @ kx
 
 
+
+
+#: the arrays an actuator fault writes into, in the order the service's compiled step hands them over
+#: (rtsim.vehicle.car.served, served_fault_arrays): the command slots, the brake's parameters, the steering's
+#: (or EPS's) parameters and state
+FAULT_ARRAYS = ("commands", "brake", "steering", "steering_state")
+A_COMMANDS, A_BRAKE, A_STEERING, A_STEERING_STATE = range(4)
 
 
 class VehicleSim:
@@ -221,6 +229,27 @@ class VehicleSim:
     eps_commands = ("motor_current_cmd",)   # bus commands that put the EPS in external mode (the ECU's)
     rider_on = False                  # no rider inside the step (its in-loop source: the scenario's driver)
     user_inputs = CAR_USER_INPUTS     # what a person may drive (the vehicle's own: set by its kind)
+
+    def fault_actuators(self) -> dict[str, tuple[str, dict[str, tuple[tuple, ...]]]]:
+        """The actuators a fault may act on (rtsim.faults): name -> (family, {fault kind: writes}); a write is
+        (array: FAULT_ARRAYS index, element, mode, value) with mode "command" (a command slot: ``value``, NaN
+        for the fault's value or the command at the onset), "zero" or "value" (a parameter, restored when the
+        fault ends). What the car has follows from its own parts: a steer-by-wire rack motor, or an EPS with
+        its motor and power stage."""
+        wheels = ("fl", "fr", "rl", "rr")
+        out: dict = {"throttle": ("throttle", {"stuck_throttle": ((A_COMMANDS, CMD_THROTTLE, "command", np.nan),)})}
+        for i, w in enumerate(wheels):
+            out[f"brake_{w}"] = ("wheel_brake", {"brake_loss": ((A_BRAKE, BP_GAIN + i, "zero", 0.0),),
+                                                 "caliper_stuck": ((A_BRAKE, BP_STUCK + i, "value", 1.0),)})
+        if self.has_eps:
+            out["eps_motor"] = ("steering_motor", {"steering_motor_failure": ((A_STEERING, EP_KT, "zero", 0.0),)})
+            out["eps_power_stage"] = ("power_stage", {"power_stage_off": (
+                (A_STEERING_STATE, ES_STAGE, "zero", 0.0), (A_STEERING_STATE, ES_FAULT, "value", 1.0))})
+        else:
+            # the rack motor's torque limits both zero: the motor block's output (its torque) is held at 0
+            out["steering_motor"] = ("steering_motor", {"steering_motor_failure": (
+                (A_STEERING, SP_MOTOR + LAG_LO, "zero", 0.0), (A_STEERING, SP_MOTOR + LAG_HI, "zero", 0.0))})
+        return out
 
     def raise_status(self, status: int, step: int) -> None:
         """The exception of a failed step's status."""

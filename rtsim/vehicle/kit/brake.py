@@ -65,7 +65,8 @@ REAR = (2, 3)
  BP_EPS,          # rad/s, regularisation band of the sliding law
  BP_STICK,        # rad/s, speed below which a slowing wheel sticks
  BP_ACT,          # lag block (LAG_NPAR floats): pressure actuator, kPa
- BP_SIZE) = offsets(NWHEEL, NWHEEL, *(1,) * 6, LAG_NPAR)
+ BP_STUCK,        # [4] 1.0: the wheel's caliper is stuck (a fault, rtsim.faults): its torques stay as they are
+ BP_SIZE) = offsets(NWHEEL, NWHEEL, *(1,) * 6, LAG_NPAR, NWHEEL)
 
 # State layout.
 (BS_MODE,        # [4] 1.0 stick, 0.0 slide
@@ -237,6 +238,8 @@ def _update_limits(p, s, p_line):
     s[BS_P_FRONT] = p_line
     s[BS_P_REAR] = p_rear
     for i in range(NWHEEL):
+        if p[BP_STUCK + i] > 0.5:           # a stuck caliper: its torques do not follow the pressure
+            continue
         pw = p_line if i < 2 else p_rear
         ts = p[BP_GAIN + i] * pw
         s[BS_TAU_SLIDE + i] = ts

@@ -14,7 +14,9 @@ calls, per step of ``h`` s:
   valid, timely command for channel u), ``takeover`` whether the user took over from the bus, ``work``
   the user source's own state (a two-wheeler's lean loop);
 - ``served_advance(v, h)``: one step; returns its status (rtsim.mbs.model.OK or a failure);
-- ``served_sensors(v, out)`` and ``served_observe(v, out)``: the sensor and the observer state channels.
+- ``served_sensors(v, out)`` and ``served_observe(v, out)``: the sensor and the observer state channels;
+- ``served_fault_arrays(v)``: the arrays actuator faults (rtsim.faults) write into, a tuple of float64
+  arrays indexed as the vehicle sim's ``fault_actuators()`` declare (at least the command array).
 
 These are declarations only. Each vehicle registers its implementations for the type of its own tuple
 (numba ``overload`` with ``jit_options=JIT``, answering only when ``of_type(v, ItsTuple)``), in its own
@@ -51,3 +53,7 @@ def served_sensors(v, out):
 
 def served_observe(v, out):
     """The observer state channels into out."""
+
+
+def served_fault_arrays(v):
+    """The arrays actuator faults write into (see the module docstring)."""

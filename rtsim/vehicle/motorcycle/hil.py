@@ -56,6 +56,11 @@ class TwoWheelerHil:
     eps_commands = ()                 # no electric power steering
     user_inputs = USER_INPUTS         # what a person may drive (the vehicle's own: set by its kind)
 
+    def fault_actuators(self) -> dict:
+        """The actuators a fault may act on (rtsim.faults; see the car's VehicleSim.fault_actuators): none
+        declared yet, so an actuator fault on a two-wheeler is refused."""
+        return {}
+
     def __init__(self, mm: MotorcycleModel, dbc: Path, q_static: np.ndarray, dt: float, speed: float = 0.0,
                  x: float = 0.0, y: float = 0.0, yaw: float = 0.0, rider=None, mu: float = 1.0):
         self.tw = TwoWheelerSim(mm, dt=dt, speed=speed, q=place(mm, q_static, x, y, yaw), mu=mu)

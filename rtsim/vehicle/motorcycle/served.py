@@ -17,8 +17,8 @@ from numba.extending import overload
 from .lean_demand import W_ON, lean_torque
 from .rider import RO_THROTTLE, RO_TORQUE
 
-from ..kit.served import (JIT, of_type, served_advance, served_drive, served_observe, served_sensors,
-                          served_user)
+from ..kit.served import (JIT, of_type, served_advance, served_drive, served_fault_arrays, served_observe,
+                          served_sensors, served_user)
 from .plant import (PP_RIDER, plant_rider, plant_sensors, plant_state, plant_step, plant_view,
                     rider_offset_kernel)
 
@@ -101,3 +101,10 @@ def _observe(v, out):
         plant_state(v.d, v.parts.idx, v.parts.par, v.params.pp, v.parts.tyre, v.plant.inp, v.plant.es,
                     rider_offset_kernel(v.rider, v.params.pp), out)
     return two_wheeler
+
+
+@overload(served_fault_arrays, jit_options=JIT)
+def _fault_arrays(v):
+    if not of_type(v, LoopTwoWheeler):
+        return None
+    return lambda v: (v.io.commands,)          # (it declares no actuator fault yet)

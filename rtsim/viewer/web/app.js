@@ -46,6 +46,7 @@ ws.onmessage = (ev) => {
   const m = JSON.parse(ev.data);
   if (m.type === 'hello') {
     start(m.info, m.source);
+    faultPanel(m.faults || [], m.may_drive !== false && m.source !== 'replay');
     if (m.may_drive === false) {        // served off loopback and this page's URL lacks the session token: watch only
       for (const id of ['drive', 'takeover', 'release', 'reset']) $(id).disabled = true;
       view.driveDeclined = true;
@@ -59,6 +60,7 @@ ws.onmessage = (ev) => {
     const now = wall(), rtt = now - m.client_time;
     if (rtt < bestPing) { bestPing = rtt; clockOffset = m.server_time - (m.client_time + now) / 2; }
   } else if (m.type === 'reset_ack') { if (!m.reply.ok) view.drive.error = m.reply.error; }
+  else if (m.type === 'fault_ack') faultAck(m.reply);
   else if (m.type === 'error') view.errors.push('server: ' + m.error);
 };
 ws.onclose = () => { $('run').textContent = 'disconnected from the rtsim view server'; };
@@ -94,7 +96,7 @@ function start(i, source) {
 function loaded(m) {
   const times = Float64Array.from(m.state, (s) => s.time);
   replay.recs[m.index] = { state: m.state, sensors: m.sensors, status: m.status, times, file: m.file,
-    damage: m.damage };
+    damage: m.damage, faults: m.faults || [] };
   if (m.damage && m.damage.damaged) {        // what the file lost and how its session ended, in view
     $('files').textContent += ` · ${m.index ? 'B' : 'A'}: ${m.health}`;
     $('files').style.color = '#b00020';
@@ -103,6 +105,7 @@ function loaded(m) {
   replay.t0 = Math.min(...all.map((r) => r.times[0]));
   replay.t1 = Math.max(...all.map((r) => r.times[r.times.length - 1]));
   if (m.index === 0) replay.t = replay.t0;
+  faultMarks();
   refill();
   view.replayLoaded = all.length;
 }
@@ -144,6 +147,34 @@ function showReplay(dt) {
   plots.dirty = true;
   if (!view.scrubbing) $('scrub').value = String(Math.round(1000 * (R.t - R.t0) / Math.max(1e-9, R.t1 - R.t0)));
   $('ttext').textContent = `${R.t.toFixed(2)} / ${R.t1.toFixed(2)} s`;
+  const on = activeFaults(R.t);
+  $('tfaults').textContent = on.length ? `faults: ${on.join(', ')}` : '';
+  view.activeFaults = on;
+}
+
+// the first recording's injected faults: a mark per onset (red) and end (grey) on the time bar, and the
+// faults active at the time shown
+function faultMarks() {
+  const r = replay.recs[0], box = $('fault-marks');
+  box.innerHTML = '';
+  if (!r) return;
+  const span = Math.max(1e-9, replay.t1 - replay.t0);
+  for (const e of r.faults) {
+    const el = document.createElement('span');
+    el.className = e.event === 'end' ? 'end' : 'onset';
+    el.style.left = `${(100 * Math.min(1, Math.max(0, (e.time - replay.t0) / span))).toFixed(2)}%`;
+    el.title = `${e.id} (${e.kind} on ${e.target}) ${e.event} at ${e.time.toFixed(3)} s`;
+    box.appendChild(el);
+  }
+}
+function activeFaults(t) {
+  const r = replay.recs[0], on = new Set();
+  if (!r) return [];
+  for (const e of r.faults) {                   // in recorded order: onsets and ends up to t
+    if (e.time > t + 1e-9) break;
+    if (e.event === 'onset') on.add(e.id); else on.delete(e.id);
+  }
+  return [...on];
 }
 
 // tests and scripts: show time t (s) of the recording(s), paused
@@ -314,3 +345,45 @@ function panel(inp) {
     <tr><td>server → screen</td><td class="v">${fmt(L.server_to_screen_ms)} ms</td></tr>` +
     (view.drive.error ? `<tr><td colspan="2" class="user">${view.drive.error}</td></tr>` : '');
 }
+
+// ---- the faults panel: a fault of the catalogue armed live in the service (control ops inject_fault,
+// clear_fault; rtsim faults --list). Parameters as "name=value ..." (numbers where they parse), "duration=s"
+// and "at=s" too; no trigger: it acts from the service's next step.
+let faultSeq = 0;
+function faultPanel(kinds, allowed) {
+  const sel = $('fault-kind');
+  sel.innerHTML = kinds.map(k => `<option value="${k.kind}">${k.kind}</option>`).join('');
+  const hint = () => {
+    const k = kinds.find(x => x.kind === sel.value);
+    if (!k) return;
+    $('fault-params').placeholder = [...k.params.filter(p => p.default == null).map(p => p.name + '='), 'duration='].join(' ');
+    $('fault-target').placeholder = k.target === 'bus' ? 'bus' : k.target;
+    sel.title = k.description;
+  };
+  sel.onchange = hint;
+  hint();
+  $('fault-row').hidden = !kinds.length;
+  for (const id of ['fault-arm', 'fault-clear']) $(id).disabled = !allowed;
+}
+function faultArgs(text) {
+  const out = {};
+  for (const part of text.trim().split(/[\s,]+/)) {
+    if (!part) continue;
+    const [k, v = ''] = part.split('=');
+    const x = Number(v);
+    out[k] = v !== '' && Number.isFinite(x) ? x : v;
+  }
+  return out;
+}
+function faultAck(r) {
+  $('fault-reply').textContent = r.ok ? `${r.fault.id}: ${r.fault.state} (${r.fault.kind} on ${r.fault.target})` : r.error;
+  $('fault-reply').className = r.ok ? '' : 'error';
+  if (r.ok) $('fault-id').value = r.fault.id;
+}
+$('fault-arm').onclick = () => {
+  let target = $('fault-target').value.trim();
+  if (/^\d+$/.test(target)) target = Number(target);
+  const args = { id: `view-${Date.now().toString(36)}-${++faultSeq}`, kind: $('fault-kind').value, target, ...faultArgs($('fault-params').value) };
+  ws.send(JSON.stringify({ type: 'fault', op: 'inject_fault', args }));
+};
+$('fault-clear').onclick = () => ws.send(JSON.stringify({ type: 'fault', op: 'clear_fault', args: { id: $('fault-id').value.trim() } }));
