@@ -305,8 +305,9 @@ def test_batch_runs_a_plan_of_two_kart_runs(tmp_path):
     assert p.returncode == 0, p.stdout + p.stderr
     rows = list(csv.DictReader(next((tmp_path / "out").glob("*.csv")).open()))
     assert len(rows) == 2 and all(r["status"] == "ok" for r in rows), rows
-    d = [float(r["distance"]) for r in rows]
-    assert 0 < d[0] < d[1], d
+    by_case = {Path(r["scenario"]).stem: float(r["distance"]) for r in rows}   # (rows come sorted by run id)
+    d = [by_case["kart_0"], by_case["kart_1"]]
+    assert 0 < d[0] < d[1], by_case
     assert not math.isnan(d[1])
 
 
