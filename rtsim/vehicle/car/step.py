@@ -27,7 +27,7 @@ from ..kit.eps import (EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_SIZE, EO_S
                        eps_outputs, external_command, hands_step)
 from .energy_kernels import audit_commit
 from .forces import (NTO, TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_GAMMA, TO_KAPPA, TO_MZ, TO_OMEGA, TO_PX,  # noqa: F401
-                     TO_PY, TO_PZ, TO_RE, TO_VSY, TO_VX, chassis_omega, vehicle_forces)
+                     TO_PY, TO_PZ, TO_RE, TO_VSY, TO_VX, vehicle_forces)
 from .layout import CI_PHI, SP_CFY, SP_CMZ, STEER_COLUMN, STEER_EPS, STEER_RACK, NPORT
 from ..kit.tyre.magic_formula import advance_deflections, advance_deflections_relaxed
 
