@@ -136,8 +136,7 @@ def _forces(m, d, veh, vd, road, parts, states, bq, hc, n):
     for _ in range(n):
         for i in range(m.nq):
             d.force[i] = 0.0
-        vehicle_forces(m, d, veh, vd, road, parts.tyre, parts.brake, states.brake, parts.steering, states.steering,
-                       parts.effects, states.effects, False, bq, hc)
+        vehicle_forces(m, d, veh, vd, road, parts, states, False, bq, hc)
 
 
 @nb.njit(cache=True, _nrt=False)

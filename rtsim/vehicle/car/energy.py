@@ -1,7 +1,9 @@
 """The power audit of a car run: the bond-graph view of the model. Every force element is a port whose
-generalized forces (VehicleData.pf, filled by the force kernel at the converged state of each step)
-do work on the coordinates; the stored energies (kinetic, gravity, suspension springs, anti-roll bars,
-torsion bar, the motor's inductance) are functions of the state. The balance
+generalized forces (VehicleData.pf: each force stage's record, rtsim.vehicle.car.forces, the last one
+of a step written at its converged state) do work on the coordinates, so the audit is a sum over the
+stages' records after the step and nothing inside the force stages depends on it; the stored
+energies (kinetic, gravity, suspension springs, anti-roll bars, torsion bar, the motor's inductance)
+are functions of the state. The balance
 
     stored(t) - stored(t0) = sum of the ports' work + supply - winding losses
 

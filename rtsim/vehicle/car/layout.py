@@ -46,7 +46,8 @@ STEER_COLUMN, STEER_RACK = 0, 1     # Vehicle.steer_idx
 STEER_BY_WIRE, STEER_EPS = 0, 1     # Vehicle.steer_kind
 
 # Energy-audit ports: rows of the port-force array (VehicleData.pf), each the generalized forces one
-# element puts on the coordinates (rtsim.vehicle.car.energy). The EPS's own ports follow PORT_EPS
+# element puts on the coordinates, written by its force stage (rtsim.vehicle.car.forces) and summed by
+# the power audit (rtsim.vehicle.car.energy). The EPS's own ports follow PORT_EPS
 # (rtsim.vehicle.kit.eps PORT_*).
 (PORT_TYRE, PORT_SPRING, PORT_DAMPER, PORT_ARB, PORT_AXLE_REACTION, PORT_BRAKE, PORT_DRIVE, PORT_AERO,
  PORT_EFFECTS, PORT_STEER_BY_WIRE, PORT_EPS) = range(11)
