@@ -59,9 +59,10 @@ from scipy.signal import savgol_filter
 
 from rtsim.errors import ConfigError, SimulationError
 from rtsim.jit import kernel
+from rtsim.mbs.model import EARTH_GRAVITY
 from rtsim.vehicle.kit.sensor_model import apply_to_series, neutral_params, sensor_params
 from rtsim.vehicle.kit.tyre.two_wheel import TW_CA, TW_CG
-from rtsim.vehicle.motorcycle.build import G, build_motorcycle
+from rtsim.vehicle.motorcycle.build import build_motorcycle
 from rtsim.vehicle.motorcycle.config import load_motorcycle
 from rtsim.vehicle.motorcycle.layout import K_PHI_F
 from rtsim.vehicle.motorcycle.plant import (C_ASSIST_INVALID, C_BRAKE_FRONT, C_BRAKE_FRONT_INVALID, C_BRAKE_REAR,
@@ -220,7 +221,8 @@ class TwoWheelerReplayer(InputCache):
                 r = cfg.rider
                 cfg = cfg.model_copy(update={"rider": r.model_copy(update={"mass_kg": r.mass_kg + added_mass})})
             a = math.atan(grade)
-            mm = build_motorcycle(cfg, self.base, gravity=(-G * math.sin(a), 0.0, -G * math.cos(a)))
+            g = EARTH_GRAVITY
+            mm = build_motorcycle(cfg, self.base, gravity=(-g * math.sin(a), 0.0, -g * math.cos(a)))
             q, loads = static_pose(mm, seconds=SETTLE, dt=dt)
             if len(self._models) > 64:
                 self._models.clear()

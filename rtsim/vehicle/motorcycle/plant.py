@@ -58,7 +58,6 @@ from .sim import FALL_ROLL
 MAX_WHEEL_TORQUE = 1200.0       # N m at the rear wheel at full throttle, for a vehicle without [powertrain]
 FELL = 64                       # plant_step's status for a fall (rtsim.mbs.model codes are below)
 LIFT_GRACE = 0.5                # s: both tyres may be unloaded this long at the start (settling)
-G = 9.81
 
 # The command array the service's watchdog fills (bridge.can_e2e.rx_watchdog): each bus command's value
 # and, in its *_INVALID slot, 1.0 while it has no valid value.
