@@ -38,7 +38,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rtsim.errors import ModelError
-from rtsim.vehicle.motorcycle.build import G, MotorcycleModel, combine, straight_running_velocity
+from rtsim.mbs.model import gravity
+from rtsim.vehicle.motorcycle.build import MotorcycleModel, combine, straight_running_velocity
 from rtsim.vehicle.motorcycle.config import Body
 from rtsim.vehicle.motorcycle.layout import D_FORK, D_PITCH, D_SWING, D_Z, NAMES, NDOF, POINTS, VECTORS
 
@@ -186,8 +187,9 @@ class TwoWheelerLinearisation:
                   ((cfg.front_wheel, cfg.geometry.wheelbase_m), (cfg.rear_wheel, 0.0))]
         mass, cg, _i = combine(cfg.rear_frame, cfg.rider, cfg.swingarm, cfg.upper_fork, cfg.lower_fork, *wheels)
         share = cg[0] / cfg.geometry.wheelbase_m
-        d_f = share * mass * G / cfg.tyres.front.radial_stiffness_n_per_m
-        d_r = (1.0 - share) * mass * G / cfg.tyres.rear.radial_stiffness_n_per_m
+        g = -gravity(self.mm.mech.model)[2]            # m/s^2, the model's
+        d_f = share * mass * g / cfg.tyres.front.radial_stiffness_n_per_m
+        d_r = (1.0 - share) * mass * g / cfg.tyres.rear.radial_stiffness_n_per_m
         return np.array([-0.5 * (d_f + d_r), (d_f - d_r) / cfg.geometry.wheelbase_m]), min(d_f, d_r)
 
     def _slices(self, names):

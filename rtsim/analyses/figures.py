@@ -15,8 +15,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from rtsim.errors import ConfigError
+from rtsim.mbs.model import EARTH_GRAVITY
 
-G = 9.81                    # m/s^2 per g
+G = EARTH_GRAVITY           # m/s^2 per g
 DPI = 100
 SIZE = (8.0, 4.5)           # in
 WHEELS = {"fl": "front left", "fr": "front right", "rl": "rear left", "rr": "rear right"}

@@ -27,7 +27,7 @@ from . import envelope, sparse
 from .model import (
     CON_ANGLE2D, CON_ANGLE3D, CON_CRANK_ROD, CON_DISC_CONTACT, CON_DISC_ROLL, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
     FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
-    FS_TOL_VEL_FAIL, FS_STALL_RATE, FS_MIN_STEP, NFSET, IS_ERROR_TEST, IS_MAX_ITER, IS_PREDICTOR, IS_ABSOLUTE_DQ, NISET, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
+    FS_TOL_VEL_FAIL, FS_STALL_RATE, FS_MIN_STEP, FS_GRAVITY, NFSET, IS_ERROR_TEST, IS_MAX_ITER, IS_PREDICTOR, IS_ABSOLUTE_DQ, NISET, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
 )
 
 
@@ -652,6 +652,7 @@ class MechanismBuilder:
         fset[FS_TOL_VEL_FAIL], fset[FS_TOL_ACC_FAIL] = s.tol_vel_fail, s.tol_acc_fail
         fset[FS_REUSE_RATE] = s.reuse_rate
         fset[FS_STALL_RATE], fset[FS_MIN_STEP] = s.stall_rate, s.min_step
+        fset[FS_GRAVITY:FS_GRAVITY + 3] = self._gravity
         con_act = np.zeros((nc, NSLOT), dtype=np.int64)
         con_nact = np.zeros(nc, dtype=np.int64)
         for i in range(nc):

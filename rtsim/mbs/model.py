@@ -55,6 +55,9 @@ DRV_POLY = 0       # par[0..3]: c0 + c1 t + c2 t^2 + c3 t^3
 DRV_SINE = 1       # par[0..3]: offset + amplitude sin(omega t + phase)
 DRV_EXTERNAL = 2   # value, rate, acceleration set by the caller in data.drv_ext before each step
 
+EARTH_GRAVITY = 9.81   # m/s^2: the magnitude of the gravity every vehicle's model is built with (its vector
+#                         (0, 0, -EARTH_GRAVITY), z up), and of the g in which accelerations are shown
+
 # Integer settings (Model.iset) and float settings (Model.fset).
 IS_MAX_ITER = 0        # Newton iterations per step before giving up
 IS_MAX_PROJ = 1        # augmented-Lagrangian projection iterations
@@ -76,7 +79,9 @@ FS_TOL_VEL_FAIL = 5    # velocity constraint residual above which a projection f
 FS_TOL_ACC_FAIL = 6    # acceleration constraint residual above which a projection fails
 FS_STALL_RATE = 7      # Newton: an increment at least this fraction of the last one (no contraction) halves the step
 FS_MIN_STEP = 8        # Newton: the smallest fraction of the increment a damped iteration applies
-NFSET = 9
+FS_GRAVITY = 9         # 3 slots: the gravity vector (m/s^2, world axes; z up: (0, 0, -9.81) on level ground)
+#                        q_grav is formed from, for whoever reads gravity from the model (IMU, references)
+NFSET = 12
 
 # Status codes returned by kernels (mapped to typed exceptions by rtsim.mbs.simulation).
 OK = 0
@@ -146,6 +151,11 @@ Data = namedtuple("Data", [
     "poly_cache",     # float64 (npoly, 3, 6) polynomial paths and derivatives shared by a poly point's rows
     "stats",          # float64 (NSTATS,)
 ])
+
+
+def gravity(model: Model) -> np.ndarray:
+    """The model's gravity vector (3,), m/s^2 in world axes (the builder's ``gravity``; zeros without one)."""
+    return np.array(model.fset[FS_GRAVITY:FS_GRAVITY + 3])
 
 
 def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: float = 0.0) -> Data:

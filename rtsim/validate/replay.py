@@ -55,6 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.errors import ConfigError
+from rtsim.mbs.model import EARTH_GRAVITY
 from rtsim.road.config import load_road
 from rtsim.vehicle.kit.actuators import LAG_RATE, LAG_TAU
 from rtsim.vehicle.kit.brake import BP_ACT
@@ -63,7 +64,7 @@ from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE
 from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.kit.powertrain import PP_THR
 from rtsim.vehicle.kit.sensor_model import apply_to_series, neutral_params, sensor_params
-from rtsim.vehicle.car.sensors import G_WORLD_Z, NSENSOR
+from rtsim.vehicle.car.sensors import NSENSOR
 from rtsim.vehicle.car.sim import VehicleSim
 from rtsim.vehicle.kit.tyre.magic_formula import effective_rolling_radius
 from rtsim.vehicle.registry import open_vehicle
@@ -83,7 +84,7 @@ STEER_TOL = 0.1       # matched when the angle's RMS error is below this many st
 STEER_PASSES = 4      # simulations at most to match the steering command
 STEER_FLOOR = 1e-4    # rad: matching never aims below this RMS error
 STEER_MAX_LEAD = 0.1  # s: longest loop delay the matching's phase lead allows for
-GRAVITY = -G_WORLD_Z  # m/s^2, the model's gravity (down)
+GRAVITY = EARTH_GRAVITY  # m/s^2, the model's gravity (down)
 
 
 def level_frame(accel_x, accel_y, accel_z, roll, pitch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

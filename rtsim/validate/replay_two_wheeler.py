@@ -42,7 +42,7 @@ brake_friction of 0.89 on data without any effect).
 
 Effects (rtsim.vehicle.motorcycle.effects) change the model through its parameters only: an added
 mass or a grade rebuilds the model (10 ms) and its static pose (cached per value; the IMU then reads
-the tilted gravity, `_tilt`), brake and tyre
+the model's tilted gravity; `_tilt` turns its pitch to the true vertical), brake and tyre
 scales change the parameter arrays of that simulation; the stepping loop is one compiled kernel
 (`_replay`) over the model's arrays, no Python per step. A fall (roll past 70 deg, both tyres off the
 road) or a failed step ends the simulation with a SimulationError naming the run time: the workflow
@@ -59,16 +59,17 @@ from scipy.signal import savgol_filter
 
 from rtsim.errors import ConfigError, SimulationError
 from rtsim.jit import kernel
+from rtsim.mbs.model import EARTH_GRAVITY
 from rtsim.vehicle.kit.sensor_model import apply_to_series, neutral_params, sensor_params
 from rtsim.vehicle.kit.tyre.two_wheel import TW_CA, TW_CG
-from rtsim.vehicle.motorcycle.build import G, build_motorcycle
+from rtsim.vehicle.motorcycle.build import build_motorcycle
 from rtsim.vehicle.motorcycle.config import load_motorcycle
-from rtsim.vehicle.motorcycle.layout import K_PHI_F, K_V
+from rtsim.vehicle.motorcycle.layout import K_PHI_F
 from rtsim.vehicle.motorcycle.plant import (C_ASSIST_INVALID, C_BRAKE_FRONT, C_BRAKE_FRONT_INVALID, C_BRAKE_REAR,
                                             C_BRAKE_REAR_INVALID,
                                             C_THROTTLE, C_THROTTLE_INVALID, FELL, NCOMMAND, PP_BRAKE_GAIN_F,
-                                            PP_BRAKE_GAIN_R, S_ACCEL_X, S_ACCEL_Y, S_ACCEL_Z, S_PITCH, PlantIO,
-                                            PlantParams, _frame_axis, make_plant, plant_sensors,
+                                            PP_BRAKE_GAIN_R, S_PITCH, PlantIO,
+                                            PlantParams, make_plant, plant_sensors,
                                             plant_step, plant_view)
 from rtsim.vehicle.motorcycle.sim import TwoWheelerSim, static_pose
 from rtsim.vehicle.motorcycle.step import TO_FZ
@@ -125,22 +126,15 @@ class TwoWheelerInputs:
 
 
 @kernel
-def _tilt(d, idx, pp, dg, row):
-    """The sensors' view of a tilted gravity (a grade): the plant's IMU assumes gravity along -z, so its
-    specific force gains (g_flat - g_tilt) in the frame's axes, and its pitch is taken from the true
-    vertical (dg[3]: the grade's angle, rad)."""
-    q = d.q
-    x0, x1, x2 = _frame_axis(q, idx, pp, 0)
-    z0, z1, z2 = _frame_axis(q, idx, pp, 2)
-    kv = idx[K_V]
-    row[S_ACCEL_X] += dg[0] * x0 + dg[1] * x1 + dg[2] * x2
-    row[S_ACCEL_Y] += dg[0] * q[kv] + dg[1] * q[kv + 1] + dg[2] * q[kv + 2]
-    row[S_ACCEL_Z] += dg[0] * z0 + dg[1] * z1 + dg[2] * z2
-    row[S_PITCH] -= dg[3]
+def _tilt(grade, row):
+    """The inclinometer's view of a grade: the plant's pitch is the rear frame's from the model's z axis,
+    the true vertical is tilted by the grade's angle (grade[0], rad). (The IMU's specific force needs no
+    correction: it reads the model's own, tilted, gravity: rtsim.vehicle.kit.imu.)"""
+    row[S_PITCH] -= grade[0]
 
 
 @kernel
-def _replay(m, d, veh, vd, parts, io, h, sub, roll, roll_rate, thr, bf, br, gains, dg, out):
+def _replay(m, d, veh, vd, parts, io, h, sub, roll, roll_rate, thr, bf, br, gains, grade, out):
     """Step the two-wheeler over the grid: in each grid interval k the inputs at the interval's mean
     (throttle, pressures as valid bus commands; the lean loop's torque as the rider's) for `sub` steps of
     h s; sensors into out[k + 1]. Returns (status, k): 0 when done, else the plant's status and the interval."""
@@ -160,8 +154,8 @@ def _replay(m, d, veh, vd, parts, io, h, sub, roll, roll_rate, thr, bf, br, gain
         if status != 0:
             return status, 0
     plant_sensors(d, parts.idx, parts.par, veh.pp, vd.inp, out[0])
-    if dg[3] != 0.0:
-        _tilt(d, parts.idx, veh.pp, dg, out[0])
+    if grade[0] != 0.0:
+        _tilt(grade, out[0])
     for k in range(n - 1):
         cmd[C_THROTTLE] = max(0.0, 0.5 * (thr[k] + thr[k + 1]))
         cmd[C_BRAKE_FRONT] = max(0.0, 0.5 * (bf[k] + bf[k + 1]))
@@ -179,8 +173,8 @@ def _replay(m, d, veh, vd, parts, io, h, sub, roll, roll_rate, thr, bf, br, gain
             if status != 0:
                 return status, k
         plant_sensors(d, parts.idx, parts.par, veh.pp, vd.inp, out[k + 1])
-        if dg[3] != 0.0:
-            _tilt(d, parts.idx, veh.pp, dg, out[k + 1])
+        if grade[0] != 0.0:
+            _tilt(grade, out[k + 1])
     return 0, n
 
 
@@ -227,7 +221,8 @@ class TwoWheelerReplayer(InputCache):
                 r = cfg.rider
                 cfg = cfg.model_copy(update={"rider": r.model_copy(update={"mass_kg": r.mass_kg + added_mass})})
             a = math.atan(grade)
-            mm = build_motorcycle(cfg, self.base, gravity=(-G * math.sin(a), 0.0, -G * math.cos(a)))
+            g = EARTH_GRAVITY
+            mm = build_motorcycle(cfg, self.base, gravity=(-g * math.sin(a), 0.0, -g * math.cos(a)))
             q, loads = static_pose(mm, seconds=SETTLE, dt=dt)
             if len(self._models) > 64:
                 self._models.clear()
@@ -323,9 +318,9 @@ class TwoWheelerReplayer(InputCache):
         out = np.zeros((t.size, len(self.sensor_names)))
         gains = np.array([P_ROLL, D_ROLL, I_ROLL, I_MAX, D_STEER, MAX_TORQUE])
         a = math.atan(vals.get("road_grade", {}).get("grade", 0.0))
-        dg = np.array([G * math.sin(a), 0.0, G * math.cos(a) - G, a])
+        grade = np.array([a])
         status, k = _replay(sim.model, sim.data, PlantParams(veh.pp, veh.ep), vd, sim.parts, PlantIO(cmd), dt, sub,
-                            roll, roll_rate, inp.throttle, inp.brake_front, inp.brake_rear, gains, dg, out)
+                            roll, roll_rate, inp.throttle, inp.brake_front, inp.brake_rear, gains, grade, out)
         self.simulations += 1
         if status != 0:
             what = "fell (roll past 70 deg or both tyres off the road)" if status == FELL else \

@@ -5,9 +5,11 @@ from __future__ import annotations
 
 from collections import namedtuple
 
+from rtsim.mbs.model import EARTH_GRAVITY
+
 from ..kit.eps import NPORT_EPS
 
-G = 9.81
+G = EARTH_GRAVITY    # m/s^2: the car model's gravity (build: (0, 0, -G)), a constant of the kernels
 WHEELS = ("fl", "fr", "rl", "rr")   # corner order of every per-wheel array: front axle first, left first
 FRONT_AXLE, REAR_AXLE = (0, 1), (2, 3)
 

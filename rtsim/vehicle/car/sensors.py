@@ -3,7 +3,8 @@ physical values computed from the multibody state. What the sensors report of th
 noise, quantisation, delay) is the kit's sensor model (rtsim.vehicle.kit.sensor_model).
 
 Inertial channels at the IMU mounting point rho (body frame, from the centre of mass):
-  a = r'' + alpha x rho + omega x (omega x rho),  accel = R^T (a - g)   (specific force, body axes)
+  a = r'' + alpha x rho + omega x (omega x rho),  accel = R^T (a - g)   (specific force, body axes;
+  g the multibody model's gravity: the kit's IMU, rtsim.vehicle.kit.imu)
   gyro = R^T omega,  with omega = (u x u' + v x v' + w x w') / 2 and alpha = (u x u'' + ...) / 2
   for the chassis frame R = [u v w]. Inclinometers: roll = atan2(v_z, w_z) (positive right side
   down), pitch = asin(-u_z) (positive nose down).
@@ -17,6 +18,7 @@ from rtsim.channels import EPS_SENSORS, SENSOR_NAMES
 from rtsim.jit import kernel
 from rtsim.mbs.constraints import poly_eval
 
+from ..kit.imu import imu_reading, model_gravity
 from .layout import CI_PHI, CI_S, CI_Z
 
 # channel indices, from the car's channel dictionary (rtsim.channels.car_sensors; the last two are the
@@ -26,6 +28,7 @@ from .layout import CI_PHI, CI_S, CI_Z
  S_STEERING_TORQUE, S_THROTTLE, S_DRIVE_TORQUE_LEFT, S_DRIVE_TORQUE_RIGHT) = (
     SENSOR_NAMES.index(n) for n in (*SENSOR_NAMES[:-2], "wheel_torque_rl", "wheel_torque_rr"))
 NSENSOR = len(SENSOR_NAMES)
+assert tuple(SENSOR_NAMES[S_ACCEL_X:S_GYRO_Z + 1]) == ("accel_x", "accel_y", "accel_z", "gyro_x", "gyro_y", "gyro_z")
 assert SENSOR_NAMES[S_WHEEL_FL] == "wheel_angle_fl" and SENSOR_NAMES[S_STEER_FR] == "steer_angle_fr"
 # a car with electric power steering: its EPS's channels follow (rtsim.channels.EPS_SENSORS)
 S_EPS0 = NSENSOR
@@ -35,8 +38,6 @@ NSENSOR_EPS = NSENSOR + len(EPS_SENSORS)
 (SG_BRAKE_PRESSURE, SG_SW_ANGLE, SG_ENGINE_SPEED, SG_STEERING_TORQUE, SG_THROTTLE, SG_TORQUE_LEFT, SG_TORQUE_RIGHT,
  SG_MOTOR_ANGLE, SG_MOTOR_SPEED, SG_MOTOR_CURRENT, SG_POWER_STAGE, SG_VEHICLE_SPEED) = range(12)
 NSIGNAL = 12
-
-G_WORLD_Z = -9.81
 
 
 @kernel
@@ -70,13 +71,9 @@ def true_sensors(m, d, veh, signals, out):
     c2 = om0 * ry - om1 * rx
     ax = qdd[ci[0]] + (al1 * rz - al2 * ry) + (om1 * c2 - om2 * c1)
     ay = qdd[ci[1]] + (al2 * rx - al0 * rz) + (om2 * c0 - om0 * c2)
-    az = qdd[ci[2]] + (al0 * ry - al1 * rx) + (om0 * c1 - om1 * c0) - G_WORLD_Z
-    out[S_ACCEL_X] = ax * ux + ay * uy + az * uz
-    out[S_ACCEL_Y] = ax * vx + ay * vy + az * vz
-    out[S_ACCEL_Z] = ax * wx + ay * wy + az * wz
-    out[S_GYRO_X] = om0 * ux + om1 * uy + om2 * uz
-    out[S_GYRO_Y] = om0 * vx + om1 * vy + om2 * vz
-    out[S_GYRO_Z] = om0 * wx + om1 * wy + om2 * wz
+    az = qdd[ci[2]] + (al0 * ry - al1 * rx) + (om0 * c1 - om1 * c0)
+    imu_reading((ax, ay, az), (om0, om1, om2), (ux, uy, uz), (vx, vy, vz), (wx, wy, wz), model_gravity(m), out,
+                S_ACCEL_X, S_GYRO_X)
     out[S_ROLL] = atan2(vz, wz)
     out[S_PITCH] = asin(min(1.0, max(-1.0, -uz)))
     for i in range(4):

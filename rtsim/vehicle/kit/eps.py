@@ -45,6 +45,7 @@ from rtsim.mbs.envelope import add_entry
 
 from .end_stop import end_stop
 from .layout import offsets
+from .rack import RK_DAMPING, RK_MASS, RK_RP, RK_SIZE, RK_STOP_C, RK_STOP_K, RK_TRAVEL, rack_and_pinion
 from .tables import map_2d, map_eval
 
 # ---------------------------------------------------------------------------------- parameter layout
@@ -52,8 +53,7 @@ from .tables import map_2d, map_eval
  EP_C_COL,           # N m s/rad, column viscous friction
  EP_K_TB,            # N m/rad, torsion bar
  EP_C_TB,            # N m s/rad, torsion bar damping
- EP_RP,              # m/rad, rack travel per pinion radian
- EP_M_RACK,          # kg, rack + (J_pinion + N^2 J_motor) / r_p^2
+ EP_RACK,            # the rack and pinion (rtsim.vehicle.kit.rack, RK_SIZE floats; geared inertia N^2 J_motor)
  EP_T_FP,            # N m, pinion dry friction
  EP_W_FP,            # rad/s, its velocity band
  EP_N,               # motor turns per pinion turn
@@ -61,7 +61,6 @@ from .tables import map_2d, map_eval
  EP_ETA_GB,          # assist gear efficiency, back-driven
  EP_ETA_RP,          # rack and pinion efficiency, pinion driving
  EP_ETA_RPB,         # rack and pinion efficiency, rack driving
- EP_C_RACK,          # N s/m, rack viscous friction
  EP_F_FR,            # N, rack dry friction
  EP_V_FR,            # m/s, its velocity band
  EP_R,               # ohm, winding + drive resistance
@@ -77,11 +76,14 @@ from .tables import map_2d, map_eval
  EP_DRIVER,          # 0: the driver imposes the angle, 1: a torque
  EP_J_M,             # kg m^2, rotor inertia (outputs)
  EP_W_HAND,          # rad/s, natural frequency of the driver's hands (imposed angle mode)
- EP_RACK_TRAVEL,     # m, rack travel from centre to either end stop
- EP_STOP_K,          # N/m, end-stop stiffness
- EP_STOP_C,          # N s/m, end-stop damping
  EP_ASSIST,          # the assistance map (rtsim.vehicle.kit.tables.map_2d), EP_ASSIST_SIZE floats
- EP_SIZE) = offsets(*(1,) * 32, 0)
+ EP_SIZE) = offsets(1, 1, 1, 1, RK_SIZE, *(1,) * 22, 0)
+EP_RP = EP_RACK + RK_RP                # m/rad, rack travel per pinion radian
+EP_M_RACK = EP_RACK + RK_MASS          # kg, rack + (J_pinion + N^2 J_motor) / r_p^2
+EP_C_RACK = EP_RACK + RK_DAMPING       # N s/m, rack viscous friction
+EP_RACK_TRAVEL = EP_RACK + RK_TRAVEL   # m, rack travel from centre to either end stop
+EP_STOP_K = EP_RACK + RK_STOP_K        # N/m, end-stop stiffness
+EP_STOP_C = EP_RACK + RK_STOP_C        # N s/m, end-stop damping
 DRIVER_ANGLE, DRIVER_TORQUE = 0.0, 1.0
 
 # ------------------------------------------------------------------------------------- state layout
@@ -218,7 +220,6 @@ class EpsConfig(Strict):
 
 
 def eps_params(c: EpsConfig) -> np.ndarray:
-    rp = c.rack_travel_per_rad_m
     n = c.gear_ratio
     law = c.assist
     assist = map_2d(law.torque_nm, law.speed_mps, law.current_a)
@@ -227,8 +228,10 @@ def eps_params(c: EpsConfig) -> np.ndarray:
     p[EP_C_COL] = c.column_damping_nms_per_rad
     p[EP_K_TB] = c.torsion_bar_nm_per_rad
     p[EP_C_TB] = c.torsion_bar_damping_nms_per_rad
-    p[EP_RP] = rp
-    p[EP_M_RACK] = c.rack_mass_kg + (c.pinion_inertia_kgm2 + n * n * c.motor_inertia_kgm2) / (rp * rp)
+    rack_and_pinion(p, EP_RACK, travel_per_rad=c.rack_travel_per_rad_m, rack_mass=c.rack_mass_kg,
+                    pinion_inertia=c.pinion_inertia_kgm2, damping=c.rack_damping_ns_per_m, travel=c.rack_travel_m,
+                    stop_stiffness=c.rack_stop_stiffness_n_per_m, stop_damping=c.rack_stop_damping_ns_per_m,
+                    geared_inertia=n * n * c.motor_inertia_kgm2)
     p[EP_T_FP] = c.pinion_friction_nm
     p[EP_W_FP] = c.pinion_friction_band_rad_s
     p[EP_N] = n
@@ -236,7 +239,6 @@ def eps_params(c: EpsConfig) -> np.ndarray:
     p[EP_ETA_GB] = c.gear_efficiency_back
     p[EP_ETA_RP] = c.rack_efficiency
     p[EP_ETA_RPB] = c.rack_efficiency_back
-    p[EP_C_RACK] = c.rack_damping_ns_per_m
     p[EP_F_FR] = c.rack_friction_n
     p[EP_V_FR] = c.rack_friction_band_m_s
     p[EP_R] = c.motor_resistance_ohm
@@ -252,9 +254,6 @@ def eps_params(c: EpsConfig) -> np.ndarray:
     p[EP_DRIVER] = DRIVER_ANGLE if c.driver_input == "angle" else DRIVER_TORQUE
     p[EP_J_M] = c.motor_inertia_kgm2
     p[EP_W_HAND] = 2.0 * math.pi * c.hands_bandwidth_hz
-    p[EP_RACK_TRAVEL] = c.rack_travel_m
-    p[EP_STOP_K] = c.rack_stop_stiffness_n_per_m
-    p[EP_STOP_C] = c.rack_stop_damping_ns_per_m
     p[EP_ASSIST:] = assist
     return p
 

@@ -43,15 +43,14 @@ from rtsim.mbs.envelope import add_entry
 from .end_stop import end_stop
 from .actuators import LAG_NPAR, LagConfig, check, part_config, pydantic_config, lag_init, lag_state_size, lag_step
 from .layout import offsets
+from .rack import RK_DAMPING, RK_MASS, RK_RP, RK_SIZE, RK_STOP_C, RK_STOP_K, RK_TRAVEL, rack_and_pinion
 
 # Parameter layout.
 (SP_J_COL,           # kg m^2, column side: steering wheel + column + N^2 J_motor
  SP_C_COL,           # N m s/rad, column viscous friction
  SP_K_TB,            # N m/rad, torsion bar
  SP_C_TB,            # N m s/rad, torsion bar damping
- SP_M_RACK,          # kg, rack side: rack + J_pinion / r_p^2
- SP_C_RACK,          # N s/m, rack viscous friction
- SP_RP,              # m/rad, rack travel per pinion radian
+ SP_RACK,            # the rack and pinion (rtsim.vehicle.kit.rack, RK_SIZE floats: no geared inertia here)
  SP_N,               # motor-to-column reduction ratio
  SP_ETA,             # reduction efficiency
  SP_KP,              # N m/rad (column torque per rad of angle error)
@@ -61,10 +60,13 @@ from .layout import offsets
  SP_TM_MAX,          # N m, motor torque limit
  SP_MOTOR,           # lag block: motor torque (N m at the motor)
  SP_CMD,             # lag block: steering-wheel angle command (rad)
- SP_RACK_TRAVEL,     # m, rack travel from centre to either end stop
- SP_STOP_K,          # N/m, end-stop stiffness
- SP_STOP_C,          # N s/m, end-stop damping
- SP_SIZE) = offsets(*(1,) * 14, LAG_NPAR, LAG_NPAR, 1, 1, 1)
+ SP_SIZE) = offsets(1, 1, 1, 1, RK_SIZE, *(1,) * 7, LAG_NPAR, LAG_NPAR)
+SP_M_RACK = SP_RACK + RK_MASS          # kg, rack side: rack + J_pinion / r_p^2
+SP_C_RACK = SP_RACK + RK_DAMPING       # N s/m, rack viscous friction
+SP_RP = SP_RACK + RK_RP                # m/rad, rack travel per pinion radian
+SP_RACK_TRAVEL = SP_RACK + RK_TRAVEL   # m, rack travel from centre to either end stop
+SP_STOP_K = SP_RACK + RK_STOP_K        # N/m, end-stop stiffness
+SP_STOP_C = SP_RACK + RK_STOP_C        # N s/m, end-stop damping
 
 # State layout (the command lag block last: its delay buffer has a variable length).
 (SS_I,               # N m, controller integral
@@ -148,14 +150,13 @@ def steering_config(data=None, where: str = "steering") -> SteeringConfig:
 def steering_params(cfg: SteeringConfig | None = None) -> np.ndarray:
     c = steering_config(cfg)
     p = np.zeros(SP_SIZE)
-    rp = c.rack_travel_per_rad
     p[SP_J_COL] = c.steering_wheel_inertia + c.column_inertia + c.reduction_ratio ** 2 * c.motor_inertia
     p[SP_C_COL] = c.column_damping
     p[SP_K_TB] = c.torsion_bar_stiffness
     p[SP_C_TB] = c.torsion_bar_damping
-    p[SP_M_RACK] = c.rack_mass + c.pinion_inertia / (rp * rp)
-    p[SP_C_RACK] = c.rack_damping
-    p[SP_RP] = rp
+    rack_and_pinion(p, SP_RACK, travel_per_rad=c.rack_travel_per_rad, rack_mass=c.rack_mass,
+                    pinion_inertia=c.pinion_inertia, damping=c.rack_damping, travel=c.rack_travel,
+                    stop_stiffness=c.rack_stop_stiffness, stop_damping=c.rack_stop_damping)
     p[SP_N] = c.reduction_ratio
     p[SP_ETA] = c.reduction_efficiency
     p[SP_KP] = c.kp
@@ -167,9 +168,6 @@ def steering_params(cfg: SteeringConfig | None = None) -> np.ndarray:
         time_constant=c.motor_time_constant, rate_limit=c.motor_torque_rate,
         min=-c.motor_torque_limit, max=c.motor_torque_limit).params()
     p[SP_CMD:SP_CMD + LAG_NPAR] = c.command.params()
-    p[SP_RACK_TRAVEL] = c.rack_travel
-    p[SP_STOP_K] = c.rack_stop_stiffness
-    p[SP_STOP_C] = c.rack_stop_damping
     return p
 
 

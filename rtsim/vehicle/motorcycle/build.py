@@ -27,13 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.mbs import Mechanism, MechanismBuilder, Settings
-from rtsim.mbs.model import IS_TANGENT_FORCES
+from rtsim.mbs.model import EARTH_GRAVITY, IS_TANGENT_FORCES
 
 from .config import Body, MotorcycleConfig
 from .geometry import Design, design, pose
 from .layout import NAMES, NK, POINTS, SCALARS, VECTORS, K_N_S
-
-G = 9.81
 
 TwoWheeler = namedtuple("TwoWheeler", [
     "idx",        # (NK,) int: first coordinate of each named group (layout K_*), -1 if absent
@@ -82,7 +80,7 @@ def combine(*bodies: Body) -> tuple[float, np.ndarray, np.ndarray]:
     return m, cg, inertia
 
 
-def build_motorcycle(cfg: MotorcycleConfig, base: Path, gravity=(0.0, 0.0, -G)) -> MotorcycleModel:
+def build_motorcycle(cfg: MotorcycleConfig, base: Path, gravity=(0.0, 0.0, -EARTH_GRAVITY)) -> MotorcycleModel:
     """The compiled two-wheeler; `gravity` (m/s^2, design frame): tilted for a road grade (rtsim.validate)."""
     des = design(cfg)
     p0 = pose(des, np.zeros(11))

@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import math
 
+from rtsim.mbs.model import EARTH_GRAVITY
+
 from ..kit.user_inputs import ControlGroup, UserChannel, UserInputs
 
 THROTTLE_FULL = 0.4                 # of wide open, at full throttle key
 BRAKE_DECEL_G = 0.5                 # deceleration (in g) at full brake key, upright on a flat road
 BRAKE_FRONT_SHARE = 0.8             # of the braking force, on the front wheel
-G = 9.81                            # m/s^2, to turn BRAKE_DECEL_G into a force
 LEAN_FULL_RAD = math.radians(30.0)  # lean demand at full steer key
 LEAN_MAX_RAD = math.radians(60.0)   # the lean demand's range
 PRESSURE_MAX_KPA = 20000.0          # the caliper pressures' range
@@ -37,7 +38,7 @@ def user_inputs(cfg=None) -> UserInputs:
     if b is None:
         front = rear = DEFAULT_MAX_PRESSURE_KPA
     else:
-        force = BRAKE_DECEL_G * G * total_mass_kg(cfg)
+        force = BRAKE_DECEL_G * EARTH_GRAVITY * total_mass_kg(cfg)
         front = min(b.max_pressure_kpa, BRAKE_FRONT_SHARE * force * cfg.front_wheel.radius_m / b.front_nm_per_kpa)
         rear = min(b.max_pressure_kpa, (1 - BRAKE_FRONT_SHARE) * force * cfg.rear_wheel.radius_m / b.rear_nm_per_kpa)
     return UserInputs((

@@ -32,6 +32,7 @@ from rtsim.channels import TWO_WHEELER_STATE, Channel, ChannelDictionary
 from rtsim.errors import ConfigError, SimulationError
 from rtsim.model_fault import ModelFault, describe_error, force_failure, test_fault_step, test_fault_time
 from rtsim.configfile import problem
+from rtsim.mbs.model import gravity
 
 from .build import build_motorcycle, combine
 from .config import Body, load_motorcycle, refuse_effects
@@ -41,7 +42,6 @@ from .ride import Ride, tyre_lean_ratio
 from .sim import Fall, TwoWheelerSim, static_pose
 from .step import MP_MU, TO_FZ, U_BRAKE_FRONT, U_BRAKE_REAR
 
-G = 9.81
 PITCH_OVER = math.radians(45.0)      # rad: the rear frame pitched nose-down past this has gone over the front
 
 
@@ -256,13 +256,18 @@ def _counter_steering(res: MotorcycleRun) -> dict:
             "final_turn_against_the_steer": bool(np.sign(last) == -sign)}
 
 
+def _g(mm) -> float:
+    """The magnitude of the two-wheeler's gravity, m/s^2: the multibody model's (its vector is vertical)."""
+    return float(-gravity(mm.mech.model)[2])
+
+
 def _steady_turn(res: MotorcycleRun, ride: Ride, radius: float) -> dict:
     c = res.column
     t = c("time")
     win = t >= t[-1] - t[-1] / 3.0
     u = float(np.mean(c("speed")[win]))
     roll = float(np.mean(c("roll_angle")[win]))
-    phi0 = math.atan(u * u / (G * radius))
+    phi0 = math.atan(u * u / (_g(ride.sim.mm) * radius))
     k = tyre_lean_ratio(ride.sim.mm)
     ref = phi0 + math.asin(k * math.sin(phi0))
     return {"window_s": [_f(t[win][0], 2), _f(t[-1], 2)], "radius_m": radius, "speed_m_s": _f(u, 4),
@@ -279,15 +284,16 @@ def braking_limits(ride: Ride) -> dict:
     the stoppie, where the rear load reaches zero: a = g b / h (b: the mass centre's distance behind
     the front contact, h its height) -- from the design geometry."""
     mm = ride.sim.mm
+    g = _g(mm)
     m, x, h = mass_centre(mm)
     b = mm.config.geometry.wheelbase_m - x
     from .parts import make_parts
     from ..kit.tyre.two_wheel import two_wheel_friction
 
     tp = make_parts(mm).tp
-    mu_front = two_wheel_friction(tp[0], m * G, ride.sim.parts.par[MP_MU])[0] / (m * G)
+    mu_front = two_wheel_friction(tp[0], m * g, ride.sim.parts.par[MP_MU])[0] / (m * g)
     return {"mass_kg": _f(m, 2), "cg_height_m": _f(h, 4), "cg_to_front_contact_m": _f(b, 4),
-            "stoppie_decel_m_s2": _f(G * b / h, 4), "front_grip_decel_m_s2": _f(mu_front * G, 4)}
+            "stoppie_decel_m_s2": _f(g * b / h, 4), "front_grip_decel_m_s2": _f(mu_front * g, 4)}
 
 
 def _braking(res: MotorcycleRun, ride: Ride) -> dict:
@@ -340,7 +346,7 @@ def _braking(res: MotorcycleRun, ride: Ride) -> dict:
         # the rear load the quasi-static balance predicts at the measured deceleration
         h, b = lim["cg_height_m"], lim["cg_to_front_contact_m"]
         wb = ride.sim.mm.config.geometry.wheelbase_m
-        out["rear_load_quasi_static_n"] = _f(float(np.mean(m * (G * b - a * h) / wb)), 1)
+        out["rear_load_quasi_static_n"] = _f(float(np.mean(m * (_g(ride.sim.mm) * b - a * h) / wb)), 1)
         out["rear_load_steady_n"] = _f(float(np.mean(c("tyre_fz_rear")[seg][full])), 1)
     return out
 

@@ -21,7 +21,8 @@ The rider (``plant_rider``, rtsim.vehicle.motorcycle.rider) reads the same view 
 roll and steer with their rates.
 
 Sensors (``plant_sensors``): the IMU at ``[sensors] imu_position_m`` on the rear frame in the frame's
-axes (x along the ground line at zero pitch, y left, z up): specific force ``R^T (r'' - g)``, angular
+axes (x along the ground line at zero pitch, y left, z up): specific force ``R^T (r'' - g)`` (g the
+multibody model's gravity; the kit's IMU, rtsim.vehicle.kit.imu), angular
 rate ``R^T omega`` with ``omega = 1/2 sum e x e'`` over the frame's unit vectors; roll ``asin(v_z)``
 and pitch ``asin(-x_z)``; wheel speeds relative to their carriers; the steering head's angle, rate
 and the rider's torque; fork and shock compressions; the rider's demands and the actuators' states.
@@ -42,6 +43,9 @@ from rtsim.jit import inline_kernel, kernel
 from .rider import (RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_DELTA, RV_DELTADOT, RV_PHI,
                            RV_PHIDOT, RV_R, RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, NRO, NRV, ST_N, rider_step)
 
+from rtsim.mbs.model import gravity
+
+from ..kit.imu import imu_reading
 from ..kit.layout import offsets
 from ..kit.rigid import angular_velocity
 from .engine import ES_ENGINE_SPEED, ES_GEAR, engine_state, pack_engine, rear_wheel_torque
@@ -54,7 +58,6 @@ from .sim import FALL_ROLL
 MAX_WHEEL_TORQUE = 1200.0       # N m at the rear wheel at full throttle, for a vehicle without [powertrain]
 FELL = 64                       # plant_step's status for a fall (rtsim.mbs.model codes are below)
 LIFT_GRACE = 0.5                # s: both tyres may be unloaded this long at the start (settling)
-G = 9.81
 
 # The command array the service's watchdog fills (bridge.can_e2e.rx_watchdog): each bus command's value
 # and, in its *_INVALID slot, 1.0 while it has no valid value.
@@ -68,9 +71,10 @@ INVALID_SLOTS = {"throttle_cmd": C_THROTTLE_INVALID, "brake_pressure_front_cmd":
 # PlantParams.pp: IMU position in the frame's (e1, h) axes from the pivot (m), the caster's cosine and
 # sine (the frame's x and z from e1 and the steering axis h), rear wheel radius (m), brake gains (N m/kPa),
 # maximum caliper pressure (kPa), drive torque at full throttle without an engine (N m), 1 with a rider,
-# 1 with slip tyres, 1 with an engine (PlantParams.ep: rtsim.vehicle.motorcycle.engine.pack_engine).
+# 1 with slip tyres, 1 with an engine (PlantParams.ep: rtsim.vehicle.motorcycle.engine.pack_engine), the
+# multibody model's gravity vector (3 slots, m/s^2, world axes: the IMU's, rtsim.vehicle.kit.imu).
 (PP_IMU_E1, PP_IMU_H, PP_COS_CASTER, PP_SIN_CASTER, PP_REAR_RADIUS, PP_BRAKE_GAIN_F, PP_BRAKE_GAIN_R,
- PP_MAX_PRESSURE, PP_MAX_DRIVE, PP_RIDER, PP_SLIP_TYRES, PP_ENGINE, NPP) = offsets(*(1,) * 12)
+ PP_MAX_PRESSURE, PP_MAX_DRIVE, PP_RIDER, PP_SLIP_TYRES, PP_ENGINE, PP_GRAVITY, NPP) = offsets(*(1,) * 12, 3)
 # PlantState.inp: what acted over the last step, for the sensors and the state.
 (IN_RIDER_TORQUE, IN_ASSIST, IN_THROTTLE, IN_BRAKE_F, IN_BRAKE_R, IN_RIDER_THROTTLE, IN_RIDER_BRAKE_F,
  IN_RIDER_BRAKE_R, IN_DRIVE, NIN) = offsets(*(1,) * 9)
@@ -84,6 +88,7 @@ _SENSORS = [c.name for c in TWO_WHEELER_SENSORS]
     "wheel_speed_rear", "steer_angle", "steer_rate", "steering_torque", "fork_travel", "shock_travel",
     "rider_throttle", "rider_brake_front", "rider_brake_rear", "throttle", "brake_pressure_front",
     "brake_pressure_rear"))
+assert _SENSORS[S_ACCEL_X:S_GYRO_Z + 1] == ["accel_x", "accel_y", "accel_z", "gyro_x", "gyro_y", "gyro_z"]
 _STATE = [c.name for c in TWO_WHEELER_STATE]
 (X_POS_X, X_ROLL, X_PITCH, X_YAW, X_VEL_X, X_VEL_Y, X_VEL_Z, X_ROLL_RATE, X_PITCH_RATE, X_YAW_RATE, X_SPEED,
  X_STEER, X_STEER_RATE, X_FORK, X_SHOCK, X_SWINGARM, X_WHEEL_SPEED_F, X_WHEEL_SPEED_R, X_WHEEL_ANGLE_F,
@@ -123,6 +128,7 @@ def make_plant(mm, rider_on: bool, gear: int | None = None) -> tuple[PlantParams
     pp[PP_RIDER] = float(rider_on)
     pp[PP_SLIP_TYRES] = 0.0 if mm.knife_edge else 1.0
     pp[PP_ENGINE] = float(cfg.powertrain is not None)
+    pp[PP_GRAVITY:PP_GRAVITY + 3] = gravity(mm.mech.model)
     ep = pack_engine(cfg.powertrain, cfg.final_ratio, gear) if cfg.powertrain is not None else np.zeros(1)
     return PlantParams(pp, ep), PlantState(np.zeros(NRV), np.zeros(NRO), np.zeros(NIN), engine_state())
 
@@ -270,14 +276,10 @@ def plant_sensors(d, idx, par, pp, inp, out):
     # IMU point r = P + a e1 + b h: r'' is linear in the coordinates' accelerations
     f0 = qdd[kp] + a * qdd[ke] + b * qdd[kh]
     f1 = qdd[kp + 1] + a * qdd[ke + 1] + b * qdd[kh + 1]
-    f2 = qdd[kp + 2] + a * qdd[ke + 2] + b * qdd[kh + 2] + G
-    w0, w1, w2 = angular_velocity(q, qd, idx[K_E1], idx[K_V], idx[K_H])
-    out[S_ACCEL_X] = f0 * x0 + f1 * x1 + f2 * x2
-    out[S_ACCEL_Y] = f0 * y0 + f1 * y1 + f2 * y2
-    out[S_ACCEL_Z] = f0 * z0 + f1 * z1 + f2 * z2
-    out[S_GYRO_X] = w0 * x0 + w1 * x1 + w2 * x2
-    out[S_GYRO_Y] = w0 * y0 + w1 * y1 + w2 * y2
-    out[S_GYRO_Z] = w0 * z0 + w1 * z1 + w2 * z2
+    f2 = qdd[kp + 2] + a * qdd[ke + 2] + b * qdd[kh + 2]
+    w = angular_velocity(q, qd, idx[K_E1], idx[K_V], idx[K_H])
+    g = (pp[PP_GRAVITY], pp[PP_GRAVITY + 1], pp[PP_GRAVITY + 2])
+    imu_reading((f0, f1, f2), w, (x0, x1, x2), (y0, y1, y2), (z0, z1, z2), g, out, S_ACCEL_X, S_GYRO_X)
     out[S_ROLL] = _roll(q, idx)
     out[S_PITCH] = asin(max(-1.0, min(1.0, -x2)))
     out[S_WHEEL_F] = qd[idx[K_PHI_F]]

@@ -78,11 +78,12 @@ from pydantic import create_model
 
 from rtsim.configfile import Strict, check_ranges, range_fields
 from rtsim.jit import inline_kernel, kernel
+from rtsim.mbs.model import EARTH_GRAVITY
 
 from rtsim.road.paths import (bracket, nearest_segment, on_segment, polyline, seg_project, value_at, vertex_curvature,
                               wrap_angle)
 
-G = 9.81          # m/s^2
+G = EARTH_GRAVITY  # m/s^2, the gravity the rider's lean references assume
 NBUF = 1024       # rows of the delay ring buffer (0.5 s at 1 ms needs 501)
 
 # What the motorcycle reports each call (view).

@@ -18,8 +18,9 @@ from math import sqrt
 
 from rtsim.jit import kernel
 
-from .magic_formula import _low_speed, _rolling_moment
-from .tir import P_LIN_CALPHA, P_LIN_CX, P_LIN_MUX, P_LIN_MUY, P_LIN_TRAIL
+from .low_speed import low_speed_fade
+from .magic_formula import _rolling_moment
+from .tir import P_LIN_CALPHA, P_LIN_CX, P_LIN_MUX, P_LIN_MUY, P_LIN_TRAIL, P_VXLOW
 
 
 @kernel
@@ -42,7 +43,7 @@ def linear_forces(p, fz, kappa, alpha, gamma, vx, mu):
             n = sqrt(n2)
             fx /= n
             fy /= n
-    _, s_low = _low_speed(p, vx)
+    _, s_low = low_speed_fade(vx, p[P_VXLOW])
     mz = -s_low * p[P_LIN_TRAIL] * fy
     my = _rolling_moment(p, fz, fx, vx, s_low)
     return fx, fy, mz, my

@@ -96,6 +96,7 @@ import numpy as np
 
 from rtsim.jit import inline_kernel, kernel
 
+from .low_speed import low_speed_damping, low_speed_fade
 from .tir import (P_BREFF, P_DAMP_RESIDUAL, P_DAMP_VLOW, P_DREFF, P_FNOMIN, P_FREFF, P_LATERAL_STIFFNESS,
                   P_LCX, P_LCY, P_LEX, P_LEY, P_LFZO, P_LGAX, P_LGAY, P_LGAZ, P_LHX, P_LHY, P_LKX, P_LKY,
                   P_LMUX, P_LMUY, P_LMY, P_LONGITUDINAL_STIFFNESS, P_LONGVL, P_LRES, P_LS, P_LSGAL,
@@ -142,19 +143,6 @@ def _mf_cos(b, c, e, x):
 
 
 @inline_kernel
-def _low_speed(p, vx):
-    """(r, s): r = sin(pi/2 |Vx|/VXLOW) in [0, 1], s = sin(pi/2 Vx/VXLOW) in [-1, 1], both saturated
-    beyond VXLOW: smooth fade-ins of offsets and of moments that change sign with the direction."""
-    x = vx / p[P_VXLOW]
-    if x >= 1.0:
-        return 1.0, 1.0
-    if x <= -1.0:
-        return 1.0, -1.0
-    s = sin(0.5 * pi * x)
-    return abs(s), s
-
-
-@inline_kernel
 def _kxk(p, fz, dfz):
     return fz * (p[P_PKX1] + p[P_PKX2] * dfz) * exp(p[P_PKX3] * dfz) * p[P_LKX]
 
@@ -179,7 +167,7 @@ def rolling_resistance_moment(p, fz, fx, vx):
     (QSY3/4 terms are speed dependent), smoothly zero at Vx = 0."""
     if not fz > 0.0:
         return 0.0
-    _, s_low = _low_speed(p, vx)
+    _, s_low = low_speed_fade(vx, p[P_VXLOW])
     return _rolling_moment(p, fz, fx, vx, s_low)
 
 
@@ -199,7 +187,7 @@ def mf52_forces(p, fz, kappa, alpha, gamma, vx, mu):
         alpha = ALPHA_MAX
     elif alpha < -ALPHA_MAX:
         alpha = -ALPHA_MAX
-    r_low, s_low = _low_speed(p, vx)
+    r_low, s_low = low_speed_fade(vx, p[P_VXLOW])
     fz0 = p[P_FNOMIN] * p[P_LFZO]
     dfz = (fz - fz0) / fz0
     r0 = p[P_UNLOADED_RADIUS]
@@ -415,18 +403,6 @@ def steady_slip(p, vx, vsy, omega, re):
     if den < p[P_VXLOW]:
         den = p[P_VXLOW]
     return (omega * re - vx) / den, atan(vsy / den)
-
-
-@inline_kernel
-def low_speed_damping(residual, low, vxlow, vx):
-    """Damping time d [s] of the contact deflections: ``residual`` + ``low`` 0.5 (1 + cos(pi |Vx|/vxlow))
-    below ``vxlow`` [m/s] (the relaxation lengths' damping that keeps a slow or standing tyre from
-    ringing), ``residual`` above."""
-    avx = abs(vx)
-    d = residual
-    if avx < vxlow:
-        d += low * 0.5 * (1.0 + cos(pi * avx / vxlow))
-    return d
 
 
 @inline_kernel

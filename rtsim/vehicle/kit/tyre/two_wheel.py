@@ -104,7 +104,8 @@ from rtsim.configfile import Range, Strict, bad
 from rtsim.jit import inline_kernel, kernel
 from rtsim.vehicle.kit.layout import offsets
 
-from .magic_formula import _relax_step, low_speed_damping, wind_up_limit
+from .low_speed import low_speed_damping, low_speed_fade
+from .magic_formula import _relax_step, wind_up_limit
 
 # ---- packed parameters ----------------------------------------------------------------------------
 (TW_MODEL,          # 0: magic_formula, 1: linear
@@ -369,18 +370,6 @@ def two_wheel_vertical_force(p, d, d_rate):
 
 # ---- force laws -----------------------------------------------------------------------------------
 @inline_kernel
-def _low_speed(p, vx):
-    """(r, s): r = sin(pi/2 |Vx|/V_low) in [0, 1], s = sin(pi/2 Vx/V_low) in [-1, 1], saturated."""
-    x = vx / p[TW_VXLOW]
-    if x >= 1.0:
-        return 1.0, 1.0
-    if x <= -1.0:
-        return 1.0, -1.0
-    s = sin(0.5 * pi * x)
-    return abs(s), s
-
-
-@inline_kernel
 def _ca_norm(p, fz):
     """K_alpha/Fz [1/rad] at load fz."""
     return p[TW_CA] * exp(-p[TW_CA_FZ] * (fz - p[TW_FZ0]) / p[TW_FZ0])
@@ -430,7 +419,7 @@ def _saturation(p, sx, sy):
 @inline_kernel
 def _moments(p, fz, fy, ya, gamma, vx, q, trail):
     """(Mx, My, Mz) from the forces (module docstring); ya = K_alpha tan(alpha) [N]."""
-    _, s_low = _low_speed(p, vx)
+    _, s_low = low_speed_fade(vx, p[TW_VXLOW])
     mx = p[TW_MX] * fy * p[TW_SIGMA_A] / _ca_norm(p, fz)
     my = -s_low * fz * p[TW_R0] * (p[TW_RR0] + p[TW_RR2] * vx * vx)
     mz = s_low * q * (trail * ya - p[TW_TWIST] * fz * gamma)
