@@ -246,7 +246,8 @@ def _truth(*effects):
 def test_scoring():
     """Outcomes against a truth: the exact set within tolerance is right (10 % sensor, 20 % model, of the
     value in the model's terms), an extra effect is a false naming, a value outside its tolerance is off,
-    a smaller-than-structural effect may go unnamed; the rates count them."""
+    a smaller-than-structural effect may go unnamed, a workflow error is never right; the rates count
+    them."""
     from rtsim.validate.bench_score import acceptable, confusion, outcome, rates
     bias = ("sensor_bias", "gyro_z", "bias", 0.03, "sensor", True, 5.0)
     tyre = ("tyre_slip_stiffness", None, "scale", 0.55, "model", True, 9.0)
@@ -268,6 +269,8 @@ def test_scoring():
     r6 = outcome(none, _truth(), named(("road_grade", None, "grade", 0.01)), "")
     r7 = outcome(none, _truth(), [], "no catalogue effect")
     assert (r6["status"], r7["status"]) == ("false", "right")
+    r8 = outcome(none, _truth(), [], "", error="ConvergenceError: the replay stopped")
+    assert r8["status"] == "error" and not acceptable(r8, _truth())[0]     # never right by naming nothing
     rt = rates([r1, r2, r3, r4, r5, r6, r7])
     assert rt["named_right"]["count"] == 1 and rt["named_right"]["of"] == 4       # r1 of r1 r2 r3 r5
     assert rt["false_naming"]["count"] == 2 and rt["none_cases_named"] == {"share": 0.5, "count": 1, "of": 2}

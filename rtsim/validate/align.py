@@ -4,7 +4,9 @@ one grid.
 Two methods (the one used is reported):
 - ``xcorr`` (default): cross-correlation of the model inputs (brake pressure, wheel torques, throttle,
   steering-wheel angle: those that vary). Every run's inputs are resampled at `XCORR_RATE` from its own
-  start and standardised with scales pooled over all runs; for every pair of runs the lag maximising
+  start and divided by their sample noise (median over the runs; at least `NOISE_FLOOR` of the spread), so
+  each input weighs by its signal-to-noise ratio: the driver's command, recorded clean, decides, and a
+  feedback input that differs between repetitions (a speed controller's torque) weighs little; for every pair of runs the lag maximising
   the Pearson correlation of the inputs over the runs' overlap is found (all lags at once with FFTs
   and cumulative sums; refined to a fraction of a sample by a parabola through the peak). The
   reference is the run that correlates best with the others (highest median correlation); each run's
@@ -28,6 +30,7 @@ from .data import Run
 from .signals import box_average
 
 XCORR_RATE = 100.0          # Hz
+NOISE_FLOOR = 1e-3          # an input's weight scale is at least this share of its spread (noise-free inputs)
 
 
 @dataclass
@@ -46,6 +49,13 @@ def default_profile():
     return open_vehicle(None).validation
 
 
+def sample_noise(x: np.ndarray) -> float:
+    """The white noise of a sampled signal, from its second differences (robust: median absolute
+    deviation; a smooth signal's second differences are near zero, white noise of sd s gives sd s sqrt(6))."""
+    d2 = np.diff(x, 2)
+    return float(np.median(np.abs(d2 - np.median(d2)))) / 0.6745 / np.sqrt(6.0) if d2.size else 0.0
+
+
 def varying_inputs(runs: list[Run], profile=None) -> list[str]:
     """Inputs present in every run that vary across the manoeuvre: the range of the signal smoothed
     over 0.1 s exceeds the vehicle profile's min_range and ten times the sample noise (estimated from
@@ -60,9 +70,7 @@ def varying_inputs(runs: list[Run], profile=None) -> list[str]:
         for r in runs:
             x = r.channels[name]
             sm = box_average(r.time, x, 0.1)
-            d2 = np.diff(x, 2)
-            noise = float(np.median(np.abs(d2 - np.median(d2)))) / 0.6745 / np.sqrt(6.0) if d2.size else 0.0
-            if float(np.ptp(sm)) <= max(prof.min_range.get(name, 0.0), 10.0 * noise):
+            if float(np.ptp(sm)) <= max(prof.min_range.get(name, 0.0), 10.0 * sample_noise(x)):
                 ok = False
                 break
         if ok:
@@ -123,7 +131,9 @@ def align_xcorr(runs: list[Run], names: list[str], fs: float = XCORR_RATE, profi
     scales = {}
     for n in names:
         allv = np.concatenate([r.channels[n] for r in runs])
-        scales[n] = float(np.std(allv)) or 1.0
+        spread = float(np.std(allv)) or 1.0
+        noise = float(np.median([sample_noise(r.channels[n]) for r in runs]))
+        scales[n] = max(noise, NOISE_FLOOR * spread)
     sig = [_uniform(r, names, scales, fs) for r in runs]
     nr = len(runs)
     if nr == 1:

@@ -177,13 +177,23 @@ class Bench:
             res = run(Options(self.vehicle, paths, out / case["id"], workers=workers), replayer=self.replayer)
             named = [{"effect": e.name, "channel": e.channel, "params": dict(e.params)} for e in res.effects]
             verdict, error = res.verdict, None
+            steps = [_evidence(it) for it in res.iterations]
         except Exception as exc:              # a workflow error is an outcome of the case, reported
-            named, verdict, error = [], "", f"{type(exc).__name__}: {exc}"
+            named, verdict, error, steps = [], "", f"{type(exc).__name__}: {exc}", []
         t3 = time.perf_counter()
-        rec = outcome(case, truth, named, verdict)
-        rec.update(label=label(case), truth=truth, found=named, verdict=verdict, error=error,
+        rec = outcome(case, truth, named, verdict, error)
+        rec.update(label=label(case), truth=truth, found=named, verdict=verdict, error=error, iterations=steps,
                    seconds={"generate": t1 - t0, "truth": t2 - t1, "workflow": t3 - t2})
         return rec
+
+
+def _evidence(it) -> dict:
+    """An iteration's winner and its best few candidates with the numbers that decided them (diagnosis)."""
+    def one(c):
+        return {"effect": c.effect.label(), "eligible": c.eligible, "moved": round(c.moved, 3),
+                "left": round(c.left, 3), "p": None if c.cv is None else round(c.cv.p_better, 4),
+                "local_reduction": round(c.local_reduction, 3), "note": c.note}
+    return {"winner": one(it.winner) if it.winner else None, "top": [one(c) for c in it.candidates[:4]]}
 
 
 def _fmt(r: dict) -> str:

@@ -6,7 +6,8 @@ Per case (named: the workflow's identified effects; hidden: the case's catalogue
   `TOL` of its value in the model's terms (sensor effects 10 %, model effects 20 %);
 - "value off": the right effects, a value outside its tolerance;
 - "false": an effect named that was not hidden (none, outside and small cases included);
-- "missed": something hidden, nothing (or only part of it) named, nothing false.
+- "missed": something hidden, nothing (or only part of it) named, nothing false;
+- "error": the workflow stopped with an error (never right, whatever was hidden).
 Rates: named right = "right" among the cases whose every effect is larger than the structural mismatch;
 value error = per hidden effect named, |named - truth| / |truth| (within tolerance: its share);
 false naming = share of all cases with a "false" naming; none-cases named = none and outside cases
@@ -24,8 +25,9 @@ def _key(effect: str, channel: str | None) -> str:
     return f"{effect}[{channel}]" if channel else effect
 
 
-def outcome(case: dict, truth: dict, named: list[dict], verdict: str) -> dict:
-    """The case's outcome (module docstring). named: [{"effect", "channel", "params": {param: value}}]."""
+def outcome(case: dict, truth: dict, named: list[dict], verdict: str, error: str | None = None) -> dict:
+    """The case's outcome (module docstring). named: [{"effect", "channel", "params": {param: value}}];
+    error: the workflow's error message, if it stopped with one."""
     hidden = {_key(e["effect"], e["channel"]): e for e in truth["effects"]}
     found = {_key(n["effect"], n.get("channel")): n for n in named}
     errors = {}
@@ -35,7 +37,9 @@ def outcome(case: dict, truth: dict, named: list[dict], verdict: str) -> dict:
             ref = e["model_terms"]
             errors[k] = abs(value - ref) / abs(ref) if value is not None and ref else float("inf")
     extra = sorted(set(found) - set(hidden))
-    if extra:
+    if error:
+        status = "error"
+    elif extra:
         status = "false"
     elif set(found) == set(hidden) and hidden:
         status = "right" if all(errors[k] <= TOL[hidden[k]["kind"]] for k in hidden) else "value off"
@@ -88,9 +92,11 @@ def confusion(outcomes: list[dict]) -> dict[str, Counter]:
 
 
 def acceptable(rec: dict, truth: dict) -> tuple[bool, str]:
-    """Whether a case's outcome meets the bar, and why not: nothing named that was not hidden; every
+    """Whether a case's outcome meets the bar, and why not: the workflow ran; nothing named that was not hidden; every
     hidden effect larger than the structural mismatch named within its tolerance; a smaller one either
     not named or named within its tolerance (it may be told apart or not)."""
+    if rec["status"] == "error":
+        return False, "the workflow stopped with an error"
     if rec["extra"]:
         return False, f"named {', '.join(rec['extra'])}, not hidden"
     for e in truth["effects"]:

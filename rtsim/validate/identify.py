@@ -49,13 +49,18 @@ value. A candidate is eligible when it is plausible and
 - it predicts left-out runs better (crossval.leave_one_run_out: each run predicted from its own inputs
   by the model re-fitted on the other runs, the corrected resampled t-test over the folds at
   crossval.ALPHA; with fewer than 3 runs: the information criterion falls by MIN_DELTA_IC);
-- it predicts no channel significantly worse (the same test per channel);
+- it predicts no channel significantly worse (the same test per channel; for a sensor effect, its own
+  channels: elsewhere only the nuisance adjustments' re-fit moves, which the test over all channels weighs);
 - it moves its signature channels (a sensor effect: its own; a model effect: those whose left-out
-  prediction it improves) by more than the disagreement it leaves there (`left`, RMS in standard
-  errors: the structural mismatch and the noise left in the mean): cross-validation across repetitions
-  cannot see a structural mismatch, which is in every run alike;
+  prediction it improves) by more than DISCREPANCY_Z (1.96) times the disagreement it leaves there
+  (`left`, RMS in standard errors, at least 1: the structural mismatch and the noise left in the mean), the 95 %
+  level of a discrepancy that may lie along the effect's signature: cross-validation across
+  repetitions cannot see a structural mismatch, which is in every run alike;
 - for a model effect, what the nuisance adjustments cannot reproduce of its change (free of their
   prior) still predicts left-out runs better;
+- a sensor effect that a model-free relation of the vehicle's profile checks (redundancy: the gyro's lag
+  against the yaw rate the rear wheel speeds give) is confirmed by it: a model whose yaw response lags
+  reads as a gyro delay against the model, never against the wheels;
 - it is not physically confounded: a gain or lag of accel_y asked for without the roll angle compared
   (TILT; body-frame accelerometers only), a gain or lag of the roll angle (ROLL_CONFOUNDED: the model's
   roll stiffness and damping), a grade asked for of level-frame data that never stand still
@@ -81,6 +86,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from scipy.optimize import minimize_scalar
+from scipy.stats import norm
 
 from rtsim.errors import RtsimError
 from rtsim.vehicle.kit.sensor_model import delayed
@@ -88,6 +94,7 @@ from rtsim.vehicle.kit.sensor_model import delayed
 from .effectset import Effect
 from .crossval import leave_one_run_out, normalised
 from .objective import MOVING, Objective, _tau
+from .redundancy import check
 from .stats import t_critical
 from .replay import Replayer, ReplayInputs
 from .signals import DERIVED
@@ -97,6 +104,9 @@ TRIAL_FRACTION = 0.25
 TOL = 0.003                  # relative tolerance on theta of the final 1-D minimisation
 LITTLE = 0.02                # share of the cost a candidate must remove to be refined
 SECANT = 0.05                # shortest relative secant for the sensitivity behind the uncertainty
+#: an effect must move its channels by this many times the discrepancy it leaves (Candidate.outweighs_structure):
+#: the two-sided 95 % quantile of the standard normal distribution
+DISCREPANCY_Z = float(norm.ppf(0.975))
 
 
 class _Budget(Exception):
@@ -161,11 +171,16 @@ class Candidate:
 
     @property
     def outweighs_structure(self) -> bool:
-        """It changes its signature channels by more than the disagreement it leaves there (`left`: the
-        structural mismatch and the noise left in the data's mean, which hides any structure smaller than
-        itself): an effect smaller than what nothing in the catalogue explains on those channels cannot
-        be told apart from it, however consistently every run shows it."""
-        return self.moved >= self.left
+        """It changes its signature channels by more than DISCREPANCY_Z times the disagreement it leaves
+        there (`left`: the structural mismatch and the noise left in the data's mean). The disagreement
+        is a model discrepancy of unknown shape: taken as a zero-mean random signal of RMS `left` that may
+        lie wholly along the effect's signature (the least favourable case: a structural gain reads as a
+        sensor gain), its share along the signature is below DISCREPANCY_Z `left` with 95 % probability,
+        so an effect that moves the channels further stands out of it at that level. An effect inside it
+        cannot be told apart from the structure, however consistently every run shows it. The mismatch is
+        never taken below 1 standard error, the noise left in the data's mean: a residual smaller than that
+        says the discrepancy cannot be resolved, not that it is absent."""
+        return self.moved >= DISCREPANCY_Z * max(self.left, 1.0)
 
     @property
     def predicts(self) -> bool:
@@ -363,7 +378,10 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
     # is left beyond it is structural
     cand.structure = math.sqrt(max(after / len(sig) - 1.0, 0.0))
     cand.moved = math.sqrt(sum(by[c][2] ** 2 for c in sig) / len(sig))
-    cand.worse = [c for c in obj.channels if cand.cv is not None and cand.cv.worsens(c)]
+    # a sensor effect changes its own channels only: what moves elsewhere is the nuisance adjustments'
+    # re-fit (an axle's rolling radius shared by its two wheels), which the test over all channels weighs
+    judged = sig if cand.kind == "sensor" else obj.channels
+    cand.worse = [c for c in judged if cand.cv is not None and cand.cv.worsens(c)]
     ntot = sum(obj.n_eff.values())
     local = sum(obj.n_eff[c] * (lr if c in sig else min(lr, 0.0)) for c in obj.channels
                 for lr in [math.log(max(by[c][1], 1e-300) / max(by[c][0], 1e-300))])
@@ -379,6 +397,8 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         what = cand.effect.name.split("_")[1]
         cand.confounded = (f"a {what} of the {ch} angle cannot be told from the model's roll stiffness and damping, "
                            "which the catalogue does not hold")
+    if cand.kind == "sensor" and not cand.confounded:
+        cand.confounded = model_free_check(ctx, cand)
     if (cand.effect.name in LEVEL_CONFOUNDED and ctx.replayer.accel_frame == "level" and obj.nuisance is not None
             and _moves_throughout(ctx)):
         cand.confounded = ("in the level frame a grade reads as a constant resistance (the resistance-offset "
@@ -397,6 +417,27 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
                                f"{100 * share:.0f} % of what it changes, and the rest does not improve the "
                                f"prediction of left-out runs")
     explain_rejection(cand)
+
+
+def model_free_check(ctx: Context, cand: Candidate) -> str:
+    """Why a sensor effect is the model's structure and not the sensor, from a model-free relation of the
+    vehicle's profile that checks it (redundancy): the relation's sentence when the data's channels do
+    not confirm the candidate's value, "" when they do or no relation checks it."""
+    rel = next((r for r in getattr(ctx.replayer.profile, "relations", ())
+                if r.channel == cand.effect.channel and cand.effect.name in r.checks), None)
+    if rel is None or cand.coord is None:
+        return ""
+    obj = ctx.objective
+    n = max(obj.runs[c].shape[0] for c in obj.channels)
+    runs = [{c: obj.runs[c][i] for c in obj.channels if i < obj.runs[c].shape[0]} for i in range(n)]
+    t = ctx.inputs.t
+    kind = "scale" if cand.effect.name == "sensor_scale" else "delay"
+    ck = check(rel, kind, runs, ctx.outputs, float(t[1] - t[0]))
+    if ck is None:
+        return ""
+    value = cand.coord.value(cand.theta)
+    add_detail(cand, f"model-free check against {rel.says}: {ck.value:.4g} +- {ck.half_width:.2g}")
+    return "" if ck.confirms(value) else ck.sentence(value)
 
 
 def add_detail(cand: Candidate, text: str) -> None:
@@ -420,9 +461,9 @@ def explain_rejection(cand: Candidate) -> None:
         cand.note = (f"It predicts {', '.join(cand.worse)} worse in left-out runs while it improves "
                      f"{sig}: it trades one mismatch for another.")
     elif not cand.outweighs_structure:
-        cand.note = (f"It changes {sig} by less than the mismatch it leaves there ({cand.moved:.2g} against "
-                     f"{cand.left:.2g} standard errors), so it cannot be told apart from the model's structural "
-                     f"mismatch.")
+        cand.note = (f"It changes {sig} by {cand.moved:.2g} standard errors, less than {DISCREPANCY_Z:.2f} times "
+                     f"the mismatch it leaves there ({max(cand.left, 1.0):.2g}, at least the noise left in the "
+                     f"mean), so it cannot be told apart from the model's structural mismatch.")
     else:
         cand.note = ""
 

@@ -69,7 +69,7 @@ from rtsim.vehicle.registry import open_vehicle
 from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import MIN_RUNS, accel_frame, announce, load_runs, require_runs
 from .effectset import Effect, from_mapping
-from .identify import (CLEAR, LITTLE, MAX_SIMS, Candidate, Context, add_detail, combine_runs, equivalents,
+from .identify import (CLEAR, DISCREPANCY_Z, LITTLE, MAX_SIMS, Candidate, Context, add_detail, combine_runs, equivalents,
                        fit_sensor_effects, rank, rebase, run_estimate)
 from .crossval import normalised
 from .joint import joint_model
@@ -439,8 +439,8 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
             if close:
                 c = close[0]
                 why = (f"; {c.effect.label()} would change {', '.join(c.signature)} by {c.moved:.2g} standard "
-                       f"errors, less than the mismatch left there ({c.left:.2g}): the data cannot "
-                       f"tell it apart from the structural mismatch")
+                       f"errors, less than {DISCREPANCY_Z:.2f} times the mismatch left there ({max(c.left, 1.0):.2g}): the "
+                       f"data cannot tell it apart from the structural mismatch")
             if not effects and _inside(metrics, INSIDE_MOSTLY):
                 verdict = ("no missing effect found: the model agrees with the benchmark (at least "
                            f"{100 * INSIDE_MOSTLY:.0f} % of every channel inside the band) and no candidate removes a "

@@ -13,6 +13,23 @@ and the workflow imports it; the vehicle never imports the workflow.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
+
+
+@dataclass(frozen=True)
+class Relation:
+    """A model-free relation between measured channels (rtsim.validate.redundancy): `channel` reads a
+    multiple of `reference(channels)` plus a constant plus multiples of `offsets(channels)`, whatever the
+    vehicle's dynamics do. `needs`: the channels the reference and offsets read; `says`: what the
+    reference is, in words for the report; `checks`: the sensor effects of the catalogue it checks
+    ("sensor_delay": the lag; "sensor_scale": the gain, only where the relation's coefficient does not
+    depend on the vehicle's structure)."""
+    channel: str
+    needs: tuple[str, ...]
+    reference: Callable[[dict], object]
+    offsets: Callable[[dict], list]
+    says: str
+    checks: tuple[str, ...] = ("sensor_delay",)
 
 
 @dataclass(frozen=True)
@@ -29,3 +46,5 @@ class ValidationProfile:
     #: the report's description of the manoeuvre ("{compared}": the compared channels); "" when the
     #: benchmark's own (longitudinal, or lateral when the runs steer) describes it
     manoeuvre: str = ""
+    #: model-free relations that check a sensor's gain and lag (rtsim.validate.redundancy)
+    relations: tuple[Relation, ...] = ()
