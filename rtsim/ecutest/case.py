@@ -199,6 +199,9 @@ def _run(cat: LoadedCatalogue, case: Case, index: int, cdir: Path, log) -> dict:
             from .expect import Outcome
             outcomes.append(Outcome(e.label(), e.signal, False, f"{e.label()}: {exc.args[0]}", e.after, None,
                                     (float("nan"), float("nan"))))
+    from .report import plot_case
+
+    plot_case(sig, case, outcomes, cdir / "plot.png")
     failed = [o for o in outcomes if not o.passed]
     return {"status": "failed" if failed else "passed", "message": "; ".join(o.message for o in failed),
             "sim_end": sig.end, "outcomes": [o.as_dict() for o in outcomes], "ecu": ecu_info}
