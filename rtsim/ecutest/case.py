@@ -58,12 +58,21 @@ def ecu_command(cat: LoadedCatalogue, case: Case, channel: str) -> list[str]:
         for k, v in subst.items():
             w = w.replace(k, v)
         if w:
-            out.append(w)
+            out.append(str(script_path(cat, w) or w))
     if not templated:
         out += ["--can-interface", "remote", "--can-channel", channel, "--duration", repr(cat.duration(case))]
         if lockstep:
             out.append("--lockstep")
     return out
+
+
+def script_path(cat: LoadedCatalogue, word: str) -> Path | None:
+    """A command word naming a script (``*.py``) as an absolute path: relative ones are relative to the
+    catalogue's folder (None: not a script)."""
+    if not word.endswith(".py"):
+        return None
+    p = Path(word)
+    return p if p.is_absolute() else (cat.path.parent / p).resolve()
 
 
 def case_id(cat: LoadedCatalogue, index: int) -> str:
@@ -79,8 +88,7 @@ def case_id(cat: LoadedCatalogue, index: int) -> str:
     files = run_inputs(scenario, vehicle, {}).files
     spec = cat.spec.model_dump(mode="json", exclude={"cases"})
     words = list(cat.spec.ecu.command or []) + list(cat.spec.ecu.args) + list(case.ecu_args)
-    scripts = {w: digest((cat.path.parent / w) if not os.path.isabs(w) else Path(w))
-               for w in words if w.endswith(".py")}
+    scripts = {w: digest(script_path(cat, w)) for w in words if w.endswith(".py")}
     blob = json.dumps({"catalogue": spec, "case": case.model_dump(mode="json"), "files": files,
                        "scripts": scripts}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
@@ -153,12 +161,12 @@ def _run(cat: LoadedCatalogue, case: Case, index: int, cdir: Path, log) -> dict:
         if "svc" in holder:
             holder["svc"].stop()
     try:
-        if not external:
-            cmd = ecu_command(cat, case, channel)
+        svc = Service(opts, out=say)        # its bus port listens from here: the ECU's first frames are kept
+        holder["svc"] = svc
+        if not external:                    # (started before, on this worker's running hub, its first step
+            cmd = ecu_command(cat, case, channel)   # request could reach the bus before the service did)
             say("ecu: " + " ".join(cmd))
             ecu = EcuProcess(cmd, cwd=ROOT, on_exit=on_exit, echo=lambda line: say("ecu: " + line))
-        svc = Service(opts, out=say)
-        holder["svc"] = svc
         timer = threading.Timer(cat.spec.timeout, svc.stop)
         timer.daemon = True
         timer.start()
@@ -174,6 +182,8 @@ def _run(cat: LoadedCatalogue, case: Case, index: int, cdir: Path, log) -> dict:
     finally:
         if ecu is not None and not ecu.ended:
             ecu.stop()
+        if "svc" in holder:
+            holder["svc"].close()          # (idempotent: closed by run() already when it ran)
     say(json.dumps({"service": {k: summary.get(k) for k in ("sim_time", "steps", "run_state", "accepted_frames")}}))
     ecu_info = {}
     if ecu is not None:
@@ -203,5 +213,5 @@ def _run(cat: LoadedCatalogue, case: Case, index: int, cdir: Path, log) -> dict:
 
     plot_case(sig, case, outcomes, cdir / "plot.png")
     failed = [o for o in outcomes if not o.passed]
-    return {"status": "failed" if failed else "passed", "message": "; ".join(o.message for o in failed),
+    return {"status": "failed" if failed else "passed", "message": " | ".join(o.message for o in failed),
             "sim_end": sig.end, "outcomes": [o.as_dict() for o in outcomes], "ecu": ecu_info}

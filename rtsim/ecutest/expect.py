@@ -87,8 +87,11 @@ def judge(e, sig: Signals, case_end: float, fault_ids=()) -> Outcome:
                              ((vw > e.max) if e.max is not None else False) | ~np.isfinite(vw))
         if len(bad):
             i = bad[0]
+            dev = np.maximum((e.min - vw) if e.min is not None else -np.inf, (vw - e.max) if e.max is not None else -np.inf)
+            k = int(np.nanargmax(np.where(np.isfinite(vw), dev, np.inf)))
+            worst = f"; worst {_fmt(vw[k])} at t = {_fmt(tw[k])} s" if k != i else ""
             return Outcome(label, e.signal, False, f"{label}: {e.signal} = {_fmt(vw[i])} at t = {_fmt(tw[i])} s, "
-                           f"outside {allowed} {where}", e.after, t0, (lo, hi), float(tw[i]), float(vw[i]))
+                           f"outside {allowed} {where}{worst}", e.after, t0, (lo, hi), float(tw[i]), float(vw[i]))
         i = int(np.argmax(np.abs(vw)))
         return Outcome(label, e.signal, True, f"{e.signal} within {allowed} {where} ({len(tw)} samples)",
                        e.after, t0, (lo, hi), float(tw[i]), float(vw[i]))

@@ -85,7 +85,7 @@ def table(rows: list[dict]) -> str:
     head = f"{'case':<32} {'status':<7} {'sim s':>6} {'wall s':>7}  message"
     out = [head, "-" * len(head)]
     for r in rows:
-        msg = (r.get("message") or "").split("; ")[0]
+        msg = (r.get("message") or "").split(" | ")[0]
         sim = r.get("sim_end")
         out.append(f"{r['name']:<32} {r['status']:<7} {'' if sim is None else f'{sim:.2f}':>6} "
                    f"{float(r.get('wall_s') or 0):>7.1f}  {msg}")
@@ -107,7 +107,7 @@ def write_html(cat, rows: list[dict], out: Path, path: Path) -> Path:
              f"mode {esc(cat.spec.mode)}</p><table><tr><th>case</th><th>status</th><th>message</th></tr>"]
     for r in rows:
         parts.append(f"<tr><td><a href='#{esc(r['name'])}'>{esc(r['name'])}</a></td><td class='{r['status']}'>"
-                     f"{r['status']}</td><td>{esc((r.get('message') or '').split('; ')[0])}</td></tr>")
+                     f"{r['status']}</td><td>{esc((r.get('message') or '').split(' | ')[0])}</td></tr>")
     parts.append("</table>")
     by_name = {c.name: c for c in cat.spec.cases}
     for r in rows:
