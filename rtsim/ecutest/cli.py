@@ -36,7 +36,7 @@ def _init(parent: int) -> None:
     die_with_parent(parent)
 
 
-def _stop(pool: ProcessPoolExecutor) -> None:
+def stop_pool(pool: ProcessPoolExecutor) -> None:
     """End the pool's workers (each takes its hub, service and ECU with it)."""
     for p in list(getattr(pool, "_processes", {}).values()):
         if p.is_alive():
@@ -44,9 +44,17 @@ def _stop(pool: ProcessPoolExecutor) -> None:
     pool.shutdown(wait=True, cancel_futures=True)
 
 
+def make_pool(workers: int) -> ProcessPoolExecutor:
+    """The worker processes (spawned; each dies with this process); end them with ``stop_pool``."""
+    return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init,
+                               initargs=(os.getpid(),))
+
+
 def run_catalogue(path: str | Path, out: Path, workers: int = 1, mode: str | None = None, select: str | None = None,
-                  say=print) -> tuple[object, list[dict]]:
-    """Run the catalogue's (selected) cases not in ``out``'s journal; (catalogue, rows in catalogue order)."""
+                  say=print, pool: ProcessPoolExecutor | None = None) -> tuple[object, list[dict]]:
+    """Run the catalogue's (selected) cases not in ``out``'s journal; (catalogue, rows in catalogue order).
+    ``pool``: worker processes to use (make_pool; kept, their kernels loaded, for the next catalogue) instead
+    of a pool of ``workers`` started and stopped here."""
     from rtsim.batch.results import Journal
 
     from .case import COLUMNS, case_id
@@ -70,18 +78,17 @@ def run_catalogue(path: str | Path, out: Path, workers: int = 1, mode: str | Non
         say(f"rtsim test: resuming: {len(picked) - len(todo)} of {len(picked)} cases done already in {out}")
     try:
         if todo:
-            _run(path, out, todo, ids, min(workers, len(todo)), journal, say)
+            _run(path, out, todo, ids, min(workers, len(todo)), journal, say, pool)
     finally:
         journal.close()
     rows = [journal.rows[ids[i]] for i in picked if ids[i] in journal.rows]
     return cat, rows
 
 
-def _run(path, out: Path, todo: list[int], ids: dict, workers: int, journal, say) -> None:
+def _run(path, out: Path, todo: list[int], ids: dict, workers: int, journal, say, given=None) -> None:
     from .case import run_case
 
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=_init,
-                               initargs=(os.getpid(),))
+    pool = given or make_pool(workers)
     try:
         pending = {pool.submit(run_case, str(Path(path).resolve()), i, str(out.resolve()), ids[i]): i for i in todo}
         while pending:
@@ -92,7 +99,8 @@ def _run(path, out: Path, todo: list[int], ids: dict, workers: int, journal, say
                 journal.append(row)
                 say(f"rtsim test: {row['name']}: {row['status']} ({float(row.get('wall_s') or 0):.1f} s wall)")
     finally:
-        _stop(pool)
+        if given is None:
+            stop_pool(pool)
 
 
 def main(args) -> int:
