@@ -33,9 +33,17 @@ def pool():
         stop_pool(p)
         left = [c for c in me.children(recursive=True) if c.pid not in before]
         gone, alive = psutil.wait_procs(left, timeout=20)
+        alive = [c for c in alive if _running(c)]          # a zombie has ended (its parent reaps it)
         for c in alive:
             c.kill()
-        assert not alive, f"processes left behind: {[c.cmdline() for c in alive]}"
+        assert not alive, f"processes left behind: {[c.pid for c in alive]}"
+
+
+def _running(proc) -> bool:
+    try:
+        return proc.status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
 
 
 def _run(name_or_path, out, pool):
