@@ -31,7 +31,7 @@ def plot_case(sig, case, outcomes, path: Path) -> Path:
         if o.signal in sig.series:
             t, v = sig.series[o.signal]
             m = (t >= a) & (t <= b)
-            ax.plot(t[m], v[m], lw=1.0, drawstyle="steps-post" if o.signal.startswith(("fault.", "sim.")) else "default")
+            ax.plot(t[m], v[m], lw=1.0, drawstyle="steps-post" if o.signal.startswith(("fault.", "sim.", "commands.", "ecu.")) else "default")
         for te, fid, ev in sig.fault_events:
             if a <= te <= b:
                 ax.axvline(te, color="red" if ev == "onset" else "grey", lw=0.6, ls=":")
