@@ -34,9 +34,20 @@ def pool():
         left = [c for c in me.children(recursive=True) if c.pid not in before]
         gone, alive = psutil.wait_procs(left, timeout=20)
         alive = [c for c in alive if _running(c)]          # a zombie has ended (its parent reaps it)
+        names = [_cmdline(c) for c in alive]
+        # multiprocessing's resource tracker serves this whole Python process (ends with it), not the run
+        alive = [c for c, n in zip(alive, names) if "multiprocessing.resource_tracker" not in n]
+        names = [n for n in names if "multiprocessing.resource_tracker" not in n]
         for c in alive:
             c.kill()
-        assert not alive, f"processes left behind: {[c.pid for c in alive]}"
+        assert not alive, f"processes left behind: {names}"
+
+
+def _cmdline(proc) -> str:
+    try:
+        return " ".join(proc.cmdline())
+    except psutil.Error:
+        return str(proc.pid)
 
 
 def _running(proc) -> bool:
