@@ -117,3 +117,14 @@ def test_monotonic_and_reached_and_condition_events(tmp_path):
     e = _expect(tmp_path, 'kind = "reached"\nsignal = "state.speed"\ncondition = "> 1"\nafter = "state.speed > 5"\n')
     o = judge(e, sig, sig.end)
     assert not o.passed and "never happened" in o.message
+
+
+def test_cli_refuses_a_bad_catalogue_in_one_line(tmp_path, capsys):
+    from rtsim.cli import main
+
+    p = tmp_path / "bad.toml"
+    p.write_text(HEAD + '[[cases.expect]]\nkind = "monotonic"\nsignal = "state.speed"\ndirection = "up"\n')
+    assert main(["test", str(p), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "cases[0].expect[0].direction" in err and "'up'" in err, err
+    assert not (tmp_path / "out").exists()
