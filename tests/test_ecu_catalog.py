@@ -30,14 +30,17 @@ def pool():
     try:
         yield p
     finally:
+        # what the pool started (its workers and their CAN hubs), taken before stopping it: a hub whose
+        # worker ended is no longer this process's descendant. multiprocessing's resource tracker serves
+        # this whole Python process (it ends with it), not the run.
+        started = [c for c in me.children(recursive=True)
+                   if c.pid not in before and "multiprocessing.resource_tracker" not in _cmdline(c)]
         stop_pool(p)
-        left = [c for c in me.children(recursive=True) if c.pid not in before]
+        left = started + [c for c in me.children(recursive=True) if c.pid not in before and c not in started
+                          and "multiprocessing.resource_tracker" not in _cmdline(c)]
         gone, alive = psutil.wait_procs(left, timeout=20)
         alive = [c for c in alive if _running(c)]          # a zombie has ended (its parent reaps it)
         names = [_cmdline(c) for c in alive]
-        # multiprocessing's resource tracker serves this whole Python process (ends with it), not the run
-        alive = [c for c, n in zip(alive, names) if "multiprocessing.resource_tracker" not in n]
-        names = [n for n in names if "multiprocessing.resource_tracker" not in n]
         for c in alive:
             c.kill()
         assert not alive, f"processes left behind: {names}"
