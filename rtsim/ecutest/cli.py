@@ -15,7 +15,7 @@ import sys
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 
-from rtsim.errors import ConfigError
+from rtsim.errors import ConfigError, RtsimError
 
 
 def add_arguments(p) -> None:
@@ -94,13 +94,23 @@ def _run(path, out: Path, todo: list[int], ids: dict, workers: int, journal, say
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for f in done:
-                pending.pop(f)
-                row = f.result()
+                i = pending.pop(f)
+                try:
+                    row = f.result()
+                except Exception as exc:  # noqa: BLE001  (a worker lost: not journalled, so a resume runs it)
+                    raise RtsimError(f"the worker running case {_name(path, i)!r} was lost ({type(exc).__name__}: "
+                                     f"{' '.join(str(exc).split())}); the finished cases are kept: run the same "
+                                     "command again to resume") from None
                 journal.append(row)
                 say(f"rtsim test: {row['name']}: {row['status']} ({float(row.get('wall_s') or 0):.1f} s wall)")
     finally:
         if given is None:
             stop_pool(pool)
+
+
+def _name(path, i: int) -> str:
+    from .catalog import load_catalogue
+    return load_catalogue(path).spec.cases[i].name
 
 
 def main(args) -> int:
