@@ -373,6 +373,8 @@ _DELEGATED = (
      "local pool or Ray: results table, metrics, pass/fail, HTML summary; resumable"),
     ("faults", "rtsim.faults.cli", "the fault catalogue (--list): sensor, bus and actuator faults a session can "
      "inject; or check fault files"),
+    ("test", "rtsim.ecutest.cli", "run an ECU test catalogue: cases of scenario, faults and expectations against an "
+     "ECU on the bus; JUnit XML, results table, HTML report; resumable"),
     ("inverse", "rtsim.analyses.inverse", "a motorcycle's inverse dynamics: the steering and drive "
      "torques that follow a path at a speed"),
 )

@@ -1,0 +1,1 @@
+"""ECU test catalogues: `rtsim test CATALOG.toml` (docs/ecu-tests.md)."""
