@@ -143,6 +143,11 @@ def _run(args) -> int:
     vehicle = open_vehicle(args.vehicle if args.vehicle is not None else sc.vehicle_path)
     vehicle.refuse("run")
     vehicle.check_scenario(sc)
+    if sc.spec.faults and not args.no_faults:
+        raise RtsimError(f"{sc.name}: the scenario arms {len(sc.spec.faults)} fault(s) "
+                         f"({', '.join(f.id for f in sc.spec.faults)}); "
+                         "an offline run does not inject faults: serve it (rtsim serve --scenario), run it as an ECU "
+                         "test case (rtsim test), or pass --no-faults to run it without them")
     shown = [-1]
 
     def progress(frac):
@@ -315,6 +320,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="vehicle TOML or name in configs/vehicles (default: the scenario's, else xbw)")
     r.add_argument("--scenario", required=True, metavar="FILE|NAME", help="scenario TOML or name in configs/scenarios")
     r.add_argument("--out", required=True, metavar="FILE", help="output file: .csv or .mcap")
+    r.add_argument("--no-faults", action="store_true",
+                   help="run a scenario that arms [[faults]] without them (an offline run injects none)")
     r.add_argument("--summary", metavar="JSON", help="two-wheeler scenarios: also write the summary (measured "
                    "against the manoeuvre's analytic references) to this JSON file")
     r.add_argument("--plot", nargs="?", const="", metavar="DIR",

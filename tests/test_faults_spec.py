@@ -103,3 +103,21 @@ def test_scenario_and_service_settings_take_faults_sections(tmp_path):
         load_service_config(svc)
     svc.write_text('[simulation]\nmode = "lockstep"\n[[faults]]\nid = "b"\nkind = "bus_off"\ntarget = "bus"\n')
     assert load_service_config(svc)["faults"] == [svc]
+
+
+def test_an_offline_run_refuses_a_scenario_with_faults_in_one_line(tmp_path, capsys):
+    """`rtsim run` injects no faults: a scenario that arms some is refused (exit 2, one line naming the
+    scenario and its faults and the commands that inject them), never run silently without them."""
+    from pathlib import Path
+
+    from rtsim.cli import main
+    shipped = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "step_steer_80kph.toml"
+    text = shipped.read_text().replace('road = "../roads/flat.toml"',
+                                       f'road = "{(shipped.parent / "../roads/flat.toml").resolve()}"')
+    sc = tmp_path / "step_with_fault.toml"
+    sc.write_text(text + '\n[[faults]]\nid = "gyro_stuck"\nkind = "stuck_value"\ntarget = "gyro_z"\n'
+                  'value = 0.0\nat = 2.0\n')
+    assert main(["run", "--scenario", str(sc), "--out", str(tmp_path / "out.csv")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "gyro_stuck" in err[0] and "rtsim serve" in err[0] and "--no-faults" in err[0]
+    assert not (tmp_path / "out.csv").exists()
