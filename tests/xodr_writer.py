@@ -13,6 +13,7 @@ LINE = 60.0                 # m, the straight
 SPIRAL = 40.0               # m, the clothoid: curvature 0 -> 1/RADIUS
 RADIUS = 100.0              # m, the arc (turning left)
 ARC = 0.5 * math.pi * RADIUS   # m, a quarter circle
+GRADE = 0.01               # the road's constant grade (elevation b)
 CROSS_SLOPE = 0.04          # the arc's superelevation, tan(roll): 4 %, falling to the inside (left)
 
 
@@ -34,7 +35,7 @@ def lanes_xml(friction: dict | None = None) -> str:
 
 def road_xml(geometries: str, length: float, lanes: str, elevation: str = "", lateral: str = "",
              rid: str = "1") -> str:
-    return (f'<road name="r{rid}" length="{length!r}" id="{rid}" junction="-1" rule="RHT">'
+    return (f'<road name="r{rid}" length="{float(length)!r}" id="{rid}" junction="-1" rule="RHT">'
             f'<planView>{geometries}</planView><elevationProfile>{elevation}</elevationProfile>'
             f'<lateralProfile>{lateral}</lateralProfile>{lanes}</road>')
 
@@ -44,7 +45,7 @@ def document(*roads: str) -> str:
             f'name="rtsim test" version="1.00"/>{"".join(roads)}</OpenDRIVE>\n')
 
 
-def bar_road(friction: dict | None = None, grade: float = 0.01) -> str:
+def bar_road(friction: dict | None = None, grade: float = GRADE) -> str:
     """Line (LINE m, heading +x from the origin), clothoid (0 -> 1/RADIUS over SPIRAL m), arc (RADIUS, a
     quarter circle, turning left); elevation a constant `grade`; superelevation 0 on the line, a linear ramp
     over the clothoid to -atan(CROSS_SLOPE) (the left, inner side low) held on the arc."""
