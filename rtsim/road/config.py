@@ -175,3 +175,20 @@ def opendrive_mesh(path, cfg: OpenDriveRoadConfig | None = None):
     cfg = read_road_config(path) if cfg is None else cfg
     odr = read_opendrive_of(path, cfg)
     return odr, mesh_opendrive(odr, cfg.mu, cfg.rolling_resistance, cfg.ds_max, cfg.dt_max)
+
+
+def road_marks_of(path) -> dict | None:
+    """The road marks to draw (rtsim.road.opendrive.road_markings) of a road TOML of type "opendrive"; None
+    for any other road or a road file that cannot be read (drawing only: the run reports that one)."""
+    from rtsim.errors import RtsimError
+    from rtsim.road.opendrive import road_markings
+
+    if path is None:
+        return None
+    try:
+        cfg = read_road_config(path)
+        if not isinstance(cfg, OpenDriveRoadConfig):
+            return None
+        return road_markings(read_opendrive_of(path, cfg))
+    except (RtsimError, OSError):
+        return None

@@ -153,6 +153,7 @@ export class Scene3D {
       for (let i = 2; i < v.length; i += 3) zmin = Math.min(zmin, v[i]);
       this.groundZ = zmin - 0.3;                 // the plane under and around the survey
       ground.material.color.set('#8a9a7a');
+      if (road.marks && road.marks.triangles.length) this.buildMarks(road.marks);
       const wallMat = new THREE.MeshLambertMaterial({ color: '#d9d4c7' });
       for (const b of road.buildings || []) {     // blocks from the file beside the survey
         const box = new THREE.Mesh(new THREE.BoxGeometry(b.length, b.width, b.height + 0.3), wallMat);
@@ -161,6 +162,25 @@ export class Scene3D {
         this.scene.add(box);
       }
     }
+  }
+
+  // an OpenDRIVE road's marks: ribbons 1 cm above the lanes, a colour per triangle
+  buildMarks(marks) {
+    const v = marks.vertices, t = marks.triangles;
+    const pos = new Float32Array(t.length * 3), col = new Float32Array(t.length * 3);
+    for (let k = 0; k < t.length / 3; k++) {
+      const c = new THREE.Color(marks.colour[k]);
+      for (let j = 0; j < 3; j++) {
+        const i = t[3 * k + j];
+        pos.set([v[3 * i], v[3 * i + 1], v[3 * i + 2]], 9 * k + 3 * j);
+        col.set([c.r, c.g, c.b], 9 * k + 3 * j);
+      }
+    }
+    const geo = new THREE.BufferGeometry();
+    geo.setAttribute('position', new THREE.BufferAttribute(pos, 3));
+    geo.setAttribute('color', new THREE.BufferAttribute(col, 3));
+    this.marks = new THREE.Mesh(geo, new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide }));
+    this.scene.add(this.marks);
   }
 
   setFriction(on) {
