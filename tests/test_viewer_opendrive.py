@@ -11,12 +11,11 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import playwright.sync_api as playwright_api      # the test extra (a hard dependency of the suite)
+import playwright.sync_api  # noqa: F401  (the test extra: a hard dependency of the suite)
 import pytest
 
 from service_harness import ServiceProcess, free_port
-from viewer_harness import (NO_CHROMIUM, ViewThread, chromium_path, launch, open_page, require_page_libraries,
-                            sim_time, wait_sim)
+from viewer_harness import NO_CHROMIUM, chromium_path, require_page_libraries, served_page, sim_time, wait_sim
 
 ROOT = Path(__file__).resolve().parents[1]
 SHOT = os.environ.get("RTSIM_OPENDRIVE_SCREENSHOT")
@@ -81,30 +80,20 @@ def test_the_page_draws_the_lanes_and_their_marks():
     zport = free_port()
     svc = ServiceProcess("virtual", f"rtsim-xodr-view-{os.getpid()}", "--scenario", "opendrive_curve",
                          "--zenoh-listen", f"tcp/127.0.0.1:{zport}", "--mode", "realtime")
-    view = pw = browser = None
     try:
-        view = ViewThread("xbw", [f"tcp/127.0.0.1:{zport}"])
-        pw = playwright_api.sync_playwright().start()
-        browser = launch(pw)
-        pg, logs = open_page(browser, view.url)
-        assert pg.evaluate("rtsimView.marksDrawn()") == len(road_markings(odr)["triangles"])
-        wait_sim(pg, sim_time(pg) + 1.0)                # the chase camera settles behind the car
-        shot = pg.screenshot()
-        pg.evaluate("rtsimView.setMarksVisible(false)")
-        pg.wait_for_timeout(300)
-        bare = pg.screenshot()
-        pg.evaluate("rtsimView.setMarksVisible(true)")
-        if SHOT:
+        with served_page("xbw", f"tcp/127.0.0.1:{zport}") as (pg, logs):
+            assert pg.evaluate("rtsimView.marksDrawn()") == len(road_markings(odr)["triangles"])
+            wait_sim(pg, sim_time(pg) + 1.0)            # the chase camera settles behind the car
+            shot = pg.screenshot()
+            pg.evaluate("rtsimView.setMarksVisible(false)")
             pg.wait_for_timeout(300)
-            pg.screenshot(path=SHOT)
-        assert not [m for m in logs if m[0] in ("error", "pageerror")], logs
+            bare = pg.screenshot()
+            pg.evaluate("rtsimView.setMarksVisible(true)")
+            if SHOT:
+                pg.wait_for_timeout(300)
+                pg.screenshot(path=SHOT)
+            assert not [m for m in logs if m[0] in ("error", "pageerror")], logs
     finally:
-        if browser is not None:
-            browser.close()
-        if pw is not None:
-            pw.stop()
-        if view is not None:
-            view.close()
         svc.stop()
         svc.close()
     a, b = _pixels(shot), _pixels(bare)

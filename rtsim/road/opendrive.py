@@ -249,17 +249,6 @@ def cubic_at(records, s, ds_base: float = 0.0) -> np.ndarray:
     return rec[i, 1] + ds * (rec[i, 2] + ds * (rec[i, 3] + ds * rec[i, 4]))
 
 
-def cubic_slope(records, s, ds_base: float = 0.0) -> np.ndarray:
-    """Derivative d/ds of `cubic_at`."""
-    s = np.asarray(s, dtype=float)
-    if not records:
-        return np.zeros_like(s)
-    rec = np.asarray(records, dtype=float)
-    i = np.clip(np.searchsorted(rec[:, 0], s, side="right") - 1, 0, len(rec) - 1)
-    ds = s - ds_base - rec[i, 0]
-    return rec[i, 2] + ds * (2.0 * rec[i, 3] + 3.0 * ds * rec[i, 4])
-
-
 def _spiral_local(u, k0, c):
     """Local position (x, y) and heading of a clothoid with start curvature k0 and rate c (1/m^2) from
     the origin heading +x, at arc lengths u (Fresnel integrals; c != 0)."""
@@ -369,11 +358,6 @@ def surface_point(road: OdrRoad, s, t) -> np.ndarray:
     return out.reshape(s.shape + (3,))
 
 
-def section_at(road: OdrRoad, s: float) -> LaneSection:
-    i = max(0, int(np.searchsorted([q.s for q in road.sections], s, side="right")) - 1)
-    return road.sections[i]
-
-
 def lane_borders(road: OdrRoad, sec: LaneSection, s) -> dict:
     """Lane id -> (t_inner, t_outer) arrays at s (within the section): the standard's sums of widths from
     the lane offset outwards (inner: the border towards the centre lane). The centre lane: (offset, offset)."""
@@ -413,15 +397,6 @@ def lane_centre_line(road: OdrRoad, lane_id: int, spacing: float = 0.5):
     p = np.concatenate(pts)
     forward = (lane_id < 0) == (road.rule != "LHT")
     return p if forward else p[::-1]
-
-
-def _record_at(records, ds):
-    """The value of the record [(sOffset, value, ...)] in force at ds (None without records)."""
-    cur = None
-    for r in records:
-        if r[0] <= ds + 1e-9:
-            cur = r
-    return cur if cur is not None else (records[0] if records else None)
 
 
 def _s_grid(road: OdrRoad, a: float, b: float, ds_max: float, chord: float) -> np.ndarray:
