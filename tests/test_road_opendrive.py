@@ -46,7 +46,7 @@ def test_an_arc_has_its_radius_and_turns_at_its_curvature(tmp_path):
     assert np.max(np.abs(h - (h0 + k * s))) < 1e-12
 
 
-@pytest.mark.parametrize("k0,k1", [(0.0, 0.02), (0.01, 0.03), (0.02, -0.015), (-0.004, -0.03)])
+@pytest.mark.parametrize("k0,k1", [(0.0, 0.02), (0.01, 0.03), (0.02, -0.015), (-0.004, -0.03), (0.01, 0.01 + 1e-10)])
 def test_a_clothoid_changes_its_curvature_at_its_rate(tmp_path, k0, k1):
     L, x0, y0, h0 = 60.0, 5.0, 3.0, -0.4
     road = _one(tmp_path, f'<geometry s="0" x="{x0}" y="{y0}" hdg="{h0}" length="{L}">'

@@ -14,6 +14,7 @@ Reference line (`<planView>`), each `<geometry s x y hdg length>` starting at (x
   integrals C, S (scipy.special.fresnel): completing the square, for c > 0
   int_0^u exp(i (k0 v + c v^2 / 2)) dv = sqrt(pi / c) exp(-i k0^2 / (2 c)) [E(w(u)) - E(w(0))],
   E = C + i S, w(v) = (v + k0 / c) sqrt(c / pi); c < 0 is the mirror image (conjugate with -k0, |c|).
+  A clothoid that is nearly an arc (|w(0)| > FRESNEL_MAX_ARG) is integrated by Gauss-Legendre quadrature.
 - `<poly3 a b c d/>`: local v = a + b u + c u^2 + d u^3 over local u, `<paramPoly3 aU .. dV pRange>`:
   u(p), v(p) cubic, p in [0, 1] (`normalized`) or [0, length] (`arcLength`); both rotated by hdg and
   moved to (x, y). Their arc length is integrated numerically (cumulative Simpson on 2049 points per
@@ -249,11 +250,32 @@ def cubic_at(records, s, ds_base: float = 0.0) -> np.ndarray:
     return rec[i, 1] + ds * (rec[i, 2] + ds * (rec[i, 3] + ds * rec[i, 4]))
 
 
+#: Beyond this Fresnel argument (a clothoid that is nearly an arc: |k0| / sqrt(pi |c|) large) the closed form
+#: subtracts two nearly equal values scaled by sqrt(pi / |c|) and loses precision; such a clothoid is
+#: integrated by Gauss-Legendre quadrature instead (its heading is then nearly linear: exact to 1e-12 m).
+FRESNEL_MAX_ARG = 100.0
+
+
+def _spiral_quadrature(u, k0, c, panels: int = 16, order: int = 12):
+    """Local x, y and heading of a clothoid at arc lengths u by composite Gauss-Legendre quadrature of
+    exp(i (k0 v + c v^2 / 2)) over [0, u]."""
+    u = np.asarray(u, dtype=float)
+    xg, wg = np.polynomial.legendre.leggauss(order)
+    edges = np.linspace(0.0, 1.0, panels + 1)
+    z = np.zeros(u.shape, dtype=complex)
+    for a, b in zip(edges[:-1], edges[1:]):
+        v = u[..., None] * (0.5 * (a + b) + 0.5 * (b - a) * xg)
+        z += (0.5 * (b - a) * u[..., None] * wg * np.exp(1j * (k0 * v + 0.5 * c * v * v))).sum(axis=-1)
+    return z.real, z.imag, k0 * u + 0.5 * c * u * u
+
+
 def _spiral_local(u, k0, c):
     """Local position (x, y) and heading of a clothoid with start curvature k0 and rate c (1/m^2) from
     the origin heading +x, at arc lengths u (Fresnel integrals; c != 0)."""
     from scipy.special import fresnel
 
+    if abs(k0) > FRESNEL_MAX_ARG * math.sqrt(math.pi * abs(c)):
+        return _spiral_quadrature(u, k0, c)
     sign = 1.0 if c > 0 else -1.0
     a, k = abs(c), sign * k0                 # mirrored: curvature k + a v
     scale = math.sqrt(math.pi / a)
