@@ -14,8 +14,8 @@ schemas (``foxglove.messages.*.get_schema()``: a FileDescriptorSet, schema encod
   3D panel can follow the vehicle.
 * ``road`` (foxglove.SceneUpdate; the service sends it at the start, when simulation time restarts and
   when a live client subscribes): entity ``road`` in frame ``world``: a plane or constant grade as two
-  triangles 2 km across around the start with grid lines every 10 m, or the survey mesh as one
-  triangle list.
+  triangles 2 km across around the start with grid lines every 10 m, or the survey's or an OpenDRIVE
+  road's mesh as one triangle list (an OpenDRIVE road's marks as more triangle lists, one per colour).
 
 What is drawn is the vehicle's own description (rtsim.vehicle.kit.drawing.Drawing: ``sim.drawing``): the
 body's box, the wheels (a wheel that carries a tyre load stands on the road at its loaded radius, from
@@ -78,8 +78,12 @@ def shape_of(sim):
 def scene_for(sim, vehicle_id: str, centre=(0.0, 0.0)) -> tuple["SceneBuilder", bytes]:
     """(SceneBuilder, road scene bytes) of a served or recorded vehicle (its ``drawing``, ``vm.channels`` and
     ``road``); `centre` (x, y, m) where the road's plane and grid are drawn around (the start)."""
+    from rtsim.road.config import road_marks_of
+
     road = getattr(sim, "road", None)
-    return SceneBuilder(vehicle_id, shape_of(sim), sim.vm.channels, road), road_scene(road, centre=centre)
+    marks = road_marks_of(getattr(sim, "road_path", None))
+    return (SceneBuilder(vehicle_id, shape_of(sim), sim.vm.channels, road),
+            road_scene(road, centre=centre, marks=marks))
 
 
 # ------------------------------------------------------------------ scene messages
@@ -207,10 +211,12 @@ def _height_fn(road):
     return mesh
 
 
-def road_scene(road=None, centre=(0.0, 0.0), t: float = 0.0, half: float = 1000.0, grid: float = 10.0) -> bytes:
+def road_scene(road=None, centre=(0.0, 0.0), t: float = 0.0, half: float = 1000.0, grid: float = 10.0,
+               marks: dict | None = None) -> bytes:
     """SceneUpdate bytes of the road (rtsim.road.model.Road; None: the flat plane z = 0): a plane as two
     triangles of side 2 x `half` m around `centre` with lines every `grid` m over the middle 200 m, a mesh
-    as its triangles."""
+    as its triangles; an OpenDRIVE road's marks (`marks`: rtsim.road.opendrive.road_markings) as one
+    more triangle list per colour in the same entity."""
     import numpy as np
     from rtsim.road.model import FP_GX, FP_GY, FP_X0, FP_Y0, FP_Z0, IP_KIND, ROAD_MESH
 
@@ -221,7 +227,7 @@ def road_scene(road=None, centre=(0.0, 0.0), t: float = 0.0, half: float = 1000.
         idx = [int(i) for i in np.asarray(road.tri).ravel()]
         prim = TriangleListPrimitive(pose=_pose((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)), points=pts,
                                      color=ROAD_COLOUR, indices=idx)
-        entity = SceneEntity(timestamp=stamp, frame_id=WORLD, id="road", triangles=[prim])
+        entity = SceneEntity(timestamp=stamp, frame_id=WORLD, id="road", triangles=[prim] + _mark_lists(marks))
         return SceneUpdate(entities=[entity]).encode()
     if road is None:
         x0 = y0 = z0 = gx = gy = 0.0
@@ -247,3 +253,23 @@ def road_scene(road=None, centre=(0.0, 0.0), t: float = 0.0, half: float = 1000.
                                thickness=0.05, scale_invariant=False, points=lines, color=LINE_COLOUR)
     entity = SceneEntity(timestamp=stamp, frame_id=WORLD, id="road", triangles=[plane], lines=[grid_lines])
     return SceneUpdate(entities=[entity]).encode()
+
+
+def _mark_lists(marks: dict | None) -> list:
+    """Road marks (rtsim.road.opendrive.road_markings) as triangle lists, one per colour."""
+    import numpy as np
+
+    if not marks or not len(marks["triangles"]):
+        return []
+    v = np.asarray(marks["vertices"], dtype=float)
+    tri = np.asarray(marks["triangles"])
+    colours = np.asarray(marks["colour"])
+    out = []
+    for hexc in sorted(set(marks["colour"])):
+        sel = tri[colours == hexc]
+        used, idx = np.unique(sel.ravel(), return_inverse=True)
+        r, g, b = (int(hexc[k:k + 2], 16) / 255.0 for k in (1, 3, 5))
+        out.append(TriangleListPrimitive(pose=_pose((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
+                                         points=[Point3(x=float(a), y=float(b_), z=float(c)) for a, b_, c in v[used]],
+                                         color=Color(r=r, g=g, b=b, a=1.0), indices=[int(i) for i in idx]))
+    return out

@@ -56,7 +56,8 @@ hold_pressure, hold_rate, v_stop, v_eps, i_max, a_res0, a_res2, ff_gain; allowed
 `SPEED_FOLLOWER_RANGES`).
 
 Path follower (`drivers.path_follower`): `x = [...]`, `y = [...]` (m) or `file` (CSV with columns x
-and y), `closed = false`, `method = "pure_pursuit"` or `"stanley"`; optional parameters by the names
+and y) or `lane = -1` (the centre line of that lane of the scenario's OpenDRIVE road, `road_id` when the
+file has several roads, points `spacing` = 0.5 m apart; docs/opendrive.md), `closed = false`, `method = "pure_pursuit"` or `"stanley"`; optional parameters by the names
 of `PathFollowerParams` (wheelbase, steering_ratio, la_min, la_gain, la_max, k_stanley, v_soft,
 max_wheel_angle, max_rate, rear_offset; ranges in `PATH_FOLLOWER_RANGES`).
 
@@ -294,12 +295,18 @@ class _PathFollowerBase(_Model):
     y: Optional[list[Coord]] = None
     file: Optional[str] = None
     closed: StrictBool = False
+    lane: Optional[Annotated[int, Field(strict=True, ge=-100, le=100)]] = None   # OpenDRIVE lane id
+    road_id: Optional[str] = None          # OpenDRIVE road id (needed when the file has several roads)
+    spacing: Annotated[float, Field(strict=True, ge=0.05, le=10.0)] = 0.5   # m, lane centre line points
 
     @model_validator(mode="after")
     def _check(self):
-        if self.file is None:
+        if self.lane is not None:
+            if self.file is not None or self.x is not None or self.y is not None:
+                raise _bad("lane", self.lane, "give the path either as a lane or as x and y lists or a file")
+        elif self.file is None:
             if self.x is None or self.y is None:
-                raise _bad("x", self.x, "give the path as x and y lists, or a file")
+                raise _bad("x", self.x, "give the path as x and y lists, a file, or an OpenDRIVE lane")
             if len(self.x) != len(self.y):
                 raise _bad("y", f"<{len(self.y)} values>", f"must have as many entries as x ({len(self.x)})")
             if len(self.x) < 2:
@@ -612,7 +619,9 @@ def load_scenario(path: str | Path, check_files: bool = False) -> Scenario:
 
     if spec.inputs.path_follower is not None:
         pfs = spec.inputs.path_follower
-        if pfs.file is not None:
+        if pfs.lane is not None:
+            sc.path_xy = _lane_path(path, road, pfs)
+        elif pfs.file is not None:
             sc.path_xy = _read_path(path, base / pfs.file, pfs.file)
         else:
             sc.path_xy = (np.array(pfs.x), np.array(pfs.y))
@@ -788,6 +797,19 @@ def _has_replay(s: Any) -> bool:
     if isinstance(s, ReplaySpec):
         return True
     return any(_has_replay(t) for t in getattr(s, "terms", None) or getattr(s, "segments", None) or [])
+
+
+def _lane_path(file: Path, road: Path, pfs) -> tuple[np.ndarray, np.ndarray]:
+    """The centre line of an OpenDRIVE lane of the scenario's road (rtsim.road.opendrive), in its direction
+    of travel."""
+    from rtsim.road.config import read_opendrive_of
+    from rtsim.road.opendrive import lane_centre_line
+
+    try:
+        p = lane_centre_line(read_opendrive_of(road).road(pfs.road_id), pfs.lane, pfs.spacing)
+    except ConfigError as exc:
+        raise _fail(file, "inputs.path_follower.lane", pfs.lane, str(exc)) from None
+    return p[:, 0].copy(), p[:, 1].copy()
 
 
 def _read_path(file: Path, csv_path: Path, given: str) -> tuple[np.ndarray, np.ndarray]:

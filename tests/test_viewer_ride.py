@@ -14,12 +14,11 @@ import math
 import os
 
 import numpy as np
-import playwright.sync_api as playwright_api      # the test extra (a hard dependency of the suite)
+import playwright.sync_api  # noqa: F401  (the test extra: a hard dependency of the suite)
 import pytest
 
 from service_harness import ServiceProcess, free_port
-from viewer_harness import (NO_CHROMIUM, ViewThread, chromium_path, launch, open_page, require_page_libraries,
-                            sim_time, wait_sim)
+from viewer_harness import NO_CHROMIUM, chromium_path, require_page_libraries, served_page, sim_time, wait_sim
 from waits import EVENT
 
 LEAN = math.radians(30.0)            # the lean demand at full key (rtsim.vehicle.motorcycle.inputs)
@@ -36,20 +35,10 @@ def moto(tmp_path_factory):
     zport = free_port()
     svc = ServiceProcess("virtual", f"rtsim-view-moto-{os.getpid()}", "--vehicle", "configs/vehicles/motorcycle.toml",
                          "--zenoh-listen", f"tcp/127.0.0.1:{zport}", "--record", str(rec), "--mode", "realtime")
-    view = pw = browser = None
     try:
-        view = ViewThread("motorcycle", [f"tcp/127.0.0.1:{zport}"])
-        pw = playwright_api.sync_playwright().start()
-        browser = launch(pw)
-        pg, logs = open_page(browser, view.url)
-        yield pg, logs, rec
+        with served_page("motorcycle", f"tcp/127.0.0.1:{zport}") as (pg, logs):
+            yield pg, logs, rec
     finally:
-        if browser is not None:
-            browser.close()
-        if pw is not None:
-            pw.stop()
-        if view is not None:
-            view.close()
         svc.stop()
         svc.close()
 

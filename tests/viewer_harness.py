@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import shutil
 import threading
+from contextlib import contextmanager
 
 import pytest
 
@@ -88,3 +89,24 @@ def sim_time(pg) -> float:
 def wait_sim(pg, t: float) -> None:
     """Until the page has drawn a state sample of simulation time >= t (bounded by EVENT s of wall time)."""
     pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {t}", timeout=EVENT * 1000, polling=50)
+
+
+@contextmanager
+def served_page(vehicle_id: str, endpoint: str):
+    """A browser page of `rtsim view` (a ViewThread) of the service at ``endpoint``, once it has drawn its first
+    state sample: (page, logs); the page, browser, Playwright and view server closed on exit."""
+    import playwright.sync_api as playwright_api
+
+    view = pw = browser = None
+    try:
+        view = ViewThread(vehicle_id, [endpoint])
+        pw = playwright_api.sync_playwright().start()
+        browser = launch(pw)
+        yield open_page(browser, view.url)
+    finally:
+        if browser is not None:
+            browser.close()
+        if pw is not None:
+            pw.stop()
+        if view is not None:
+            view.close()

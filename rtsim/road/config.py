@@ -22,7 +22,17 @@ rolling_resistance = 0.010
 off_survey_friction = 0.6     # friction scale of the ground beyond the survey's outline, (0, 2]
 off_survey_rolling_resistance = 0.02   # its rolling resistance, [0, 0.1]
 ```
-The world does not end where the survey does: beyond the outline the ground continues at the height
+```toml
+type = "opendrive"            # an ASAM OpenDRIVE road network (rtsim.road.opendrive, docs/opendrive.md)
+file = "curve.xodr"           # relative to this file
+mu = 1.0                      # friction scale of lanes without <material friction>
+rolling_resistance = 0.010
+ds_max = 1.0                  # m, largest mesh step along the reference line, [0.05, 10]
+dt_max = 1.0                  # m, largest mesh step across a lane, [0.05, 10]
+off_survey_friction = 0.6     # the ground beyond the road's outer lane borders
+off_survey_rolling_resistance = 0.02
+```
+The world does not end where the survey (or the OpenDRIVE road) does: beyond the outline the ground continues at the height
 of the nearest outline points, levelling out and taking the off-survey friction within 1 m
 (rtsim.road.model, "Off the survey"), so a tyre that rolls off the mesh keeps its load.
 Every error is a ConfigError naming the file, the key, the value and what is allowed.
@@ -90,12 +100,30 @@ class MeshRoadConfig(_Road):
                                                              "the survey")
 
 
-RoadConfig = Annotated[Union[FlatRoadConfig, GradeRoadConfig, MeshRoadConfig],
+class OpenDriveRoadConfig(_Road):
+    type: Literal["opendrive"]
+    file: str = Field(min_length=1, strict=True, description="OpenDRIVE (.xodr) path, relative to the TOML file")
+    mu: float = _MU
+    rolling_resistance: float = _RR
+    ds_max: float = Field(1.0, ge=0.05, le=10.0, allow_inf_nan=False, strict=True,
+                          description="largest mesh step along the reference line, m")
+    dt_max: float = Field(1.0, ge=0.05, le=10.0, allow_inf_nan=False, strict=True,
+                          description="largest mesh step across a lane, m")
+    smooth_normals: bool = Field(True, strict=True,
+                                 description="contact normals interpolated from vertex normals")
+    off_survey_friction: float = Field(0.6, gt=MU_RANGE[0], le=MU_RANGE[1], allow_inf_nan=False,
+                                       strict=True, description="friction scale of the ground beyond the road")
+    off_survey_rolling_resistance: float = Field(0.02, ge=RR_RANGE[0], le=RR_RANGE[1],
+                                                 allow_inf_nan=False, strict=True,
+                                                 description="rolling resistance of the ground beyond the road")
+
+
+RoadConfig = Annotated[Union[FlatRoadConfig, GradeRoadConfig, MeshRoadConfig, OpenDriveRoadConfig],
                        Field(discriminator="type")]
 _ADAPTER = TypeAdapter(RoadConfig)
 
 
-def read_road_config(path) -> FlatRoadConfig | GradeRoadConfig | MeshRoadConfig:
+def read_road_config(path) -> FlatRoadConfig | GradeRoadConfig | MeshRoadConfig | OpenDriveRoadConfig:
     """Parse and validate a road TOML file (rtsim.configfile: errors name the file, key, value, range)."""
     return load(_ADAPTER, Path(path))
 
@@ -109,6 +137,12 @@ def load_road(path) -> Road:
     if isinstance(cfg, GradeRoadConfig):
         return make_grade(cfg.grade, math.radians(cfg.heading_deg), cfg.origin, cfg.mu,
                           cfg.rolling_resistance)
+    if isinstance(cfg, OpenDriveRoadConfig):
+        odr, mesh = opendrive_mesh(path, cfg)
+        return make_mesh(mesh.vertices, mesh.triangles, mesh.tri_mu, mesh.tri_rr, cell_size=cfg.ds_max,
+                         source=odr.path, smooth_normals=cfg.smooth_normals,
+                         off_survey_mu=cfg.off_survey_friction,
+                         off_survey_rr=cfg.off_survey_rolling_resistance)
     survey_path = path.parent / cfg.survey
     if not survey_path.is_file():
         raise problem(path, "survey", cfg.survey, f"file not found ({survey_path})")
@@ -118,3 +152,43 @@ def load_road(path) -> Road:
                      cell_size=cfg.grid_spacing, source=str(survey_path), smooth_normals=cfg.smooth_normals,
                      off_survey_mu=cfg.off_survey_friction,
                      off_survey_rr=cfg.off_survey_rolling_resistance)
+
+
+def read_opendrive_of(path, cfg: OpenDriveRoadConfig | None = None):
+    """The OpenDRIVE file a road TOML of type "opendrive" points to, read (rtsim.road.opendrive)."""
+    from rtsim.road.opendrive import read_opendrive
+
+    path = Path(path)
+    cfg = read_road_config(path) if cfg is None else cfg
+    if not isinstance(cfg, OpenDriveRoadConfig):
+        raise problem(path, "type", cfg.type, "an OpenDRIVE road is needed here (type = \"opendrive\")")
+    xodr = path.parent / cfg.file
+    if not xodr.is_file():
+        raise problem(path, "file", cfg.file, f"file not found ({xodr})")
+    return read_opendrive(xodr)
+
+
+def opendrive_mesh(path, cfg: OpenDriveRoadConfig | None = None):
+    """(OpenDrive, RoadMesh) of a road TOML of type "opendrive": its file read and its lanes meshed."""
+    from rtsim.road.opendrive import mesh_opendrive
+
+    cfg = read_road_config(path) if cfg is None else cfg
+    odr = read_opendrive_of(path, cfg)
+    return odr, mesh_opendrive(odr, cfg.mu, cfg.rolling_resistance, cfg.ds_max, cfg.dt_max)
+
+
+def road_marks_of(path) -> dict | None:
+    """The road marks to draw (rtsim.road.opendrive.road_markings) of a road TOML of type "opendrive"; None
+    for any other road or a road file that cannot be read (drawing only: the run reports that one)."""
+    from rtsim.errors import RtsimError
+    from rtsim.road.opendrive import road_markings
+
+    if path is None:
+        return None
+    try:
+        cfg = read_road_config(path)
+        if not isinstance(cfg, OpenDriveRoadConfig):
+            return None
+        return road_markings(read_opendrive_of(path, cfg))
+    except (RtsimError, OSError):
+        return None

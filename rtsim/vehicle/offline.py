@@ -75,6 +75,7 @@ def sim_for(model, sc) -> VehicleSim:
     first = driver.step(0.0, sc.initial_state())
     sim = VehicleSim(model, road, sc.dt, brake_pressure=float(first[I_BRAKE]), position=(ini.x, ini.y),
                      yaw=ini.yaw, speed=ini.speed)
+    sim.road_path = sc.road_path          # what the 3D scene draws besides the mesh (OpenDRIVE road marks)
     if sc.torque_mode:
         sim.set_torque_mode(True)
     return sim

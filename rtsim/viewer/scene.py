@@ -88,11 +88,11 @@ def read_buildings(path: Path, vertices) -> list[dict]:
 
 def road_description(road_path: Path | None) -> dict:
     """The road as the page draws it: {"type": "flat", "height"}, {"type": "grade", "grade", "heading",
-    "origin"}, or {"type": "mesh", "vertices", "triangles", "mu"} (the survey's mesh as the service builds
-    it); a road file that cannot be read gives a flat road at 0 with the reason in "note"."""
+    "origin"}, or {"type": "mesh", "vertices", "triangles", "mu"} (the survey's or an OpenDRIVE road's mesh
+    as the service builds it; an OpenDRIVE road also with its "marks"); a road file that cannot be read gives a flat road at 0 with the reason in "note"."""
     if road_path is None:
         return {"type": "flat", "height": 0.0, "mu": 1.0, "note": "road unknown: drawn flat at z = 0"}
-    from rtsim.road.config import FlatRoadConfig, GradeRoadConfig, read_road_config
+    from rtsim.road.config import FlatRoadConfig, GradeRoadConfig, OpenDriveRoadConfig, read_road_config
     from rtsim.road.survey import read_survey, survey_to_mesh
     from rtsim.errors import RtsimError
 
@@ -103,6 +103,8 @@ def road_description(road_path: Path | None) -> dict:
         if isinstance(cfg, GradeRoadConfig):
             return {"type": "grade", "grade": cfg.grade, "heading": math.radians(cfg.heading_deg),
                     "origin": list(cfg.origin), "mu": cfg.mu}
+        if isinstance(cfg, OpenDriveRoadConfig):
+            return opendrive_description(road_path, cfg)
         survey = road_path.parent / cfg.survey
         mesh = survey_to_mesh(read_survey(survey), cfg.grid_spacing, cfg.alpha_radius, cfg.mu, cfg.rolling_resistance)
         out = {"type": "mesh", "vertices": [round(float(v), 4) for v in mesh.vertices.ravel()],
@@ -117,6 +119,21 @@ def road_description(road_path: Path | None) -> dict:
         return out
     except (RtsimError, OSError, ValueError) as exc:
         return {"type": "flat", "height": 0.0, "mu": 1.0, "note": f"road {road_path}: {exc}; drawn flat at z = 0"}
+
+
+def opendrive_description(road_path: Path, cfg) -> dict:
+    """An OpenDRIVE road as the page draws it: its lanes' mesh as the service builds it (``type`` "mesh",
+    per-triangle friction) and its road marks (``marks``: vertices, triangles, a colour per triangle)."""
+    from rtsim.road.config import opendrive_mesh
+    from rtsim.road.opendrive import road_markings
+
+    odr, mesh = opendrive_mesh(road_path, cfg)
+    marks = road_markings(odr)
+    return {"type": "mesh", "vertices": [round(float(v), 4) for v in mesh.vertices.ravel()],
+            "triangles": [int(i) for i in mesh.triangles.ravel()],
+            "mu": [round(float(v), 4) for v in mesh.tri_mu], "source": road_path.name, "buildings": [],
+            "marks": {"vertices": [round(float(v), 4) for v in marks["vertices"].ravel()],
+                      "triangles": [int(i) for i in marks["triangles"].ravel()], "colour": marks["colour"]}}
 
 
 def describe(config: dict) -> dict:

@@ -92,6 +92,7 @@ class CarKind(VehicleKind):
         sim = VehicleSim(model, load_road(sc.road_path), dt if dt is not None else sc.dt, brake_pressure=0.0,
                          position=(ini.x, ini.y), yaw=ini.yaw, speed=ini.speed)
         sim.user_inputs = opened.user_inputs
+        sim.road_path = sc.road_path      # what the 3D scene draws besides the mesh (OpenDRIVE road marks)
         return sim
 
     def user_inputs(self, opened):

@@ -22,6 +22,8 @@ const wall = () => (performance.timeOrigin + performance.now()) / 1000;     // s
 const view = window.rtsimView = { ready: false, frames: 0, fps: 0, errors: [], latency: {}, drive: {}, pose: null };
 window.addEventListener('error', (e) => view.errors.push(String(e.message)));
 view.setVehicleVisible = (on) => { if (scene.vehicle) scene.vehicle.group.visible = on; };   // (tests: an empty scene)
+view.marksDrawn = () => (scene.marks ? scene.marks.geometry.attributes.position.count / 3 : 0);   // road-mark triangles
+view.setMarksVisible = (on) => { if (scene.marks) scene.marks.visible = on; };          // (tests)
 
 const scene = new Scene3D($('view'));
 const plots = new Plots($('plot-channels'), $('plot-health'), $('pick'));

@@ -21,6 +21,24 @@ function gridTexture() {
   return t;
 }
 
+// a geometry of separate triangles (flat colour each): vertices (x, y, z flat), triangles (3 indices each),
+// colourOf(k) the colour of triangle k
+function triangleSoup(v, t, colourOf) {
+  const pos = new Float32Array(t.length * 3), col = new Float32Array(t.length * 3);
+  for (let k = 0; k < t.length / 3; k++) {
+    const c = colourOf(k);
+    for (let j = 0; j < 3; j++) {
+      const i = t[3 * k + j];
+      pos.set([v[3 * i], v[3 * i + 1], v[3 * i + 2]], 9 * k + 3 * j);
+      col.set([c.r, c.g, c.b], 9 * k + 3 * j);
+    }
+  }
+  const geo = new THREE.BufferGeometry();
+  geo.setAttribute('position', new THREE.BufferAttribute(pos, 3));
+  geo.setAttribute('color', new THREE.BufferAttribute(col, 3));
+  return geo;
+}
+
 function frictionColour(mu, lo, hi) {
   const f = hi > lo ? (mu - lo) / (hi - lo) : 0.5;        // low friction red, high green
   return new THREE.Color().setHSL(0.33 * Math.min(1, Math.max(0, f)), 0.75, 0.45);
@@ -128,23 +146,10 @@ export class Scene3D {
       const n = new THREE.Vector3(-g * Math.cos(h), -g * Math.sin(h), 1).normalize();
       ground.quaternion.setFromUnitVectors(new THREE.Vector3(0, 0, 1), n);
     } else if (road.type === 'mesh') {
-      const v = road.vertices, t = road.triangles, mu = road.mu;
-      const pos = new Float32Array(t.length * 3), col = new Float32Array(t.length * 3);
-      const lo = Math.min(...mu), hi = Math.max(...mu);
+      const v = road.vertices, mu = road.mu, lo = Math.min(...mu), hi = Math.max(...mu);
       const asphalt = new THREE.Color('#5c5f63');
-      this._muColours = [];
-      for (let k = 0; k < t.length / 3; k++) {
-        const c = frictionColour(mu[k], lo - 0.05, hi + 0.05);
-        this._muColours.push(c);
-        for (let j = 0; j < 3; j++) {
-          const i = t[3 * k + j];
-          pos.set([v[3 * i], v[3 * i + 1], v[3 * i + 2]], 9 * k + 3 * j);
-          col.set([asphalt.r, asphalt.g, asphalt.b], 9 * k + 3 * j);
-        }
-      }
-      const geo = new THREE.BufferGeometry();
-      geo.setAttribute('position', new THREE.BufferAttribute(pos, 3));
-      geo.setAttribute('color', new THREE.BufferAttribute(col, 3));
+      this._muColours = mu.map((m) => frictionColour(m, lo - 0.05, hi + 0.05));
+      const geo = triangleSoup(v, road.triangles, () => asphalt);
       geo.computeVertexNormals();
       geo.computeBoundingSphere();
       this.meshRoad = new THREE.Mesh(geo, new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide }));
@@ -153,6 +158,7 @@ export class Scene3D {
       for (let i = 2; i < v.length; i += 3) zmin = Math.min(zmin, v[i]);
       this.groundZ = zmin - 0.3;                 // the plane under and around the survey
       ground.material.color.set('#8a9a7a');
+      if (road.marks && road.marks.triangles.length) this.buildMarks(road.marks);
       const wallMat = new THREE.MeshLambertMaterial({ color: '#d9d4c7' });
       for (const b of road.buildings || []) {     // blocks from the file beside the survey
         const box = new THREE.Mesh(new THREE.BoxGeometry(b.length, b.width, b.height + 0.3), wallMat);
@@ -161,6 +167,13 @@ export class Scene3D {
         this.scene.add(box);
       }
     }
+  }
+
+  // an OpenDRIVE road's marks: ribbons 1 cm above the lanes, a colour per triangle
+  buildMarks(marks) {
+    const geo = triangleSoup(marks.vertices, marks.triangles, (k) => new THREE.Color(marks.colour[k]));
+    this.marks = new THREE.Mesh(geo, new THREE.MeshBasicMaterial({ vertexColors: true, side: THREE.DoubleSide }));
+    this.scene.add(this.marks);
   }
 
   setFriction(on) {
