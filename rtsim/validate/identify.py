@@ -65,7 +65,8 @@ value. A candidate is eligible when it is plausible and
   (TILT; body-frame accelerometers only), a gain or lag of the roll angle (ROLL_CONFOUNDED: the model's
   roll stiffness and damping), a grade asked for of level-frame data that never stand still
   (LEVEL_CONFOUNDED).
-Candidates are ranked by the fold test's t statistic (the strongest evidence first). Every candidate
+Eligible candidates are ranked by the share of the left-out runs' prediction loss they remove (the
+largest first): among the effects the data support, the one that predicts unseen repetitions best. Every candidate
 turned down carries one plain sentence saying why (Candidate.note; technical detail: Candidate.detail).
 
 Several model effects at once (fit_joint, joint_member, joint_run_estimate). Fitted one by one, the first
@@ -192,10 +193,11 @@ class Candidate:
 
     @property
     def score(self) -> float:
-        """What ranks the candidates: the strength of the evidence that it predicts left-out runs better
-        (the fold test's t statistic, negative: better), else its IC."""
+        """What ranks the candidates (lower first): the share of the left-out runs' prediction loss it
+        removes, negated (the expected prediction error is the selection criterion; the fold test only
+        says whether the improvement is real), else its IC."""
         if self.cv is not None:
-            return self.cv.t_better
+            return -self.cv.gain
         return self.delta_ic
 
     @property
