@@ -83,17 +83,16 @@ class FmuController:
         by_name = {v.name: v for v in md.modelVariables}
         avail = channel_units(channels)
 
-        def var(key: str, name: str, causality: str):
+        def var(key: str, name: str, value: str, causality: str):
             v = by_name.get(name)
             want = [n for n, x in by_name.items() if x.causality == causality]
             if v is None:
-                raise problem(src, key, name, f"missing variable: the FMU has no variable {name!r} (its "
+                raise problem(src, key, value, f"missing variable: the FMU has no variable {name!r} (its "
                               f"{causality}s: {', '.join(want) or 'none'})")
             if v.causality != causality:
-                raise problem(src, key, name, f"the FMU's {name!r} is a {v.causality}, not an {causality}"
-                              if causality[0] in "aeiou" else f"the FMU's {name!r} is a {v.causality}, not a {causality}")
+                raise problem(src, key, value, f"wrong causality: the FMU's {name!r} is {v.causality}, not {causality}")
             if v.type not in _REAL:
-                raise problem(src, key, name, f"the FMU's {name!r} is of type {v.type}; rtsim exchanges floats")
+                raise problem(src, key, value, f"the FMU's {name!r} is of type {v.type}; rtsim exchanges floats")
             return v
 
         def unit_of(v):
@@ -107,7 +106,7 @@ class FmuController:
             if ch not in avail:
                 raise problem(src, key, ch, f"not a sensor or state channel of the vehicle (its channels: "
                               f"{', '.join(avail)})")
-            v = var(key, name, "input")
+            v = var(key, name, ch, "input")
             conv = conversion(avail[ch], md, unit_of(v))
             if isinstance(conv, str):
                 raise problem(src, key, ch, conv)
@@ -119,7 +118,7 @@ class FmuController:
             key = f"outputs.{name}"
             if cmd not in commands:
                 raise problem(src, key, cmd, f"not a command this run takes (allowed: {', '.join(commands)})")
-            v = var(key, name, "output")
+            v = var(key, name, cmd, "output")
             conv = conversion(commands[cmd], md, unit_of(v))
             if isinstance(conv, str):
                 raise problem(src, key, cmd, conv)
