@@ -167,6 +167,15 @@ def _run(args) -> int:
     return 0 if res.status == "ok" else MODEL_FAULT_EXIT
 
 
+def _export_fmu(args) -> int:
+    """`rtsim export-fmu`: the vehicle as an FMU (rtsim.fmu.export)."""
+    from rtsim.fmu.export import export_vehicle
+
+    out = export_vehicle(args.vehicle, args.out, args.scenario)
+    print(f"{out}: FMI 3.0 co-simulation FMU of {args.vehicle}")
+    return 0
+
+
 MODEL_FAULT_EXIT = 3      # `rtsim run`: the model failed (a two-wheeler: or fell); the rows up to it are written
 
 
@@ -321,6 +330,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also write PNG figures (lateral acceleration, tyre loads, steering) into DIR "
                         "(default: <output stem>_plots/ beside the output)")
     r.set_defaults(func=_run)
+    ef = sub.add_parser("export-fmu", help="write an FMI 3.0 co-simulation FMU of a vehicle: its commands as "
+                        "inputs, its channels as outputs (docs/fmu.md)")
+    ef.add_argument("--vehicle", required=True, metavar="FILE|NAME", help="vehicle TOML or name in configs/vehicles")
+    ef.add_argument("--scenario", metavar="FILE|NAME", help="where the FMU starts: the scenario's road, initial "
+                    "state and step (its inputs are not used; default: the vehicle's default scenario)")
+    ef.add_argument("--out", required=True, metavar="FILE.fmu", help="the FMU to write")
+    ef.set_defaults(func=_export_fmu)
     en = sub.add_parser("energy", help="the power audit of a recorded run: every port's energy and the balance")
     en.add_argument("run", metavar="RUN.mcap|.csv", help="a run's MCAP or CSV (rtsim run --out)")
     en.set_defaults(func=_energy)
