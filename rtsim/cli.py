@@ -69,6 +69,11 @@ def _bench(args) -> int:
         res = dispatch_costs()
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
+    if args.suite == "fmu":
+        from rtsim.benchmarks.fmu import fmu_costs, format_report
+        res = fmu_costs()
+        print(json.dumps(res, indent=2) if args.json else format_report(res))
+        return 0
     if args.suite == "fuzz":
         from pathlib import Path
 
@@ -278,11 +283,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--t-end", type=float, metavar="S", help="end time, s (default: the problem's)")
     b.add_argument("--json", action="store_true", help="print a JSON list, one object per problem")
     b.add_argument("--scaling", action="store_true", help="also time the N-four-bar for N = 1, 2, 10, 40, 100")
-    b.add_argument("--suite", choices=["mbs", "vehicle", "service", "dispatch", "fuzz"], default="mbs",
+    b.add_argument("--suite", choices=["mbs", "vehicle", "service", "dispatch", "fuzz", "fmu"], default="mbs",
                    help="mbs: the IFToMM benchmark problems (default); vehicle: the vehicle model's cost per "
                         "step; service: the HIL service's real-time budget under load (CAN, Zenoh, MCAP, ECU); "
                         "dispatch: the cost of a call into a kernel, direct and bound (rtsim.boundcall); "
-                        "fuzz: command sequences drawn in each vehicle's DBC ranges (rtsim.robustness)")
+                        "fuzz: command sequences drawn in each vehicle's DBC ranges (rtsim.robustness); "
+                        "fmu: the cost of one controller FMU call and of the car as an FMU (docs/fmu.md)")
     b.add_argument("--count", type=int, default=2000, metavar="N",
                    help="fuzz suite: rides drawn per vehicle (2000)")
     b.add_argument("--vehicle", action="append", metavar="FILE",

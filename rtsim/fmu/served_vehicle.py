@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rtsim.boundcall import bind
 from rtsim.errors import RtsimError
 from rtsim.mbs.model import OK
 
@@ -52,6 +53,9 @@ class ServedVehicle:
         if set(sim.eps_commands) & set(self.commands):
             sim.external_eps(True)                  # the commanded motor current replaces the built-in law
         self.steps = 0
+        # bound once (rtsim.boundcall): a direct call would unbox the vehicle's ~100 arrays at every step
+        self._advance = bind(advance, self.v, n_free=2)
+        self._read_channels = bind(read_channels, self.v, self._sens, self._state, n_free=0)
         self._read()
 
     def set_commands(self, values) -> None:
@@ -63,14 +67,14 @@ class ServedVehicle:
         n = int(round(h / self.dt))
         if n < 1 or abs(n * self.dt - h) > 1e-9 * max(h, self.dt):
             raise RtsimError(f"communication step {h!r} s is not a whole number of the vehicle's step {self.dt!r} s")
-        status, done = advance(self.v, self.dt, n)
+        status, done = self._advance(self.dt, n)
         self.steps += done
         if status != OK:
             self.sim.raise_status(status, self.steps + 1)
         self._read()
 
     def _read(self) -> None:
-        read_channels(self.v, self._sens, self._state)
+        self._read_channels()
         ns = self._sens.shape[0]
         self.outputs[:ns] = self._sens
         self.outputs[ns:] = self._state[self._keep]
