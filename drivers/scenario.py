@@ -584,7 +584,9 @@ class Scenario:
             spec = inp.path_follower
             x, y = self.path_xy
             pf = path_follower(x, y, method=spec.method, closed=spec.closed, params=spec.params())
-        return Driver(self.profiles, speed=sf, path=pf)
+        d = Driver(self.profiles, speed=sf, path=pf)
+        d.controller = self.mapping
+        return d
 
 
 def load_scenario(path: str | Path, check_files: bool = False) -> Scenario:
