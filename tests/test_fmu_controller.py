@@ -196,3 +196,28 @@ def test_scenario_refuses_a_command_with_two_sources(tmp_path, fmus):
     with pytest.raises(ConfigError, match=r"sc.toml: controller = 'pi.toml': its FMU drives throttle_angle_cmd, "
                                           r"which inputs.speed_follower drives too"):
         load_scenario(scenario(tmp_path, mapping, follower))
+
+
+def test_rtsim_batch_runs_the_controller(tmp_path, fmus, car):
+    """`rtsim batch` over the initial speed of the PI scenario: each point's run is the offline run's."""
+    import csv
+
+    from rtsim.cli import main
+
+    mapping = write(tmp_path, "pi.toml", PI_MAP.format(fmu=fmus["pi"], step=STEP))
+    sc = scenario(tmp_path, mapping, duration=1.0)
+    plan = write(tmp_path, "plan.toml", f"""name = "fmu"
+metrics = ["distance"]
+[[cases]]
+scenario = "{sc}"
+[grid]
+"scenario.initial.speed" = [15.0, 17.0]
+""")
+    out = tmp_path / "batch"
+    assert main(["batch", str(plan), "--workers", "1", "--out", str(out)]) == 0
+    rows = {float(r["scenario.initial.speed"]): r for r in csv.DictReader((out / "results.csv").open())}
+    assert {r["status"] for r in rows.values()} == {"ok"}
+    res = car.run_offline(load_scenario(sc))         # the scenario's own speed, 15 m/s
+    dist = float(np.sum(np.hypot(np.diff(res.column("pos_x")), np.diff(res.column("pos_y")))))
+    assert float(rows[15.0]["distance"]) == pytest.approx(dist, rel=1e-9)
+    assert float(rows[17.0]["distance"]) > dist + 1.5      # 2 m/s faster for 1 s

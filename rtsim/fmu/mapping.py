@@ -26,7 +26,7 @@ from pathlib import Path
 
 from pydantic import Field
 
-from rtsim.configfile import Range, Strict, load, problem
+from rtsim.configfile import Range, Strict, load, note_read, problem
 
 
 class MappingSpec(Strict):
@@ -62,6 +62,7 @@ def load_mapping(path: str | Path) -> Mapping:
     path = Path(path)
     spec = load(MappingSpec, path)
     fmu = (path.parent / spec.fmu).resolve()
+    note_read(fmu)                      # the FMU is an input of the run (a batch's run ids hash it)
     if not fmu.is_file():
         raise problem(path, "fmu", spec.fmu, f"file not found ({fmu})")
     seen: dict[str, str] = {}
