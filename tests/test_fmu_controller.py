@@ -1,5 +1,5 @@
 """A controller FMU as a command source (rtsim.fmu): FMUs built here with pythonfmu3 from the Python
-classes in tests/fmu drive the car offline, and their runs equal the same controllers written as Python
+classes in rtsim/fmu/examples drive the car offline, and their runs equal the same controllers written as Python
 command sources (same inputs, same step) within 1e-9; bad mappings and FMUs get one clear line."""
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from rtsim.fmu.mapping import load_mapping
 from rtsim.vehicle.offline import run, sim_for
 from rtsim.vehicle.registry import ROOT, open_vehicle
 
-from fmu.build import PythonLaneKeep, PythonPiSpeed, build_fmu
+from fmu.build import PythonLaneKeep, PythonPiSpeed
+from rtsim.fmu.examples import build_example
 
 FLAT = ROOT / "configs" / "roads" / "flat.toml"
 STEP = 0.01          # s, the controllers' communication step (10 run steps)
@@ -25,7 +26,7 @@ STEP = 0.01          # s, the controllers' communication step (10 run steps)
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
     d = tmp_path_factory.mktemp("fmus")
-    return {"pi": build_fmu("pi_speed", d), "lane": build_fmu("lane_keep", d)}
+    return {"pi": build_example("pi_speed", d), "lane": build_example("lane_keep", d)}
 
 
 @pytest.fixture(scope="module")

@@ -32,9 +32,8 @@ ramp = 0.1
 
 def test_exported_vehicle_reproduces_rtsim_run_over_a_step_steer(tmp_path):
     import fmpy
-    from fmpy.fmi3 import FMU3Slave
-
     from rtsim.cli import main
+    from rtsim.fmu.controller import open_slave
 
     scen = tmp_path / "step_steer.toml"
     scen.write_text(STEP_STEER)
@@ -55,12 +54,8 @@ def test_exported_vehicle_reproduces_rtsim_run_over_a_step_steer(tmp_path):
     driver = sc.driver()
     dt, every = sc.dt, 10
 
-    fmu = FMU3Slave(guid=md.guid, unzipDirectory=fmpy.extract(str(fmu_path), unzipdir=tmp_path / "fmu"),
-                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="car")
-    fmu.instantiate()
+    fmu = open_slave(md, fmpy.extract(str(fmu_path), unzipdir=tmp_path / "fmu"), "car")
     try:
-        fmu.enterInitializationMode(startTime=0.0)
-        fmu.exitInitializationMode()
         in_vr = [byname[c].valueReference for c in commands]
         out_vr = [byname[o].valueReference for o in outputs]
         rows = [fmu.getFloat64(out_vr)]

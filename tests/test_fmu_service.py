@@ -1,5 +1,5 @@
 """A controller FMU in the service (rtsim.service.controller): a lockstep service in this process serves a
-scenario naming the PI speed controller FMU (built here with pythonfmu3); with no ECU on the bus the FMU
+scenario naming the PI speed controller FMU (the example, built here with pythonfmu3); with no ECU on the bus the FMU
 drives the throttle and brake through the user source (the watchdog's hold released by its commands) and
 accelerates the car towards its target; its commands are recorded as user changes."""
 from __future__ import annotations
@@ -11,12 +11,12 @@ from bridge.mcap_recorder import read_recording
 from rtsim.service.server import ServeOptions, Service
 from waits import EVENT, HUB_START
 
-from fmu.build import build_fmu
+from rtsim.fmu.examples import build_example
 from test_fmu_controller import PI_MAP, scenario, write
 
 
 def test_pi_speed_fmu_drives_the_car_in_the_service(tmp_path):
-    fmu = build_fmu("pi_speed", tmp_path)
+    fmu = build_example("pi_speed", tmp_path)
     mapping = write(tmp_path, "pi.toml", PI_MAP.format(fmu=fmu, step=0.01))
     sc = scenario(tmp_path, mapping, duration=10.0, speed=15.0)
     rec = tmp_path / "session.mcap"

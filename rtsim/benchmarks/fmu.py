@@ -1,8 +1,8 @@
 """`rtsim bench --suite fmu`: what an FMU costs beside the 1 ms loop budget.
 
 - one call of a controller FMU as a command source (rtsim.fmu.controller.FmuController.communicate: set
-  its input, doStep, get its two outputs), for a PI speed controller built here with pythonfmu3 (a Python
-  FMU: the cost is fmpy's ctypes calls plus the FMU's Python), compared with one step of the car;
+  its input, doStep, get its two outputs), for the example PI speed controller (rtsim/fmu/examples)
+  built here with pythonfmu3 (a Python FMU: the cost is fmpy's ctypes calls plus the FMU's Python);
 - one doStep of 1 ms of the car exported as an FMU (`rtsim export-fmu`), imported with fmpy, with its
   commands set and its channels read, against `rtsim run`'s cost per step.
 Medians and best of `repeats` rounds of `reps` calls (microseconds)."""
@@ -14,32 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-PI_FMU = '''
-from pythonfmu3 import Fmi3Causality, Fmi3Slave, Fmi3Variability, Float64
-from pythonfmu3.unit import Unit
-
-
-class BenchPi(Fmi3Slave):
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.time, self.v, self.throttle, self.brake, self.integ = 0.0, 0.0, 0.0, 0.0, 0.0
-        self.register_units([Unit("m/s", m=1, s=-1), Unit("rad", rad=1), Unit("kPa", kg=1, m=-1, s=-2, factor=1e3)])
-        self.register_variable(Float64("time", causality=Fmi3Causality.independent,
-                                       variability=Fmi3Variability.continuous))
-        self.register_variable(Float64("v", causality=Fmi3Causality.input, unit="m/s", start=0.0))
-        self.register_variable(Float64("throttle", causality=Fmi3Causality.output, unit="rad"))
-        self.register_variable(Float64("brake", causality=Fmi3Causality.output, unit="kPa"))
-
-    def do_step(self, current_time, step_size):
-        e = 20.0 - self.v
-        self.integ += 0.3 * e * step_size
-        u = 0.8 * e + self.integ
-        self.throttle = min(0.35 * u, 1.4) if u > 0.0 else 0.0
-        self.brake = -800.0 * u if u < 0.0 else 0.0
-        return True
-'''
-
-MAPPING = '''fmu = "BenchPi.fmu"
+MAPPING = '''fmu = "PiSpeed.fmu"
 step = 0.01
 [inputs]
 v = "speed"
@@ -60,21 +35,18 @@ def _rounds(fn, reps: int, repeats: int) -> dict:
 
 
 def fmu_costs(reps: int = 2000, repeats: int = 5) -> dict:
-    from pythonfmu3.builder import FmuBuilder
-
     import fmpy
-    from fmpy.fmi3 import FMU3Slave
 
     from rtsim.channels import CAR, COMMANDS
-    from rtsim.fmu.controller import FmuController
+    from rtsim.fmu.controller import FmuController, open_slave
+    from rtsim.fmu.examples import build_example
     from rtsim.fmu.export import export_vehicle
     from rtsim.vehicle.registry import open_vehicle
 
     res: dict = {"loop_budget_us": 1000.0}
     with tempfile.TemporaryDirectory(prefix="rtsim_bench_fmu_") as tmp:
         d = Path(tmp)
-        (d / "bench_pi.py").write_text(PI_FMU)
-        FmuBuilder.build_FMU(d / "bench_pi.py", dest=d)
+        build_example("pi_speed", d)
         (d / "pi.toml").write_text(MAPPING)
         ctl = FmuController(d / "pi.toml", CAR, {c.name: c.unit for c in COMMANDS}, 1e-3)
         ctl.start(0.0)
@@ -92,12 +64,8 @@ def fmu_costs(reps: int = 2000, repeats: int = 5) -> dict:
         vehicle = open_vehicle("xbw")
         fmu_path = export_vehicle("xbw", d / "xbw.fmu")
         md = fmpy.read_model_description(str(fmu_path))
-        fmu = FMU3Slave(guid=md.guid, unzipDirectory=fmpy.extract(str(fmu_path), unzipdir=d / "xbw"),
-                        modelIdentifier=md.coSimulation.modelIdentifier, instanceName="car")
-        fmu.instantiate()
+        fmu = open_slave(md, fmpy.extract(str(fmu_path), unzipdir=d / "xbw"), "car")
         try:
-            fmu.enterInitializationMode(startTime=0.0)
-            fmu.exitInitializationMode()
             ins = [v.valueReference for v in md.modelVariables if v.causality == "input"]
             outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
             cmd = [0.0] * len(ins)

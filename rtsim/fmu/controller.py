@@ -100,32 +100,26 @@ class FmuController:
 
         self.inputs: tuple[str, ...] = tuple(m.inputs.values())
         self.outputs: tuple[str, ...] = tuple(m.outputs.values())
-        self._in_vr, self._in_a, self._in_b = [], [], []
-        for name, ch in m.inputs.items():
-            key = f"inputs.{name}"
-            if ch not in avail:
-                raise problem(src, key, ch, f"not a sensor or state channel of the vehicle (its channels: "
-                              f"{', '.join(avail)})")
-            v = var(key, name, ch, "input")
-            conv = conversion(avail[ch], md, unit_of(v))
-            if isinstance(conv, str):
-                raise problem(src, key, ch, conv)
-            self._in_vr.append(v.valueReference)
-            self._in_a.append(conv[0])
-            self._in_b.append(conv[1])
-        self._out_vr, self._out_a, self._out_b = [], [], []
-        for name, cmd in m.outputs.items():
-            key = f"outputs.{name}"
-            if cmd not in commands:
-                raise problem(src, key, cmd, f"not a command this run takes (allowed: {', '.join(commands)})")
-            v = var(key, name, cmd, "output")
-            conv = conversion(commands[cmd], md, unit_of(v))
-            if isinstance(conv, str):
-                raise problem(src, key, cmd, conv)
-            # the inverse map: command = (fmu - b) / a
-            self._out_vr.append(v.valueReference)
-            self._out_a.append(conv[0])
-            self._out_b.append(conv[1])
+        # per direction: value references and the linear map fmu = a * channel + b (outputs inverted)
+        maps = {}
+        for side, causality, table, known, what in (
+                ("inputs", "input", m.inputs, avail, "a sensor or state channel of the vehicle (its channels"),
+                ("outputs", "output", m.outputs, commands, "a command this run takes (allowed")):
+            vr, a, b = [], [], []
+            for name, ch in table.items():
+                key = f"{side}.{name}"
+                if ch not in known:
+                    raise problem(src, key, ch, f"not {what}: {', '.join(known)})")
+                v = var(key, name, ch, causality)
+                conv = conversion(known[ch], md, unit_of(v))
+                if isinstance(conv, str):
+                    raise problem(src, key, ch, conv)
+                vr.append(v.valueReference)
+                a.append(conv[0])
+                b.append(conv[1])
+            maps[side] = (vr, np.array(a), np.array(b))
+        self._in_vr, self._in_a, self._in_b = maps["inputs"]
+        self._out_vr, self._out_a, self._out_b = maps["outputs"]
         self._par = []
         for name, value in m.spec.parameters.items():
             v = by_name.get(name)
@@ -133,8 +127,6 @@ class FmuController:
                 raise problem(src, f"parameters.{name}", value, "missing variable: the FMU has no parameter "
                               f"{name!r} (its parameters: {', '.join(n for n, x in by_name.items() if x.causality == 'parameter') or 'none'})")
             self._par.append((v.valueReference, float(value)))
-        self._in_a, self._in_b = np.array(self._in_a), np.array(self._in_b)
-        self._out_a, self._out_b = np.array(self._out_a), np.array(self._out_b)
         self._fmu = None
         self._dir = None
 
@@ -142,35 +134,15 @@ class FmuController:
     def start(self, t0: float = 0.0) -> None:
         """Instantiate and initialise the FMU at time t0 (again after a previous run: a fresh instance)."""
         from fmpy import extract
-        from fmpy.fmi2 import FMU2Slave
-        from fmpy.fmi3 import FMU3Slave
 
         self.close()
         self._dir = extract(str(self.mapping.fmu))
-        cls = FMU3Slave if self.fmi3 else FMU2Slave
-        fmu = cls(guid=self.md.guid, unzipDirectory=self._dir, modelIdentifier=self.md.coSimulation.modelIdentifier,
-                  instanceName=self.mapping.path.stem)
         try:
-            fmu.instantiate()
-            if self.fmi3:
-                self._set = fmu.setFloat64
-                self._get = fmu.getFloat64
-                self._set_par()
-                fmu.enterInitializationMode(startTime=t0)
-            else:
-                self._set = fmu.setReal
-                self._get = fmu.getReal
-                fmu.setupExperiment(startTime=t0)
-                self._set_par()
-                fmu.enterInitializationMode()
-            fmu.exitInitializationMode()
+            fmu = open_slave(self.md, self._dir, self.mapping.path.stem, t0, self._par)
         except Exception as exc:  # noqa: BLE001 (an FMU's failure comes as fmpy's exception of its status)
             raise RtsimError(f"{self.mapping.path}: fmu = {self.mapping.spec.fmu!r}: cannot initialise it: {exc}") from None
+        self._set, self._get = (fmu.setFloat64, fmu.getFloat64) if self.fmi3 else (fmu.setReal, fmu.getReal)
         self._fmu = fmu
-
-    def _set_par(self) -> None:
-        if self._par:
-            self._set([vr for vr, _ in self._par], [x for _, x in self._par])
 
     def communicate(self, t: float, x: np.ndarray) -> np.ndarray:
         """The commands for [t, t + step) from the input channels' values x (SI) at t."""
@@ -195,3 +167,29 @@ class FmuController:
             shutil.rmtree(self._dir, ignore_errors=True)
             self._dir = None
 
+
+
+def open_slave(md, unzipdir, name: str, t0: float = 0.0, parameters=()):
+    """An extracted co-simulation FMU (fmpy's model description `md`, FMI 2.0 or 3.0) instantiated as
+    `name`, its float `parameters` ((value reference, value), ...) set, initialised at time t0."""
+    from fmpy.fmi2 import FMU2Slave
+    from fmpy.fmi3 import FMU3Slave
+
+    fmi3 = md.fmiVersion == "3.0"
+    fmu = (FMU3Slave if fmi3 else FMU2Slave)(guid=md.guid, unzipDirectory=str(unzipdir), instanceName=name,
+                                            modelIdentifier=md.coSimulation.modelIdentifier)
+    fmu.instantiate()
+    try:
+        if not fmi3:
+            fmu.setupExperiment(startTime=t0)
+        if parameters:
+            (fmu.setFloat64 if fmi3 else fmu.setReal)([vr for vr, _ in parameters], [x for _, x in parameters])
+        if fmi3:
+            fmu.enterInitializationMode(startTime=t0)
+        else:
+            fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+    except BaseException:
+        fmu.freeInstance()
+        raise
+    return fmu
