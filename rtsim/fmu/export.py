@@ -37,6 +37,7 @@ def export_vehicle(vehicle: str | Path | None, out: str | Path, scenario: str | 
     if out.suffix.lower() != ".fmu":
         raise RtsimError(f"{out}: the output must end in .fmu")
     opened = open_vehicle(vehicle)
+    opened.refuse("export-fmu")
     sc_path = resolve_scenario(scenario) if scenario is not None else opened.default_scenario
     sc = load_scenario(sc_path, check_files=True)
     opened.check_scenario(sc)
