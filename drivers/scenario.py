@@ -24,6 +24,9 @@ scenario file; ranges inclusive unless marked <):
     [inputs.path_follower]           # closed loop, drives steering_wheel_angle_cmd
                                      # a channel with neither stays 0; one with both is an error
 
+    controller = "pi.toml"           # optional: a controller FMU's mapping file (docs/fmu.md); the
+                                     #   commands it drives must have no profile or follower here
+
     [torque_mode]                    # optional: drive with wheel torques instead of the engine (the
     wheel_torque_rl = {...}          #   seed validation's inputs); both are profiles, N*m; the
     wheel_torque_rr = {...}          #   throttle and the speed follower are then not allowed
@@ -100,6 +103,7 @@ from pydantic import Field, StrictBool, create_model, model_validator
 
 from rtsim.configfile import Range, Strict, bad, load, problem, range_fields
 from rtsim.faults.spec import FaultSpec
+from rtsim.fmu.mapping import Mapping, load_mapping
 from rtsim.errors import ConfigError
 
 from .base import INPUT_NAMES, INPUT_UNITS, LIMITS, NSTATE, S_SPEED, S_X, S_Y
@@ -476,6 +480,8 @@ class ScenarioSpec(_Model):
     reference: dict[str, Num] = {}
     #: faults the service arms when it serves this scenario (rtsim.faults: docs/faults.md)
     faults: list[FaultSpec] = []
+    #: a controller FMU's mapping file (rtsim.fmu.mapping: docs/fmu.md) driving some of the commands
+    controller: Optional[str] = None
 
     @model_validator(mode="after")
     def _check(self):
@@ -529,6 +535,7 @@ class Scenario:
     recordings: dict[Path, Recording] = field(default_factory=dict)
     path_xy: tuple[np.ndarray, np.ndarray] | None = None
     two_wheeler_profiles: dict[str, Profile] = field(default_factory=dict)
+    mapping: Mapping | None = None        # the controller FMU's mapping (rtsim.fmu.mapping), if any
 
     @property
     def two_wheeler(self) -> bool:
@@ -584,7 +591,9 @@ class Scenario:
             spec = inp.path_follower
             x, y = self.path_xy
             pf = path_follower(x, y, method=spec.method, closed=spec.closed, params=spec.params())
-        return Driver(self.profiles, speed=sf, path=pf)
+        d = Driver(self.profiles, speed=sf, path=pf)
+        d.controller = self.mapping
+        return d
 
 
 def load_scenario(path: str | Path, check_files: bool = False) -> Scenario:
@@ -631,12 +640,33 @@ def load_scenario(path: str | Path, check_files: bool = False) -> Scenario:
             raise _fail(path, "inputs.path_follower", pfs.file or "<x, y>", str(exc)) from None
     if spec.two_wheeler is not None:
         _two_wheeler_profiles(sc)
+    if spec.controller is not None:
+        sc.mapping = _controller(sc)
     if spec.rider is not None:
         try:  # geometry errors (coincident points) surface at load
             spec.rider.build()
         except ValueError as exc:
             raise _fail(path, "rider", "<path>", str(exc)) from None
     return sc
+
+
+def _controller(sc: Scenario) -> Mapping:
+    """The controller's mapping file, loaded; its commands must not also be driven by [inputs]."""
+    spec = sc.spec
+    if sc.two_wheeler:
+        raise _fail(sc.path, "controller", spec.controller, "a controller FMU drives a car's commands; a "
+                    "two-wheeler's scenario cannot name one (yet)")
+    mapping = load_mapping(sc.path.parent / spec.controller)
+    driven = {ch: f"inputs.{ch}" for ch in sc.profiles}
+    if spec.inputs.speed_follower is not None:
+        driven.update({ch: "inputs.speed_follower" for ch in ("throttle_angle_cmd", "brake_pressure_cmd")})
+    if spec.inputs.path_follower is not None:
+        driven["steering_wheel_angle_cmd"] = "inputs.path_follower"
+    for cmd in mapping.outputs.values():
+        if cmd in driven:
+            raise _fail(sc.path, "controller", spec.controller, f"its FMU drives {cmd}, which {driven[cmd]} "
+                        "drives too (a command has one source)")
+    return mapping
 
 
 def load_all(directory: str | Path = SCENARIO_DIR, check_files: bool = False) -> dict[str, Scenario]:

@@ -69,6 +69,11 @@ def _bench(args) -> int:
         res = dispatch_costs()
         print(json.dumps(res, indent=2) if args.json else format_report(res))
         return 0
+    if args.suite == "fmu":
+        from rtsim.benchmarks.fmu import fmu_costs, format_report
+        res = fmu_costs()
+        print(json.dumps(res, indent=2) if args.json else format_report(res))
+        return 0
     if args.suite == "fuzz":
         from pathlib import Path
 
@@ -170,6 +175,15 @@ def _run(args) -> int:
     if res.fault is not None:
         return _model_fault_exit(res.fault, len(res.data), out)
     return 0 if res.status == "ok" else MODEL_FAULT_EXIT
+
+
+def _export_fmu(args) -> int:
+    """`rtsim export-fmu`: the vehicle as an FMU (rtsim.fmu.export)."""
+    from rtsim.fmu.export import export_vehicle
+
+    out = export_vehicle(args.vehicle, args.out, args.scenario)
+    print(f"{out}: FMI 3.0 co-simulation FMU of {args.vehicle}")
+    return 0
 
 
 MODEL_FAULT_EXIT = 3      # `rtsim run`: the model failed (a two-wheeler: or fell); the rows up to it are written
@@ -274,11 +288,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--t-end", type=float, metavar="S", help="end time, s (default: the problem's)")
     b.add_argument("--json", action="store_true", help="print a JSON list, one object per problem")
     b.add_argument("--scaling", action="store_true", help="also time the N-four-bar for N = 1, 2, 10, 40, 100")
-    b.add_argument("--suite", choices=["mbs", "vehicle", "service", "dispatch", "fuzz"], default="mbs",
+    b.add_argument("--suite", choices=["mbs", "vehicle", "service", "dispatch", "fuzz", "fmu"], default="mbs",
                    help="mbs: the IFToMM benchmark problems (default); vehicle: the vehicle model's cost per "
                         "step; service: the HIL service's real-time budget under load (CAN, Zenoh, MCAP, ECU); "
                         "dispatch: the cost of a call into a kernel, direct and bound (rtsim.boundcall); "
-                        "fuzz: command sequences drawn in each vehicle's DBC ranges (rtsim.robustness)")
+                        "fuzz: command sequences drawn in each vehicle's DBC ranges (rtsim.robustness); "
+                        "fmu: the cost of one controller FMU call and of the car as an FMU (docs/fmu.md)")
     b.add_argument("--count", type=int, default=2000, metavar="N",
                    help="fuzz suite: rides drawn per vehicle (2000)")
     b.add_argument("--vehicle", action="append", metavar="FILE",
@@ -328,6 +343,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also write PNG figures (lateral acceleration, tyre loads, steering) into DIR "
                         "(default: <output stem>_plots/ beside the output)")
     r.set_defaults(func=_run)
+    ef = sub.add_parser("export-fmu", help="write an FMI 3.0 co-simulation FMU of a vehicle: its commands as "
+                        "inputs, its channels as outputs (docs/fmu.md)")
+    ef.add_argument("--vehicle", required=True, metavar="FILE|NAME", help="vehicle TOML or name in configs/vehicles")
+    ef.add_argument("--scenario", metavar="FILE|NAME", help="where the FMU starts: the scenario's road, initial "
+                    "state and step (its inputs are not used; default: the vehicle's default scenario)")
+    ef.add_argument("--out", required=True, metavar="FILE.fmu", help="the FMU to write")
+    ef.set_defaults(func=_export_fmu)
     en = sub.add_parser("energy", help="the power audit of a recorded run: every port's energy and the balance")
     en.add_argument("run", metavar="RUN.mcap|.csv", help="a run's MCAP or CSV (rtsim run --out)")
     en.set_defaults(func=_energy)

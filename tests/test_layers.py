@@ -37,7 +37,8 @@ LAYERS = (
     ("bridge", ("bridge",)),
     ("apps", ("rtsim.service", "rtsim.batch", "rtsim.viewer", "rtsim.robustness", "rtsim.benchmarks", "rtsim.watch",
               "rtsim.cli", "rtsim.validate.cli", "drivers.ecu_demo", "drivers.eps_demo", "drivers.rider_assist_demo",
-              "drivers.bus_controller")),
+              "drivers.bus_controller", "rtsim.fmu.export", "rtsim.fmu.served_vehicle", "rtsim.fmu.vehicle_step",
+              "rtsim.fmu.vehicle_slave")),
 )
 
 #: (importer, imported) -> why it is still there. Shrink it; never grow it.

@@ -71,6 +71,18 @@ def render_dispatch(res) -> list[str]:
     return lines
 
 
+def render_fmu(res) -> list[str]:
+    """`rtsim bench --suite fmu --json`: one controller FMU call and the car as an FMU, beside the 1 ms budget."""
+    b = res["loop_budget_us"]
+    rows = (("controller FMU call (set 1 input, doStep, get 2 outputs)", res["controller_call_us"]),
+            (f"car FMU doStep of 1 ms (set 3 commands, get {res['vehicle_fmu_outputs']} channels)",
+             res["vehicle_fmu_dostep_us"]),
+            ("car step in rtsim (1 ms, channels read)", res["vehicle_step_us"]))
+    lines = ["| call | us per call, median | best | median share of 1 ms |", "|---|---|---|---|"]
+    lines += [f"| {k} | {v['median']:.1f} | {v['best']:.1f} | {100 * v['median'] / b:.1f} % |" for k, v in rows]
+    return lines
+
+
 def render_eigen(res) -> list[str]:
     """`rtsim eigen --vehicle motorcycle --speeds 5:60:5 --out FILE`: where each mode changes stability."""
     lines = ["| mode | becomes | at (m/s) |", "|---|---|---|"]
@@ -83,6 +95,7 @@ BLOCKS: dict[str, Block] = {
     "mbs": Block(("bench", "--json", "--scaling"), render_mbs),
     "vehicle": Block(("bench", "--suite", "vehicle", "--json"), render_vehicle),
     "dispatch": Block(("bench", "--suite", "dispatch", "--json"), render_dispatch),
+    "fmu": Block(("bench", "--suite", "fmu", "--json"), render_fmu),
     "eigen-motorcycle": Block(("eigen", "--vehicle", "motorcycle", "--speeds", "5:60:5", "--out", "{out}"),
                               render_eigen),
 }

@@ -218,6 +218,7 @@ class HilLoop:
         for spec, (source, key) in zip(self.fault_specs, self.fault_where):
             table.arm(spec, 0, source, key)
         self._fault_ev_seen = 0
+        self._controller(sim, driver)
         self.lp = LoopParams(self.rx.plan, ints, np.array([self.dt]), lay["frame_id"], lay["time_start"],
                              lay["time_mask"], lay["sig_int"], lay["sig_float"], status["sig_int"],
                              status["sig_float"], ack["sig_int"], ack["sig_float"], np.zeros(2, dtype=np.int64),
@@ -245,6 +246,23 @@ class HilLoop:
         # one compiled call per step, its fixed arguments (model, state, loop arrays) bound once: passed
         # as one address table instead of unboxing ~120 arrays at every call (rtsim.boundcall)
         self._loop_run = bind(loop_run, sim.served(), self.lp, self.ls, self.rings, n_free=3)
+
+    def _controller(self, sim, driver) -> None:
+        """The scenario's controller FMU (its Driver's ``controller`` mapping), a fresh instance at every
+        start (rtsim.service.controller)."""
+        old = getattr(self, "ctl", None)
+        if old is not None:
+            old.close()
+        mapping = getattr(driver, "controller", None)
+        self.ctl = None
+        if mapping is not None:
+            from .controller import LoopController
+            self.ctl = LoopController(sim, mapping, sim.dt, self.sensor_every, self.state_every)
+
+    def _communicate(self) -> None:
+        """The controller's step at step k (see rtsim.service.controller), logged as a user change."""
+        self.ctl.communicate(self.k, self.sim_time, self.ls.values, self.ls.state, self.ls.usr)
+        self._user_changed("controller")
 
     def _user_slots(self, sim) -> tuple[np.ndarray, np.ndarray]:
         """Per user channel (rtsim.service.user_input): the command slot it writes (a car's) or the
@@ -337,6 +355,8 @@ class HilLoop:
             return
         if k % self.status_every == 0:
             self._status_inputs()
+        if self.ctl is not None and self.k % self.ctl.every == 0:
+            self._communicate()
         self._call(True, 1)
         if self.port is not None and (k % self.sensor_every == 0 or k % self.status_every == 0):
             self.port.wake()
@@ -354,6 +374,10 @@ class HilLoop:
         while n > 0 and self.run_state in STEPPING:
             c = min(n, CHUNK)
             k0 = self.k
+            if self.ctl is not None:        # a chunk ends where the controller's next step begins
+                if k0 % self.ctl.every == 0:
+                    self._communicate()
+                c = min(c, self.ctl.every - k0 % self.ctl.every)
             f = self._forced_step
             if f is not None and k0 + 1 < f <= k0 + c:
                 c = f - 1 - k0                # the test-only hook acts before the call whose first step is f

@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from rtsim.channels import CAR, ChannelDictionary
+from rtsim.channels import CAR, COMMANDS, ChannelDictionary
 from rtsim.errors import ConfigError, SimulationError
 from rtsim.model_fault import ModelFault, describe_error, force_failure, test_fault_step, test_fault_time
 from rtsim.road.config import load_road
@@ -21,7 +21,7 @@ from rtsim.road.config import load_road
 from .car.build import build_vehicle
 from .car.energy import ENERGY_NAMES, energy_row
 from .car.config import load_vehicle
-from .car.inputs import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, NSTATE
+from .car.inputs import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, INPUT_NAMES, NSTATE
 from .car.observer import driver_view, vehicle_state_values
 from .car.sim import VehicleSim
 from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT
@@ -87,11 +87,13 @@ def vehicle_state(sim: VehicleSim, out: np.ndarray) -> None:
 
 
 def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
-        seed: int = 0) -> RunResult:
+        seed: int = 0, controller=None) -> RunResult:
     """Run the scenario to its duration; rows at the scenario's output rate. Sensor channels are what the
     sensors report (the vehicle's sensor model: the config's [sensors.channels] and sensor effects);
     `seed` seeds its noise. A model failure ends the run: the rows up to the failure, and ``fault``
-    (its step, time, reason and coordinate; rtsim.model_fault, whose test-only hook can force one)."""
+    (its step, time, reason and coordinate; rtsim.model_fault, whose test-only hook can force one).
+    `controller`: a command source (rtsim.fmu.controller) driving some commands; by default the scenario's
+    controller FMU (its `controller` mapping file), if it names one."""
     dt = sc.dt
     forced = test_fault_step(test_fault_time(), dt)
     nsteps = int(round(sc.duration / dt))
@@ -105,9 +107,20 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
     observed = np.zeros(len(sim.vm.channels.state))
     keep = np.array([sim.vm.channels.state_names.index(n) for n in _state_only(sim.vm.channels)])
     io = sim.io
-    nrow = 0
     sim.seed_sensor_noise(seed)         # the sensor model's noise, reproducible
+    ctl = _Controlled(sim, sc, controller)
     t0 = time.perf_counter()
+    try:
+        return _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state, sens, observed,
+                     keep, io, ctl, t0)
+    finally:
+        ctl.close()
+
+
+def _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state, sens, observed, keep, io,
+          ctl, t0) -> RunResult:
+    dt = sc.dt
+    nrow = 0
     for n in range(nsteps + 1):
         if n % every == 0:
             _log(sim, sens, observed, keep, rows[nrow])
@@ -118,6 +131,8 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
             break
         vehicle_state(sim, state)
         cmd = driver.step(sim.data.t[0] + dt, state)
+        if ctl.source is not None:
+            ctl.apply(n, cmd)
         io.commands[CMD_THROTTLE] = cmd[I_THROTTLE]
         io.commands[CMD_BRAKE] = cmd[I_BRAKE]
         io.commands[CMD_STEER] = cmd[I_STEER]
@@ -132,6 +147,48 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
             return RunResult(columns, rows[:nrow], wall, n, describe_error(sim, exc, n + 1))
     wall = time.perf_counter() - t0
     return RunResult(columns, rows[:nrow], wall, nsteps)
+
+
+class _Controlled:
+    """A command source in the offline loop (rtsim.fmu.controller): at every `every`-th step it reads its
+    input channels (the sensors as reported, else the observer's state channels), communicates, and its
+    commands overwrite the driver's until its next step."""
+
+    def __init__(self, sim: VehicleSim, sc, source):
+        if source is None and getattr(sc, "mapping", None) is not None:
+            from rtsim.fmu.controller import FmuController
+            commands = {c.name: c.unit for c in COMMANDS}     # what the offline driver commands
+            source = FmuController(sc.mapping, sim.vm.channels, commands, sc.dt)
+        self.source = source
+        if source is None:
+            return
+        ch = sim.vm.channels
+        self.sim = sim
+        self.every = int(round(source.step / sc.dt))
+        self.sens = np.zeros(sim.nsensor)
+        self.obs = np.zeros(len(ch.state))
+        self.pick = [(0, ch.sensor_names.index(n)) if n in ch.sensor_names else (1, ch.state_names.index(n))
+                     for n in source.inputs]
+        self.reads_sensors = any(k == 0 for k, _ in self.pick)
+        self.x = np.zeros(len(self.pick))
+        self.slots = np.array([INPUT_NAMES.index(n) for n in source.outputs], dtype=np.int64)
+        self.held = np.zeros(len(self.slots))
+        source.start(float(sim.data.t[0]))
+
+    def apply(self, n: int, cmd: np.ndarray) -> None:
+        if n % self.every == 0:
+            sim = self.sim
+            if self.reads_sensors:
+                sim.sensors(self.sens)
+            vehicle_state_values(sim.data, sim.vm.vehicle, sim.vd, sim.io.signals, self.obs)
+            for i, (k, j) in enumerate(self.pick):
+                self.x[i] = self.sens[j] if k == 0 else self.obs[j]
+            self.held[:] = self.source.communicate(float(sim.data.t[0]), self.x)
+        cmd[self.slots] = self.held
+
+    def close(self) -> None:
+        if self.source is not None:
+            self.source.close()
 
 
 def _log(sim: VehicleSim, sens: np.ndarray, observed: np.ndarray, keep: np.ndarray, row: np.ndarray) -> None:

@@ -36,7 +36,7 @@ DEFAULT_VEHICLE = VEHICLES / "xbw.toml"
 #: the commands that take a vehicle (the bar of the vehicle interface: each runs on every vehicle or
 #: refuses in one line)
 COMMANDS = ("describe", "run", "serve", "demo", "resim", "validate", "eigen", "statics", "energy", "feel",
-            "view", "batch")
+            "view", "batch", "export-fmu")
 
 
 def resolve_config(name: str | Path, what: str, folder: Path) -> Path:
