@@ -96,7 +96,7 @@ from .effectset import Effect
 from .crossval import leave_one_run_out, normalised
 from .objective import MOVING, Objective, _tau
 from .redundancy import check
-from .stats import t_critical
+from .stats import parabolic_minimum, t_critical
 from .replay import Replayer, ReplayInputs
 from .signals import DERIVED
 
@@ -652,13 +652,7 @@ def fit_sensor_effects(ctx: Context) -> list[Candidate]:
                 for d in grid:
                     yd = delayed(y, float(t[1] - t[0]), d)
                     costs.append(float(np.sum(((yd - obj.mean[comp]) / s) ** 2)))
-                k = int(np.argmin(costs))
-                free = float(grid[k])
-                if 0 < k < grid.size - 1:
-                    c0, c1, c2 = costs[k - 1], costs[k], costs[k + 1]
-                    den = c0 - 2 * c1 + c2
-                    if den > 0:
-                        free += 0.5 * (c0 - c2) / den * (grid[1] - grid[0])
+                free = parabolic_minimum(grid, costs)
                 J = direction(-np.gradient(delayed(y, float(t[1] - t[0]), free), t))
             th = coord.clip(free)
             span = coord.thi - coord.tlo

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .signals import box_average
-from .stats import t_critical
+from .stats import parabolic_minimum, t_critical
 
 SHARE = 0.5                  # share of the candidate's deviation from neutral the check must see
 LAG_STEP = 0.002             # s, the lag grid's step
@@ -60,7 +60,7 @@ class Check:
         n = self.values.size
         if n < 2:
             return float("inf")
-        return float(t_critical(n - 1) * self.values.std(ddof=1) / np.sqrt(n))
+        return float(t_critical(n) * self.values.std(ddof=1) / np.sqrt(n))
 
     def confirms(self, candidate: float) -> bool:
         """The interval excludes neutral on the candidate's side and covers at least SHARE of its deviation."""
@@ -125,15 +125,7 @@ def lag(y: np.ndarray, ref: np.ndarray, offsets: list[np.ndarray], dt: float, lo
         return float("nan")
     y, ref, offsets = smooth(y, dt), smooth(ref, dt), [smooth(o, dt) for o in offsets]
     grid = np.arange(lo, hi + 0.5 * LAG_STEP, LAG_STEP)
-    costs = np.array([_fit(y, shifted(ref, dt, float(d)), offsets, mask)[1] for d in grid])
-    k = int(np.argmin(costs))
-    d = float(grid[k])
-    if 0 < k < grid.size - 1:
-        c0, c1, c2 = costs[k - 1], costs[k], costs[k + 1]
-        den = c0 - 2 * c1 + c2
-        if den > 0:
-            d += 0.5 * (c0 - c2) / den * LAG_STEP
-    return d
+    return parabolic_minimum(grid, [_fit(y, shifted(ref, dt, float(d)), offsets, mask)[1] for d in grid])
 
 
 def _estimate(rel, kind: str, channels: dict, dt: float, lo: float, hi: float) -> float:

@@ -71,3 +71,17 @@ def error_metrics(model: np.ndarray, b: Band) -> dict:
     r = model - b.mean
     return {"rms": float(np.sqrt(np.mean(r * r))), "max": float(np.max(np.abs(r))),
             "inside_band": inside_fraction(model, b)}
+
+
+def parabolic_minimum(grid: np.ndarray, costs) -> float:
+    """The minimum of a cost sampled on an evenly spaced grid: the best grid point, refined by the parabola
+    through it and its two neighbours (when it is inside the grid and the parabola opens upwards)."""
+    costs = np.asarray(costs, float)
+    k = int(np.argmin(costs))
+    x = float(grid[k])
+    if 0 < k < grid.size - 1:
+        c0, c1, c2 = costs[k - 1], costs[k], costs[k + 1]
+        den = c0 - 2 * c1 + c2
+        if den > 0:
+            x += 0.5 * (c0 - c2) / den * float(grid[1] - grid[0])
+    return x
