@@ -288,9 +288,6 @@ EXPECTED_FAILURES: dict[str, str] = {
     "c016": "a 2.1 % scale of one wheel angle (fl 0.979) beside a gyro_z scale: gyro_z named right (0.8995, "
             "0.8949 in the model's terms), the wheel's scale split between the axle's two wheels (fl 0.9941 and "
             "fr 1.018 named): sensor_scale[wheel_angle_fr] named, not hidden",
-    "c005": "an accelerometer bias (accel_x 0.179) on the lateral run: named right (0.175), but a gyro_z scale of "
-            "1.0046 is named beside it, not hidden: the cross-validation's structure rule lets a small gain "
-            "through",
 }
 
 

@@ -78,10 +78,7 @@ SEEDS = {"brake_lag": 13, "road_grade": 15, "sensor_delay": 16, "sensor_scale": 
 
 
 #: cases that fail with issue 30's selection rule (cross-validation across the runs): strict, with reasons
-KNOWN_FAILURES = {
-    "road_grade": "mass 180 kg and brake friction 1.56 are named for the hidden grade 0.03: the mass is taken "
-                  "first on the cross-validation's evidence",
-}
+KNOWN_FAILURES: dict[str, str] = {}
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.xfail(strict=True, raises=AssertionError,

@@ -332,10 +332,11 @@ def _check(res, expected, in_model_terms: dict | None = None):
 #: cases that fail, with the one part of the bar each fails (any other failure fails the test): the limits
 #: of what the data can tell, kept so that a change shows (strict: a pass fails)
 KNOWN_FAILURES = {
-    "accel_x_scale": (RmsBar, "named 1.095 +- 0.008 (true 1.1; 1.095 in the model's terms), but accel_x's RMS "
-                      "falls 0.135 -> 0.054 m/s^2, 2.5 times, not 3: the noise left in the data's mean (0.034) "
-                      "stops any model at 3.9 times, the peer that made the runs included (test_rms_bar_reach); "
-                      "with no hidden effect rtsim leaves 0.050 there, so the change can fall 2.7 times at most"),
+    "accel_x_scale": (AssertionError, "not named: the 1.095 scale (true 1.1) moves accel_x by 1.5 standard errors "
+                      "of the mean, less than 1.96 times the mismatch it leaves (0.65, taken at its floor of 1: the "
+                      "noise left in the mean), so it cannot be told from a structural gain of that size; the "
+                      "field benchmark would not count it larger than the structural mismatch (2 times the floor); "
+                      "had it been named, its RMS bar was out of reach anyway (2.5 times, test_rms_bar_reach)"),
     "accel_y_delay": (ValueBar, "named 0.0751 +- 0.013 s (true 0.1): the model's accel_y lags the peer's by "
                       "25 ms (its roll, which the peer lacks), a structural lag with a sensor delay's signature "
                       "on that channel, which reads as a delay of -0.025 s in the same runs without the hidden "
@@ -343,21 +344,13 @@ KNOWN_FAILURES = {
                       "0.1 s delay 0.0903, inside the 10 %)"),
     # issue 30's selection rule (cross-validation across the runs, each run predicted from its own inputs):
     # these cases passed with issue 15's thresholds and fail with it
-    "gyro_z_delay": (AssertionError, "named 0.0903 (0.0903 in the model's terms), but a gyro_z scale of 1.004 "
-                     "is named beside it: the model's small structural gain on gyro_z, which every run shows "
-                     "alike, moves gyro_z by more than it leaves there"),
     "stiffness_0.6": (AssertionError, "a delay (0.094 s) and a scale (0.955) of accel_y are named instead of the "
                       "tyre stiffness: the accel_y delay's cross-validation evidence outranks the tyre's on this "
                       "seed (on the issue's stiffness 0.5 case the tyre wins)"),
 }
 #: the longitudinal (pitch-plane peer) cases that fail with issue 30's selection rule (strict, with reasons)
 LONGITUDINAL_FAILURES = {
-    "grade": (AssertionError, "mass 383 kg, brake friction 2 and an accel_x bias 0.56 are named instead of the "
-              "grade 0.04: the first candidate taken (by the cross-validation's evidence) is the mass"),
-    "mass_and_grade": (AssertionError, "nothing is named: no candidate alone passes the rule"),
     "mass_and_rolling_resistance": (AssertionError, "nothing is named: no candidate alone passes the rule"),
-    "brake_and_grade": (AssertionError, "mass 59 kg and grade 0.021 are named instead of brake friction 0.8 "
-                        "and grade 0.03"),
 }
 KNOWN_FAILURES.update(LONGITUDINAL_FAILURES)
 
@@ -414,8 +407,14 @@ def test_lateral_peer(replayer, car, tyre_params, folder, case):
         t = res.bench.t
         best = -_best_delay(t, m, d, -np.arange(0.0, 0.06, 0.001))
         assert abs(ay["signature"]["value"] - best) < 0.3 * best, (ay, best)
-        for c in [*WHEELS, "gyro_z"]:
+        for c in WHEELS:
             assert res.channels[c]["status"] == "inside the band", (c, res.channels[c])
+        # gyro_z: inside the band, or (runs aligned closely enough for the band to resolve it) structural
+        # with the lag of the model's yaw response behind the peer's, about 10 ms (module docstring)
+        gz = res.channels["gyro_z"]
+        assert gz["status"] == "inside the band" or (
+            gz["status"] == "structural" and gz["signature"]["kind"] == "lag"
+            and 0.005 < gz["signature"]["value"] < 0.015), gz
         assert res.nuisance and all(abs(v) > 0 for v, _ in res.nuisance.values())
         report.write(res, folder / "html")
         html = (folder / "html" / "report.html").read_text()

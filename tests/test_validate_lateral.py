@@ -107,10 +107,7 @@ SEEDS = {"tyre_slip_stiffness": 41, "accel_y_scale": 43, "mass": 44}
 
 
 #: cases that fail with issue 30's selection rule (cross-validation across the runs): strict, with reasons
-KNOWN_FAILURES = {
-    "mass": "an accel_x scale of 0.797 is named for the hidden 250 kg: the scale's cross-validation evidence "
-            "outranks the mass's",
-}
+KNOWN_FAILURES: dict[str, str] = {}
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.xfail(strict=True, raises=AssertionError,
