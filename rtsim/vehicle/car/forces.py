@@ -4,9 +4,11 @@
 implicit in the step). It is a pipeline of stages; each adds its generalized forces to d.force, with
 `tangent` its stiffness (scaled by bq = h^2/4) and damping (by hc = h/2) to W, and writes its own
 force record: its rows of the port-force array VehicleData.pf (rows PORT_*, rtsim.vehicle.car.layout),
-the generalized forces that element puts on the coordinates. The records are written at every
-evaluation (the last one of a step is at the converged state), so the power audit
-(rtsim.vehicle.car.energy) is a sum over them after the step and no stage branches on it.
+the generalized forces that element puts on the coordinates. The records are written only while
+the power audit is on (VehicleData.audit, the flag `rec` every stage takes; the stages' forces are
+the same either way), at every evaluation (the last one of a step is at the converged state), so the
+power audit (rtsim.vehicle.car.energy) is a sum over them after the step; with the audit off the
+records cost nothing.
 
 Per corner, in this order (the corners share the rack coordinate, so each corner's stages run
 together and the forces add in one fixed order):
@@ -114,7 +116,7 @@ def _corner_travel(veh, vd, q, qd, i):
 
 
 @inline_kernel
-def suspension_stage(m, d, veh, vd, i, tangent, bq, hc):
+def suspension_stage(m, d, veh, vd, i, rec, tangent, bq, hc):
     """Corner i's spring and damper (tables: force in compression against compression from the design
     length, and against compression speed), its travel stops and its anti-roll bar. Records: PORT_SPRING,
     PORT_DAMPER (with the stops: a non-storing port), PORT_ARB."""
@@ -135,19 +137,21 @@ def suspension_stage(m, d, veh, vd, i, tangent, bq, hc):
     f_ts, k_ts, c_ts = travel_stops(z, zd, sp[SP_Z_LO], sp[SP_Z_HI], sp[SP_STOP_K], sp[SP_STOP_C])
     if k_ts != 0.0:
         f[kz] += f_ts
-        pf[PORT_DAMPER, kz] += f_ts
+        if rec:
+            pf[PORT_DAMPER, kz] += f_ts
         if tangent:
             add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * k_ts + hc * c_ts)
     # anti-roll bar on the travel difference with the other wheel of the axle
     partner = veh.corner_idx[int(sp[SP_PARTNER]), CI_Z]
     f_arb = -sp[SP_ARB] * (z - q[partner])
     f[kz] += f_arb
-    pf[PORT_SPRING, kz] += f_spring * lz
-    pf[PORT_DAMPER, kz] += f_damp * lz
-    if ks >= 0:
-        pf[PORT_SPRING, ks] += f_spring * ls
-        pf[PORT_DAMPER, ks] += f_damp * ls
-    pf[PORT_ARB, kz] += f_arb
+    if rec:
+        pf[PORT_SPRING, kz] += f_spring * lz
+        pf[PORT_DAMPER, kz] += f_damp * lz
+        if ks >= 0:
+            pf[PORT_SPRING, ks] += f_spring * ls
+            pf[PORT_DAMPER, ks] += f_damp * ls
+        pf[PORT_ARB, kz] += f_arb
     if tangent:
         add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * (k_eff * lz * lz + sp[SP_ARB]) + hc * c * lz * lz)
         add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, partner, -0.5 * bq * sp[SP_ARB])
@@ -180,14 +184,15 @@ def corner_kinematics(m, d, veh, vd, i, om):
 
 
 @inline_kernel
-def brake_stage(m, d, veh, vd, bp, bs, i, tangent, bq, hc):
+def brake_stage(m, d, veh, vd, bp, bs, i, rec, tangent, bq, hc):
     """Corner i's brake torque on the spin coordinate (implicit, with stiction): VehicleData.brake_torque
     and the record PORT_BRAKE; spin_torques adds it to the force."""
     kp = veh.corner_idx[i, CI_PHI]
     w = d.qd[kp]
     tb, dtdw, dtdth = brake_wheel_torque(bp, bs, i, d.q[kp], w)
     vd.brake_torque[i] = tb
-    vd.pf[PORT_BRAKE, kp] += tb
+    if rec:
+        vd.pf[PORT_BRAKE, kp] += tb
     if tangent:
         # Near a locked wheel the sliding law's slope is -tau_s/omega_eps inside the band and 0
         # outside: a tangent of 0 lets Newton jump across the band and back forever. Within 20 bands
@@ -200,10 +205,11 @@ def brake_stage(m, d, veh, vd, bp, bs, i, tangent, bq, hc):
         if c_b == 0.0 and abs(w) < 20.0 * w_band and w_band > 0.0:
             c_b = bs[BS_TAU_SLIDE + i] / (abs(w) + w_band)
         add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, -bq * dtdth + hc * c_b)
+    return tb
 
 
 @inline_kernel
-def drive_stage(m, d, veh, vd, fx, fs, i, a_dot_tz, tangent, bq, hc):
+def drive_stage(m, d, veh, vd, fx, fs, i, a_dot_tz, rec, tangent, bq, hc):
     """Corner i's drive torque on the spin coordinate, its reaction on the travel (a . tz per N m), with
     the driveline-compliance effect (the torque through the driveline's nodes) and the bearing-drag
     effect (its torque on the spin coordinate: record PORT_EFFECTS). Record PORT_DRIVE; spin_torques adds
@@ -222,25 +228,28 @@ def drive_stage(m, d, veh, vd, fx, fs, i, a_dot_tz, tangent, bq, hc):
             sb, dsb = smooth_sign(d.qd[kp], BEARING_OMEGA_EPS)
             d.force[kp] -= fx[FX_BEARING] * sb
             c_fx += fx[FX_BEARING] * dsb
-            pf[PORT_EFFECTS, kp] -= fx[FX_BEARING] * sb
-    pf[PORT_DRIVE, kp] += drive
-    pf[PORT_DRIVE, kz] += drive * a_dot_tz
+            if rec:
+                pf[PORT_EFFECTS, kp] -= fx[FX_BEARING] * sb
+    if rec:
+        pf[PORT_DRIVE, kp] += drive
+        pf[PORT_DRIVE, kz] += drive * a_dot_tz
     if tangent and (k_fx != 0.0 or c_fx != 0.0):
         add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, bq * k_fx + hc * c_fx)
+    return drive
 
 
 @inline_kernel
-def spin_torques(veh, vd, f, i):
-    """Corner i's brake and drive records added to the force: one torque on the spin coordinate, the
-    drive's reaction on the travel."""
+def spin_torques(veh, f, i, tb, drive, a_dot_tz):
+    """Corner i's brake torque tb and drive torque (N m, from brake_stage and drive_stage) added to the
+    force: one torque on the spin coordinate, the drive's reaction on the travel (a . tz per N m)."""
     kp = veh.corner_idx[i, CI_PHI]
     kz = veh.corner_idx[i, CI_Z]
-    f[kp] += vd.pf[PORT_BRAKE, kp] + vd.pf[PORT_DRIVE, kp]
-    f[kz] += vd.pf[PORT_DRIVE, kz]
+    f[kp] += tb + drive
+    f[kz] += drive * a_dot_tz
 
 
 @inline_kernel
-def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, tangent, bq, hc):
+def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, rec, tangent, bq, hc):
     """Corner i's tyre on the road, with the corner's kinematics `kin` (corner_kinematics): contact,
     vertical force, transient slip, MF 5.2 or linear forces; its force and moment on the wheel centre,
     the spin coordinate, the chassis and the knuckle's travel and rack coordinates; the axle reactions.
@@ -322,16 +331,17 @@ def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, tangent, bq, hc):
     # the axle's swing arms, a force on the travel (positive: pulls the body down onto the wheel)
     f_ar = -fxt * veh.susp[i, SP_BX] + side * fy * veh.susp[i, SP_BY]
     f[kz] += f_ar
-    rec = pf[PORT_TYRE]
-    rec[kw] += fvx
-    rec[kw + 1] += fvy
-    rec[kw + 2] += fvz
-    rec[kp] += q_spin
-    _add_chassis_moment(veh, q, rec, m0, m1, m2)
-    rec[kz] += q_z
-    if ks >= 0:
-        rec[ks] += q_s
-    pf[PORT_AXLE_REACTION, kz] += f_ar
+    if rec:
+        rt = pf[PORT_TYRE]
+        rt[kw] += fvx
+        rt[kw + 1] += fvy
+        rt[kw + 2] += fvz
+        rt[kp] += q_spin
+        _add_chassis_moment(veh, q, rt, m0, m1, m2)
+        rt[kz] += q_z
+        if ks >= 0:
+            rt[ks] += q_s
+        pf[PORT_AXLE_REACTION, kz] += f_ar
     out[TO_FX] = fxt
     out[TO_FY] = fy
     out[TO_FZ] = fz
@@ -357,28 +367,29 @@ def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, tangent, bq, hc):
 
 
 @inline_kernel
-def steering_stage(m, d, veh, vd, stp, sts, tangent, bq, hc):
+def steering_stage(m, d, veh, vd, stp, sts, rec, tangent, bq, hc):
     """The steering column and rack: the EPS (rtsim.vehicle.kit.eps, its own records from PORT_EPS on)
     or steer-by-wire (rtsim.vehicle.kit.steering, one record PORT_STEER_BY_WIRE)."""
     ic = veh.steer_idx[STEER_COLUMN]
     ir = veh.steer_idx[STEER_RACK]
     pf = vd.pf
     if veh.steer_kind[0] == STEER_EPS:
-        eps_forces(m, d, stp, sts, ic, ir, 2.0 * hc, tangent, bq, hc, pf[PORT_EPS:])
+        eps_forces(m, d, stp, sts, ic, ir, 2.0 * hc, tangent, bq, hc, rec, pf[PORT_EPS:])
     else:
         f = d.force
         fc0 = f[ic]
         fr0 = f[ir]
         steering_forces(stp, sts, d.q, d.qd, f, ic, ir)
-        pf[PORT_STEER_BY_WIRE, ic] += f[ic] - fc0
-        pf[PORT_STEER_BY_WIRE, ir] += f[ir] - fr0
+        if rec:
+            pf[PORT_STEER_BY_WIRE, ic] += f[ic] - fc0
+            pf[PORT_STEER_BY_WIRE, ir] += f[ir] - fr0
         if tangent:
             steering_tangent(m, d.w_env, stp, ic, ir, bq, hc)
             rack_stop_tangent(m, d.w_env, stp, d.q, d.qd, ir, bq, hc)
 
 
 @inline_kernel
-def aero_stage(m, d, veh, vd, fx, tangent, hc):
+def aero_stage(m, d, veh, vd, fx, rec, tangent, hc):
     """Aerodynamic drag at the centre of mass, -rho CdA |v| v / 2 (CdA with the aero-drag effect's
     addition). Record PORT_AERO."""
     ci = veh.chassis_idx
@@ -394,30 +405,33 @@ def aero_stage(m, d, veh, vd, fx, tangent, hc):
     f[ci[0]] -= cd * vx
     f[ci[1]] -= cd * vy
     f[ci[2]] -= cd * vz
-    pf[PORT_AERO, ci[0]] -= cd * vx
-    pf[PORT_AERO, ci[1]] -= cd * vy
-    pf[PORT_AERO, ci[2]] -= cd * vz
+    if rec:
+        pf[PORT_AERO, ci[0]] -= cd * vx
+        pf[PORT_AERO, ci[1]] -= cd * vy
+        pf[PORT_AERO, ci[2]] -= cd * vz
     if tangent and speed > 0.0:
         for a in range(3):
             add_entry(d.w_env, m.first, m.ptr, m.pinv, ci[a], ci[a], hc * 2.0 * cd)
 
 
 @inline_kernel
-def effects_stage(m, d, veh, vd, fx, tangent):
+def effects_stage(m, d, veh, vd, fx, rec, tangent):
     """The effects that are forces of their own (the others change the stage they act in): the mass
     effect (-dm r'' - dm g e_z at the centre of mass, tangent dm on W: the step then integrates
     (M + dm) r'' exactly) and the road grade (m (g' - g) on every translational mass). Record
     PORT_EFFECTS."""
     ci = veh.chassis_idx
     f = d.force
-    rec = vd.pf[PORT_EFFECTS]
+    re_ = vd.pf[PORT_EFFECTS]
     dm = fx[FX_MASS]
     if dm != 0.0:
         for a in range(3):
             f[ci[a]] -= dm * d.qdd[ci[a]]
-            rec[ci[a]] -= dm * d.qdd[ci[a]]
+            if rec:
+                re_[ci[a]] -= dm * d.qdd[ci[a]]
         f[ci[2]] -= dm * G
-        rec[ci[2]] -= dm * G
+        if rec:
+            re_[ci[2]] -= dm * G
         if tangent:
             for a in range(3):
                 add_entry(d.w_env, m.first, m.ptr, m.pinv, ci[a], ci[a], dm)
@@ -435,33 +449,37 @@ def effects_stage(m, d, veh, vd, fx, tangent):
             f[j] -= mass * gs * hx
             f[j + 1] -= mass * gs * hy
             f[j + 2] += mass * gc
-            rec[j] -= mass * gs * hx
-            rec[j + 1] -= mass * gs * hy
-            rec[j + 2] += mass * gc
+            if rec:
+                re_[j] -= mass * gs * hx
+                re_[j + 1] -= mass * gs * hy
+                re_[j + 2] += mass * gc
 
 
 @kernel
 def vehicle_forces(m, d, veh, vd, road, parts, states, tangent, bq, hc):
     """Add the car's forces to d.force (and with `tangent` their K, C to d.w_env, scaled by bq = h^2/4
-    and hc = h/2), stage by stage; each stage's force record goes to its rows of vd.pf. parts, states:
+    and hc = h/2), stage by stage; while the power audit is on (vd.audit) each stage's force record goes
+    to its rows of vd.pf, else vd.pf is left as it is. parts, states:
     the car's Parts and States (rtsim.vehicle.car.step). Returns the index of a non-finite generalized
     force, or -1."""
     fx = parts.effects
     f = d.force
-    vd.pf[:, :] = 0.0
+    rec = vd.audit[0] > 0.5
+    if rec:
+        vd.pf[:, :] = 0.0
     om = chassis_omega(veh, d.q, d.qd)
     for i in range(4):
-        suspension_stage(m, d, veh, vd, i, tangent, bq, hc)
+        suspension_stage(m, d, veh, vd, i, rec, tangent, bq, hc)
         kin = corner_kinematics(m, d, veh, vd, i, om)
         a_dot_tz = kin[0] * kin[3] + kin[1] * kin[4] + kin[2] * kin[5]
-        brake_stage(m, d, veh, vd, parts.brake, states.brake, i, tangent, bq, hc)
-        drive_stage(m, d, veh, vd, fx, states.effects, i, a_dot_tz, tangent, bq, hc)
-        spin_torques(veh, vd, f, i)
-        tyre_stage(m, d, veh, vd, road, parts.tyre, fx, i, kin, tangent, bq, hc)
-    steering_stage(m, d, veh, vd, parts.steering, states.steering, tangent, bq, hc)
-    aero_stage(m, d, veh, vd, fx, tangent, hc)
+        tb = brake_stage(m, d, veh, vd, parts.brake, states.brake, i, rec, tangent, bq, hc)
+        drive = drive_stage(m, d, veh, vd, fx, states.effects, i, a_dot_tz, rec, tangent, bq, hc)
+        spin_torques(veh, f, i, tb, drive, a_dot_tz)
+        tyre_stage(m, d, veh, vd, road, parts.tyre, fx, i, kin, rec, tangent, bq, hc)
+    steering_stage(m, d, veh, vd, parts.steering, states.steering, rec, tangent, bq, hc)
+    aero_stage(m, d, veh, vd, fx, rec, tangent, hc)
     if fx[FX_ON] > 0.5:
-        effects_stage(m, d, veh, vd, fx, tangent)
+        effects_stage(m, d, veh, vd, fx, rec, tangent)
     for i in range(m.nq):
         if not np.isfinite(f[i]):
             return i
