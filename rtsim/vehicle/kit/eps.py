@@ -44,9 +44,8 @@ from rtsim.configfile import Strict
 from rtsim.jit import inline_kernel, kernel
 from rtsim.mbs.envelope import add_entry
 
-from .end_stop import end_stop
 from .layout import offsets
-from .rack import RK_DAMPING, RK_MASS, RK_RP, RK_SIZE, RK_STOP_C, RK_STOP_K, RK_TRAVEL, rack_and_pinion
+from .rack import RK_DAMPING, RK_MASS, RK_RP, RK_SIZE, RK_STOP_C, RK_STOP_K, RK_TRAVEL, rack_and_pinion, rack_force
 from .tables import map_2d, map_eval
 
 # ---------------------------------------------------------------------------------- parameter layout
@@ -414,10 +413,9 @@ def eps_forces(m, d, p, s, ic, ir, h, tangent, bq, hc, rec, pf):
     t_p = t_el + t_damp + e_g * n * t_m + t_pf
     e_rp, de_rp = _efficiency(t_p, wp, p[EP_W_FP], p[EP_ETA_RP], p[EP_ETA_RPB])
     sf_r, dsf_r = _sat(xd, p[EP_V_FR])
-    f_rf = -p[EP_C_RACK] * xd - p[EP_F_FR] * sf_r
-    f_stop, k_stop, c_stop = end_stop(q[ir], xd, p[EP_RACK_TRAVEL], p[EP_STOP_K], p[EP_STOP_C])
+    f_rack, f_rf, f_stop, k_stop, c_stop = rack_force(p, EP_RACK, q[ir], xd, e_rp * t_p / rp, -p[EP_F_FR] * sf_r)
     f[ic] += t_drv - t_el - t_damp - t_col
-    f[ir] += e_rp * t_p / rp + f_rf + f_stop
+    f[ir] += f_rack
     if rec:
         pf[PORT_DRIVER_TORQUE, ic] += t_drv
         pf[PORT_TORSION_BAR, ic] -= t_el
