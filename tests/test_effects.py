@@ -20,8 +20,7 @@ from rtsim.road.model import make_plane
 from rtsim.vehicle.kit.actuators import LAG_RATE, LAG_TAU
 from rtsim.vehicle.kit.brake import BP_ACT, BP_BREAK_RATIO, BP_GAIN, BP_K, BS_MODE
 from rtsim.vehicle.car.config import load_vehicle
-from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT, TO_FX, TO_FZ, \
-    TO_OMEGA, TO_RE, TO_VX
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT, TyreOut
 from rtsim.vehicle.car.effect_kernels import (BRAKE_STICTION_PRESSURE, DRIVELINE_DAMPING_RATIO, DRIVELINE_INERTIA,
                                           FS_DL)
 from rtsim.vehicle.car.effects import EFFECTS, effects_toml, validate_effects
@@ -244,13 +243,13 @@ def test_tyre_slip_stiffness_scale_shows_in_wheel_slip(model, road, car):
         sim = _coasting(model, road, 10.0, eff, torque=150.0)
         sim.step(1000)
         t = sim.vd.tyre[2:4]
-        return (t[:, TO_OMEGA] * t[:, TO_RE] - t[:, TO_VX]) / t[:, TO_VX], t
+        return (t[:, TyreOut.OMEGA] * t[:, TyreOut.RE] - t[:, TyreOut.VX]) / t[:, TyreOut.VX], t
     s = 0.5
     k1, t1 = slips(None)
     ks, _ = slips({"tyre_slip_stiffness": {"scale": s}})
     np.testing.assert_allclose(ks / k1, 1 / s, rtol=0.03)
-    kxk = np.array([slip_stiffnesses(car["tp"], fz, 0.0)[0] for fz in t1[:, TO_FZ]])
-    np.testing.assert_allclose(k1, t1[:, TO_FX] / kxk, rtol=0.1)
+    kxk = np.array([slip_stiffnesses(car["tp"], fz, 0.0)[0] for fz in t1[:, TyreOut.FZ]])
+    np.testing.assert_allclose(k1, t1[:, TyreOut.FX] / kxk, rtol=0.1)
 
 
 def test_tyre_relaxation_lengthens_the_first_order_slip_response(car):
@@ -302,7 +301,7 @@ def test_added_mass_carries_its_weight_and_slows_acceleration(model, road, car):
     dm = 120.0
     sim = VehicleSim(model, road, DT, brake_pressure=2000.0, effects={"mass": {"added_mass": dm}})
     sim.step(3000)
-    assert float(np.sum(sim.vd.tyre[:, TO_FZ])) == pytest.approx((car["m"] + dm) * G, rel=2e-3)
+    assert float(np.sum(sim.vd.tyre[:, TyreOut.FZ])) == pytest.approx((car["m"] + dm) * G, rel=2e-3)
 
     def drive_part(eff):                     # acceleration due to the drive torque alone
         return _accel(model, road, eff, 200.0) - _accel(model, road, eff, 0.0)

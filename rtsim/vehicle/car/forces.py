@@ -37,6 +37,7 @@ and road grade). Effects: parameters fx = Parts.effects, states fs = States.effe
 """
 from __future__ import annotations
 
+from enum import IntEnum
 from math import atan, sqrt, tan
 
 import numpy as np
@@ -53,22 +54,39 @@ from ..kit.brake import BP_EPS, BS_TAU_SLIDE, brake_wheel_torque
 from ..kit.steering import rack_stop_tangent, steering_forces, steering_tangent
 from ..kit.eps import eps_forces
 from ..kit.end_stop import travel_stops
+from ..kit.imu import model_gravity
 from ..kit.rigid import add_moment, angular_velocity, cross, vec3
-from ..kit.tables import table_eval
-from .layout import (
-    G, TYRE_LINEAR, CI_PHI, CI_S, CI_WX, CI_Z, STEER_COLUMN, STEER_EPS, STEER_RACK, SP_ARB, SP_BX, SP_BY, SP_L0,
-    SP_PARTNER, SP_STOP_C, SP_STOP_K, SP_Z_HI, SP_Z_LO, PORT_AERO, PORT_ARB, PORT_AXLE_REACTION, PORT_BRAKE,
-    PORT_DAMPER, PORT_DRIVE, PORT_EFFECTS, PORT_EPS, PORT_SPRING, PORT_STEER_BY_WIRE, PORT_TYRE,
-)
+from ..kit.spring_damper import spring_damper_force
+from .layout import (TYRE_LINEAR, CI_PHI, CI_S, CI_WX, CI_Z, STEER_COLUMN, STEER_EPS, STEER_RACK, PORT_AERO, PORT_ARB,
+                     PORT_AXLE_REACTION, PORT_BRAKE, PORT_DAMPER, PORT_DRIVE, PORT_EFFECTS, PORT_EPS, PORT_SPRING,
+                     PORT_STEER_BY_WIRE, PORT_TYRE, Susp)
 from ..kit.tyre.magic_formula import (effective_rolling_radius, mf52_forces, transient_slip, transient_slip_relaxed,
                                       vertical_force)
 from ..kit.tyre.linear import linear_forces
 from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_DAMPING, P_VERTICAL_STIFFNESS
 
-# Per-tyre outputs (VehicleData.tyre[w, :]) for logging and sensors.
-TO_FX, TO_FY, TO_FZ, TO_MZ, TO_KAPPA, TO_ALPHA, TO_PX, TO_PY, TO_PZ, TO_VX, TO_GAMMA, TO_OMEGA, TO_RE, \
-    TO_VSY = range(14)
-NTO = 14
+
+
+class TyreOut(IntEnum):
+    """Per-tyre outputs of the last force evaluation, for logging and sensors: columns of
+    VehicleData.tyre[w, :] (zeros without contact)."""
+    FX = 0          # N, longitudinal force (contact frame)
+    FY = 1          # N, lateral force
+    FZ = 2          # N, vertical force
+    MZ = 3          # N m, aligning moment
+    KAPPA = 4       # longitudinal slip
+    ALPHA = 5       # rad, slip angle
+    PX = 6          # m, contact point (world)
+    PY = 7
+    PZ = 8
+    VX = 9          # m/s, the wheel centre's speed along the contact's longitudinal axis
+    GAMMA = 10      # rad, camber to the road
+    OMEGA = 11      # rad/s, the wheel's absolute spin rate
+    RE = 12         # m, effective rolling radius
+    VSY = 13        # m/s, lateral slip speed at the contact point
+
+
+NTO = len(TyreOut)
 
 _vec = vec3
 _cross = cross
@@ -127,14 +145,13 @@ def suspension_stage(m, d, veh, vd, i, rec, tangent, bq, hc):
     sp = veh.susp[i]
     length, lz, ls, _a, _b, _c = poly_eval(veh.spring_coef[i], m.poly_exp, z, s)
     ldot = lz * zd + ls * sd
-    f_spring, k_eff = table_eval(veh.spring_tab[i], sp[SP_L0] - length)
-    f_damp, c = table_eval(veh.damper_tab[i], -ldot)
+    f_spring, k_eff, f_damp, c = spring_damper_force(veh.spring_tab[i], veh.damper_tab[i], sp[Susp.L0] - length, -ldot)
     fsp = f_spring + f_damp
     f[kz] += fsp * lz
     if ks >= 0:
         f[ks] += fsp * ls
     # rebound and bump stops at the ends of the travel (a hanging wheel, a slammed one)
-    f_ts, k_ts, c_ts = travel_stops(z, zd, sp[SP_Z_LO], sp[SP_Z_HI], sp[SP_STOP_K], sp[SP_STOP_C])
+    f_ts, k_ts, c_ts = travel_stops(z, zd, sp[Susp.Z_LO], sp[Susp.Z_HI], sp[Susp.STOP_K], sp[Susp.STOP_C])
     if k_ts != 0.0:
         f[kz] += f_ts
         if rec:
@@ -142,8 +159,8 @@ def suspension_stage(m, d, veh, vd, i, rec, tangent, bq, hc):
         if tangent:
             add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * k_ts + hc * c_ts)
     # anti-roll bar on the travel difference with the other wheel of the axle
-    partner = veh.corner_idx[int(sp[SP_PARTNER]), CI_Z]
-    f_arb = -sp[SP_ARB] * (z - q[partner])
+    partner = veh.corner_idx[int(sp[Susp.PARTNER]), CI_Z]
+    f_arb = -sp[Susp.ARB] * (z - q[partner])
     f[kz] += f_arb
     if rec:
         pf[PORT_SPRING, kz] += f_spring * lz
@@ -153,8 +170,8 @@ def suspension_stage(m, d, veh, vd, i, rec, tangent, bq, hc):
             pf[PORT_DAMPER, ks] += f_damp * ls
         pf[PORT_ARB, kz] += f_arb
     if tangent:
-        add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * (k_eff * lz * lz + sp[SP_ARB]) + hc * c * lz * lz)
-        add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, partner, -0.5 * bq * sp[SP_ARB])
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * (k_eff * lz * lz + sp[Susp.ARB]) + hc * c * lz * lz)
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, partner, -0.5 * bq * sp[Susp.ARB])
 
 
 @inline_kernel
@@ -329,7 +346,7 @@ def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, rec, tangent, bq, hc):
         f[ks] += q_s
     # axle reactions (Brouilhet effects): the tyre forces' moments about the wheel centre taken by
     # the axle's swing arms, a force on the travel (positive: pulls the body down onto the wheel)
-    f_ar = -fxt * veh.susp[i, SP_BX] + side * fy * veh.susp[i, SP_BY]
+    f_ar = -fxt * veh.susp[i, Susp.BX] + side * fy * veh.susp[i, Susp.BY]
     f[kz] += f_ar
     if rec:
         rt = pf[PORT_TYRE]
@@ -342,20 +359,20 @@ def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, rec, tangent, bq, hc):
         if ks >= 0:
             rt[ks] += q_s
         pf[PORT_AXLE_REACTION, kz] += f_ar
-    out[TO_FX] = fxt
-    out[TO_FY] = fy
-    out[TO_FZ] = fz
-    out[TO_MZ] = mz
-    out[TO_KAPPA] = kappa
-    out[TO_ALPHA] = alpha
-    out[TO_PX] = ct[CT_PX]
-    out[TO_PY] = ct[CT_PX + 1]
-    out[TO_PZ] = ct[CT_PX + 2]
-    out[TO_VX] = vx
-    out[TO_GAMMA] = gamma
-    out[TO_OMEGA] = omega
-    out[TO_RE] = re
-    out[TO_VSY] = vsy
+    out[TyreOut.FX] = fxt
+    out[TyreOut.FY] = fy
+    out[TyreOut.FZ] = fz
+    out[TyreOut.MZ] = mz
+    out[TyreOut.KAPPA] = kappa
+    out[TyreOut.ALPHA] = alpha
+    out[TyreOut.PX] = ct[CT_PX]
+    out[TyreOut.PY] = ct[CT_PX + 1]
+    out[TyreOut.PZ] = ct[CT_PX + 2]
+    out[TyreOut.VX] = vx
+    out[TyreOut.GAMMA] = gamma
+    out[TyreOut.OMEGA] = omega
+    out[TyreOut.RE] = re
+    out[TyreOut.VSY] = vsy
     if tangent:
         kzt = tp[P_VERTICAL_STIFFNESS]
         czt = tp[P_VERTICAL_DAMPING]
@@ -417,9 +434,9 @@ def aero_stage(m, d, veh, vd, fx, rec, tangent, hc):
 @inline_kernel
 def effects_stage(m, d, veh, vd, fx, rec, tangent):
     """The effects that are forces of their own (the others change the stage they act in): the mass
-    effect (-dm r'' - dm g e_z at the centre of mass, tangent dm on W: the step then integrates
-    (M + dm) r'' exactly) and the road grade (m (g' - g) on every translational mass). Record
-    PORT_EFFECTS."""
+    effect (dm (g - r'') at the centre of mass, g the model's gravity vector, tangent dm on W: the step
+    then integrates (M + dm) r'' exactly) and the road grade (m (g' - g) on every translational mass).
+    Record PORT_EFFECTS."""
     ci = veh.chassis_idx
     f = d.force
     re_ = vd.pf[PORT_EFFECTS]
@@ -429,9 +446,11 @@ def effects_stage(m, d, veh, vd, fx, rec, tangent):
             f[ci[a]] -= dm * d.qdd[ci[a]]
             if rec:
                 re_[ci[a]] -= dm * d.qdd[ci[a]]
-        f[ci[2]] -= dm * G
-        if rec:
-            re_[ci[2]] -= dm * G
+        g = model_gravity(m)
+        for a in range(3):
+            f[ci[a]] += dm * g[a]
+            if rec:
+                re_[ci[a]] += dm * g[a]
         if tangent:
             for a in range(3):
                 add_entry(d.w_env, m.first, m.ptr, m.pinv, ci[a], ci[a], dm)
