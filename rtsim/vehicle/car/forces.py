@@ -266,6 +266,23 @@ def spin_torques(veh, f, i, tb, drive, a_dot_tz):
 
 
 @inline_kernel
+def _add_tyre_load(veh, q, f, ix, fvx, fvy, fvz, q_spin, m0, m1, m2, q_z, q_s):
+    """A tyre's generalized forces into f (the force, or its record): the force F on the wheel centre,
+    q_spin on the spin coordinate, its moment M about the centre on the chassis axes, q_z and q_s on the
+    travel and (if steered) rack coordinates of the corner whose index row is ix."""
+    kw = ix[CI_WX]
+    ks = ix[CI_S]
+    f[kw] += fvx
+    f[kw + 1] += fvy
+    f[kw + 2] += fvz
+    f[ix[CI_PHI]] += q_spin
+    _add_chassis_moment(veh, q, f, m0, m1, m2)
+    f[ix[CI_Z]] += q_z
+    if ks >= 0:
+        f[ks] += q_s
+
+
+@inline_kernel
 def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, rec, tangent, bq, hc):
     """Corner i's tyre on the road, with the corner's kinematics `kin` (corner_kinematics): contact,
     vertical force, transient slip, MF 5.2 or linear forces; its force and moment on the wheel centre,
@@ -277,8 +294,6 @@ def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, rec, tangent, bq, hc):
     pf = vd.pf
     ix = veh.corner_idx[i]
     kz = ix[CI_Z]
-    ks = ix[CI_S]
-    kp = ix[CI_PHI]
     kw = ix[CI_WX]
     ax, ay, az, tzx, tzy, tzz, tsx, tsy, tsz, okx, oky, okz, omega = kin
     fx_on = fx[FX_ON] > 0.5
@@ -336,28 +351,13 @@ def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, rec, tangent, bq, hc):
     q_spin = m0 * ax + m1 * ay + m2 * az
     q_z = m0 * tzx + m1 * tzy + m2 * tzz
     q_s = m0 * tsx + m1 * tsy + m2 * tsz
-    f[kw] += fvx
-    f[kw + 1] += fvy
-    f[kw + 2] += fvz
-    f[kp] += q_spin
-    _add_chassis_moment(veh, q, f, m0, m1, m2)
-    f[kz] += q_z
-    if ks >= 0:
-        f[ks] += q_s
+    _add_tyre_load(veh, q, f, ix, fvx, fvy, fvz, q_spin, m0, m1, m2, q_z, q_s)
     # axle reactions (Brouilhet effects): the tyre forces' moments about the wheel centre taken by
     # the axle's swing arms, a force on the travel (positive: pulls the body down onto the wheel)
     f_ar = -fxt * veh.susp[i, Susp.BX] + side * fy * veh.susp[i, Susp.BY]
     f[kz] += f_ar
     if rec:
-        rt = pf[PORT_TYRE]
-        rt[kw] += fvx
-        rt[kw + 1] += fvy
-        rt[kw + 2] += fvz
-        rt[kp] += q_spin
-        _add_chassis_moment(veh, q, rt, m0, m1, m2)
-        rt[kz] += q_z
-        if ks >= 0:
-            rt[ks] += q_s
+        _add_tyre_load(veh, q, pf[PORT_TYRE], ix, fvx, fvy, fvz, q_spin, m0, m1, m2, q_z, q_s)
         pf[PORT_AXLE_REACTION, kz] += f_ar
     out[TyreOut.FX] = fxt
     out[TyreOut.FY] = fy
