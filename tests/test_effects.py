@@ -22,7 +22,7 @@ from rtsim.vehicle.kit.brake import BP_ACT, BP_BREAK_RATIO, BP_GAIN, BP_K, BS_MO
 from rtsim.vehicle.car.config import load_vehicle
 from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT, TyreOut
 from rtsim.vehicle.car.effect_kernels import (BRAKE_STICTION_PRESSURE, DRIVELINE_DAMPING_RATIO, DRIVELINE_INERTIA,
-                                          FS_DL)
+                                              EffectState)
 from rtsim.vehicle.car.effects import EFFECTS, effects_toml, validate_effects
 from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.car.sim import VehicleSim
@@ -225,7 +225,7 @@ def test_driveline_compliance_oscillates_at_sqrt_k_over_j(model, road):
     shaft = []
     for _ in range(400):
         sim.step(1)
-        shaft.append(sim.states.effects[FS_DL + 2])
+        shaft.append(sim.states.effects[EffectState.DL + 2])
     x = np.array(shaft) - 100.0
     ups = np.nonzero((x[:-1] < 0) & (x[1:] >= 0))[0]
     frac = -x[ups] / (x[ups + 1] - x[ups])             # linear interpolation of the crossings
@@ -486,13 +486,13 @@ def test_changing_a_parameter_mid_run_continues_the_effect_states(model, road):
     sim.step(50)
     sim.io.commands[CMD_BRAKE] = 1500.0
     sim.step(60)
-    before = -sim.vd.brake_torque[0], sim.states.effects[FS_DL + 2]
+    before = -sim.vd.brake_torque[0], sim.states.effects[EffectState.DL + 2]
     sim.step(1)
     one_step = -sim.vd.brake_torque[0] - before[0]
     sim.set_effects({"brake_lag": {"time_constant": 0.1}, "driveline_compliance": {"stiffness": 6000.0}})
-    shaft = sim.states.effects[FS_DL + 2]
+    shaft = sim.states.effects[EffectState.DL + 2]
     sim.step(1)
     after = -sim.vd.brake_torque[0]
     assert 0.0 < after - (before[0] + one_step) < 3.0 * one_step          # faster lag, but no jump
-    assert abs(sim.states.effects[FS_DL + 2] - shaft) < 5.0                # N*m, against 80 applied
+    assert abs(sim.states.effects[EffectState.DL + 2] - shaft) < 5.0        # N*m, against 80 applied
     assert before[0] < 0.5 * sim.parts.brake[BP_GAIN] * 1500.0            # still far from the final torque

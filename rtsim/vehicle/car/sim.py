@@ -26,8 +26,8 @@ from ..kit.steering import steering_config, steering_params, steering_state, Sbw
 from ..kit.tyre.magic_formula import effective_rolling_radius
 from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
 from .build import VehicleModel
-from .effect_kernels import (FS_DL, FS_LAG, FS_SIZE, FX_B_LAG, FX_DL, FX_DL_K, FX_MASS, FX_ON, fill_history,
-                             neutral_params, physical_sensors, sensor_stage)
+from .effect_kernels import (FX_B_LAG, FX_DL, FX_DL_K, FX_MASS, FX_ON, fill_history, neutral_params, physical_sensors,
+                             sensor_stage, EffectState)
 from .effects import pack_effects, validate_effects
 from .layout import CI_PHI, WHEELS
 from .inputs import USER_INPUTS as CAR_USER_INPUTS
@@ -95,7 +95,7 @@ class VehicleSim:
             sts = eps_state()
         self.vd = make_vehicle_data(mech.model.nq)
         self.parts = Parts(self.tp, bp, pp, sp, neutral_params(), sm_neutral(self.nsensor))
-        self.states = States(bs, ps, sts, np.zeros(FS_SIZE), sensor_state(self.parts.sensors))
+        self.states = States(bs, ps, sts, np.zeros(EffectState.SIZE), sensor_state(self.parts.sensors))
         self._effects: dict = {}
         self.sim = Simulation(mech, self.dt, q0=q0, qd0=qd0)
         self.data = self.sim.data
@@ -189,10 +189,10 @@ class VehicleSim:
         bp, bs = self.parts.brake, self.states.brake
         if not lag_on:
             for i in range(4):
-                fs[FS_LAG + i] = bp[BP_GAIN + i] * bs[BS_P_FRONT if i < 2 else BS_P_REAR]
+                fs[EffectState.LAG + i] = bp[BP_GAIN + i] * bs[BS_P_FRONT if i < 2 else BS_P_REAR]
         if fx[FX_DL] > 0.5:
             for j in range(2):
-                o = FS_DL + 3 * j
+                o = EffectState.DL + 3 * j
                 i = self.vm.vehicle.driven[j]
                 kp = self.vm.vehicle.corner_idx[i, CI_PHI]
                 t, w = (fs[o + 2], fs[o + 1]) if dl_on else (float(self.vd.drive[i]), self.data.qd[kp])

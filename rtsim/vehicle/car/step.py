@@ -12,7 +12,8 @@ from rtsim.mbs.integrator import step_with
 from rtsim.mbs.model import OK
 from rtsim.road.query import NCONTACT
 
-from .effect_kernels import FS_DL, FX_BRAKE, FX_DL, FX_ON, FX_RELAX, driveline_commit, effects_brake, record_sensors
+from .effect_kernels import (FX_BRAKE, FX_DL, FX_ON, FX_RELAX, driveline_commit, effects_brake, record_sensors,
+                             EffectState)
 from ..kit.brake import BI_SIZE, BO_LINE, BO_SIZE, brake_commit, brake_step
 from ..kit.powertrain import (PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT, powertrain_step,
                               PtIn)
@@ -124,8 +125,8 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
         steering_control(parts.steering, states.steering, io.commands[CMD_STEER], d.q[ic], d.qd[ic], h)
     io.pt_in[PtIn.THROTTLE_CMD] = io.commands[CMD_THROTTLE]
     if fx_on and fx[FX_DL] > 0.5:       # the gearbox turns with the driveline nodes
-        io.pt_in[PtIn.OMEGA_LEFT] = fs[FS_DL + 1]
-        io.pt_in[PtIn.OMEGA_RIGHT] = fs[FS_DL + 4]
+        io.pt_in[PtIn.OMEGA_LEFT] = fs[EffectState.DL + 1]
+        io.pt_in[PtIn.OMEGA_RIGHT] = fs[EffectState.DL + 4]
     else:
         io.pt_in[PtIn.OMEGA_LEFT] = d.qd[veh.corner_idx[veh.driven[0], CI_PHI]]
         io.pt_in[PtIn.OMEGA_RIGHT] = d.qd[veh.corner_idx[veh.driven[1], CI_PHI]]
