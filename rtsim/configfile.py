@@ -6,9 +6,13 @@ list items as [i]), the offending value and what is allowed:
     configs/vehicles/x.toml: steering.kp = -1.0: out of range (allowed 0 <= kp <= 1e+06 N m/rad)
     configs/roads/x.toml: heigth = 1.0: unknown key (allowed: type, height, mu, rolling_resistance)
 
-Ranges are declared with `Range(lo, hi, unit)` (an annotated float: finite, within the bounds, the unit
-in the message); checks across keys raise `bad(key, value, reason)` inside a model validator; checks
-after validation (files that must exist, sampled profiles) raise `problem(source, key, value, reason)`.
+Ranges are declared with `Range(lo, hi, unit)` (an annotated float: within the bounds, finite unless a
+closed bound is itself infinite, the unit in the message), or with pydantic's `Field(ge=, le=, gt=, lt=)`
+on a model's field; a config dataclass (a kit part's section) declares its fields' ranges with `Range`
+too and calls `check_declared_ranges(self)` in its `__post_init__`, so a part built in code is checked
+by the same declaration as one read from a file. Checks across keys raise `bad(key, value, reason)`
+inside a model validator; checks after validation (files that must exist, sampled profiles) raise
+`problem(source, key, value, reason)`.
 Vehicles, roads, scenarios, drivers and the service's settings all load through here, so `overrides`
 (a batch's grid point: dotted keys set in a file's table as it is read) is checked like the file itself.
 
@@ -20,6 +24,8 @@ from __future__ import annotations
 
 import contextvars
 import copy
+import dataclasses
+import functools
 import math
 import re
 import tomllib
@@ -46,16 +52,67 @@ def _number(x: Any) -> Any:
     return float(x)
 
 
+def in_range(x: float, lo: float, hi: float, lo_open: bool = False, hi_open: bool = False) -> bool:
+    """x within the bounds; an infinite x only where a closed bound is that infinity (Range(0, inf)
+    accepts inf: "no limit"), never NaN."""
+    if math.isnan(x) or (math.isinf(x) and not (x == hi and not hi_open or x == lo and not lo_open)):
+        return False
+    return (x > lo if lo_open else x >= lo) and (x < hi if hi_open else x <= hi)
+
+
+def range_text(leaf: str, lo: float, hi: float, unit: str = "", lo_open: bool = False, hi_open: bool = False) -> str:
+    """'out of range (allowed lo <= leaf <= hi unit)', the one wording of a range violation."""
+    unit = f" {unit}" if unit else ""
+    return (f"out of range (allowed {lo:g} {'<' if lo_open else '<='} {leaf} "
+            f"{'<' if hi_open else '<='} {hi:g}{unit})")
+
+
 def Range(lo: float, hi: float, unit: str = "", lo_open: bool = False, hi_open: bool = False):
-    """A float within [lo, hi] (open at either end if asked), finite; its errors show the whole range
-    and the unit."""
+    """A float within [lo, hi] (open at either end if asked; `in_range`); its errors show the whole
+    range and the unit."""
     def check(x: float) -> float:
-        ok = math.isfinite(x) and (x > lo if lo_open else x >= lo) and (x < hi if hi_open else x <= hi)
-        if not ok:
+        if not in_range(x, lo, hi, lo_open, hi_open):
             raise PydanticCustomError("out_of_range", "out of range",
                                       {"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open, "unit": unit})
         return x
+    check.declared_range = (lo, hi, unit, lo_open, hi_open)
     return Annotated[float, BeforeValidator(_number), AfterValidator(check)]
+
+
+def Positive(unit: str = ""):
+    """A finite value > 0 (in `unit`)."""
+    return Range(0.0, math.inf, unit, lo_open=True, hi_open=True)
+
+
+def NonNegative(unit: str = ""):
+    """A finite value >= 0 (in `unit`)."""
+    return Range(0.0, math.inf, unit, hi_open=True)
+
+
+def declared_range(annotation) -> tuple | None:
+    """(lo, hi, unit, lo_open, hi_open) of a `Range` annotation, else None."""
+    for m in getattr(annotation, "__metadata__", ()):
+        r = getattr(getattr(m, "func", None), "declared_range", None)
+        if r is not None:
+            return r
+    return None
+
+
+@functools.cache
+def _dataclass_ranges(cls) -> tuple:
+    hints = typing.get_type_hints(cls, include_extras=True)
+    return tuple((f.name, r) for f in dataclasses.fields(cls) if (r := declared_range(hints.get(f.name))) is not None)
+
+
+def check_declared_ranges(obj) -> None:
+    """In a config dataclass's __post_init__: every field declared with `Range` within it, else the
+    error about that key (as `bad`: rtsim.configfile formats it with the file and the section's key)."""
+    for name, (lo, hi, unit, lo_open, hi_open) in _dataclass_ranges(type(obj)):
+        x = getattr(obj, name)
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            raise bad(name, x, "must be a number")
+        if not in_range(float(x), lo, hi, lo_open, hi_open):
+            raise bad(name, x, range_text(name, lo, hi, unit, lo_open, hi_open))
 
 
 def range_fields(ranges: dict, defaults: dict) -> dict:
@@ -213,10 +270,7 @@ def _message(err: dict, data: Any, root) -> str:
         value = ctx["value"]
         reason = err["msg"]
     elif kind == "out_of_range":
-        leaf = _leaf(loc)
-        unit = f" {ctx['unit']}" if ctx["unit"] else ""
-        reason = (f"out of range (allowed {ctx['lo']:g} {'<' if ctx['lo_open'] else '<='} {leaf} "
-                  f"{'<' if ctx['hi_open'] else '<='} {ctx['hi']:g}{unit})")
+        reason = range_text(_leaf(loc), ctx["lo"], ctx["hi"], ctx["unit"], ctx["lo_open"], ctx["hi_open"])
     elif kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
         reason = f"out of range (allowed {_allowed(root, loc, _leaf(loc), ctx)})"
     elif kind == "missing":

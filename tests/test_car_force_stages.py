@@ -1,6 +1,7 @@
-"""The car's force stages (rtsim.vehicle.car.forces): every generalized force a stage adds is also in
-its force record (a row of VehicleData.pf), so the power audit, a sum over the records, sees every force.
-Reference: the total the stages add to d.force, which must equal the sum of the records' rows."""
+"""The car's force stages (rtsim.vehicle.car.forces): while the power audit is on, every generalized force
+a stage adds is also in its force record (a row of VehicleData.pf), so the audit, a sum over the records,
+sees every force. Reference: the total the stages add to d.force, which must equal the sum of the
+records' rows. With the audit off the records are not written and the forces are the same, bit for bit."""
 from __future__ import annotations
 
 import math
@@ -37,16 +38,23 @@ def _cornering_and_braking(name: str, effects) -> VehicleSim:
     return sim
 
 
-@pytest.mark.parametrize("name", ["xbw", "eps_car"])
-@pytest.mark.parametrize("with_effects", [False, True])
-def test_the_force_records_sum_to_the_force_the_stages_add(name, with_effects):
-    sim = _cornering_and_braking(name, EFFECTS if with_effects else None)
+def _evaluate(sim: VehicleSim) -> None:
+    """One evaluation of the force stages at the present state, into a zeroed d.force."""
     d = sim.data
     d.force[:] = 0.0
     h = sim.dt
     bad = vehicle_forces(sim.m, d, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, False, 0.25 * h * h,
                          0.5 * h)
     assert bad == -1
+
+
+@pytest.mark.parametrize("name", ["xbw", "eps_car"])
+@pytest.mark.parametrize("with_effects", [False, True])
+def test_the_force_records_sum_to_the_force_the_stages_add(name, with_effects):
+    sim = _cornering_and_braking(name, EFFECTS if with_effects else None)
+    d = sim.data
+    sim.vd.audit[0] = 1.0
+    _evaluate(sim)
     pf = sim.vd.pf
     assert pf.shape[0] == NPORT
     total = pf.sum(axis=0)
@@ -57,3 +65,17 @@ def test_the_force_records_sum_to_the_force_the_stages_add(name, with_effects):
         assert np.any(pf[port] != 0.0)
     assert np.any(pf[PORT_EFFECTS] != 0.0) == with_effects
     assert math.isfinite(scale) and scale > 0.0
+
+
+@pytest.mark.parametrize("name", ["xbw", "eps_car"])
+def test_with_the_audit_off_the_records_are_not_written_and_the_forces_are_the_same(name):
+    sim = _cornering_and_braking(name, EFFECTS)
+    assert sim.vd.audit[0] == 0.0
+    sim.vd.pf[:] = np.nan                 # anything a stage wrote would show
+    _evaluate(sim)
+    off = sim.data.force.copy()
+    assert np.all(np.isnan(sim.vd.pf))
+    sim.vd.audit[0] = 1.0
+    _evaluate(sim)
+    assert np.all(np.isfinite(sim.vd.pf))
+    assert off.tobytes() == sim.data.force.tobytes()

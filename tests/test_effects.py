@@ -20,10 +20,9 @@ from rtsim.road.model import make_plane
 from rtsim.vehicle.kit.actuators import LAG_RATE, LAG_TAU
 from rtsim.vehicle.kit.brake import BP_ACT, BP_BREAK_RATIO, BP_GAIN, BP_K, BS_MODE
 from rtsim.vehicle.car.config import load_vehicle
-from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT, TO_FX, TO_FZ, \
-    TO_OMEGA, TO_RE, TO_VX
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT, TyreOut
 from rtsim.vehicle.car.effect_kernels import (BRAKE_STICTION_PRESSURE, DRIVELINE_DAMPING_RATIO, DRIVELINE_INERTIA,
-                                          FS_DL)
+                                              EffectState)
 from rtsim.vehicle.car.effects import EFFECTS, effects_toml, validate_effects
 from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.car.sim import VehicleSim
@@ -226,7 +225,7 @@ def test_driveline_compliance_oscillates_at_sqrt_k_over_j(model, road):
     shaft = []
     for _ in range(400):
         sim.step(1)
-        shaft.append(sim.states.effects[FS_DL + 2])
+        shaft.append(sim.states.effects[EffectState.DL + 2])
     x = np.array(shaft) - 100.0
     ups = np.nonzero((x[:-1] < 0) & (x[1:] >= 0))[0]
     frac = -x[ups] / (x[ups + 1] - x[ups])             # linear interpolation of the crossings
@@ -244,13 +243,13 @@ def test_tyre_slip_stiffness_scale_shows_in_wheel_slip(model, road, car):
         sim = _coasting(model, road, 10.0, eff, torque=150.0)
         sim.step(1000)
         t = sim.vd.tyre[2:4]
-        return (t[:, TO_OMEGA] * t[:, TO_RE] - t[:, TO_VX]) / t[:, TO_VX], t
+        return (t[:, TyreOut.OMEGA] * t[:, TyreOut.RE] - t[:, TyreOut.VX]) / t[:, TyreOut.VX], t
     s = 0.5
     k1, t1 = slips(None)
     ks, _ = slips({"tyre_slip_stiffness": {"scale": s}})
     np.testing.assert_allclose(ks / k1, 1 / s, rtol=0.03)
-    kxk = np.array([slip_stiffnesses(car["tp"], fz, 0.0)[0] for fz in t1[:, TO_FZ]])
-    np.testing.assert_allclose(k1, t1[:, TO_FX] / kxk, rtol=0.1)
+    kxk = np.array([slip_stiffnesses(car["tp"], fz, 0.0)[0] for fz in t1[:, TyreOut.FZ]])
+    np.testing.assert_allclose(k1, t1[:, TyreOut.FX] / kxk, rtol=0.1)
 
 
 def test_tyre_relaxation_lengthens_the_first_order_slip_response(car):
@@ -302,7 +301,7 @@ def test_added_mass_carries_its_weight_and_slows_acceleration(model, road, car):
     dm = 120.0
     sim = VehicleSim(model, road, DT, brake_pressure=2000.0, effects={"mass": {"added_mass": dm}})
     sim.step(3000)
-    assert float(np.sum(sim.vd.tyre[:, TO_FZ])) == pytest.approx((car["m"] + dm) * G, rel=2e-3)
+    assert float(np.sum(sim.vd.tyre[:, TyreOut.FZ])) == pytest.approx((car["m"] + dm) * G, rel=2e-3)
 
     def drive_part(eff):                     # acceleration due to the drive torque alone
         return _accel(model, road, eff, 200.0) - _accel(model, road, eff, 0.0)
@@ -487,13 +486,13 @@ def test_changing_a_parameter_mid_run_continues_the_effect_states(model, road):
     sim.step(50)
     sim.io.commands[CMD_BRAKE] = 1500.0
     sim.step(60)
-    before = -sim.vd.brake_torque[0], sim.states.effects[FS_DL + 2]
+    before = -sim.vd.brake_torque[0], sim.states.effects[EffectState.DL + 2]
     sim.step(1)
     one_step = -sim.vd.brake_torque[0] - before[0]
     sim.set_effects({"brake_lag": {"time_constant": 0.1}, "driveline_compliance": {"stiffness": 6000.0}})
-    shaft = sim.states.effects[FS_DL + 2]
+    shaft = sim.states.effects[EffectState.DL + 2]
     sim.step(1)
     after = -sim.vd.brake_torque[0]
     assert 0.0 < after - (before[0] + one_step) < 3.0 * one_step          # faster lag, but no jump
-    assert abs(sim.states.effects[FS_DL + 2] - shaft) < 5.0                # N*m, against 80 applied
+    assert abs(sim.states.effects[EffectState.DL + 2] - shaft) < 5.0        # N*m, against 80 applied
     assert before[0] < 0.5 * sim.parts.brake[BP_GAIN] * 1500.0            # still far from the final torque

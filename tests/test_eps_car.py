@@ -24,7 +24,7 @@ from rtsim.vehicle.car.config import load_vehicle
 from rtsim.vehicle.car.energy import Balance
 from rtsim.vehicle.car.layout import CI_S, G
 from rtsim.vehicle.car.sim import VehicleSim
-from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, TO_FZ
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, TyreOut
 from rtsim.vehicle.kit import eps as E
 from rtsim.vehicle.kit.tables import map_2d, map_eval
 from rtsim.vehicle.kit.tyre.magic_formula import mf52_forces
@@ -67,7 +67,7 @@ def test_model_size_and_static_wheel_loads(model):
     sim.step(3000)
     cfg = model.config
     mass = cfg.chassis.mass_kg + 2 * cfg.front.unsprung_mass_kg + 2 * cfg.rear.unsprung_mass_kg
-    loads = sim.vd.tyre[:, TO_FZ]
+    loads = sim.vd.tyre[:, TyreOut.FZ]
     assert abs(loads.sum() - mass * G) <= 1e-4 * mass * G
     assert loads[0] == pytest.approx(loads[1], rel=1e-3) and loads[0] > loads[2]   # front-heavy, symmetric
 

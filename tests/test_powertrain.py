@@ -24,13 +24,13 @@ def setup(data=None, dt=DT, **state):
 
 
 def inputs(throttle=0.0, w_rl=0.0, w_rr=None, selector=1.0, t_rl=0.0, t_rr=0.0):
-    u = np.zeros(P.PI_SIZE)
-    u[P.PI_THROTTLE_CMD] = throttle
-    u[P.PI_OMEGA_LEFT] = w_rl
-    u[P.PI_OMEGA_RIGHT] = w_rl if w_rr is None else w_rr
-    u[P.PI_SELECTOR] = selector
-    u[P.PI_TORQUE_LEFT] = t_rl
-    u[P.PI_TORQUE_RIGHT] = t_rr
+    u = np.zeros(P.PtIn.SIZE)
+    u[P.PtIn.THROTTLE_CMD] = throttle
+    u[P.PtIn.OMEGA_LEFT] = w_rl
+    u[P.PtIn.OMEGA_RIGHT] = w_rl if w_rr is None else w_rr
+    u[P.PtIn.SELECTOR] = selector
+    u[P.PtIn.TORQUE_LEFT] = t_rl
+    u[P.PtIn.TORQUE_RIGHT] = t_rr
     return u
 
 
@@ -196,7 +196,7 @@ def drive_speed_profile(p, s, throttle, v_of_t, t_end, rw):
     for k in range(int(round(t_end / DT))):
         t = (k + 1) * DT
         v = v_of_t(t)
-        u[P.PI_OMEGA_LEFT] = u[P.PI_OMEGA_RIGHT] = v / rw
+        u[P.PtIn.OMEGA_LEFT] = u[P.PtIn.OMEGA_RIGHT] = v / rw
         P.powertrain_step(p, s, u, DT, out)
         ts.append(t)
         vs.append(v)
@@ -303,7 +303,7 @@ def test_throttle_by_wire_lag_and_rate_limit():
         assert out[P.PO_THROTTLE] - prev <= 5.0 * DT * (1 + 1e-12)
         prev = out[P.PO_THROTTLE]
     assert out[P.PO_THROTTLE] == pytest.approx(1.4, abs=1e-3)
-    u[P.PI_THROTTLE_CMD] = 3.0            # saturated at the plate's travel
+    u[P.PtIn.THROTTLE_CMD] = 3.0            # saturated at the plate's travel
     for _ in range(300):
         P.powertrain_step(p, s, u, DT, out)
         assert out[P.PO_THROTTLE] <= 1.4

@@ -76,10 +76,10 @@ def test_rolling_state_is_a_fixed_point_of_the_step(v, throttle):
     s = P.powertrain_state_rolling(p, DT, w, throttle=throttle)
     assert int(s[P.PS_GEAR]) == schedule_gear_ref(cfg, v, throttle)
     s0 = s.copy()
-    u = np.zeros(P.PI_SIZE)
-    u[P.PI_THROTTLE_CMD] = throttle
-    u[P.PI_OMEGA_LEFT] = u[P.PI_OMEGA_RIGHT] = w
-    u[P.PI_SELECTOR] = 1.0
+    u = np.zeros(P.PtIn.SIZE)
+    u[P.PtIn.THROTTLE_CMD] = throttle
+    u[P.PtIn.OMEGA_LEFT] = u[P.PtIn.OMEGA_RIGHT] = w
+    u[P.PtIn.SELECTOR] = 1.0
     out = np.zeros(P.PO_SIZE)
     P.powertrain_step(p, s, u, DT, out)
     t_first = out[P.PO_TORQUE_LEFT]
@@ -107,9 +107,9 @@ def test_coasting_state_matches_the_overrun_equilibrium():
         assert 0.9 * wt < we < wt
         assert s[P.PS_IDLE_I] == 0.0
         out = np.zeros(P.PO_SIZE)
-        u = np.zeros(P.PI_SIZE)
-        u[P.PI_OMEGA_LEFT] = u[P.PI_OMEGA_RIGHT] = w
-        u[P.PI_SELECTOR] = 1.0
+        u = np.zeros(P.PtIn.SIZE)
+        u[P.PtIn.OMEGA_LEFT] = u[P.PtIn.OMEGA_RIGHT] = w
+        u[P.PtIn.SELECTOR] = 1.0
         P.powertrain_step(p, s, u, DT, out)
         assert out[P.PO_TORQUE_LEFT] == pytest.approx(t_wheel, rel=1e-6)
         assert t_wheel < 0.0
@@ -124,8 +124,8 @@ def test_at_rest_in_drive_the_engine_idles_against_the_stalled_converter():
     e, c, g = cfg.engine, cfg.converter, cfg.gearbox
     assert int(s[P.PS_GEAR]) == 1 and s[P.PS_OMEGA_E] == e.idle_speed
     t_stall = (e.idle_speed / c.k_factor[0]) ** 2
-    u = np.zeros(P.PI_SIZE)
-    u[P.PI_SELECTOR] = 1.0
+    u = np.zeros(P.PtIn.SIZE)
+    u[P.PtIn.SELECTOR] = 1.0
     out = np.zeros(P.PO_SIZE)
     P.powertrain_step(p, s, u, DT, out)
     assert out[P.PO_PUMP_TORQUE] == pytest.approx(t_stall, rel=1e-9)
@@ -145,10 +145,10 @@ def test_rolling_state_with_lockup_engaged():
     s = P.powertrain_state_rolling(p, DT, w, throttle=0.3)
     assert s[P.PS_LOCKED] == 1.0 and int(s[P.PS_GEAR]) == 3
     w0 = s[P.PS_OMEGA_E]
-    u = np.zeros(P.PI_SIZE)
-    u[P.PI_THROTTLE_CMD] = 0.3
-    u[P.PI_OMEGA_LEFT] = u[P.PI_OMEGA_RIGHT] = w
-    u[P.PI_SELECTOR] = 1.0
+    u = np.zeros(P.PtIn.SIZE)
+    u[P.PtIn.THROTTLE_CMD] = 0.3
+    u[P.PtIn.OMEGA_LEFT] = u[P.PtIn.OMEGA_RIGHT] = w
+    u[P.PtIn.SELECTOR] = 1.0
     out = np.zeros(P.PO_SIZE)
     for _ in range(500):
         P.powertrain_step(p, s, u, DT, out)

@@ -75,7 +75,7 @@ class Rig:
 
     @property
     def m_rack(self) -> float:
-        return float(self.p[S.SP_M_RACK])
+        return float(self.p[S.SbwPar.M_RACK])
 
 
 def test_free_oscillation_at_the_analytic_frequencies():
@@ -89,7 +89,7 @@ def test_free_oscillation_at_the_analytic_frequencies():
               column_damping=0.0, torsion_bar_damping=0.0, rack_damping=0.0)
     c = rig.cfg
     rp, k = c.rack_travel_per_rad, c.torsion_bar_stiffness
-    jc = float(rig.p[S.SP_J_COL])
+    jc = float(rig.p[S.SbwPar.J_COL])
     mass = np.diag([jc, rig.m_rack + m_link])
     stiff = k * np.array([[1.0, -1.0 / rp], [-1.0 / rp, 1.0 / rp ** 2]]) + np.diag([0.0, k_s])
     w_ref = np.sqrt(np.sort(np.linalg.eigvals(np.linalg.solve(mass, stiff)).real))

@@ -13,7 +13,7 @@ from drivers.scenario import load_scenario
 from rtsim.errors import ConfigError
 from rtsim.road.model import make_grade, make_plane
 from rtsim.vehicle.car.config import load_vehicle, validate, VehicleConfig, load_toml
-from rtsim.vehicle.car.step import TO_FZ
+from rtsim.vehicle.car.step import TyreOut
 from rtsim.vehicle.kit.linkages import (
     OUT_AXIS, OUT_CENTRE, _pose_points, _solve_double_wishbone, _solve_macpherson, solve_corner,
 )
@@ -90,7 +90,7 @@ def test_static_wheel_loads_carry_the_weight(parked, model):
     mass predicts (sprung and unsprung masses and their positions) within 1 %."""
     cfg = model.config
     m_total = cfg.chassis.mass_kg + 2 * cfg.front.unsprung_mass_kg + 2 * cfg.rear.unsprung_mass_kg
-    fz = parked.vd.tyre[:, TO_FZ]
+    fz = parked.vd.tyre[:, TyreOut.FZ]
     assert abs(fz.sum() - m_total * G) <= 1e-3 * m_total * G
     w = model.design_wheel_centre
     xf, xr = w[0, 0], w[2, 0]
@@ -139,7 +139,7 @@ def test_steady_turn_is_kinematically_consistent():
     yaw_rate = float(np.cross(u, ud)[2] / max(1e-9, np.linalg.norm(u[:2]) ** 2))
     assert yaw_rate > 0.05                       # turning left
     assert abs(a_lat - yaw_rate * speed) <= 0.02 * abs(a_lat)
-    fz = sim.vd.tyre[:, TO_FZ]
+    fz = sim.vd.tyre[:, TyreOut.FZ]
     assert fz[1] > fz[0] and fz[3] > fz[2]
     assert d.stats[ST_MAX_PHI] <= 1e-8 and d.stats[ST_MAX_PHID] <= 1e-6
 
@@ -180,7 +180,7 @@ def test_linear_tyre_model_is_used_when_configured():
     """tyres.model = "linear" in the vehicle file switches every tyre to the seed's linearised law:
     in a steady turn each tyre's lateral force is -C_alpha x slip angle (mirrored on the right side),
     with C_alpha from the same .tir at FNOMIN."""
-    from rtsim.vehicle.car.step import TO_ALPHA, TO_FY
+    from rtsim.vehicle.car.step import TyreOut
     from rtsim.vehicle.kit.tyre.tir import P_LIN_CALPHA
     cfg, base = load_vehicle(VEHICLE)
     lin = cfg.model_copy(update={"tyres": cfg.tyres.model_copy(update={"model": "linear"})})
@@ -192,5 +192,5 @@ def test_linear_tyre_model_is_used_when_configured():
     c_alpha = sim.tp[P_LIN_CALPHA]
     for i in range(4):
         # steady state: the transient slip equals the steady one, and the law is linear there
-        assert abs(t[i, TO_FY] - (-c_alpha * t[i, TO_ALPHA])) < 1e-3 * abs(t[i, TO_FY]) + 1.0
-    assert np.all(np.abs(t[:, TO_FY]) > 50.0)
+        assert abs(t[i, TyreOut.FY] - (-c_alpha * t[i, TyreOut.ALPHA])) < 1e-3 * abs(t[i, TyreOut.FY]) + 1.0
+    assert np.all(np.abs(t[:, TyreOut.FY]) > 50.0)

@@ -11,7 +11,7 @@ from drivers.scenario import load_scenario
 from rtsim.mbs.model import ST_MAX_PHI, ST_MAX_PHID
 from rtsim.road.model import make_plane
 from rtsim.vehicle.car.config import load_vehicle
-from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, TO_FZ, TO_KAPPA
+from rtsim.vehicle.car.step import CMD_BRAKE, CMD_STEER, TyreOut
 from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.car.describe import describe
 from rtsim.vehicle.offline import prepare, run
@@ -62,11 +62,11 @@ def test_wheels_leave_the_ground_and_land(model):
         if n.endswith(".z") and not n.startswith("chassis.") or n == "chassis.z":
             sim.data.q[names.index(n)] += 0.05
     sim.step(20)
-    assert np.all(sim.vd.tyre[:, TO_FZ] == 0.0)
+    assert np.all(sim.vd.tyre[:, TyreOut.FZ] == 0.0)
     sim.step(4000)
     cfg = model.config
     m_total = cfg.chassis.mass_kg + 2 * cfg.front.unsprung_mass_kg + 2 * cfg.rear.unsprung_mass_kg
-    assert abs(sim.vd.tyre[:, TO_FZ].sum() - m_total * G) < 1e-3 * m_total * G
+    assert abs(sim.vd.tyre[:, TyreOut.FZ].sum() - m_total * G) < 1e-3 * m_total * G
     assert sim.data.stats[ST_MAX_PHI] <= 1e-8
 
 
@@ -121,8 +121,8 @@ def test_rear_lock_in_a_panic_stop_is_set_by_the_brakes_not_the_powertrain(model
         sim.io.commands[CMD_BRAKE] = pressure
         sim.io.extra[EX_SELECTOR] = selector
         sim.step(1500)
-        assert np.all(sim.vd.tyre[:2, TO_KAPPA] < -0.99)     # the fronts lock either way
-        kappa.append(sim.vd.tyre[2:, TO_KAPPA].copy())
+        assert np.all(sim.vd.tyre[:2, TyreOut.KAPPA] < -0.99)     # the fronts lock either way
+        kappa.append(sim.vd.tyre[2:, TyreOut.KAPPA].copy())
     assert np.all(np.abs(kappa[0] - kappa[1]) < 0.02)
     assert np.all(kappa[0] < -0.99) == np.all(kappa[1] < -0.99)
 
@@ -139,7 +139,7 @@ def test_panic_stop_at_full_pressure_locks_all_four_and_the_converter_only_creep
     p_line = sim.bcfg.actuator.max
     sim.io.commands[CMD_BRAKE] = p_line
     sim.step(1500)
-    assert np.all(sim.vd.tyre[:, TO_KAPPA] < -0.99)
+    assert np.all(sim.vd.tyre[:, TyreOut.KAPPA] < -0.99)
     sim.step(3000)
     assert _speed(sim) < 0.05
     e, c, g = sim.ptcfg.engine, sim.ptcfg.converter, sim.ptcfg.gearbox

@@ -16,7 +16,7 @@ from rtsim.road.model import make_plane
 from rtsim.road.query import NCONTACT, wheel_contact
 from rtsim.vehicle.kit.brake import brake_step
 from rtsim.vehicle.car.config import load_vehicle
-from rtsim.vehicle.car.step import CMD_STEER, CMD_THROTTLE, TO_FZ, vehicle_forces
+from rtsim.vehicle.car.step import CMD_STEER, CMD_THROTTLE, vehicle_forces, TyreOut
 from rtsim.vehicle.car.build import build_vehicle
 from rtsim.vehicle.car.layout import CI_WX
 from rtsim.vehicle.kit.powertrain import powertrain_step
@@ -58,7 +58,7 @@ def run_scenario(name: str, road_path: Path | None, speed: float, steer: float, 
     t0 = time.perf_counter()
     sim.step(steps)
     wall = time.perf_counter() - t0
-    if np.any(sim.vd.tyre[:, TO_FZ] <= 0.0):
+    if np.any(sim.vd.tyre[:, TyreOut.FZ] <= 0.0):
         raise RuntimeError(f"{name}: a wheel left the road during the benchmark")
     s1 = sim.data.stats
     shares = {} if sim.has_eps else _shares(sim)

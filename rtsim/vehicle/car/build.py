@@ -26,10 +26,11 @@ from rtsim.errors import ConfigError
 from rtsim.mbs.model import IS_TANGENT_FORCES
 
 from .config import VehicleConfig
-from .layout import (NSP, SP_ARB, SP_BX, SP_BY, SP_CFY, SP_CMZ, SP_L0, SP_PARTNER, SP_STOP_C, SP_STOP_K, SP_Z_HI, SP_Z_LO, STEER_BY_WIRE, STEER_EPS,
-                     TYRE_LINEAR, TYRE_MAGIC_FORMULA, G, Vehicle, FRONT_AXLE, REAR_AXLE, WHEELS)
+from .layout import (NSP, STEER_BY_WIRE, STEER_EPS, TYRE_LINEAR, TYRE_MAGIC_FORMULA, G, Vehicle, FRONT_AXLE,
+                     REAR_AXLE, WHEELS, Susp)
 from ..kit.eps import add_eps, eps_params
 from ..kit.steering import add_steering, steering_config, steering_params
+from ..kit.spring_damper import bump_stop_spring_table, characteristic_table, two_rate_damper_table
 from ..kit.tables import table_1d
 from ..kit.linkage_cache import cached_corner_kinematics
 from ..kit.linkages import (
@@ -234,21 +235,21 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         dl = _spring_slope(spring_coef[i], full_exps)
         length0 = spring_coef[i] @ _basis(full_exps, 0.0, 0.0)
         f_static = sprung[i] / max(-dl, 1e-6)          # spring compression force at design height
-        susp[i, SP_L0] = length0
-        susp[i, SP_PARTNER] = i ^ 1
+        susp[i, Susp.L0] = length0
+        susp[i, Susp.PARTNER] = i ^ 1
         if axle.rigid:                  # no spring, damper, bar, axle reaction or stops: zero forces
             spring_tab[i] = damper_tab[i] = table_1d([-1.0, 1.0], [0.0, 0.0])
             continue
         spring_tab[i], damper_tab[i] = _spring_damper_tables(axle.spring, length0, f_static)
-        susp[i, SP_ARB] = axle.anti_roll_bar_n_per_m
-        susp[i, SP_BX] = r_wheel / axle.anti_pitch_arm_m if axle.anti_pitch_arm_m else 0.0
-        susp[i, SP_BY] = r_wheel / axle.anti_roll_arm_m if axle.anti_roll_arm_m else 0.0
-        susp[i, SP_CFY] = axle.compliance_steer_rad_per_n
-        susp[i, SP_CMZ] = axle.compliance_steer_rad_per_nm
-        susp[i, SP_Z_LO] = axle.travel_m[0] + axle.travel_stop_margin_m
-        susp[i, SP_Z_HI] = axle.travel_m[1] - axle.travel_stop_margin_m
-        susp[i, SP_STOP_K] = axle.travel_stop_stiffness_n_per_m
-        susp[i, SP_STOP_C] = axle.travel_stop_damping_ns_per_m
+        susp[i, Susp.ARB] = axle.anti_roll_bar_n_per_m
+        susp[i, Susp.BX] = r_wheel / axle.anti_pitch_arm_m if axle.anti_pitch_arm_m else 0.0
+        susp[i, Susp.BY] = r_wheel / axle.anti_roll_arm_m if axle.anti_roll_arm_m else 0.0
+        susp[i, Susp.CFY] = axle.compliance_steer_rad_per_n
+        susp[i, Susp.CMZ] = axle.compliance_steer_rad_per_nm
+        susp[i, Susp.Z_LO] = axle.travel_m[0] + axle.travel_stop_margin_m
+        susp[i, Susp.Z_HI] = axle.travel_m[1] - axle.travel_stop_margin_m
+        susp[i, Susp.STOP_K] = axle.travel_stop_stiffness_n_per_m
+        susp[i, Susp.STOP_C] = axle.travel_stop_damping_ns_per_m
     driven = list(FRONT_AXLE if cfg.driven_axle == "front" else REAR_AXLE)
     veh = Vehicle(
         chassis_idx=np.array([*r.idx, *u.idx, *v.idx, *w.idx], dtype=np.int64),
@@ -273,15 +274,15 @@ def _spring_damper_tables(sp, length0: float, f_static: float) -> tuple[np.ndarr
     and the damper's force against compression speed (m/s), as tables. A linear spring with its bump
     stop and a two-rate damper are tables of three points each, exactly (the ends continue linearly)."""
     if sp.spring_table is not None:
-        spring = table_1d(sp.spring_table.x, np.asarray(sp.spring_table.force_n) + f_static)
+        spring = characteristic_table(sp.spring_table, f_static)
     else:
-        k, kb, gap = sp.stiffness_n_per_m, sp.bump_stop_stiffness_n_per_m, sp.bump_stop_clearance_m
+        k = sp.stiffness_n_per_m
         pre = f_static if sp.free_length_m is None else k * (sp.free_length_m - length0)
-        spring = table_1d([-1.0, gap, gap + 1.0], [pre - k, pre + k * gap, pre + k * (gap + 1.0) + kb])
+        spring = bump_stop_spring_table(k, pre, sp.bump_stop_clearance_m, sp.bump_stop_stiffness_n_per_m)
     if sp.damper_table is not None:
-        damper = table_1d(sp.damper_table.x, sp.damper_table.force_n)
+        damper = characteristic_table(sp.damper_table)
     else:
-        damper = table_1d([-1.0, 0.0, 1.0], [-sp.damping_rebound_ns_per_m, 0.0, sp.damping_bump_ns_per_m])
+        damper = two_rate_damper_table(sp.damping_bump_ns_per_m, sp.damping_rebound_ns_per_m, 1.0)
     return spring, damper
 
 

@@ -28,6 +28,7 @@ from ..kit.inertia import inertia_problem
 from ..kit.linkage_checks import STEERING_RATIO_RANGE, short_link, steering_arm, steering_ratio
 from ..kit.linkages import DoubleWishbone, VerticalSlider
 from ..kit.powertrain import PowertrainConfig
+from ..kit.spring_damper import Characteristic
 from ..kit.steering import SteeringConfig
 
 from .effects import validate_effects
@@ -100,20 +101,6 @@ class VerticalSliderHardpoints(Strict):
 
 SUSPENSIONS = {"double_wishbone": DoubleWishboneHardpoints, "macpherson": MacPhersonHardpoints,
                "vertical_slider": VerticalSliderHardpoints}
-
-
-class Characteristic(Strict):
-    """A nonlinear law as a table (piecewise linear, continued with the end slopes): x increasing."""
-    x: list[float] = Field(min_length=2, max_length=16)
-    force_n: list[float] = Field(min_length=2, max_length=16)
-
-    @model_validator(mode="after")
-    def _points(self):
-        if len(self.x) != len(self.force_n):
-            raise ValueError(f"x and force_n must have the same length ({len(self.x)} != {len(self.force_n)})")
-        if any(b <= a for a, b in zip(self.x, self.x[1:])):
-            raise ValueError("x must increase")
-        return self
 
 
 class SpringDamper(Strict):

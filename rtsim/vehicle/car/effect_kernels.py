@@ -3,7 +3,7 @@ array layouts and the kernels the vehicle step calls when an effect is on.
 
 Parameter array ``Parts.effects`` (float64, FX_SIZE), packed by ``rtsim.vehicle.car.effects.pack_effects``;
 all zeros (but the neutral scales, 1.0) is the nominal model, and with ``FX_ON`` = 0 the vehicle step
-runs exactly the nominal code. State array ``States.effects`` (float64, FS_SIZE): brake lag, driveline
+runs exactly the nominal code. State array ``States.effects`` (float64, EffectState.SIZE): brake lag, driveline
 nodes. Units SI; brake torques N*m, pressures kPa.
 
 Formulations (each chosen so that the multibody step stays implicit and allocation-free):
@@ -36,6 +36,7 @@ Formulations (each chosen so that the multibody step stays implicit and allocati
 """
 from __future__ import annotations
 
+from enum import IntEnum
 from math import sqrt
 
 import numpy as np
@@ -82,9 +83,12 @@ DRIVELINE_DAMPING_RATIO = 0.1  # zeta of the node on the spring against a held w
  FX_SIZE) = offsets(*(1,) * 21, 4)
 
 # ---- state array layout (States.effects) ---------------------------------------------------------------
-(FS_LAG,          # [4] lagged nominal sliding torque, N*m
- FS_DL,           # [2 x 3] driven wheels left, right: node angle rad, node speed rad/s, shaft torque N*m
- FS_SIZE) = offsets(4, 2 * 3)
+class EffectState(IntEnum):
+    """The effects' state array (States.effects): offsets of its blocks, then SIZE (rtsim.mbs.model's
+    FS_* index the model's float settings, another array)."""
+    (LAG,            # [4] lagged nominal sliding torque, N*m
+     DL,             # [2 x 3] driven wheels left, right: node angle rad, node speed rad/s, shaft torque N*m
+     SIZE) = offsets(4, 2 * 3)
 
 
 def neutral_params() -> np.ndarray:
@@ -117,7 +121,7 @@ def driveline_torque(fx, fs, j, t_src, phi, phid, h):
     k = fx[FX_DL_K]
     c = fx[FX_DL_C]
     jd = fx[FX_DL_J]
-    o = FS_DL + 3 * j
+    o = EffectState.DL + 3 * j
     x0 = fs[o]
     w0 = fs[o + 1]
     t0 = fs[o + 2]
@@ -148,8 +152,8 @@ def effects_brake(fx, fs, bp, bs, out):
         target = gain * pw
         x = target
         if a > 0.0:
-            x = fs[FS_LAG + i] + a * (target - fs[FS_LAG + i])
-        fs[FS_LAG + i] = x
+            x = fs[EffectState.LAG + i] + a * (target - fs[EffectState.LAG + i])
+        fs[EffectState.LAG + i] = x
         ts = scale * x
         tb = ts * bp[BP_BREAK_RATIO + i]
         if t_break > 0.0 and gain > 0.0:
@@ -172,7 +176,7 @@ def driveline_commit(fx, fs, d, veh, drive, h):
         i = veh.driven[j]
         kp = veh.corner_idx[i, CI_PHI]
         t, w, x, _k, _c = driveline_torque(fx, fs, j, drive[i], d.q[kp], d.qd[kp], h)
-        o = FS_DL + 3 * j
+        o = EffectState.DL + 3 * j
         fs[o] = x
         fs[o + 1] = w
         fs[o + 2] = t

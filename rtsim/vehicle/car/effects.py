@@ -59,7 +59,6 @@ from .effect_kernels import (
     FX_BEARING, FX_BRAKE, FX_CDA, FX_COS, FX_DL, FX_DL_C, FX_DL_J, FX_DL_K, FX_G_1MCOS, FX_G_SIN, FX_GRADE,
     FX_M_CHASSIS, FX_M_CORNER, FX_MASS, FX_ON, FX_RELAX, FX_RR, FX_SIN, FX_SLIP, neutral_params,
 )
-from .layout import G
 
 
 @dataclass(frozen=True)
@@ -324,9 +323,10 @@ def effects_toml(effects) -> str:
 
 
 # ------------------------------------------------------------------------------------------- packing
-def pack_effects(effects: dict, dt: float, chassis_mass: float, unsprung_masses) -> np.ndarray:
+def pack_effects(effects: dict, dt: float, chassis_mass: float, unsprung_masses, g: float) -> np.ndarray:
     """The kernels' parameter array (rtsim.vehicle.car.effect_kernels FX_*) of a validated effects mapping,
-    for integrator step dt (s), sprung mass (kg) and the four unsprung masses (kg)."""
+    for integrator step dt (s), sprung mass (kg), the four unsprung masses (kg) and the model's gravity g
+    (m/s^2, downward: rtsim.mbs.model.gravity's -z component), which the road grade tilts."""
     fx = neutral_params()
     model_on = False
 
@@ -349,7 +349,7 @@ def pack_effects(effects: dict, dt: float, chassis_mass: float, unsprung_masses)
         th = math.atan(grade)
         fx[FX_GRADE] = 1.0
         fx[FX_SIN], fx[FX_COS] = math.sin(th), math.cos(th)
-        fx[FX_G_SIN], fx[FX_G_1MCOS] = G * math.sin(th), G * (1.0 - math.cos(th))
+        fx[FX_G_SIN], fx[FX_G_1MCOS] = g * math.sin(th), g * (1.0 - math.cos(th))
         model_on = True
     fx[FX_M_CHASSIS] = chassis_mass + dm
     fx[FX_M_CORNER:FX_M_CORNER + 4] = unsprung_masses

@@ -8,7 +8,7 @@ from rtsim.mbs.envelope import matvec_add
 
 from ..kit.eps import EP_K_TB, EP_L, EP_RP, ES_E_EMF, ES_E_SUPPLY, ES_E_WINDING, ES_I
 from ..kit.tables import table_integral
-from .layout import CI_S, CI_Z, NPORT, SP_ARB, SP_L0, STEER_COLUMN, STEER_EPS, STEER_RACK
+from .layout import CI_S, CI_Z, NPORT, STEER_COLUMN, STEER_EPS, STEER_RACK, Susp
 
 # Audit array layout (VehicleData.audit_e): the port works (NPORT), the constraint ports, the electrical
 # flows, the stored energies now and at the start, and the started flag.
@@ -40,10 +40,10 @@ def stored_energies(m, d, veh, vd, stp, sts, out):
         ks = ix[CI_S]
         s = (q[ks] + vd.steer_offset[i]) if ks >= 0 else 0.0
         length = poly_value(veh.spring_coef[i], m.poly_exp, q[ix[CI_Z]], s)
-        springs += table_integral(veh.spring_tab[i], veh.susp[i, SP_L0] - length)
+        springs += table_integral(veh.spring_tab[i], veh.susp[i, Susp.L0] - length)
         if i % 2 == 0:
             dz = q[ix[CI_Z]] - q[veh.corner_idx[i + 1, CI_Z]]
-            arb += 0.5 * veh.susp[i, SP_ARB] * dz * dz
+            arb += 0.5 * veh.susp[i, Susp.ARB] * dz * dz
     ic = veh.steer_idx[STEER_COLUMN]
     ir = veh.steer_idx[STEER_RACK]
     if veh.steer_kind[0] == STEER_EPS:

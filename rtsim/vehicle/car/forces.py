@@ -4,9 +4,11 @@
 implicit in the step). It is a pipeline of stages; each adds its generalized forces to d.force, with
 `tangent` its stiffness (scaled by bq = h^2/4) and damping (by hc = h/2) to W, and writes its own
 force record: its rows of the port-force array VehicleData.pf (rows PORT_*, rtsim.vehicle.car.layout),
-the generalized forces that element puts on the coordinates. The records are written at every
-evaluation (the last one of a step is at the converged state), so the power audit
-(rtsim.vehicle.car.energy) is a sum over them after the step and no stage branches on it.
+the generalized forces that element puts on the coordinates. The records are written only while
+the power audit is on (VehicleData.audit, the flag `rec` every stage takes; the stages' forces are
+the same either way), at every evaluation (the last one of a step is at the converged state), so the
+power audit (rtsim.vehicle.car.energy) is a sum over them after the step; with the audit off the
+records cost nothing.
 
 Per corner, in this order (the corners share the rack coordinate, so each corner's stages run
 together and the forces add in one fixed order):
@@ -35,6 +37,7 @@ and road grade). Effects: parameters fx = Parts.effects, states fs = States.effe
 """
 from __future__ import annotations
 
+from enum import IntEnum
 from math import atan, sqrt, tan
 
 import numpy as np
@@ -51,22 +54,39 @@ from ..kit.brake import BP_EPS, BS_TAU_SLIDE, brake_wheel_torque
 from ..kit.steering import rack_stop_tangent, steering_forces, steering_tangent
 from ..kit.eps import eps_forces
 from ..kit.end_stop import travel_stops
+from ..kit.imu import model_gravity
 from ..kit.rigid import add_moment, angular_velocity, cross, vec3
-from ..kit.tables import table_eval
-from .layout import (
-    G, TYRE_LINEAR, CI_PHI, CI_S, CI_WX, CI_Z, STEER_COLUMN, STEER_EPS, STEER_RACK, SP_ARB, SP_BX, SP_BY, SP_L0,
-    SP_PARTNER, SP_STOP_C, SP_STOP_K, SP_Z_HI, SP_Z_LO, PORT_AERO, PORT_ARB, PORT_AXLE_REACTION, PORT_BRAKE,
-    PORT_DAMPER, PORT_DRIVE, PORT_EFFECTS, PORT_EPS, PORT_SPRING, PORT_STEER_BY_WIRE, PORT_TYRE,
-)
+from ..kit.spring_damper import spring_damper_force
+from .layout import (TYRE_LINEAR, CI_PHI, CI_S, CI_WX, CI_Z, STEER_COLUMN, STEER_EPS, STEER_RACK, PORT_AERO, PORT_ARB,
+                     PORT_AXLE_REACTION, PORT_BRAKE, PORT_DAMPER, PORT_DRIVE, PORT_EFFECTS, PORT_EPS, PORT_SPRING,
+                     PORT_STEER_BY_WIRE, PORT_TYRE, Susp)
 from ..kit.tyre.magic_formula import (effective_rolling_radius, mf52_forces, transient_slip, transient_slip_relaxed,
                                       vertical_force)
 from ..kit.tyre.linear import linear_forces
 from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_DAMPING, P_VERTICAL_STIFFNESS
 
-# Per-tyre outputs (VehicleData.tyre[w, :]) for logging and sensors.
-TO_FX, TO_FY, TO_FZ, TO_MZ, TO_KAPPA, TO_ALPHA, TO_PX, TO_PY, TO_PZ, TO_VX, TO_GAMMA, TO_OMEGA, TO_RE, \
-    TO_VSY = range(14)
-NTO = 14
+
+
+class TyreOut(IntEnum):
+    """Per-tyre outputs of the last force evaluation, for logging and sensors: columns of
+    VehicleData.tyre[w, :] (zeros without contact)."""
+    FX = 0          # N, longitudinal force (contact frame)
+    FY = 1          # N, lateral force
+    FZ = 2          # N, vertical force
+    MZ = 3          # N m, aligning moment
+    KAPPA = 4       # longitudinal slip
+    ALPHA = 5       # rad, slip angle
+    PX = 6          # m, contact point (world)
+    PY = 7
+    PZ = 8
+    VX = 9          # m/s, the wheel centre's speed along the contact's longitudinal axis
+    GAMMA = 10      # rad, camber to the road
+    OMEGA = 11      # rad/s, the wheel's absolute spin rate
+    RE = 12         # m, effective rolling radius
+    VSY = 13        # m/s, lateral slip speed at the contact point
+
+
+NTO = len(TyreOut)
 
 _vec = vec3
 _cross = cross
@@ -114,7 +134,7 @@ def _corner_travel(veh, vd, q, qd, i):
 
 
 @inline_kernel
-def suspension_stage(m, d, veh, vd, i, tangent, bq, hc):
+def suspension_stage(m, d, veh, vd, i, rec, tangent, bq, hc):
     """Corner i's spring and damper (tables: force in compression against compression from the design
     length, and against compression speed), its travel stops and its anti-roll bar. Records: PORT_SPRING,
     PORT_DAMPER (with the stops: a non-storing port), PORT_ARB."""
@@ -125,32 +145,33 @@ def suspension_stage(m, d, veh, vd, i, tangent, bq, hc):
     sp = veh.susp[i]
     length, lz, ls, _a, _b, _c = poly_eval(veh.spring_coef[i], m.poly_exp, z, s)
     ldot = lz * zd + ls * sd
-    f_spring, k_eff = table_eval(veh.spring_tab[i], sp[SP_L0] - length)
-    f_damp, c = table_eval(veh.damper_tab[i], -ldot)
+    f_spring, k_eff, f_damp, c = spring_damper_force(veh.spring_tab[i], veh.damper_tab[i], sp[Susp.L0] - length, -ldot)
     fsp = f_spring + f_damp
     f[kz] += fsp * lz
     if ks >= 0:
         f[ks] += fsp * ls
     # rebound and bump stops at the ends of the travel (a hanging wheel, a slammed one)
-    f_ts, k_ts, c_ts = travel_stops(z, zd, sp[SP_Z_LO], sp[SP_Z_HI], sp[SP_STOP_K], sp[SP_STOP_C])
+    f_ts, k_ts, c_ts = travel_stops(z, zd, sp[Susp.Z_LO], sp[Susp.Z_HI], sp[Susp.STOP_K], sp[Susp.STOP_C])
     if k_ts != 0.0:
         f[kz] += f_ts
-        pf[PORT_DAMPER, kz] += f_ts
+        if rec:
+            pf[PORT_DAMPER, kz] += f_ts
         if tangent:
             add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * k_ts + hc * c_ts)
     # anti-roll bar on the travel difference with the other wheel of the axle
-    partner = veh.corner_idx[int(sp[SP_PARTNER]), CI_Z]
-    f_arb = -sp[SP_ARB] * (z - q[partner])
+    partner = veh.corner_idx[int(sp[Susp.PARTNER]), CI_Z]
+    f_arb = -sp[Susp.ARB] * (z - q[partner])
     f[kz] += f_arb
-    pf[PORT_SPRING, kz] += f_spring * lz
-    pf[PORT_DAMPER, kz] += f_damp * lz
-    if ks >= 0:
-        pf[PORT_SPRING, ks] += f_spring * ls
-        pf[PORT_DAMPER, ks] += f_damp * ls
-    pf[PORT_ARB, kz] += f_arb
+    if rec:
+        pf[PORT_SPRING, kz] += f_spring * lz
+        pf[PORT_DAMPER, kz] += f_damp * lz
+        if ks >= 0:
+            pf[PORT_SPRING, ks] += f_spring * ls
+            pf[PORT_DAMPER, ks] += f_damp * ls
+        pf[PORT_ARB, kz] += f_arb
     if tangent:
-        add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * (k_eff * lz * lz + sp[SP_ARB]) + hc * c * lz * lz)
-        add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, partner, -0.5 * bq * sp[SP_ARB])
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * (k_eff * lz * lz + sp[Susp.ARB]) + hc * c * lz * lz)
+        add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, partner, -0.5 * bq * sp[Susp.ARB])
 
 
 @inline_kernel
@@ -180,14 +201,15 @@ def corner_kinematics(m, d, veh, vd, i, om):
 
 
 @inline_kernel
-def brake_stage(m, d, veh, vd, bp, bs, i, tangent, bq, hc):
+def brake_stage(m, d, veh, vd, bp, bs, i, rec, tangent, bq, hc):
     """Corner i's brake torque on the spin coordinate (implicit, with stiction): VehicleData.brake_torque
     and the record PORT_BRAKE; spin_torques adds it to the force."""
     kp = veh.corner_idx[i, CI_PHI]
     w = d.qd[kp]
     tb, dtdw, dtdth = brake_wheel_torque(bp, bs, i, d.q[kp], w)
     vd.brake_torque[i] = tb
-    vd.pf[PORT_BRAKE, kp] += tb
+    if rec:
+        vd.pf[PORT_BRAKE, kp] += tb
     if tangent:
         # Near a locked wheel the sliding law's slope is -tau_s/omega_eps inside the band and 0
         # outside: a tangent of 0 lets Newton jump across the band and back forever. Within 20 bands
@@ -200,10 +222,11 @@ def brake_stage(m, d, veh, vd, bp, bs, i, tangent, bq, hc):
         if c_b == 0.0 and abs(w) < 20.0 * w_band and w_band > 0.0:
             c_b = bs[BS_TAU_SLIDE + i] / (abs(w) + w_band)
         add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, -bq * dtdth + hc * c_b)
+    return tb
 
 
 @inline_kernel
-def drive_stage(m, d, veh, vd, fx, fs, i, a_dot_tz, tangent, bq, hc):
+def drive_stage(m, d, veh, vd, fx, fs, i, a_dot_tz, rec, tangent, bq, hc):
     """Corner i's drive torque on the spin coordinate, its reaction on the travel (a . tz per N m), with
     the driveline-compliance effect (the torque through the driveline's nodes) and the bearing-drag
     effect (its torque on the spin coordinate: record PORT_EFFECTS). Record PORT_DRIVE; spin_torques adds
@@ -222,25 +245,45 @@ def drive_stage(m, d, veh, vd, fx, fs, i, a_dot_tz, tangent, bq, hc):
             sb, dsb = smooth_sign(d.qd[kp], BEARING_OMEGA_EPS)
             d.force[kp] -= fx[FX_BEARING] * sb
             c_fx += fx[FX_BEARING] * dsb
-            pf[PORT_EFFECTS, kp] -= fx[FX_BEARING] * sb
-    pf[PORT_DRIVE, kp] += drive
-    pf[PORT_DRIVE, kz] += drive * a_dot_tz
+            if rec:
+                pf[PORT_EFFECTS, kp] -= fx[FX_BEARING] * sb
+    if rec:
+        pf[PORT_DRIVE, kp] += drive
+        pf[PORT_DRIVE, kz] += drive * a_dot_tz
     if tangent and (k_fx != 0.0 or c_fx != 0.0):
         add_entry(d.w_env, m.first, m.ptr, m.pinv, kp, kp, bq * k_fx + hc * c_fx)
+    return drive
 
 
 @inline_kernel
-def spin_torques(veh, vd, f, i):
-    """Corner i's brake and drive records added to the force: one torque on the spin coordinate, the
-    drive's reaction on the travel."""
+def spin_torques(veh, f, i, tb, drive, a_dot_tz):
+    """Corner i's brake torque tb and drive torque (N m, from brake_stage and drive_stage) added to the
+    force: one torque on the spin coordinate, the drive's reaction on the travel (a . tz per N m)."""
     kp = veh.corner_idx[i, CI_PHI]
     kz = veh.corner_idx[i, CI_Z]
-    f[kp] += vd.pf[PORT_BRAKE, kp] + vd.pf[PORT_DRIVE, kp]
-    f[kz] += vd.pf[PORT_DRIVE, kz]
+    f[kp] += tb + drive
+    f[kz] += drive * a_dot_tz
 
 
 @inline_kernel
-def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, tangent, bq, hc):
+def _add_tyre_load(veh, q, f, ix, fvx, fvy, fvz, q_spin, m0, m1, m2, q_z, q_s):
+    """A tyre's generalized forces into f (the force, or its record): the force F on the wheel centre,
+    q_spin on the spin coordinate, its moment M about the centre on the chassis axes, q_z and q_s on the
+    travel and (if steered) rack coordinates of the corner whose index row is ix."""
+    kw = ix[CI_WX]
+    ks = ix[CI_S]
+    f[kw] += fvx
+    f[kw + 1] += fvy
+    f[kw + 2] += fvz
+    f[ix[CI_PHI]] += q_spin
+    _add_chassis_moment(veh, q, f, m0, m1, m2)
+    f[ix[CI_Z]] += q_z
+    if ks >= 0:
+        f[ks] += q_s
+
+
+@inline_kernel
+def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, rec, tangent, bq, hc):
     """Corner i's tyre on the road, with the corner's kinematics `kin` (corner_kinematics): contact,
     vertical force, transient slip, MF 5.2 or linear forces; its force and moment on the wheel centre,
     the spin coordinate, the chassis and the knuckle's travel and rack coordinates; the axle reactions.
@@ -251,8 +294,6 @@ def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, tangent, bq, hc):
     pf = vd.pf
     ix = veh.corner_idx[i]
     kz = ix[CI_Z]
-    ks = ix[CI_S]
-    kp = ix[CI_PHI]
     kw = ix[CI_WX]
     ax, ay, az, tzx, tzy, tzz, tsx, tsy, tsz, okx, oky, okz, omega = kin
     fx_on = fx[FX_ON] > 0.5
@@ -310,42 +351,28 @@ def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, tangent, bq, hc):
     q_spin = m0 * ax + m1 * ay + m2 * az
     q_z = m0 * tzx + m1 * tzy + m2 * tzz
     q_s = m0 * tsx + m1 * tsy + m2 * tsz
-    f[kw] += fvx
-    f[kw + 1] += fvy
-    f[kw + 2] += fvz
-    f[kp] += q_spin
-    _add_chassis_moment(veh, q, f, m0, m1, m2)
-    f[kz] += q_z
-    if ks >= 0:
-        f[ks] += q_s
+    _add_tyre_load(veh, q, f, ix, fvx, fvy, fvz, q_spin, m0, m1, m2, q_z, q_s)
     # axle reactions (Brouilhet effects): the tyre forces' moments about the wheel centre taken by
     # the axle's swing arms, a force on the travel (positive: pulls the body down onto the wheel)
-    f_ar = -fxt * veh.susp[i, SP_BX] + side * fy * veh.susp[i, SP_BY]
+    f_ar = -fxt * veh.susp[i, Susp.BX] + side * fy * veh.susp[i, Susp.BY]
     f[kz] += f_ar
-    rec = pf[PORT_TYRE]
-    rec[kw] += fvx
-    rec[kw + 1] += fvy
-    rec[kw + 2] += fvz
-    rec[kp] += q_spin
-    _add_chassis_moment(veh, q, rec, m0, m1, m2)
-    rec[kz] += q_z
-    if ks >= 0:
-        rec[ks] += q_s
-    pf[PORT_AXLE_REACTION, kz] += f_ar
-    out[TO_FX] = fxt
-    out[TO_FY] = fy
-    out[TO_FZ] = fz
-    out[TO_MZ] = mz
-    out[TO_KAPPA] = kappa
-    out[TO_ALPHA] = alpha
-    out[TO_PX] = ct[CT_PX]
-    out[TO_PY] = ct[CT_PX + 1]
-    out[TO_PZ] = ct[CT_PX + 2]
-    out[TO_VX] = vx
-    out[TO_GAMMA] = gamma
-    out[TO_OMEGA] = omega
-    out[TO_RE] = re
-    out[TO_VSY] = vsy
+    if rec:
+        _add_tyre_load(veh, q, pf[PORT_TYRE], ix, fvx, fvy, fvz, q_spin, m0, m1, m2, q_z, q_s)
+        pf[PORT_AXLE_REACTION, kz] += f_ar
+    out[TyreOut.FX] = fxt
+    out[TyreOut.FY] = fy
+    out[TyreOut.FZ] = fz
+    out[TyreOut.MZ] = mz
+    out[TyreOut.KAPPA] = kappa
+    out[TyreOut.ALPHA] = alpha
+    out[TyreOut.PX] = ct[CT_PX]
+    out[TyreOut.PY] = ct[CT_PX + 1]
+    out[TyreOut.PZ] = ct[CT_PX + 2]
+    out[TyreOut.VX] = vx
+    out[TyreOut.GAMMA] = gamma
+    out[TyreOut.OMEGA] = omega
+    out[TyreOut.RE] = re
+    out[TyreOut.VSY] = vsy
     if tangent:
         kzt = tp[P_VERTICAL_STIFFNESS]
         czt = tp[P_VERTICAL_DAMPING]
@@ -357,28 +384,29 @@ def tyre_stage(m, d, veh, vd, road, tp, fx, i, kin, tangent, bq, hc):
 
 
 @inline_kernel
-def steering_stage(m, d, veh, vd, stp, sts, tangent, bq, hc):
+def steering_stage(m, d, veh, vd, stp, sts, rec, tangent, bq, hc):
     """The steering column and rack: the EPS (rtsim.vehicle.kit.eps, its own records from PORT_EPS on)
     or steer-by-wire (rtsim.vehicle.kit.steering, one record PORT_STEER_BY_WIRE)."""
     ic = veh.steer_idx[STEER_COLUMN]
     ir = veh.steer_idx[STEER_RACK]
     pf = vd.pf
     if veh.steer_kind[0] == STEER_EPS:
-        eps_forces(m, d, stp, sts, ic, ir, 2.0 * hc, tangent, bq, hc, pf[PORT_EPS:])
+        eps_forces(m, d, stp, sts, ic, ir, 2.0 * hc, tangent, bq, hc, rec, pf[PORT_EPS:])
     else:
         f = d.force
         fc0 = f[ic]
         fr0 = f[ir]
         steering_forces(stp, sts, d.q, d.qd, f, ic, ir)
-        pf[PORT_STEER_BY_WIRE, ic] += f[ic] - fc0
-        pf[PORT_STEER_BY_WIRE, ir] += f[ir] - fr0
+        if rec:
+            pf[PORT_STEER_BY_WIRE, ic] += f[ic] - fc0
+            pf[PORT_STEER_BY_WIRE, ir] += f[ir] - fr0
         if tangent:
             steering_tangent(m, d.w_env, stp, ic, ir, bq, hc)
             rack_stop_tangent(m, d.w_env, stp, d.q, d.qd, ir, bq, hc)
 
 
 @inline_kernel
-def aero_stage(m, d, veh, vd, fx, tangent, hc):
+def aero_stage(m, d, veh, vd, fx, rec, tangent, hc):
     """Aerodynamic drag at the centre of mass, -rho CdA |v| v / 2 (CdA with the aero-drag effect's
     addition). Record PORT_AERO."""
     ci = veh.chassis_idx
@@ -394,30 +422,35 @@ def aero_stage(m, d, veh, vd, fx, tangent, hc):
     f[ci[0]] -= cd * vx
     f[ci[1]] -= cd * vy
     f[ci[2]] -= cd * vz
-    pf[PORT_AERO, ci[0]] -= cd * vx
-    pf[PORT_AERO, ci[1]] -= cd * vy
-    pf[PORT_AERO, ci[2]] -= cd * vz
+    if rec:
+        pf[PORT_AERO, ci[0]] -= cd * vx
+        pf[PORT_AERO, ci[1]] -= cd * vy
+        pf[PORT_AERO, ci[2]] -= cd * vz
     if tangent and speed > 0.0:
         for a in range(3):
             add_entry(d.w_env, m.first, m.ptr, m.pinv, ci[a], ci[a], hc * 2.0 * cd)
 
 
 @inline_kernel
-def effects_stage(m, d, veh, vd, fx, tangent):
+def effects_stage(m, d, veh, vd, fx, rec, tangent):
     """The effects that are forces of their own (the others change the stage they act in): the mass
-    effect (-dm r'' - dm g e_z at the centre of mass, tangent dm on W: the step then integrates
-    (M + dm) r'' exactly) and the road grade (m (g' - g) on every translational mass). Record
-    PORT_EFFECTS."""
+    effect (dm (g - r'') at the centre of mass, g the model's gravity vector, tangent dm on W: the step
+    then integrates (M + dm) r'' exactly) and the road grade (m (g' - g) on every translational mass).
+    Record PORT_EFFECTS."""
     ci = veh.chassis_idx
     f = d.force
-    rec = vd.pf[PORT_EFFECTS]
+    re_ = vd.pf[PORT_EFFECTS]
     dm = fx[FX_MASS]
     if dm != 0.0:
         for a in range(3):
             f[ci[a]] -= dm * d.qdd[ci[a]]
-            rec[ci[a]] -= dm * d.qdd[ci[a]]
-        f[ci[2]] -= dm * G
-        rec[ci[2]] -= dm * G
+            if rec:
+                re_[ci[a]] -= dm * d.qdd[ci[a]]
+        g = model_gravity(m)
+        for a in range(3):
+            f[ci[a]] += dm * g[a]
+            if rec:
+                re_[ci[a]] += dm * g[a]
         if tangent:
             for a in range(3):
                 add_entry(d.w_env, m.first, m.ptr, m.pinv, ci[a], ci[a], dm)
@@ -435,33 +468,37 @@ def effects_stage(m, d, veh, vd, fx, tangent):
             f[j] -= mass * gs * hx
             f[j + 1] -= mass * gs * hy
             f[j + 2] += mass * gc
-            rec[j] -= mass * gs * hx
-            rec[j + 1] -= mass * gs * hy
-            rec[j + 2] += mass * gc
+            if rec:
+                re_[j] -= mass * gs * hx
+                re_[j + 1] -= mass * gs * hy
+                re_[j + 2] += mass * gc
 
 
 @kernel
 def vehicle_forces(m, d, veh, vd, road, parts, states, tangent, bq, hc):
     """Add the car's forces to d.force (and with `tangent` their K, C to d.w_env, scaled by bq = h^2/4
-    and hc = h/2), stage by stage; each stage's force record goes to its rows of vd.pf. parts, states:
+    and hc = h/2), stage by stage; while the power audit is on (vd.audit) each stage's force record goes
+    to its rows of vd.pf, else vd.pf is left as it is. parts, states:
     the car's Parts and States (rtsim.vehicle.car.step). Returns the index of a non-finite generalized
     force, or -1."""
     fx = parts.effects
     f = d.force
-    vd.pf[:, :] = 0.0
+    rec = vd.audit[0] > 0.5
+    if rec:
+        vd.pf[:, :] = 0.0
     om = chassis_omega(veh, d.q, d.qd)
     for i in range(4):
-        suspension_stage(m, d, veh, vd, i, tangent, bq, hc)
+        suspension_stage(m, d, veh, vd, i, rec, tangent, bq, hc)
         kin = corner_kinematics(m, d, veh, vd, i, om)
         a_dot_tz = kin[0] * kin[3] + kin[1] * kin[4] + kin[2] * kin[5]
-        brake_stage(m, d, veh, vd, parts.brake, states.brake, i, tangent, bq, hc)
-        drive_stage(m, d, veh, vd, fx, states.effects, i, a_dot_tz, tangent, bq, hc)
-        spin_torques(veh, vd, f, i)
-        tyre_stage(m, d, veh, vd, road, parts.tyre, fx, i, kin, tangent, bq, hc)
-    steering_stage(m, d, veh, vd, parts.steering, states.steering, tangent, bq, hc)
-    aero_stage(m, d, veh, vd, fx, tangent, hc)
+        tb = brake_stage(m, d, veh, vd, parts.brake, states.brake, i, rec, tangent, bq, hc)
+        drive = drive_stage(m, d, veh, vd, fx, states.effects, i, a_dot_tz, rec, tangent, bq, hc)
+        spin_torques(veh, f, i, tb, drive, a_dot_tz)
+        tyre_stage(m, d, veh, vd, road, parts.tyre, fx, i, kin, rec, tangent, bq, hc)
+    steering_stage(m, d, veh, vd, parts.steering, states.steering, rec, tangent, bq, hc)
+    aero_stage(m, d, veh, vd, fx, rec, tangent, hc)
     if fx[FX_ON] > 0.5:
-        effects_stage(m, d, veh, vd, fx, tangent)
+        effects_stage(m, d, veh, vd, fx, rec, tangent)
     for i in range(m.nq):
         if not np.isfinite(f[i]):
             return i

@@ -4,12 +4,14 @@ arrays the kernels read, and the index tables into it."""
 from __future__ import annotations
 
 from collections import namedtuple
+from enum import IntEnum
 
 from rtsim.mbs.model import EARTH_GRAVITY
 
 from ..kit.eps import NPORT_EPS
 
-G = EARTH_GRAVITY    # m/s^2: the car model's gravity (build: (0, 0, -G)), a constant of the kernels
+G = EARTH_GRAVITY    # m/s^2: the gravity the car's model is built with, (0, 0, -G); kernels read the model's own
+#                      vector (rtsim.vehicle.kit.imu.model_gravity), never this constant
 WHEELS = ("fl", "fr", "rl", "rr")   # corner order of every per-wheel array: front axle first, left first
 FRONT_AXLE, REAR_AXLE = (0, 1), (2, 3)
 
@@ -17,12 +19,24 @@ FRONT_AXLE, REAR_AXLE = (0, 1), (2, 3)
 CI_WX, CI_WY, CI_WZ, CI_Z, CI_PHI, CI_S = range(6)
 # Chassis coordinate index table (Vehicle.chassis_idx): r (0..2), u (3..5), v (6..8), w (9..11).
 
-# Per-corner suspension parameters (Vehicle.susp[w, :]): the spring/damper element's length at design
-# ride height (m; the tables' compression is measured from it), anti-roll bar (N/m of travel difference)
-# and the other wheel of the axle, the axle reactions (Brouilhet effects: 1/m, force on the travel per
-# N m of Fx r and of Fy r), the compliance steer (rad/N of Fy, rad/(N m) of Mz).
-SP_L0, SP_ARB, SP_PARTNER, SP_BX, SP_BY, SP_CFY, SP_CMZ, SP_Z_LO, SP_Z_HI, SP_STOP_K, SP_STOP_C = range(11)
-NSP = 11   # SP_Z_LO, SP_Z_HI: the travel stops (m); SP_STOP_K, SP_STOP_C: their stiffness, damping at the wheel
+
+
+class Susp(IntEnum):
+    """Per-corner suspension parameters: columns of Vehicle.susp[w, :]."""
+    L0 = 0          # m, the spring/damper element's length at design ride height (the tables' compression from it)
+    ARB = 1         # N/m of travel difference, anti-roll bar
+    PARTNER = 2     # the other wheel of the axle (corner index)
+    BX = 3          # 1/m, axle reaction (Brouilhet effect): force on the travel per N m of Fx r
+    BY = 4          # 1/m, the same per N m of Fy r
+    CFY = 5         # rad/N of Fy, compliance steer
+    CMZ = 6         # rad/(N m) of Mz, compliance steer
+    Z_LO = 7        # m, the travel stops: rebound end
+    Z_HI = 8        # m, bump end
+    STOP_K = 9      # N/m at the wheel, their stiffness
+    STOP_C = 10     # N s/m at the wheel, their damping
+
+
+NSP = len(Susp)
 
 Vehicle = namedtuple("Vehicle", [
     "chassis_idx",     # (12,) int
@@ -31,7 +45,7 @@ Vehicle = namedtuple("Vehicle", [
     "spring_coef",     # (4, nterm) spring/damper length polynomial, m
     "susp",            # (4, NSP) float
     "spring_tab",      # (4, TABLE) spring force (N, compression positive, preload included) against
-                       # compression from SP_L0 (m): rtsim.vehicle.kit.tables 1-D table
+                       # compression from Susp.L0 (m): rtsim.vehicle.kit.tables 1-D table
     "damper_tab",      # (4, TABLE) damper force (N) against compression speed (m/s)
     "steer_idx",       # (2,) int coordinate indices of the steering column angle and the rack travel
     "steer_kind",      # (1,) int STEER_BY_WIRE or STEER_EPS (which of rtsim.vehicle.kit.steering / eps)

@@ -14,7 +14,7 @@ from rtsim.channels import STATE_NAMES, WHEELS
 from rtsim.jit import kernel
 
 from .inputs import S_SPEED, S_X, S_Y, S_YAW
-from .step import TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_KAPPA
+from .step import TyreOut
 from .layout import CI_PHI, STEER_RACK
 from .sensors import SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_SW_ANGLE, SG_THROTTLE
 
@@ -73,11 +73,11 @@ def vehicle_state_values(d, veh, vd, signals, out):
     out[X_SPEED] = sqrt(r0 * r0 + r1 * r1 + r2 * r2)
     for i in range(4):
         out[X_WHEEL + i] = qd[veh.corner_idx[i, CI_PHI]]
-        out[X_WHEEL + 4 + i] = vd.tyre[i, TO_FX]
-        out[X_WHEEL + 8 + i] = vd.tyre[i, TO_FY]
-        out[X_WHEEL + 12 + i] = vd.tyre[i, TO_FZ]
-        out[X_WHEEL + 16 + i] = vd.tyre[i, TO_KAPPA]
-        out[X_WHEEL + 20 + i] = vd.tyre[i, TO_ALPHA]
+        out[X_WHEEL + 4 + i] = vd.tyre[i, TyreOut.FX]
+        out[X_WHEEL + 8 + i] = vd.tyre[i, TyreOut.FY]
+        out[X_WHEEL + 12 + i] = vd.tyre[i, TyreOut.FZ]
+        out[X_WHEEL + 16 + i] = vd.tyre[i, TyreOut.KAPPA]
+        out[X_WHEEL + 20 + i] = vd.tyre[i, TyreOut.ALPHA]
         out[X_WHEEL + 24 + i] = vd.brake_torque[i]
     out[X_THROTTLE] = signals[SG_THROTTLE]
     out[X_BRAKE] = signals[SG_BRAKE_PRESSURE]

@@ -11,24 +11,23 @@ import numpy as np
 from rtsim.errors import ConfigError
 from rtsim.mbs import Simulation
 from rtsim.mbs.integrator import NEED_FACTOR
-from rtsim.mbs.model import OK
+from rtsim.mbs.model import OK, gravity
 from rtsim.road.model import Road
 from rtsim.road.query import NQUERY, Q_NX, Q_NZ, Q_Z, road_query
 
 from ..kit.brake import BP_GAIN, BP_STUCK, BS_P_FRONT, BS_P_REAR, brake_config, brake_params, brake_state
-from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT,
-                              PP_MEASURED, powertrain_config, powertrain_params, powertrain_state_rolling,
-                              powertrain_step)
-from ..kit.sensor_model import ST_ON as SM_ST_ON, ST_SLOTS as SM_ST_SLOTS
-from ..kit.sensor_model import copy_noise_state, neutral_params as sm_neutral, seed_noise, sensor_params, sensor_state
+from ..kit.powertrain import (PO_TORQUE_LEFT, PO_TORQUE_RIGHT, PP_MEASURED, powertrain_config, powertrain_params,
+                              powertrain_state_rolling, powertrain_step, PtIn)
+from ..kit.sensor_model import (SensorState, copy_noise_state, neutral_params as sm_neutral, seed_noise, sensor_params,
+                                sensor_state)
 from ..kit.eps import EP_KT, ES_FAULT, ES_GAIN, ES_STAGE, eps_state, eps_params, external_mode, stage_off
 from ..kit.actuators import LAG_HI, LAG_LO
-from ..kit.steering import SP_MOTOR, steering_config, steering_params, steering_state
+from ..kit.steering import steering_config, steering_params, steering_state, SbwPar
 from ..kit.tyre.magic_formula import effective_rolling_radius
 from ..kit.tyre.tir import P_UNLOADED_RADIUS, P_VERTICAL_STIFFNESS, load_tir
 from .build import VehicleModel
-from .effect_kernels import (FS_DL, FS_LAG, FS_SIZE, FX_B_LAG, FX_DL, FX_DL_K, FX_MASS, FX_ON, fill_history,
-                             neutral_params, physical_sensors, sensor_stage)
+from .effect_kernels import (FX_B_LAG, FX_DL, FX_DL_K, FX_MASS, FX_ON, fill_history, neutral_params, physical_sensors,
+                             sensor_stage, EffectState)
 from .effects import pack_effects, validate_effects
 from .layout import CI_PHI, WHEELS
 from .inputs import USER_INPUTS as CAR_USER_INPUTS
@@ -96,7 +95,7 @@ class VehicleSim:
             sts = eps_state()
         self.vd = make_vehicle_data(mech.model.nq)
         self.parts = Parts(self.tp, bp, pp, sp, neutral_params(), sm_neutral(self.nsensor))
-        self.states = States(bs, ps, sts, np.zeros(FS_SIZE), sensor_state(self.parts.sensors))
+        self.states = States(bs, ps, sts, np.zeros(EffectState.SIZE), sensor_state(self.parts.sensors))
         self._effects: dict = {}
         self.sim = Simulation(mech, self.dt, q0=q0, qd0=qd0)
         self.data = self.sim.data
@@ -150,9 +149,9 @@ class VehicleSim:
         step, so that effects started with the car (a driveline's wound-up shafts) start from them.
         Evaluated on a copy: the powertrain state itself is left at t = 0."""
         io = self.io
-        pt_in = np.zeros(PI_SIZE)
-        pt_in[PI_OMEGA_LEFT] = pt_in[PI_OMEGA_RIGHT] = w_driven
-        pt_in[PI_SELECTOR] = io.extra[EX_SELECTOR]
+        pt_in = np.zeros(PtIn.SIZE)
+        pt_in[PtIn.OMEGA_LEFT] = pt_in[PtIn.OMEGA_RIGHT] = w_driven
+        pt_in[PtIn.SELECTOR] = io.extra[EX_SELECTOR]
         powertrain_step(self.parts.powertrain, self.states.powertrain.copy(), pt_in, self.dt, io.pt_out)
         left, right = self.vm.vehicle.driven
         self.vd.drive[left] = io.pt_out[PO_TORQUE_LEFT]
@@ -180,7 +179,7 @@ class VehicleSim:
         eff = validate_effects(mapping, "effects")
         cfg = self.vm.config
         unsprung = [cfg.front.unsprung_mass_kg] * 2 + [cfg.rear.unsprung_mass_kg] * 2
-        fx = pack_effects(eff, self.dt, cfg.chassis.mass_kg, unsprung)
+        fx = pack_effects(eff, self.dt, cfg.chassis.mass_kg, unsprung, -float(gravity(self.m)[2]))
         old = self.parts.effects
         lag_on = old[FX_ON] > 0.5 and old[FX_B_LAG] > 0.0 and fx[FX_B_LAG] > 0.0
         dl_on = old[FX_ON] > 0.5 and old[FX_DL] > 0.5
@@ -190,10 +189,10 @@ class VehicleSim:
         bp, bs = self.parts.brake, self.states.brake
         if not lag_on:
             for i in range(4):
-                fs[FS_LAG + i] = bp[BP_GAIN + i] * bs[BS_P_FRONT if i < 2 else BS_P_REAR]
+                fs[EffectState.LAG + i] = bp[BP_GAIN + i] * bs[BS_P_FRONT if i < 2 else BS_P_REAR]
         if fx[FX_DL] > 0.5:
             for j in range(2):
-                o = FS_DL + 3 * j
+                o = EffectState.DL + 3 * j
                 i = self.vm.vehicle.driven[j]
                 kp = self.vm.vehicle.corner_idx[i, CI_PHI]
                 t, w = (fs[o + 2], fs[o + 1]) if dl_on else (float(self.vd.drive[i]), self.data.qd[kp])
@@ -209,11 +208,11 @@ class VehicleSim:
         ss = sensor_state(sp)
         old = self.states.sensors
         self.parts.sensors[:] = sp
-        if old.shape == ss.shape and old[SM_ST_SLOTS] == ss[SM_ST_SLOTS]:
-            old[SM_ST_ON] = ss[SM_ST_ON]
+        if old.shape == ss.shape and old[SensorState.SLOTS] == ss[SensorState.SLOTS]:
+            old[SensorState.ON] = ss[SensorState.ON]
             return
         copy_noise_state(old, ss)                        # the noise stream carries on
-        if ss[SM_ST_SLOTS] > 0:
+        if ss[SensorState.SLOTS] > 0:
             fill_history(self.m, self.data, self.vm.vehicle, self.io.signals, self.parts.effects, ss, np.zeros(self.nsensor))
         self.states = self.states._replace(sensors=ss)
 
@@ -248,7 +247,7 @@ class VehicleSim:
         else:
             # the rack motor's torque limits both zero: the motor block's output (its torque) is held at 0
             out["steering_motor"] = ("steering_motor", {"steering_motor_failure": (
-                (A_STEERING, SP_MOTOR + LAG_LO, "zero", 0.0), (A_STEERING, SP_MOTOR + LAG_HI, "zero", 0.0))})
+                (A_STEERING, SbwPar.MOTOR + LAG_LO, "zero", 0.0), (A_STEERING, SbwPar.MOTOR + LAG_HI, "zero", 0.0))})
         return out
 
     def raise_status(self, status: int, step: int) -> None:

@@ -12,23 +12,22 @@ from rtsim.mbs.integrator import step_with
 from rtsim.mbs.model import OK
 from rtsim.road.query import NCONTACT
 
-from .effect_kernels import FS_DL, FX_BRAKE, FX_DL, FX_ON, FX_RELAX, driveline_commit, effects_brake, record_sensors
+from .effect_kernels import (FX_BRAKE, FX_DL, FX_ON, FX_RELAX, driveline_commit, effects_brake, record_sensors,
+                             EffectState)
 from ..kit.brake import BI_SIZE, BO_LINE, BO_SIZE, brake_commit, brake_step
-from ..kit.powertrain import (PI_OMEGA_LEFT, PI_OMEGA_RIGHT, PI_SELECTOR, PI_SIZE, PI_THROTTLE_CMD, PI_TORQUE_LEFT,
-                              PI_TORQUE_RIGHT, PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT,
-                              powertrain_step)
+from ..kit.powertrain import (PO_ENGINE_SPEED, PO_SIZE, PO_THROTTLE, PO_TORQUE_LEFT, PO_TORQUE_RIGHT, powertrain_step,
+                              PtIn)
 from .sensors import (NSIGNAL, SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_MOTOR_ANGLE, SG_MOTOR_CURRENT,
                       SG_MOTOR_SPEED, SG_POWER_STAGE, SG_STEERING_TORQUE, SG_SW_ANGLE, SG_THROTTLE, SG_TORQUE_LEFT,
                       SG_TORQUE_RIGHT, SG_VEHICLE_SPEED)
-from ..kit.sensor_model import ST_SLOTS as SM_ST_SLOTS
+from ..kit.sensor_model import SensorState
 from ..kit.steering import SO_SIZE, SO_SW_ANGLE, SO_TORQUE, steering_control, steering_outputs
 from ..kit.eps import (EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_SIZE, EO_SW_ANGLE, EO_TB_TORQUE, EP_DRIVER,
                        EP_K_TB, EP_N, EP_RP, ES_EXT, ES_STAGE, ES_T_DRIVER, DRIVER_TORQUE, eps_commit, eps_control,
                        eps_outputs, external_command, hands_step)
 from .energy_kernels import audit_commit
-from .forces import (NTO, TO_ALPHA, TO_FX, TO_FY, TO_FZ, TO_GAMMA, TO_KAPPA, TO_MZ, TO_OMEGA, TO_PX,  # noqa: F401
-                     TO_PY, TO_PZ, TO_RE, TO_VSY, TO_VX, vehicle_forces)
-from .layout import CI_PHI, SP_CFY, SP_CMZ, STEER_COLUMN, STEER_EPS, STEER_RACK, NPORT
+from .forces import NTO, vehicle_forces, TyreOut
+from .layout import CI_PHI, STEER_COLUMN, STEER_EPS, STEER_RACK, NPORT, Susp
 from ..kit.tyre.magic_formula import advance_deflections, advance_deflections_relaxed
 
 VehicleData = namedtuple("VehicleData", [
@@ -95,7 +94,7 @@ EX_TORQUE_LEFT, EX_TORQUE_RIGHT, EX_SELECTOR, EX_SW_TORQUE = 0, 1, 2, 3   # EX_S
 
 
 def make_io() -> IO:
-    return IO(commands=np.zeros(NCMD), extra=np.array([0.0, 0.0, 1.0, 0.0]), pt_in=np.zeros(PI_SIZE),
+    return IO(commands=np.zeros(NCMD), extra=np.array([0.0, 0.0, 1.0, 0.0]), pt_in=np.zeros(PtIn.SIZE),
               pt_out=np.zeros(PO_SIZE), st_out=np.zeros(SO_SIZE), eps_out=np.zeros(EO_SIZE),
               signals=np.zeros(NSIGNAL))
 
@@ -124,16 +123,16 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
         _eps_before_step(m, d, veh, parts.steering, states.steering, io, h, ic, ir)
     else:
         steering_control(parts.steering, states.steering, io.commands[CMD_STEER], d.q[ic], d.qd[ic], h)
-    io.pt_in[PI_THROTTLE_CMD] = io.commands[CMD_THROTTLE]
+    io.pt_in[PtIn.THROTTLE_CMD] = io.commands[CMD_THROTTLE]
     if fx_on and fx[FX_DL] > 0.5:       # the gearbox turns with the driveline nodes
-        io.pt_in[PI_OMEGA_LEFT] = fs[FS_DL + 1]
-        io.pt_in[PI_OMEGA_RIGHT] = fs[FS_DL + 4]
+        io.pt_in[PtIn.OMEGA_LEFT] = fs[EffectState.DL + 1]
+        io.pt_in[PtIn.OMEGA_RIGHT] = fs[EffectState.DL + 4]
     else:
-        io.pt_in[PI_OMEGA_LEFT] = d.qd[veh.corner_idx[veh.driven[0], CI_PHI]]
-        io.pt_in[PI_OMEGA_RIGHT] = d.qd[veh.corner_idx[veh.driven[1], CI_PHI]]
-    io.pt_in[PI_TORQUE_LEFT] = io.extra[EX_TORQUE_LEFT]
-    io.pt_in[PI_TORQUE_RIGHT] = io.extra[EX_TORQUE_RIGHT]
-    io.pt_in[PI_SELECTOR] = io.extra[EX_SELECTOR]
+        io.pt_in[PtIn.OMEGA_LEFT] = d.qd[veh.corner_idx[veh.driven[0], CI_PHI]]
+        io.pt_in[PtIn.OMEGA_RIGHT] = d.qd[veh.corner_idx[veh.driven[1], CI_PHI]]
+    io.pt_in[PtIn.TORQUE_LEFT] = io.extra[EX_TORQUE_LEFT]
+    io.pt_in[PtIn.TORQUE_RIGHT] = io.extra[EX_TORQUE_RIGHT]
+    io.pt_in[PtIn.SELECTOR] = io.extra[EX_SELECTOR]
     powertrain_step(parts.powertrain, states.powertrain, io.pt_in, h, io.pt_out)
     vd.drive[veh.driven[0]] = io.pt_out[PO_TORQUE_LEFT]
     vd.drive[veh.driven[1]] = io.pt_out[PO_TORQUE_RIGHT]
@@ -151,11 +150,11 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     for i in range(4):
         t = vd.tyre[i]
         if relax != 0.0:
-            advance_deflections_relaxed(parts.tyre, vd.slip, i, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY],
-                                        t[TO_OMEGA], t[TO_RE], h, relax)
+            advance_deflections_relaxed(parts.tyre, vd.slip, i, t[TyreOut.FZ], t[TyreOut.GAMMA], t[TyreOut.VX],
+                                        t[TyreOut.VSY], t[TyreOut.OMEGA], t[TyreOut.RE], h, relax)
         else:
-            advance_deflections(parts.tyre, vd.slip, i, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY],
-                                t[TO_OMEGA], t[TO_RE], h)
+            advance_deflections(parts.tyre, vd.slip, i, t[TyreOut.FZ], t[TyreOut.GAMMA], t[TyreOut.VX], t[TyreOut.VSY],
+                                t[TyreOut.OMEGA], t[TyreOut.RE], h)
     io.signals[SG_BRAKE_PRESSURE] = vd.brake_out[BO_LINE]
     if eps:
         stp = parts.steering
@@ -172,7 +171,7 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
         io.signals[SG_POWER_STAGE] = sts[ES_STAGE]
         for i in range(2):       # compliance steer of the front knuckles over the next step
             sp = veh.susp[i]
-            vd.steer_offset[i] = sp[SP_CFY] * vd.tyre[i, TO_FY] + sp[SP_CMZ] * vd.tyre[i, TO_MZ]
+            vd.steer_offset[i] = sp[Susp.CFY] * vd.tyre[i, TyreOut.FY] + sp[Susp.CMZ] * vd.tyre[i, TyreOut.MZ]
     else:
         steering_outputs(parts.steering, states.steering, d.q, ic, ir, io.st_out)
         io.signals[SG_SW_ANGLE] = io.st_out[SO_SW_ANGLE]
@@ -185,7 +184,7 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     io.signals[SG_THROTTLE] = io.pt_out[PO_THROTTLE]
     io.signals[SG_TORQUE_LEFT] = io.pt_out[PO_TORQUE_LEFT]
     io.signals[SG_TORQUE_RIGHT] = io.pt_out[PO_TORQUE_RIGHT]
-    if states.sensors[SM_ST_SLOTS] > 0.0:
+    if states.sensors[SensorState.SLOTS] > 0.0:
         record_sensors(m, d, veh, io.signals, fx, parts.sensors, states.sensors)
     return OK
 

@@ -28,7 +28,7 @@ from dataclasses import MISSING, dataclass, fields, is_dataclass
 import numpy as np
 from pydantic import ConfigDict, TypeAdapter
 
-from rtsim.configfile import bad, validate
+from rtsim.configfile import NonNegative, Range, bad, check_declared_ranges, validate
 from rtsim.errors import ConfigError
 from rtsim.jit import inline_kernel, kernel
 
@@ -197,17 +197,14 @@ def pydantic_config(cls):
 class LagConfig:
     """A by-wire actuator as a lag block. Units are those of the actuated quantity (kPa for brake
     pressure, rad for the throttle plate, N*m for a motor torque)."""
-    time_constant: float = 0.0      # s, first-order lag (0: none)
-    rate_limit: float = math.inf    # units/s, largest output rate (inf: none)
-    delay: float = 0.0              # s, pure transport delay, rounded to whole steps
-    min: float = -math.inf          # units, lower bound of command and output
-    max: float = math.inf           # units, upper bound of command and output
+    time_constant: NonNegative("s") = 0.0                             # first-order lag (0: none)
+    rate_limit: Range(0.0, math.inf, "units/s (inf: none)", lo_open=True) = math.inf   # largest output rate
+    delay: Range(0.0, 1.0, "s") = 0.0                                 # pure transport delay, whole steps
+    min: Range(-math.inf, math.inf, "units") = -math.inf              # lower bound of command and output
+    max: Range(-math.inf, math.inf, "units") = math.inf               # upper bound of command and output
 
     def __post_init__(self) -> None:
-        check(self.time_constant >= 0.0 and math.isfinite(self.time_constant),
-              "time_constant", self.time_constant, "expected a finite time >= 0 s")
-        check(self.rate_limit > 0.0, "rate_limit", self.rate_limit, "expected a rate > 0 (inf: none)")
-        check(0.0 <= self.delay <= 1.0, "delay", self.delay, "expected 0 <= delay <= 1 s")
+        check_declared_ranges(self)
         check(self.min < self.max, "max", self.max, f"expected max > min ({self.min})")
 
     def params(self) -> np.ndarray:

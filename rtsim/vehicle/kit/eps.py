@@ -28,8 +28,9 @@ is in the tangent), so they neither chatter at 1 ms nor creep measurably. The ge
 between eta (input driving) and 1/eta_back (output driving) with the sign of the power, smoothly within
 the input's friction speed band; the loss (1 - e) P is never negative.
 
-Energy audit: every force is also written to its port's row of the port-force array (PORT_*, the
-force records), and the electrical flows are kept in the state (ES_*), for rtsim.vehicle.car.energy.
+Energy audit: while the audit is on every force is also written to its port's row of the port-force
+array (PORT_*, the force records), and the electrical flows are kept in the state (ES_*), for
+rtsim.vehicle.car.energy.
 """
 from __future__ import annotations
 
@@ -43,9 +44,8 @@ from rtsim.configfile import Strict
 from rtsim.jit import inline_kernel, kernel
 from rtsim.mbs.envelope import add_entry
 
-from .end_stop import end_stop
 from .layout import offsets
-from .rack import RK_DAMPING, RK_MASS, RK_RP, RK_SIZE, RK_STOP_C, RK_STOP_K, RK_TRAVEL, rack_and_pinion
+from .rack import RK_DAMPING, RK_MASS, RK_RP, RK_SIZE, RK_STOP_C, RK_STOP_K, RK_TRAVEL, rack_and_pinion, rack_force
 from .tables import map_2d, map_eval
 
 # ---------------------------------------------------------------------------------- parameter layout
@@ -380,10 +380,10 @@ def eps_current(p, s, omega1, h):
 
 
 @inline_kernel
-def eps_forces(m, d, p, s, ic, ir, h, tangent, bq, hc, pf):
+def eps_forces(m, d, p, s, ic, ir, h, tangent, bq, hc, rec, pf):
     """Add the EPS's generalized forces on the column (ic, N m) and the rack (ir, N) to d.force (with
-    `tangent` their stiffness and damping to d.w_env), and each element's to its row PORT_* of pf (the
-    force records the power audit sums)."""
+    `tangent` their stiffness and damping to d.w_env), and with `rec` each element's to its row PORT_* of
+    pf (the force records the power audit sums)."""
     q = d.q
     qd = d.qd
     f = d.force
@@ -413,21 +413,21 @@ def eps_forces(m, d, p, s, ic, ir, h, tangent, bq, hc, pf):
     t_p = t_el + t_damp + e_g * n * t_m + t_pf
     e_rp, de_rp = _efficiency(t_p, wp, p[EP_W_FP], p[EP_ETA_RP], p[EP_ETA_RPB])
     sf_r, dsf_r = _sat(xd, p[EP_V_FR])
-    f_rf = -p[EP_C_RACK] * xd - p[EP_F_FR] * sf_r
-    f_stop, k_stop, c_stop = end_stop(q[ir], xd, p[EP_RACK_TRAVEL], p[EP_STOP_K], p[EP_STOP_C])
+    f_rack, f_rf, f_stop, k_stop, c_stop = rack_force(p, EP_RACK, q[ir], xd, e_rp * t_p / rp, -p[EP_F_FR] * sf_r)
     f[ic] += t_drv - t_el - t_damp - t_col
-    f[ir] += e_rp * t_p / rp + f_rf + f_stop
-    pf[PORT_DRIVER_TORQUE, ic] += t_drv
-    pf[PORT_TORSION_BAR, ic] -= t_el
-    pf[PORT_TORSION_BAR, ir] += t_el / rp
-    pf[PORT_COLUMN_FRICTION, ic] -= t_damp + t_col
-    pf[PORT_COLUMN_FRICTION, ir] += t_damp / rp
-    pf[PORT_MOTOR_EM, ir] += n * t_em / rp
-    pf[PORT_MOTOR_FRICTION, ir] += n * t_mf / rp
-    pf[PORT_GEAR_LOSS, ir] += (e_g - 1.0) * n * t_m / rp
-    pf[PORT_PINION_FRICTION, ir] += t_pf / rp
-    pf[PORT_RACK_LOSS, ir] += (e_rp - 1.0) * t_p / rp
-    pf[PORT_RACK_FRICTION, ir] += f_rf + f_stop
+    f[ir] += f_rack
+    if rec:
+        pf[PORT_DRIVER_TORQUE, ic] += t_drv
+        pf[PORT_TORSION_BAR, ic] -= t_el
+        pf[PORT_TORSION_BAR, ir] += t_el / rp
+        pf[PORT_COLUMN_FRICTION, ic] -= t_damp + t_col
+        pf[PORT_COLUMN_FRICTION, ir] += t_damp / rp
+        pf[PORT_MOTOR_EM, ir] += n * t_em / rp
+        pf[PORT_MOTOR_FRICTION, ir] += n * t_mf / rp
+        pf[PORT_GEAR_LOSS, ir] += (e_g - 1.0) * n * t_m / rp
+        pf[PORT_PINION_FRICTION, ir] += t_pf / rp
+        pf[PORT_RACK_LOSS, ir] += (e_rp - 1.0) * t_p / rp
+        pf[PORT_RACK_FRICTION, ir] += f_rf + f_stop
     if tangent:
         k_tb = bq * p[EP_K_TB] + hc * p[EP_C_TB]
         # rack damping: back-emf (d i1 / d w_m), frictions' bands, viscous terms, through the gears

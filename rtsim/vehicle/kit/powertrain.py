@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import IntEnum
 from typing import Literal
 
 import numpy as np
@@ -116,13 +117,18 @@ RPM = 2.0 * math.pi / 60.0   # rad/s per rpm
  _) = offsets(*(1,) * 8, 3)
 
 # ----------------------------------------------------------------------------------- inputs
-(PI_THROTTLE_CMD,  # rad
- PI_OMEGA_LEFT,    # rad/s, spin rate of the driven axle's left wheel
- PI_OMEGA_RIGHT,   # rad/s, and of its right wheel
- PI_TORQUE_LEFT,   # N*m, measured drive torque (used in measured mode)
- PI_TORQUE_RIGHT,  # N*m
- PI_SELECTOR,      # +1 drive, 0 neutral, -1 reverse
- PI_SIZE) = offsets(*(1,) * 6)
+
+
+class PtIn(IntEnum):
+    """The powertrain's input array (powertrain_step's `inp`)."""
+    (THROTTLE_CMD,  # rad
+     OMEGA_LEFT,    # rad/s, spin rate of the driven axle's left wheel
+     OMEGA_RIGHT,   # rad/s, and of its right wheel
+     TORQUE_LEFT,   # N*m, measured drive torque (used in measured mode)
+     TORQUE_RIGHT,  # N*m
+     SELECTOR,      # +1 drive, 0 neutral, -1 reverse
+     SIZE) = offsets(*(1,) * 6)
+
 
 # ---------------------------------------------------------------------------------- outputs
 (PO_TORQUE_LEFT,     # N*m, drive torque on the driven axle's left wheel
@@ -720,10 +726,10 @@ def _effective_ratio(p, s):
 def powertrain_step(p, s, inp, dt, out):
     """Advance throttle actuator, gearbox logic and engine speed by one step; write drive torques and
     sensor values into out (PO_*). Returns the engine speed (rad/s)."""
-    thr = lag_step(p, PP_THR, s, PS_THR, inp[PI_THROTTLE_CMD], dt)
-    w_carrier = 0.5 * (inp[PI_OMEGA_LEFT] + inp[PI_OMEGA_RIGHT])
+    thr = lag_step(p, PP_THR, s, PS_THR, inp[PtIn.THROTTLE_CMD], dt)
+    w_carrier = 0.5 * (inp[PtIn.OMEGA_LEFT] + inp[PtIn.OMEGA_RIGHT])
     v = p[PP_RW] * w_carrier
-    ratio = _gearbox(p, s, inp[PI_SELECTOR], v, thr, dt)
+    ratio = _gearbox(p, s, inp[PtIn.SELECTOR], v, thr, dt)
     gear = int(s[PS_GEAR])
     rtot = ratio * p[PP_FD]
     wt = rtot * w_carrier
@@ -759,8 +765,8 @@ def powertrain_step(p, s, inp, dt, out):
     t_wheel = 0.5 * eff * rtot * shaft
     dtdw = 0.25 * eff * rtot * rtot * dtt if coupled else 0.0
     if p[PP_MEASURED] > 0.5:
-        out[PO_TORQUE_LEFT] = inp[PI_TORQUE_LEFT]
-        out[PO_TORQUE_RIGHT] = inp[PI_TORQUE_RIGHT]
+        out[PO_TORQUE_LEFT] = inp[PtIn.TORQUE_LEFT]
+        out[PO_TORQUE_RIGHT] = inp[PtIn.TORQUE_RIGHT]
         out[PO_DTDW] = 0.0
     else:
         out[PO_TORQUE_LEFT] = t_wheel

@@ -22,7 +22,7 @@ to the config's, their scales multiply the config's (noise and quantum come from
 Generic in the number of channels: the arrays are sized by the channel names given, and a name is
 resolved to its index when the parameters are built.
 
-Arrays: parameters (nch, NSM) float64; state `HEADER + slots * nch` float64: the header (head slot,
+Arrays: parameters (nch, NSM) float64; state `SensorState.HEADER + slots * nch` float64: the header (head slot,
 number of slots, a flag that any parameter is not neutral, the noise generator's 64-bit state as two
 32-bit halves), then the ring of the last `slots` recorded rows. A model with every channel neutral
 (scale 1, all else 0) reports x exactly (bit for bit).
@@ -30,6 +30,7 @@ number of slots, a flag that any parameter is not neutral, the noise generator's
 from __future__ import annotations
 
 from collections.abc import Mapping
+from enum import IntEnum
 from math import cos, floor, log, sqrt
 
 import numpy as np
@@ -45,11 +46,16 @@ from .layout import offsets
  SM_DELAY,       # recorded rows (float: linear between rows)
  NSM) = offsets(1, 1, 1, 1, 1)
 
-(ST_HEAD,        # ring slot of the latest recorded row
- ST_SLOTS,       # rows in the ring (0: no delay anywhere, nothing recorded)
- ST_ON,          # 1.0: some channel is not neutral
- ST_RNG,         # [2] noise generator state: high and low 32 bits of a uint64 (exact in float64)
- HEADER) = offsets(1, 1, 1, 2)
+
+
+class SensorState(IntEnum):
+    """The header of the sensor model's state array (the recorded rows follow it)."""
+    (HEAD,           # ring slot of the latest recorded row
+     SLOTS,          # rows in the ring (0: no delay anywhere, nothing recorded)
+     ON,             # 1.0: some channel is not neutral
+     RNG,            # [2] noise generator state: high and low 32 bits of a uint64 (exact in float64)
+     HEADER) = offsets(1, 1, 1, 2)
+
 
 _LOW32 = np.uint64(0xFFFFFFFF)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)      # SplitMix64 increment and mixing constants
@@ -108,9 +114,9 @@ def sensor_state(params: np.ndarray, seed: int = 0) -> np.ndarray:
     """A state for `params`: an empty ring of the length its delays need, the noise generator at `seed`."""
     nch = params.shape[0]
     slots = ring_slots(params)
-    s = np.zeros(HEADER + slots * nch)
-    s[ST_SLOTS] = slots
-    s[ST_ON] = 0.0 if np.array_equal(params, neutral_params(nch)) else 1.0
+    s = np.zeros(SensorState.HEADER + slots * nch)
+    s[SensorState.SLOTS] = slots
+    s[SensorState.ON] = 0.0 if np.array_equal(params, neutral_params(nch)) else 1.0
     seed_noise(s, seed)
     return s
 
@@ -120,22 +126,22 @@ def seed_noise(state: np.ndarray, seed: int) -> None:
     seed = int(seed)
     if not 0 <= seed < 1 << 64:
         raise ValueError(f"noise seed must be in 0 .. 2**64 - 1, got {seed}")
-    state[ST_RNG] = float(seed >> 32)
-    state[ST_RNG + 1] = float(seed & 0xFFFFFFFF)
+    state[SensorState.RNG] = float(seed >> 32)
+    state[SensorState.RNG + 1] = float(seed & 0xFFFFFFFF)
 
 
 def copy_noise_state(src: np.ndarray, dst: np.ndarray) -> None:
     """Carry the noise generator's state over to another state array (e.g. a longer ring)."""
-    dst[ST_RNG:ST_RNG + 2] = src[ST_RNG:ST_RNG + 2]
+    dst[SensorState.RNG:SensorState.RNG + 2] = src[SensorState.RNG:SensorState.RNG + 2]
 
 
 @kernel
 def _uniform(state):
     """The next uniform number in [0, 1) of the generator in `state` (SplitMix64, 53 bits)."""
-    s = (np.uint64(state[ST_RNG]) << np.uint64(32)) | np.uint64(state[ST_RNG + 1])
+    s = (np.uint64(state[SensorState.RNG]) << np.uint64(32)) | np.uint64(state[SensorState.RNG + 1])
     s = s + _GOLDEN
-    state[ST_RNG] = float(s >> np.uint64(32))
-    state[ST_RNG + 1] = float(s & _LOW32)
+    state[SensorState.RNG] = float(s >> np.uint64(32))
+    state[SensorState.RNG + 1] = float(s & _LOW32)
     z = (s ^ (s >> np.uint64(30))) * _MIX1
     z = (z ^ (z >> np.uint64(27))) * _MIX2
     z = z ^ (z >> np.uint64(31))
@@ -153,13 +159,13 @@ def standard_normal(state):
 @kernel
 def sensor_record(state, x):
     """Append the physical values x (one per channel) to the ring (no-op without delays)."""
-    slots = int(state[ST_SLOTS])
+    slots = int(state[SensorState.SLOTS])
     if slots == 0:
         return
     nch = x.shape[0]
-    head = (int(state[ST_HEAD]) + 1) % slots
-    state[ST_HEAD] = head
-    o = HEADER + head * nch
+    head = (int(state[SensorState.HEAD]) + 1) % slots
+    state[SensorState.HEAD] = head
+    o = SensorState.HEADER + head * nch
     for c in range(nch):
         state[o + c] = x[c]
 
@@ -167,22 +173,22 @@ def sensor_record(state, x):
 @kernel
 def sensor_next_row(state, nch):
     """Advance the ring's head and return the offset in `state` of its row (nch floats), for the caller
-    to write the latest physical values into (there must be a ring: ST_SLOTS > 0)."""
-    slots = int(state[ST_SLOTS])
-    head = (int(state[ST_HEAD]) + 1) % slots
-    state[ST_HEAD] = head
-    return HEADER + head * nch
+    to write the latest physical values into (there must be a ring: SensorState.SLOTS > 0)."""
+    slots = int(state[SensorState.SLOTS])
+    head = (int(state[SensorState.HEAD]) + 1) % slots
+    state[SensorState.HEAD] = head
+    return SensorState.HEADER + head * nch
 
 
 @kernel
 def sensor_fill(state, x):
     """Fill the whole ring with x (nothing older is known: the value is held)."""
-    slots = int(state[ST_SLOTS])
+    slots = int(state[SensorState.SLOTS])
     nch = x.shape[0]
     for k in range(slots):
         for c in range(nch):
-            state[HEADER + k * nch + c] = x[c]
-    state[ST_HEAD] = 0.0
+            state[SensorState.HEADER + k * nch + c] = x[c]
+    state[SensorState.HEAD] = 0.0
 
 
 @kernel
@@ -190,20 +196,20 @@ def sensor_apply(params, state, x, out):
     """out = what the sensors report of the physical values x, whose latest row the ring holds already
     when there are delays (x and out may be the same array)."""
     nch = x.shape[0]
-    if state[ST_ON] < 0.5:
+    if state[SensorState.ON] < 0.5:
         for c in range(nch):
             out[c] = x[c]
         return
-    slots = int(state[ST_SLOTS])
-    head = int(state[ST_HEAD])
+    slots = int(state[SensorState.SLOTS])
+    head = int(state[SensorState.HEAD])
     for c in range(nch):
         v = x[c]
         lag = params[c, SM_DELAY]
         if lag > 0.0 and slots > 0:
             n = int(lag)
             frac = lag - n
-            a = state[HEADER + ((head - n) % slots) * nch + c]
-            b = state[HEADER + ((head - n - 1) % slots) * nch + c]
+            a = state[SensorState.HEADER + ((head - n) % slots) * nch + c]
+            b = state[SensorState.HEADER + ((head - n - 1) % slots) * nch + c]
             v = a + frac * (b - a)
         v = params[c, SM_SCALE] * v + params[c, SM_BIAS]
         if params[c, SM_NOISE] > 0.0:

@@ -34,39 +34,46 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import IntEnum
 
 import numpy as np
 
+from rtsim.configfile import NonNegative, Positive, Range, check_declared_ranges
 from rtsim.jit import inline_kernel, kernel
 from rtsim.mbs.envelope import add_entry
 
-from .end_stop import end_stop
-from .actuators import LAG_NPAR, LagConfig, check, part_config, pydantic_config, lag_init, lag_state_size, lag_step
+from .actuators import LAG_NPAR, LagConfig, part_config, pydantic_config, lag_init, lag_state_size, lag_step
 from .layout import offsets
-from .rack import RK_DAMPING, RK_MASS, RK_RP, RK_SIZE, RK_STOP_C, RK_STOP_K, RK_TRAVEL, rack_and_pinion
+from .rack import (RK_DAMPING, RK_MASS, RK_RP, RK_SIZE, RK_STOP_C, RK_STOP_K, RK_TRAVEL, rack_and_pinion, rack_force,
+                   rack_stops)
 
-# Parameter layout.
-(SP_J_COL,           # kg m^2, column side: steering wheel + column + N^2 J_motor
- SP_C_COL,           # N m s/rad, column viscous friction
- SP_K_TB,            # N m/rad, torsion bar
- SP_C_TB,            # N m s/rad, torsion bar damping
- SP_RACK,            # the rack and pinion (rtsim.vehicle.kit.rack, RK_SIZE floats: no geared inertia here)
- SP_N,               # motor-to-column reduction ratio
- SP_ETA,             # reduction efficiency
- SP_KP,              # N m/rad (column torque per rad of angle error)
- SP_KI,              # N m/(rad s)
- SP_KD,              # N m s/rad
- SP_I_MAX,           # N m, integral clamp
- SP_TM_MAX,          # N m, motor torque limit
- SP_MOTOR,           # lag block: motor torque (N m at the motor)
- SP_CMD,             # lag block: steering-wheel angle command (rad)
- SP_SIZE) = offsets(1, 1, 1, 1, RK_SIZE, *(1,) * 7, LAG_NPAR, LAG_NPAR)
-SP_M_RACK = SP_RACK + RK_MASS          # kg, rack side: rack + J_pinion / r_p^2
-SP_C_RACK = SP_RACK + RK_DAMPING       # N s/m, rack viscous friction
-SP_RP = SP_RACK + RK_RP                # m/rad, rack travel per pinion radian
-SP_RACK_TRAVEL = SP_RACK + RK_TRAVEL   # m, rack travel from centre to either end stop
-SP_STOP_K = SP_RACK + RK_STOP_K        # N/m, end-stop stiffness
-SP_STOP_C = SP_RACK + RK_STOP_C        # N s/m, end-stop damping
+
+
+class SbwPar(IntEnum):
+    """The steer-by-wire system's parameter array (steering_params): offsets of its blocks, then SIZE."""
+    (J_COL,           # kg m^2, column side: steering wheel + column + N^2 J_motor
+     C_COL,           # N m s/rad, column viscous friction
+     K_TB,            # N m/rad, torsion bar
+     C_TB,            # N m s/rad, torsion bar damping
+     RACK,            # the rack and pinion (rtsim.vehicle.kit.rack, RK_SIZE floats: no geared inertia here)
+     N,               # motor-to-column reduction ratio
+     ETA,             # reduction efficiency
+     KP,              # N m/rad (column torque per rad of angle error)
+     KI,              # N m/(rad s)
+     KD,              # N m s/rad
+     I_MAX,           # N m, integral clamp
+     TM_MAX,          # N m, motor torque limit
+     MOTOR,           # lag block: motor torque (N m at the motor)
+     CMD,             # lag block: steering-wheel angle command (rad)
+     SIZE) = offsets(1, 1, 1, 1, RK_SIZE, *(1,) * 7, LAG_NPAR, LAG_NPAR)
+    # inside the rack and pinion block:
+    RP = RACK + RK_RP                  # m/rad, rack travel per pinion radian
+    M_RACK = RACK + RK_MASS            # kg, rack side: rack + J_pinion / r_p^2
+    C_RACK = RACK + RK_DAMPING         # N s/m, rack viscous friction
+    RACK_TRAVEL = RACK + RK_TRAVEL     # m, rack travel from centre to either end stop
+    STOP_K = RACK + RK_STOP_K          # N/m, end-stop stiffness
+    STOP_C = RACK + RK_STOP_C          # N s/m, end-stop damping
+
 
 # State layout (the command lag block last: its delay buffer has a variable length).
 (SS_I,               # N m, controller integral
@@ -94,52 +101,38 @@ def _default_command() -> LagConfig:
 @pydantic_config
 @dataclass(frozen=True)
 class SteeringConfig:
-    steering_wheel_inertia: float = 0.03       # kg m^2
-    column_inertia: float = 0.005              # kg m^2
-    column_damping: float = 0.05               # N m s/rad
-    torsion_bar_stiffness: float = 1.5 * 180.0 / math.pi   # N m/rad (1.5 N m/deg)
-    torsion_bar_damping: float = 0.02          # N m s/rad
-    pinion_inertia: float = 1.0e-4             # kg m^2
-    rack_mass: float = 2.5                     # kg
-    rack_damping: float = 200.0                # N s/m
-    rack_travel_per_rad: float = 6.4e-3        # m/rad (40 mm of rack per pinion turn)
-    motor_inertia: float = 4.0e-5              # kg m^2
-    reduction_ratio: float = 16.0              # motor turns per column turn
-    reduction_efficiency: float = 0.9
-    motor_torque_limit: float = 3.0            # N m at the motor shaft
-    motor_time_constant: float = 0.002         # s, torque (current) loop
-    motor_torque_rate: float = math.inf        # N m/s at the motor shaft
-    kp: float = 180.0                          # N m/rad
-    ki: float = 600.0                          # N m/(rad s)
-    kd: float = 5.0                            # N m s/rad
-    integral_limit: float = 40.0               # N m
+    """The steer-by-wire system's section; each number's range declared on its field (rtsim.configfile
+    Range: a file's value and one built in code get the same check)."""
+    steering_wheel_inertia: Positive("kg m^2") = 0.03
+    column_inertia: Positive("kg m^2") = 0.005
+    column_damping: NonNegative("N m s/rad") = 0.05
+    torsion_bar_stiffness: Positive("N m/rad") = 1.5 * 180.0 / math.pi   # 1.5 N m/deg
+    torsion_bar_damping: NonNegative("N m s/rad") = 0.02
+    pinion_inertia: Positive("kg m^2") = 1.0e-4
+    rack_mass: Positive("kg") = 2.5
+    rack_damping: NonNegative("N s/m") = 200.0
+    rack_travel_per_rad: Range(0.0, 0.1, "m/rad", lo_open=True, hi_open=True) = 6.4e-3   # 40 mm per pinion turn
+    motor_inertia: NonNegative("kg m^2") = 4.0e-5
+    reduction_ratio: Positive("motor turns per column turn") = 16.0
+    reduction_efficiency: Range(0.0, 1.0, lo_open=True) = 0.9
+    motor_torque_limit: Positive("N m at the motor shaft") = 3.0
+    motor_time_constant: NonNegative("s") = 0.002               # torque (current) loop
+    motor_torque_rate: Range(0.0, math.inf, "N m/s at the motor shaft (inf: none)", lo_open=True) = math.inf
+    kp: NonNegative("N m/rad") = 180.0
+    ki: NonNegative("N m/(rad s)") = 600.0
+    kd: NonNegative("N m s/rad") = 5.0
+    integral_limit: NonNegative("N m") = 40.0
     command: LagConfig = field(default_factory=_default_command)   # rad, rad/s
     # Rack end stops (rtsim.vehicle.kit.end_stop): the rack's travel either side of centre and the
     # stops' contact stiffness and damping (steel stop with a polyurethane ring). At the motor's full
-    # column torque the rack force is ~6.8 kN: 1.4 mm of static deflection at 5 MN/m.
-    rack_travel: float = 0.062                 # m, 0.005 .. 0.2 (inside the linkage fit's rack range)
-    rack_stop_stiffness: float = 5.0e6         # N/m, 1e5 .. 1e8
-    rack_stop_damping: float = 2.0e4           # N s/m, 0 .. 1e6
+    # column torque the rack force is ~6.8 kN: 1.4 mm of static deflection at 5 MN/m. The travel lies
+    # inside the linkage fit's rack range.
+    rack_travel: Range(0.005, 0.2, "m") = 0.062
+    rack_stop_stiffness: Range(1e5, 1e8, "N/m") = 5.0e6
+    rack_stop_damping: Range(0.0, 1e6, "N s/m") = 2.0e4
 
     def __post_init__(self) -> None:
-        for key in ("steering_wheel_inertia", "column_inertia", "pinion_inertia", "rack_mass",
-                    "torsion_bar_stiffness", "rack_travel_per_rad", "reduction_ratio",
-                    "motor_torque_limit", "motor_torque_rate"):
-            v = getattr(self, key)
-            check(v > 0.0, key, v, "expected a value > 0")
-        for key in ("column_damping", "torsion_bar_damping", "rack_damping",
-                    "motor_inertia", "motor_time_constant", "kp", "ki", "kd", "integral_limit"):
-            v = getattr(self, key)
-            check(v >= 0.0 and math.isfinite(v), key, v, "expected a finite value >= 0")
-        check(0.0 < self.reduction_efficiency <= 1.0, "reduction_efficiency",
-              self.reduction_efficiency, "expected 0 < eta <= 1")
-        check(0.005 <= self.rack_travel <= 0.2, "rack_travel", self.rack_travel, "expected 0.005 .. 0.2 m")
-        check(1e5 <= self.rack_stop_stiffness <= 1e8, "rack_stop_stiffness", self.rack_stop_stiffness,
-              "expected 1e5 .. 1e8 N/m")
-        check(0.0 <= self.rack_stop_damping <= 1e6, "rack_stop_damping", self.rack_stop_damping,
-              "expected 0 .. 1e6 N s/m")
-        check(self.rack_travel_per_rad < 0.1, "rack_travel_per_rad", self.rack_travel_per_rad,
-              "expected metres of rack per pinion radian (< 0.1)")
+        check_declared_ranges(self)
 
 
 def steering_config(data=None, where: str = "steering") -> SteeringConfig:
@@ -149,34 +142,34 @@ def steering_config(data=None, where: str = "steering") -> SteeringConfig:
 
 def steering_params(cfg: SteeringConfig | None = None) -> np.ndarray:
     c = steering_config(cfg)
-    p = np.zeros(SP_SIZE)
-    p[SP_J_COL] = c.steering_wheel_inertia + c.column_inertia + c.reduction_ratio ** 2 * c.motor_inertia
-    p[SP_C_COL] = c.column_damping
-    p[SP_K_TB] = c.torsion_bar_stiffness
-    p[SP_C_TB] = c.torsion_bar_damping
-    rack_and_pinion(p, SP_RACK, travel_per_rad=c.rack_travel_per_rad, rack_mass=c.rack_mass,
+    p = np.zeros(SbwPar.SIZE)
+    p[SbwPar.J_COL] = c.steering_wheel_inertia + c.column_inertia + c.reduction_ratio ** 2 * c.motor_inertia
+    p[SbwPar.C_COL] = c.column_damping
+    p[SbwPar.K_TB] = c.torsion_bar_stiffness
+    p[SbwPar.C_TB] = c.torsion_bar_damping
+    rack_and_pinion(p, SbwPar.RACK, travel_per_rad=c.rack_travel_per_rad, rack_mass=c.rack_mass,
                     pinion_inertia=c.pinion_inertia, damping=c.rack_damping, travel=c.rack_travel,
                     stop_stiffness=c.rack_stop_stiffness, stop_damping=c.rack_stop_damping)
-    p[SP_N] = c.reduction_ratio
-    p[SP_ETA] = c.reduction_efficiency
-    p[SP_KP] = c.kp
-    p[SP_KI] = c.ki
-    p[SP_KD] = c.kd
-    p[SP_I_MAX] = c.integral_limit
-    p[SP_TM_MAX] = c.motor_torque_limit
-    p[SP_MOTOR:SP_MOTOR + LAG_NPAR] = LagConfig(
+    p[SbwPar.N] = c.reduction_ratio
+    p[SbwPar.ETA] = c.reduction_efficiency
+    p[SbwPar.KP] = c.kp
+    p[SbwPar.KI] = c.ki
+    p[SbwPar.KD] = c.kd
+    p[SbwPar.I_MAX] = c.integral_limit
+    p[SbwPar.TM_MAX] = c.motor_torque_limit
+    p[SbwPar.MOTOR:SbwPar.MOTOR + LAG_NPAR] = LagConfig(
         time_constant=c.motor_time_constant, rate_limit=c.motor_torque_rate,
         min=-c.motor_torque_limit, max=c.motor_torque_limit).params()
-    p[SP_CMD:SP_CMD + LAG_NPAR] = c.command.params()
+    p[SbwPar.CMD:SbwPar.CMD + LAG_NPAR] = c.command.params()
     return p
 
 
 def steering_state(params: np.ndarray, dt: float, angle: float = 0.0) -> np.ndarray:
     """Controller and actuator state at rest, unloaded, commanded to `angle` rad."""
-    s = np.zeros(SS_CMD + lag_state_size(params, SP_CMD, dt))
+    s = np.zeros(SS_CMD + lag_state_size(params, SbwPar.CMD, dt))
     s[SS_CMD_OUT] = angle
-    lag_init(params, SP_MOTOR, s, SS_MOTOR, dt, 0.0)
-    lag_init(params, SP_CMD, s, SS_CMD, dt, angle)
+    lag_init(params, SbwPar.MOTOR, s, SS_MOTOR, dt, 0.0)
+    lag_init(params, SbwPar.CMD, s, SS_CMD, dt, angle)
     return s
 
 
@@ -185,8 +178,8 @@ def add_steering(b, params: np.ndarray, rack, angle: float = 0.0):
     length, m): adds the column angle coordinate (rad, at `angle`), the column and rack inertias and the
     tangent pattern of the torsion bar. Returns the column coordinate."""
     col = b.angle("steering_column", angle, velocity=0.0)
-    b.scalar_inertia(col, float(params[SP_J_COL]))
-    b.scalar_inertia(rack, float(params[SP_M_RACK]))
+    b.scalar_inertia(col, float(params[SbwPar.J_COL]))
+    b.scalar_inertia(rack, float(params[SbwPar.M_RACK]))
     b.couple(col, rack)
     return col
 
@@ -207,23 +200,23 @@ def describe(cfg: SteeringConfig | None = None) -> dict:
 def steering_control(p, s, cmd_in, th_c, w_c, dt):
     """Controller and motor over the coming step from the command (rad) and the column angle (rad) and
     rate (rad/s) at its start: stores the column torque the motor holds over the step (SS_T_COL)."""
-    cmd = lag_step(p, SP_CMD, s, SS_CMD, cmd_in, dt)
+    cmd = lag_step(p, SbwPar.CMD, s, SS_CMD, cmd_in, dt)
     s[SS_CMD_OUT] = cmd
-    n_eta = p[SP_N] * p[SP_ETA]
+    n_eta = p[SbwPar.N] * p[SbwPar.ETA]
     err = cmd - th_c
-    t_col = p[SP_KP] * err + s[SS_I] - p[SP_KD] * w_c
+    t_col = p[SbwPar.KP] * err + s[SS_I] - p[SbwPar.KD] * w_c
     tm_dem = t_col / n_eta
-    tmax = p[SP_TM_MAX]
+    tmax = p[SbwPar.TM_MAX]
     saturated = (tm_dem > tmax and err > 0.0) or (tm_dem < -tmax and err < 0.0)
     if not saturated:
-        i_new = s[SS_I] + p[SP_KI] * err * dt
-        imax = p[SP_I_MAX]
+        i_new = s[SS_I] + p[SbwPar.KI] * err * dt
+        imax = p[SbwPar.I_MAX]
         if i_new > imax:
             i_new = imax
         elif i_new < -imax:
             i_new = -imax
         s[SS_I] = i_new
-    tm = lag_step(p, SP_MOTOR, s, SS_MOTOR, tm_dem, dt)
+    tm = lag_step(p, SbwPar.MOTOR, s, SS_MOTOR, tm_dem, dt)
     s[SS_T_COL] = n_eta * tm
 
 
@@ -231,28 +224,27 @@ def steering_control(p, s, cmd_in, th_c, w_c, dt):
 def steering_forces(p, s, q, qd, f, ic, ir):
     """Add the motor torque, the torsion bar and the viscous frictions to the generalized forces of the
     column (index ic, N m) and the rack (index ir, N)."""
-    rp = p[SP_RP]
-    t_tb = p[SP_K_TB] * (q[ic] - q[ir] / rp) + p[SP_C_TB] * (qd[ic] - qd[ir] / rp)
-    f[ic] += s[SS_T_COL] - t_tb - p[SP_C_COL] * qd[ic]
-    f_stop, _k, _c = end_stop(q[ir], qd[ir], p[SP_RACK_TRAVEL], p[SP_STOP_K], p[SP_STOP_C])
-    f[ir] += t_tb / rp - p[SP_C_RACK] * qd[ir] + f_stop
+    rp = p[SbwPar.RP]
+    t_tb = p[SbwPar.K_TB] * (q[ic] - q[ir] / rp) + p[SbwPar.C_TB] * (qd[ic] - qd[ir] / rp)
+    f[ic] += s[SS_T_COL] - t_tb - p[SbwPar.C_COL] * qd[ic]
+    f[ir] += rack_force(p, SbwPar.RACK, q[ir], qd[ir], t_tb / rp, 0.0)[0]
 
 
 @inline_kernel
 def steering_tangent(m, w_env, p, ic, ir, bq, hc):
     """Stiffness (scaled by bq) and damping (by hc) of steering_forces into the tangent W (the end
     stops' in rack_stop_tangent, which needs the state)."""
-    rp = p[SP_RP]
-    kc = bq * p[SP_K_TB] + hc * p[SP_C_TB]
-    add_entry(w_env, m.first, m.ptr, m.pinv, ic, ic, kc + hc * p[SP_C_COL])
-    add_entry(w_env, m.first, m.ptr, m.pinv, ir, ir, kc / (rp * rp) + hc * p[SP_C_RACK])
+    rp = p[SbwPar.RP]
+    kc = bq * p[SbwPar.K_TB] + hc * p[SbwPar.C_TB]
+    add_entry(w_env, m.first, m.ptr, m.pinv, ic, ic, kc + hc * p[SbwPar.C_COL])
+    add_entry(w_env, m.first, m.ptr, m.pinv, ir, ir, kc / (rp * rp) + hc * p[SbwPar.C_RACK])
     add_entry(w_env, m.first, m.ptr, m.pinv, ic, ir, -kc / rp)
 
 
 @inline_kernel
 def rack_stop_tangent(m, w_env, p, q, qd, ir, bq, hc):
     """The rack end stops' stiffness (scaled by bq) and damping (by hc) at (q, qd) into the tangent W."""
-    _f, k_stop, c_stop = end_stop(q[ir], qd[ir], p[SP_RACK_TRAVEL], p[SP_STOP_K], p[SP_STOP_C])
+    _f, k_stop, c_stop = rack_stops(p, SbwPar.RACK, q[ir], qd[ir])
     if k_stop != 0.0:
         add_entry(w_env, m.first, m.ptr, m.pinv, ir, ir, bq * k_stop + hc * c_stop)
 
@@ -260,10 +252,10 @@ def rack_stop_tangent(m, w_env, p, q, qd, ir, bq, hc):
 @inline_kernel
 def steering_outputs(p, s, q, ic, ir, out):
     """The steering's outputs (SO_*) at the state q."""
-    rp = p[SP_RP]
+    rp = p[SbwPar.RP]
     out[SO_SW_ANGLE] = q[ic]
     out[SO_RACK_POS] = q[ir]
-    out[SO_TORQUE] = p[SP_K_TB] * (q[ic] - q[ir] / rp)
-    out[SO_MOTOR_TORQUE] = s[SS_T_COL] / (p[SP_N] * p[SP_ETA])
+    out[SO_TORQUE] = p[SbwPar.K_TB] * (q[ic] - q[ir] / rp)
+    out[SO_MOTOR_TORQUE] = s[SS_T_COL] / (p[SbwPar.N] * p[SbwPar.ETA])
     out[SO_PINION_ANGLE] = q[ir] / rp
     out[SO_CMD] = s[SS_CMD_OUT]

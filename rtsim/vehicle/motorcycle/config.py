@@ -21,6 +21,7 @@ from rtsim.errors import ConfigError
 
 from ..kit.inertia import inertia_problem
 from ..kit.linkage_checks import MIN_LINK_M
+from ..kit.spring_damper import Characteristic
 from ..kit.tyre.two_wheel import TwoWheelTyreSpec, sport_front, sport_rear
 
 Vec2 = tuple[float, float]
@@ -75,20 +76,6 @@ class Geometry(Strict):
     def _one_of(self):
         if (self.trail_m is None) == (self.fork_offset_m is None):
             raise ValueError("give exactly one of trail_m and fork_offset_m")
-        return self
-
-
-class Characteristic(Strict):
-    """A force table: force (N, compression positive) against travel (m) or travel rate (m/s)."""
-    x: list[float] = Field(min_length=2)
-    force_n: list[float] = Field(min_length=2)
-
-    @model_validator(mode="after")
-    def _shape(self):
-        if len(self.x) != len(self.force_n):
-            raise ValueError("x and force_n need the same length")
-        if any(b <= a for a, b in zip(self.x, self.x[1:])):
-            raise ValueError("x must increase")
         return self
 
 

@@ -6,6 +6,7 @@ from collections import namedtuple
 
 import numpy as np
 
+from ..kit.spring_damper import characteristic_table, stroke_spring_table, two_rate_damper_table
 from ..kit.tables import table_1d
 from ..kit.tyre.two_wheel import new_two_wheel_slip_state, pack_two_wheel_tyre
 from .build import MotorcycleModel
@@ -23,16 +24,15 @@ def spring_table(sp: Spring) -> np.ndarray:
     """Force (N) against compression from full extension (m): top-out stop below 0, the spring with its
     preload over the stroke, the bottom-out stop beyond it."""
     if sp.table is not None:
-        return table_1d(sp.table.x, sp.table.force_n)
-    k, pre, s = sp.stiffness_n_per_m, sp.preload_n, sp.stroke_m
-    return table_1d([-BIG, 0.0, s, s + BIG],
-                    [pre - sp.top_out_n_per_m * BIG, pre, pre + k * s, pre + k * s + (k + sp.bottom_out_n_per_m) * BIG])
+        return characteristic_table(sp.table)
+    return stroke_spring_table(sp.stiffness_n_per_m, sp.preload_n, sp.stroke_m, sp.top_out_n_per_m,
+                               sp.bottom_out_n_per_m, BIG)
 
 
 def damper_table(dp: Damper) -> np.ndarray:
     if dp.table is not None:
-        return table_1d(dp.table.x, dp.table.force_n)
-    return table_1d([-BIG, 0.0, BIG], [-dp.rebound_ns_per_m * BIG, 0.0, dp.compression_ns_per_m * BIG])
+        return characteristic_table(dp.table)
+    return two_rate_damper_table(dp.compression_ns_per_m, dp.rebound_ns_per_m, BIG)
 
 
 def frame_coordinates(mm: MotorcycleModel, point) -> tuple[float, float]:

@@ -32,7 +32,7 @@ from rtsim.mbs.integrator import step_with
 
 from ..kit.layout import offsets
 from ..kit.rigid import add_moment, angular_velocity, cross, vec3
-from ..kit.tables import table_eval
+from ..kit.spring_damper import spring_damper_force
 from ..kit.tyre.two_wheel import (advance_two_wheel_slip, contact_force_world, toroidal_contact,
                                   two_wheel_rolling_radius, two_wheel_transient_slip, two_wheel_tyre_forces,
                                   two_wheel_vertical_force, wrench_at_wheel_centre, TW_CZ, TW_KZ)
@@ -148,14 +148,12 @@ def two_wheeler_forces(m, d, idx, par, tab, u, tp, slip, tyre, tangent, bq, hc):
     # ---- suspension -------------------------------------------------------------------------------------
     if par[MP_FREE_SUSPENSION] > 0.5:
         kz = idx[K_ZETA]
-        fs, ks = table_eval(tab[T_FORK_SPRING], q[kz])
-        fd, cs = table_eval(tab[T_FORK_DAMPER], qd[kz])
+        fs, ks, fd, cs = spring_damper_force(tab[T_FORK_SPRING], tab[T_FORK_DAMPER], q[kz], qd[kz])
         f[kz] -= fs + fd
         kt = idx[K_THETA]
         length, dl = _shock_length(par, q[kt])
         comp = par[MP_SHOCK_C0] + par[MP_SHOCK_L0] - length
-        fs2, ks2 = table_eval(tab[T_SHOCK_SPRING], comp)
-        fd2, cs2 = table_eval(tab[T_SHOCK_DAMPER], -dl * qd[kt])
+        fs2, ks2, fd2, cs2 = spring_damper_force(tab[T_SHOCK_SPRING], tab[T_SHOCK_DAMPER], comp, -dl * qd[kt])
         f[kt] += (fs2 + fd2) * dl
         if tangent:
             add_entry(d.w_env, m.first, m.ptr, m.pinv, kz, kz, bq * ks + hc * cs)
