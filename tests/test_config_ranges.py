@@ -29,6 +29,7 @@ from rtsim.errors import ConfigError
 NOT_YET_RANGED = {
     "rtsim.batch.plan.Criterion": {"max", "min"},
     "rtsim.batch.plan.Distribution": {"uniform"},
+    "rtsim.ecutest.catalog.Bounds": {"max", "min"},
     "rtsim.faults.spec.Condition": {"value"},
     "rtsim.faults.spec.FaultSpec": {"params", "target"},
     "rtsim.road.config.GradeRoadConfig": {"origin"},
@@ -105,6 +106,7 @@ def _members(tp) -> list:
 
 def _annotated_metadata(tp) -> list:
     out = list(getattr(tp, "__metadata__", ())) if typing.get_origin(tp) is Annotated else []
+    out += [c for m in out for c in getattr(m, "metadata", ())]     # a pydantic Field's own constraints
     for a in typing.get_args(tp):
         out += _annotated_metadata(a)
     return out

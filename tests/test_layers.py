@@ -14,7 +14,8 @@ Layers, lowest first (the README's map):
               rtsim.cli, the validate command (rtsim.validate.cli: it wires the workflow to the bridge's
               MCAP reader and the batch's Ray executor), and the demo ECU processes of drivers
               (drivers.ecu_demo, .eps_demo, .rider_assist_demo, .bus_controller: programs on the far side
-              of the bus)
+              of the bus), the ECU test catalogues (rtsim.ecutest: they run services and ECUs), the vehicle
+              as an FMU (rtsim.fmu.export and its slave)
 
 ``KNOWN`` lists the wrong-way imports the tree still has, each with its reason; it may only shrink: a
 new wrong-way import fails, and so does an entry that no longer occurs (remove it)."""
@@ -38,7 +39,7 @@ LAYERS = (
     ("apps", ("rtsim.service", "rtsim.batch", "rtsim.viewer", "rtsim.robustness", "rtsim.benchmarks", "rtsim.watch",
               "rtsim.cli", "rtsim.validate.cli", "drivers.ecu_demo", "drivers.eps_demo", "drivers.rider_assist_demo",
               "drivers.bus_controller", "rtsim.fmu.export", "rtsim.fmu.served_vehicle", "rtsim.fmu.vehicle_step",
-              "rtsim.fmu.vehicle_slave")),
+              "rtsim.fmu.vehicle_slave", "rtsim.ecutest")),
 )
 
 #: (importer, imported) -> why it is still there. Shrink it; never grow it.

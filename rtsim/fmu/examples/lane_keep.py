@@ -4,7 +4,10 @@ written in Python (`law`): steering-wheel angle = -(k_y (y - y_ref) + k_psi yaw)
 (rad). Its lateral input is declared in millimetres, so a run converts the channel (m) into it."""
 from pythonfmu3 import Fmi3Slave
 
-from fmu_vars import declare
+try:                                  # inside the FMU, its project file sits beside this script
+    from fmu_vars import declare
+except ImportError:                   # imported from the package (the Python form of the law)
+    from rtsim.fmu.examples.fmu_vars import declare
 
 PARAMS = {"y_ref": 0.0, "k_y": 0.06, "k_psi": 1.6, "delta_max": 1.0}
 

@@ -4,7 +4,10 @@ written in Python (`law`): demand u = kp e + I (m/s^2, e = v_ref - v), I += ki e
 throttle (thr_gain rad per m/s^2, up to thr_max), u < 0 brakes (brk_gain kPa per m/s^2)."""
 from pythonfmu3 import Fmi3Slave
 
-from fmu_vars import declare
+try:                                  # inside the FMU, its project file sits beside this script
+    from fmu_vars import declare
+except ImportError:                   # imported from the package (the Python form of the law)
+    from rtsim.fmu.examples.fmu_vars import declare
 
 PARAMS = {"v_ref": 20.0, "kp": 0.8, "ki": 0.3, "thr_gain": 0.35, "thr_max": 1.4, "brk_gain": 800.0}
 
