@@ -420,8 +420,13 @@ def _delegate(module: str):
 
 
 def main(argv: list[str] | None = None) -> int:
+    from rtsim.compile_status import COMPILING_COMMANDS, command_progress
+
     args = build_parser().parse_args(argv)
     try:
+        if args.command in COMPILING_COMMANDS:
+            with command_progress(args.command):
+                return args.func(args)
         return args.func(args)
     except RtsimError as exc:
         print(f"rtsim: error: {exc}", file=sys.stderr)

@@ -174,3 +174,59 @@ class CompileProgress:
     def _tick(self) -> None:
         while not self._done.wait(self.every):
             self.out(self.status())
+
+
+#: the commands that may compile kernels and show `command_progress` lines (serve and demo show their
+#: own, predicted from the service's kernels)
+COMPILING_COMMANDS = ("run", "resim", "validate", "batch", "eigen", "statics", "energy", "feel", "bench",
+                      "inverse", "describe")
+
+
+def command_progress(command: str) -> CompileProgress:
+    """The compile progress of one ``rtsim <command>``: plain lines on stderr (so a command's JSON or
+    CSV on stdout stays clean), announced at the first kernel numba actually compiles, so a run whose
+    kernels are all cached prints nothing. numba saves each kernel to its cache as soon as that
+    kernel's own compilation ends (callees before their callers), so an interrupted first start keeps
+    every kernel that finished and the next start compiles only the rest."""
+    import sys
+
+    def say(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+    return CompileProgress("rtsim " + command, say, expect_s=None, every=10.0, predict=())
+
+
+class CompileClock:
+    """Context manager: ``seconds``, the wall time numba spent compiling inside the body (outermost
+    compilations only, so a callee compiled inside its caller is not counted twice; loads from the
+    cache are not compilations). A loop's time per step excludes it: ``(wall - clock.seconds) / steps``."""
+
+    def __init__(self):
+        self.seconds = 0.0
+        self._depth = 0
+        self._t = 0.0
+        self._listener = None
+
+    def __enter__(self) -> "CompileClock":
+        from numba.core import event
+
+        clock = self
+
+        class _Clock(event.Listener):
+            def on_start(self, ev):
+                if clock._depth == 0:
+                    clock._t = time.monotonic()
+                clock._depth += 1
+
+            def on_end(self, ev):
+                clock._depth -= 1
+                if clock._depth == 0:
+                    clock.seconds += time.monotonic() - clock._t
+
+        self._listener = _Clock()
+        event.register("numba:compile", self._listener)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        from numba.core import event
+
+        event.unregister("numba:compile", self._listener)

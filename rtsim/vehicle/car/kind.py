@@ -75,7 +75,8 @@ class CarKind(VehicleKind):
         dist = float(np.sum(np.hypot(np.diff(res.column("pos_x")), np.diff(res.column("pos_y")))))
         peak = float(res.column("speed").max()) if len(res.data) else 0.0
         out.line = (f"{sc.name}: {res.data[-1, 0] if len(res.data) else 0.0:g} s simulated in {res.wall_s:.2f} s "
-                    f"({res.wall_s / max(res.steps, 1) * 1e6:.1f} us/step), distance {dist:.1f} m, "
+                    f"({res.wall_s / max(res.steps, 1) * 1e6:.1f} us/step"
+                    f"{f'; {res.compile_s:.0f} s compiling besides' if res.compile_s else ''}), distance {dist:.1f} m, "
                     f"peak speed {peak * 3.6:.1f} km/h, {len(res.data)} rows")
         return out
 
