@@ -72,8 +72,9 @@ class Driver:
         self.path = path if path is not None else path_follower([0.0, 1.0], [0.0, 0.0])
         self.out = np.zeros(NINPUT)
         self._state = np.zeros(NSTATE)
-        #: the scenario's controller FMU mapping (rtsim.fmu.mapping), which the service's loop runs beside
-        #: this driver (rtsim.service.controller); None: none
+        #: the scenario's controller FMU mapping (rtsim.fmu.mapping) or a command source in its place
+        #: (rtsim.fmu.controller), which the service's loop runs beside this driver
+        #: (rtsim.service.controller); None: none
         self.controller = None
 
     def reset(self) -> None:

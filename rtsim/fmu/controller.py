@@ -169,6 +169,15 @@ class FmuController:
 
 
 
+def open_source(controller, channels: ChannelDictionary, commands: dict[str, str], dt: float):
+    """The command source a run drives with: a mapping (Mapping or its file) opens its FMU as an
+    FmuController; anything else is taken as a command source already (a controller written in Python with
+    the members of the module docstring), so both stand in the same place of a run."""
+    if isinstance(controller, (Mapping, str, Path)):
+        return FmuController(controller, channels, commands, dt)
+    return controller
+
+
 def open_slave(md, unzipdir, name: str, t0: float = 0.0, parameters=()):
     """An extracted co-simulation FMU (fmpy's model description `md`, FMI 2.0 or 3.0) instantiated as
     `name`, its float `parameters` ((value reference, value), ...) set, initialised at time t0."""

@@ -16,25 +16,36 @@ import numpy as np
 
 from rtsim.boundcall import bind
 from rtsim.configfile import problem
-from rtsim.fmu.controller import FmuController
+from rtsim.fmu.controller import open_source
 from rtsim.fmu.vehicle_step import read_channels
 
 
 class LoopController:
-    """The mapping's FMU bound to the served vehicle ``sim`` and its loop's sample periods (steps)."""
+    """A controller bound to the served vehicle ``sim`` and its loop's sample periods (steps): a mapping's
+    FMU, or a command source written in Python (rtsim.fmu.controller.open_source), the same way."""
 
-    def __init__(self, sim, mapping, dt: float, sensor_every: int, state_every: int):
+    def __init__(self, sim, controller, dt: float, sensor_every: int, state_every: int):
         inputs = sim.user_inputs
         table = inputs.table()
-        self.source = src = FmuController(mapping, sim.vm.channels, {n: r[2] for n, r in table.items()}, dt)
+        self.source = src = open_source(controller, sim.vm.channels, {n: r[2] for n, r in table.items()}, dt)
+        where = getattr(src, "mapping", None)
+        where = where.path if where is not None else type(src).__name__
+        ratio = src.step / dt
+        if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio) or round(ratio) < 1:
+            raise problem(where, "step", src.step, f"must be a whole multiple of the run's step dt = {dt:g} s")
+        every = int(round(ratio))
+        unknown = [c for c in src.outputs if c not in table]
+        if unknown:
+            raise problem(where, "outputs", ", ".join(unknown), f"not a user channel of the served vehicle "
+                          f"(those are: {', '.join(table)})")
         ch = sim.vm.channels
         self.pick = [(0, ch.sensor_names.index(n)) if n in ch.sensor_names else (1, ch.state_names.index(n))
                      for n in src.inputs]
-        for kind, every, what in ((0, sensor_every, "sensor"), (1, state_every, "state")):
-            if any(k == kind for k, _ in self.pick) and src.every % every:
-                raise problem(mapping.path, "step", mapping.step, f"must be a whole number of the service's "
-                              f"{what} period ({every * dt:g} s): it reads {what} channels")
-        self.every = src.every
+        for kind, each, what in ((0, sensor_every, "sensor"), (1, state_every, "state")):
+            if any(k == kind for k, _ in self.pick) and every % each:
+                raise problem(where, "step", src.step, f"must be a whole number of the service's "
+                              f"{what} period ({each * dt:g} s): it reads {what} channels")
+        self.every = every
         names = list(inputs.names)
         self.slots = np.array([names.index(c) for c in src.outputs], dtype=np.int64)
         self.lo = np.array([table[c][0] for c in src.outputs])

@@ -85,11 +85,15 @@ def session_faults(o: ServeOptions, sc) -> tuple[list, list]:
 
 
 class Service:
-    """The assembled service (see the module docstring). ``out`` prints the start-up lines."""
+    """The assembled service (see the module docstring). ``out`` prints the start-up lines. ``controller``
+    (optional, for a program that embeds the service): a command source (rtsim.fmu.controller: a mapping
+    or a controller written in Python) that stands in every session (resets too) where the scenario's
+    controller FMU would (rtsim.service.controller)."""
 
-    def __init__(self, opts: ServeOptions, out=print):
+    def __init__(self, opts: ServeOptions, out=print, controller=None):
         opts.check()
         self.opts = opts
+        self.controller = controller
         self.out = out
         self.hub = None
         self.port = None
@@ -130,7 +134,7 @@ class Service:
         self.health = LoopHealth(period=self.sim.dt)
         self.loop = HilLoop(self.sim, self.codec, self.rings, mode=o.mode, state_rate=o.state_rate,
                             hold_pressure=o.hold_pressure, inbox=self.inbox, health=self.health,
-                            scenario_name=self.sc.name, driver=self.sc.driver(), user_input=o.user_input,
+                            scenario_name=self.sc.name, driver=self._driver(self.sc), user_input=o.user_input,
                             test_fault_at=self.test_fault_at, faults=self.fault_specs, fault_where=self.fault_where)
         self.loop.port = self.port
         self.loop.on_model_fault = self._on_model_fault
@@ -151,6 +155,13 @@ class Service:
         if self.zenoh is not None:
             self.zenoh.serve(self.control, self.config)
         self._warm_up()
+
+    def _driver(self, sc):
+        """The scenario's driver for a session, with the service's ``controller`` if it was given one."""
+        d = sc.driver()
+        if self.controller is not None:
+            d.controller = self.controller
+        return d
 
     def _foxglove(self):
         """The 3D scene (bridge.scene) for the recording and the Foxglove server, and that server when
@@ -262,7 +273,7 @@ class Service:
                 if self.outbox is not None and self.outbox.scene is not None:     # its road (and vehicle) in 3D
                     from bridge.scene import scene_for
                     self.outbox.replace_scene(*scene_for(sim, self.vehicle_id, (sc.spec.initial.x, sc.spec.initial.y)))
-            args = {"_sim": sim, "_name": sc.name, "_driver": sc.driver()}
+            args = {"_sim": sim, "_name": sc.name, "_driver": self._driver(sc)}
             if op == "load_scenario":       # the new scenario's faults replace the old one's
                 args["_faults"] = session_faults(self.opts, sc)
         req = Request(op, args)
