@@ -128,9 +128,14 @@ def test_the_keyboard_rides_the_motorcycle_for_20_s_without_a_fall(moto):
     thr = [c["channels"].get("throttle_cmd") for c in changes]
     assert max(x for x in thr if x is not None) == pytest.approx(THROTTLE, abs=1e-4)
     t_up, t_release = keys["throttle"]
-    for c in changes:                         # the throttle is the user's only from its key to its release
+    # the throttle is the user's only from its key to its release: every change carrying it comes after the
+    # key went down and before the brake key (pressed 2 s of simulated time after the release); the
+    # release's ramp is the page's, in wall time, so under load its changes land later in simulated time
+    # than the page saw the release, and are bounded by the next key instead
+    first_brake = min(c["time"] for c in changes if (c["channels"].get("brake_pressure_front_cmd") or 0.0) > 0.0)
+    for c in changes:
         if c["channels"].get("throttle_cmd") is not None:
-            assert t_up - 0.2 <= c["time"] <= t_release + 1.0, c
+            assert t_up - 0.2 <= c["time"] < first_brake, c
     assert changes[-1]["channels"].get("throttle_cmd") is None
     assert changes[-1]["channels"].get("brake_pressure_front_cmd") is None
     brake = [c["channels"].get("brake_pressure_front_cmd") or 0.0 for c in changes]
