@@ -5,6 +5,7 @@ accelerates the car towards its target; its commands are recorded as user change
 from __future__ import annotations
 
 import threading
+from contextlib import contextmanager
 
 from bridge.can_bus import LoopbackHub
 from bridge.mcap_recorder import read_recording
@@ -16,17 +17,30 @@ from fmu.build import PythonPiSpeed
 from test_fmu_controller import PI_MAP, scenario, write
 
 
+@contextmanager
+def _lockstep(rec, sc, controller=None):
+    """A lockstep service of the scenario `sc` recording to `rec` (with `controller` in the place of its
+    FMU, if given) on its own loopback hub, run in a thread; stopped, joined and its hub closed on exit."""
+    hub = LoopbackHub(0, start_timeout=HUB_START)
+    svc = Service(ServeOptions(mode="lockstep", scenario=str(sc), can_interface="remote", can_channel=hub.channel,
+                               start_hub=False, zenoh=False, record=rec), out=lambda *a: None, controller=controller)
+    th = threading.Thread(target=svc.run, daemon=True)
+    th.start()
+    try:
+        yield svc
+    finally:
+        svc.stop()
+        th.join(EVENT)
+        hub.close()
+    assert not th.is_alive()
+
+
 def test_pi_speed_fmu_drives_the_car_in_the_service(tmp_path):
     fmu = build_example("pi_speed", tmp_path)
     mapping = write(tmp_path, "pi.toml", PI_MAP.format(fmu=fmu, step=0.01))
     sc = scenario(tmp_path, mapping, duration=10.0, speed=15.0)
     rec = tmp_path / "session.mcap"
-    hub = LoopbackHub(0, start_timeout=HUB_START)
-    svc = Service(ServeOptions(mode="lockstep", scenario=str(sc), can_interface="remote", can_channel=hub.channel,
-                               start_hub=False, zenoh=False, record=rec), out=lambda *a: None)
-    th = threading.Thread(target=svc.run, daemon=True)
-    th.start()
-    try:
+    with _lockstep(rec, sc) as svc:
         loop = svc.loop
         names = loop.codec.channels.state_names
         speed = names.index("speed")
@@ -42,11 +56,6 @@ def test_pi_speed_fmu_drives_the_car_in_the_service(tmp_path):
         assert v0 < 15.3 and v > 17.5, (v0, v)              # towards its 19 m/s target
         usr = loop.user_status()["channels"]
         assert usr["throttle_angle_cmd"] > 0.0 and usr["brake_pressure_cmd"] == 0.0
-    finally:
-        svc.stop()
-        th.join(EVENT)
-        hub.close()
-    assert not th.is_alive()
     msgs, _ = read_recording(rec)
     changes = [m.data for m in msgs[f"rtsim/{svc.vehicle_id}/user"] if m.data["cause"] == "controller"]
     assert len(changes) > 100 and all(c["step"] % 10 == 0 for c in changes)
@@ -56,20 +65,10 @@ def _served(tmp_path, name, sc, controller=None, seconds=2.0):
     """A lockstep service of the scenario `sc` (with `controller` in the place of its FMU, if given)
     stepped `seconds` of simulated time by the step control op; its recording's messages by topic."""
     rec = tmp_path / f"{name}.mcap"
-    hub = LoopbackHub(0, start_timeout=HUB_START)
-    svc = Service(ServeOptions(mode="lockstep", scenario=str(sc), can_interface="remote", can_channel=hub.channel,
-                               start_hub=False, zenoh=False, record=rec), out=lambda *a: None, controller=controller)
-    th = threading.Thread(target=svc.run, daemon=True)
-    th.start()
-    try:
+    with _lockstep(rec, sc, controller) as svc:
         for _ in range(int(round(seconds / 0.1))):
             r = svc.control({"op": "step", "n": 100})
             assert r["ok"], r
-    finally:
-        svc.stop()
-        th.join(EVENT)
-        hub.close()
-    assert not th.is_alive()
     msgs, _ = read_recording(rec)
     return {t.rsplit("/", 1)[1]: m for t, m in msgs.items()}
 
