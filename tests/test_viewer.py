@@ -134,11 +134,15 @@ def test_the_keyboard_drives_the_car_through_the_service(page, service):
     pedals = min(c["time"] for c in users if c["channels"].get("throttle_angle_cmd") is not None)
     steer = min(c["time"] for c in users if c["channels"].get("steering_wheel_angle_cmd") is not None)
     assert pedals < t1 <= steer + 0.2
-    assert all(c["channels"].get("brake_pressure_cmd") == 0.0 for c in users if c["time"] >= pedals)
+    brakes = [(c["time"], c["channels"].get("brake_pressure_cmd")) for c in users if c["time"] >= pedals]
+    assert all(b == 0.0 for _, b in brakes), f"the up key's brake pressure (time, Pa): {brakes}"
     status = [m.data for m in msgs["rtsim/xbw/status"]]
-    assert all(s["drivers"]["steering_wheel_angle_cmd"] != "user" for s in status if pedals < s["time"] < steer)
-    during = [s for s in status if steer < s["time"] <= t2]
-    assert during and all(set(s["drivers"].values()) == {"user"} for s in during)
+    early = [(s["time"], s["drivers"]) for s in status if pedals < s["time"] < steer]
+    assert all(d["steering_wheel_angle_cmd"] != "user" for _, d in early), f"before the left key: {early}"
+    during = [(s["time"], s["drivers"]) for s in status if steer < s["time"] <= t2]
+    # (a page stalled for USER_HOLD = 1 s of wall time lets the user's channels lapse: named in the message)
+    assert during and all(set(d.values()) == {"user"} for _, d in during), \
+        f"drivers while both keys were held: {[x for x in during if set(x[1].values()) != {'user'}]}"
     assert latency["key_to_model_ms"] is not None and latency["server_to_screen_ms"] is not None
 
 

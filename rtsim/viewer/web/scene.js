@@ -105,6 +105,9 @@ export class Scene3D {
     // the panels cover the window's right and left edges: the view's centre a little left of the middle
     this.camera.setViewOffset(w, h, 0.08 * w, 0, w, h);
     this.camera.updateProjectionMatrix();
+    // a new size clears the canvas: draw the scene again at once, or the page shows its bare background
+    // until the next frame (a screenshot or a slow frame in between sees no road and no car)
+    this.renderer.render(this.scene, this.camera);
   }
 
   // ---- road -------------------------------------------------------------------------------------------
