@@ -134,13 +134,18 @@ def test_the_keyboard_drives_the_car_through_the_service(page, service):
     pedals = min(c["time"] for c in users if c["channels"].get("throttle_angle_cmd") is not None)
     steer = min(c["time"] for c in users if c["channels"].get("steering_wheel_angle_cmd") is not None)
     assert pedals < t1 <= steer + 0.2
-    brakes = [(c["time"], c["channels"].get("brake_pressure_cmd")) for c in users if c["time"] >= pedals]
-    assert all(b == 0.0 for _, b in brakes), f"the up key's brake pressure (time, Pa): {brakes}"
+    # a page stalled for USER_HOLD (1 s of wall time, a loaded machine) lets the user's channels lapse: the
+    # service records that (cause "lapse") and the page's next request drives again; those spans are the
+    # service's rule working, not the keys' mapping, and are left out below
+    sent = [c for c in users if c["time"] >= pedals and c["cause"] != "lapse"]
+    assert all(c["channels"].get("brake_pressure_cmd") == 0.0 for c in sent), \
+        f"the up key's brake pressure (time, Pa): {[(c['time'], c['channels']) for c in sent]}"
+    edges = sorted((c["time"], c["cause"] == "lapse") for c in users)
+    lapsed = lambda t: any(lap for _, lap in [e for e in edges if e[0] < t][-1:])
     status = [m.data for m in msgs["rtsim/xbw/status"]]
     early = [(s["time"], s["drivers"]) for s in status if pedals < s["time"] < steer]
     assert all(d["steering_wheel_angle_cmd"] != "user" for _, d in early), f"before the left key: {early}"
-    during = [(s["time"], s["drivers"]) for s in status if steer < s["time"] <= t2]
-    # (a page stalled for USER_HOLD = 1 s of wall time lets the user's channels lapse: named in the message)
+    during = [(s["time"], s["drivers"]) for s in status if steer < s["time"] <= t2 and not lapsed(s["time"])]
     assert during and all(set(d.values()) == {"user"} for _, d in during), \
         f"drivers while both keys were held: {[x for x in during if set(x[1].values()) != {'user'}]}"
     assert latency["key_to_model_ms"] is not None and latency["server_to_screen_ms"] is not None
