@@ -52,6 +52,7 @@ class RunResult:
     steps: int
     fault: ModelFault | None = None   # the model failure that ended the run early (rows up to it)
     compile_s: float = 0.0    # s numba spent compiling kernels during the loop (0 when all were cached)
+    step_s: float = 0.0       # s of wall time inside the model's steps (sim.step), compilations excluded
 
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.columns.index(name)]
@@ -117,6 +118,7 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
             res = _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state, sens, observed,
                         keep, io, ctl, t0)
         res.wall_s, res.compile_s = max(res.wall_s - clock.seconds, 0.0), clock.seconds
+        res.step_s = max(res.step_s - clock.seconds, 0.0)
         return res
     finally:
         ctl.close()
@@ -126,6 +128,8 @@ def _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state
           ctl, t0) -> RunResult:
     dt = sc.dt
     nrow = 0
+    step_s = 0.0                        # the model's steps alone (the driver and the logging are not in it)
+    clock = time.perf_counter
     for n in range(nsteps + 1):
         if n % every == 0:
             _log(sim, sens, observed, keep, rows[nrow])
@@ -145,13 +149,16 @@ def _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state
         io.extra[EX_TORQUE_RIGHT] = cmd[I_TORQUE_RR]
         if forced == n + 1:
             force_failure(sim)
+        ts = clock()
         try:
             sim.step(1)
         except SimulationError as exc:
             wall = time.perf_counter() - t0
-            return RunResult(columns, rows[:nrow], wall, n, describe_error(sim, exc, n + 1))
+            return RunResult(columns, rows[:nrow], wall, n, describe_error(sim, exc, n + 1),
+                             step_s=step_s + clock() - ts)
+        step_s += clock() - ts
     wall = time.perf_counter() - t0
-    return RunResult(columns, rows[:nrow], wall, nsteps)
+    return RunResult(columns, rows[:nrow], wall, nsteps, step_s=step_s)
 
 
 class _Controlled:
