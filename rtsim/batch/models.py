@@ -1,0 +1,67 @@
+"""A worker's opened vehicles, kept across its runs: each distinct vehicle (its file and the run's vehicle
+overrides) is read, validated and built once per worker process, and every later run of it gets the same
+opened vehicle, whose compiled model is immutable arrays (each run makes its own state: rtsim.vehicle's
+``run_offline`` builds a fresh simulation on it). A run's scenario is read per run (its overrides differ
+from run to run; reading it takes a few ms). A run whose vehicle overrides differ from every kept one in
+any value -- a plain parameter such as the chassis mass as much as a change of topology -- is a new
+vehicle: validated and built afresh (its values are read on load, so a bad one is that run's config
+error as before). The input files are taken not to change during a batch (a run id hashes them at the
+start: rtsim.batch.inputs).
+
+The worker keeps at most ``KEEP`` vehicles (the least recently used goes first), so a random sweep
+over a continuous parameter does not fill its memory."""
+from __future__ import annotations
+
+import json
+from collections import OrderedDict
+from pathlib import Path
+
+from .inputs import split_overrides
+
+KEEP = 32
+
+
+class OpenedVehicles:
+    """(resolved vehicle file, its overrides) -> opened vehicle with its model built; ``built`` counts the
+    vehicles opened and built, ``reused`` the runs that got a kept one."""
+
+    def __init__(self, keep: int = KEEP):
+        self.keep = keep
+        self.kept: OrderedDict = OrderedDict()
+        self.built = 0
+        self.reused = 0
+
+    def open_run(self, scenario: str | Path, vehicle: str | Path | None, overrides: dict):
+        """(scenario, opened vehicle) of a run, as rtsim.batch.inputs.open_run opens them (same loaders,
+        same order, same errors), the vehicle a kept one when this worker opened it before."""
+        from drivers.scenario import load_scenario
+        from rtsim.configfile import overrides as with_overrides
+        from rtsim.vehicle.registry import DEFAULT_VEHICLE, open_vehicle
+
+        scen = Path(scenario)
+        veh_over, scen_over = split_overrides(overrides)
+        files = {scen.resolve(): scen_over}
+        with with_overrides(files):
+            sc = load_scenario(scen, check_files=True)
+            vpath = Path(vehicle) if vehicle else (sc.vehicle_path or DEFAULT_VEHICLE)
+            key = (str(vpath.resolve()), json.dumps(veh_over, sort_keys=True, default=repr))
+            opened = self.kept.get(key)
+            if opened is None:
+                files[vpath.resolve()] = veh_over
+                opened = open_vehicle(vpath)
+                opened.refuse("batch")
+                opened.check_scenario(sc)
+                opened.model
+                self.built += 1
+                self.kept[key] = opened
+                while len(self.kept) > self.keep:
+                    self.kept.popitem(last=False)
+            else:
+                self.kept.move_to_end(key)
+                opened.check_scenario(sc)
+                self.reused += 1
+        return sc, opened
+
+
+#: this worker process's vehicles (one batch runs per process at a time)
+WORKER = OpenedVehicles()
