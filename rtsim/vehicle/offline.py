@@ -16,6 +16,7 @@ import numpy as np
 from rtsim.channels import CAR, COMMANDS, ChannelDictionary
 from rtsim.compile_status import CompileClock
 from rtsim.errors import ConfigError, SimulationError
+from rtsim.mbs.model import OK
 from rtsim.model_fault import ModelFault, describe_error, force_failure, test_fault_step, test_fault_time
 from rtsim.road.config import load_road
 
@@ -115,8 +116,11 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
     t0 = time.perf_counter()
     try:
         with CompileClock() as clock:       # a first run compiles at its first step: not step time
-            res = _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state, sens, observed,
-                        keep, io, ctl, t0)
+            if progress is None and forced is None and ctl.source is None:
+                res = _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, t0)
+            else:
+                res = _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state, sens, observed,
+                            keep, io, ctl, t0)
         res.wall_s, res.compile_s = max(res.wall_s - clock.seconds, 0.0), clock.seconds
         res.step_s = max(res.step_s - clock.seconds, 0.0)
         return res
@@ -158,6 +162,35 @@ def _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state
                              step_s=step_s + clock() - ts)
         step_s += clock() - ts
     wall = time.perf_counter() - t0
+    return RunResult(columns, rows[:nrow], wall, nsteps, step_s=step_s)
+
+
+_CYCLES_PER_S: list[float] = []
+
+
+def _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, t0) -> RunResult:
+    """The loop of `_loop` in one compiled call (rtsim.vehicle.car.offline_kernel: the same rows, bit for
+    bit) for a run without progress reports, controller or forced fault; the time inside the steps from
+    the cycle counter."""
+    from rtsim.jit import cycles_per_second
+
+    from .car.energy import FLOW_KEYS
+    from .car.offline_kernel import offline_loop
+
+    if not _CYCLES_PER_S:
+        _CYCLES_PER_S.append(cycles_per_second())
+    cycles = np.zeros(1, dtype=np.int64)
+    status, n, nrow = offline_loop(sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, sim.io,
+                                   sim.dt, driver.packed, driver.speed, driver.path, driver.flags, nsteps, every, rows,
+                                   keep.astype(np.int64), sim.has_eps, state, driver.out, sens, observed,
+                                   np.zeros(len(FLOW_KEYS)), cycles)
+    wall = time.perf_counter() - t0
+    step_s = float(cycles[0]) / _CYCLES_PER_S[0]
+    if status != OK:
+        try:
+            sim.sim._raise(status, int(sim.data.stats[0]) + 1)
+        except SimulationError as exc:
+            return RunResult(columns, rows[:nrow], wall, n, describe_error(sim, exc, n + 1), step_s=step_s)
     return RunResult(columns, rows[:nrow], wall, nsteps, step_s=step_s)
 
 
