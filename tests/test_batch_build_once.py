@@ -110,3 +110,23 @@ def test_timing_columns_add_up_to_the_wall_time(worker):
     bad = run.run_one({**specs[0], "overrides": {**specs[0]["overrides"], "scenario.duration": -1.0}}, job)
     assert bad["status"] == "config_error"
     assert bad["step_s"] == 0.0 and bad["outside_s"] == bad["wall_s"] and bad["outside_pct"] == pytest.approx(100.0)
+
+
+@pytest.mark.parametrize("scenario, vehicle, extra", [
+    ("opendrive_curve", "xbw", {}),                                          # path and speed followers
+    ("step_steer_80kph", "eps_car", {"vehicle.sensors.channels.gyro_z.noise_std": 0.01}),   # sensor noise
+])
+def test_the_compiled_offline_loop_logs_the_python_loops_rows(scenario, vehicle, extra):
+    """The car's loop in one kernel (a run without progress reports) against the Python loop (a run
+    with them): the same rows, bit for bit, noise and closed-loop drivers included."""
+    from rtsim.batch.inputs import open_run
+    from rtsim.vehicle.offline import run as run_offline, sim_for
+
+    sc, opened = open_run(ROOT / "configs" / "scenarios" / f"{scenario}.toml",
+                          ROOT / "configs" / "vehicles" / f"{vehicle}.toml", {"scenario.duration": 0.5, **extra})
+    compiled = run_offline(sim_for(opened.model, sc), sc, seed=3)
+    python = run_offline(sim_for(opened.model, sc), sc, progress=lambda f: None, seed=3)
+    assert compiled.fault is None and python.fault is None
+    assert compiled.data.shape == python.data.shape and compiled.data.shape[0] > 40
+    assert compiled.data.tobytes() == python.data.tobytes()
+    assert 0.0 < compiled.step_s <= compiled.wall_s
