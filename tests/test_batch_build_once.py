@@ -130,3 +130,19 @@ def test_the_compiled_offline_loop_logs_the_python_loops_rows(scenario, vehicle,
     assert compiled.data.shape == python.data.shape and compiled.data.shape[0] > 40
     assert compiled.data.tobytes() == python.data.tobytes()
     assert 0.0 < compiled.step_s <= compiled.wall_s
+
+
+def test_the_compiled_offline_loop_fails_where_the_python_loop_does(monkeypatch):
+    """A model failure (rtsim.model_fault's test-only hook at 0.2 s) in the compiled loop: the rows up to
+    it and the fault (step, time, reason, coordinate) of the Python loop."""
+    from rtsim.batch.inputs import open_run
+    from rtsim.model_fault import TEST_FAULT_ENV
+    from rtsim.vehicle.offline import run as run_offline, sim_for
+
+    monkeypatch.setenv(TEST_FAULT_ENV, "0.2")
+    sc, opened = open_run(ROOT / "configs" / "scenarios" / "step_steer_80kph.toml",
+                          ROOT / "configs" / "vehicles" / "xbw.toml", {"scenario.duration": 0.5})
+    compiled = run_offline(sim_for(opened.model, sc), sc)
+    python = run_offline(sim_for(opened.model, sc), sc, progress=lambda f: None)
+    assert compiled.fault is not None and compiled.fault == python.fault and compiled.fault.step == 200
+    assert compiled.steps == python.steps and compiled.data.tobytes() == python.data.tobytes()

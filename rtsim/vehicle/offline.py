@@ -116,8 +116,9 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
     t0 = time.perf_counter()
     try:
         with CompileClock() as clock:       # a first run compiles at its first step: not step time
-            if progress is None and forced is None and ctl.source is None:
-                res = _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, t0)
+            if progress is None and ctl.source is None:
+                res = _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, forced,
+                                     t0)
             else:
                 res = _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state, sens, observed,
                             keep, io, ctl, t0)
@@ -168,10 +169,11 @@ def _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state
 _CYCLES_PER_S: list[float] = []
 
 
-def _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, t0) -> RunResult:
-    """The loop of `_loop` in one compiled call (rtsim.vehicle.car.offline_kernel: the same rows, bit for
-    bit) for a run without progress reports, controller or forced fault; the time inside the steps from
-    the cycle counter."""
+def _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, forced,
+                   t0) -> RunResult:
+    """The loop of `_loop` in one compiled call (rtsim.vehicle.car.offline_kernel: the same rows and
+    fault, bit for bit) for a run without progress reports or controller; the time inside the steps
+    from the cycle counter."""
     from rtsim.jit import cycles_per_second
 
     from .car.energy import FLOW_KEYS
@@ -182,7 +184,8 @@ def _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, obser
     cycles = np.zeros(1, dtype=np.int64)
     status, n, nrow = offline_loop(sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, sim.io,
                                    sim.dt, driver.packed, driver.speed, driver.path, driver.flags, nsteps, every, rows,
-                                   keep.astype(np.int64), sim.has_eps, state, driver.out, sens, observed,
+                                   keep.astype(np.int64), sim.has_eps, -1 if forced is None else forced, state,
+                                   driver.out, sens, observed,
                                    np.zeros(len(FLOW_KEYS)), cycles)
     wall = time.perf_counter() - t0
     step_s = float(cycles[0]) / _CYCLES_PER_S[0]

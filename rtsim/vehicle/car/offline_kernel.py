@@ -61,10 +61,11 @@ def _audit_row(a, e_base, eps_out, has_eps, flows, out):
 
 @kernel
 def offline_loop(m, d, veh, vd, road, parts, states, io, h, packed, speed, path, flags, nsteps, every, rows,
-                 keep, has_eps, state, cmd, sens, observed, flows, cycles):
+                 keep, has_eps, forced, state, cmd, sens, observed, flows, cycles):
     """Steps 0..nsteps of an offline run (rows as rtsim.vehicle.offline._loop logs them). Returns
     (status, steps done, rows written); cmd is the driver's output array, cycles[0] += the cycles spent
-    inside vehicle_advance."""
+    inside vehicle_advance; step number `forced` (-1: none) fails as rtsim.model_fault's test-only hook
+    makes it (the first generalized velocity NaN before it)."""
     nrow = 0
     ns = sens.shape[0]
     nk = keep.shape[0]
@@ -89,6 +90,8 @@ def offline_loop(m, d, veh, vd, road, parts, states, io, h, packed, speed, path,
         io.commands[CMD_STEER] = cmd[I_STEER]
         io.extra[EX_TORQUE_LEFT] = cmd[I_TORQUE_RL]
         io.extra[EX_TORQUE_RIGHT] = cmd[I_TORQUE_RR]
+        if forced == n + 1:
+            d.qd[0] = np.nan
         c0 = read_cycles()
         status, _ = vehicle_advance(m, d, veh, vd, road, parts, states, io, h, 1)
         cycles[0] += read_cycles() - c0
