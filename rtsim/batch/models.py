@@ -16,7 +16,7 @@ import json
 from collections import OrderedDict
 from pathlib import Path
 
-from .inputs import split_overrides
+from .inputs import open_run
 
 KEEP = 32
 
@@ -34,33 +34,27 @@ class OpenedVehicles:
     def open_run(self, scenario: str | Path, vehicle: str | Path | None, overrides: dict):
         """(scenario, opened vehicle) of a run, as rtsim.batch.inputs.open_run opens them (same loaders,
         same order, same errors), the vehicle a kept one when this worker opened it before."""
-        from drivers.scenario import load_scenario
-        from rtsim.configfile import overrides as with_overrides
-        from rtsim.vehicle.registry import DEFAULT_VEHICLE, open_vehicle
+        return open_run(scenario, vehicle, overrides, kept=self)
 
-        scen = Path(scenario)
-        veh_over, scen_over = split_overrides(overrides)
-        files = {scen.resolve(): scen_over}
-        with with_overrides(files):
-            sc = load_scenario(scen, check_files=True)
-            vpath = Path(vehicle) if vehicle else (sc.vehicle_path or DEFAULT_VEHICLE)
-            key = (str(vpath.resolve()), json.dumps(veh_over, sort_keys=True, default=repr))
-            opened = self.kept.get(key)
-            if opened is None:
-                files[vpath.resolve()] = veh_over
-                opened = open_vehicle(vpath)
-                opened.refuse("batch")
-                opened.check_scenario(sc)
-                opened.model
-                self.built += 1
-                self.kept[key] = opened
-                while len(self.kept) > self.keep:
-                    self.kept.popitem(last=False)
-            else:
-                self.kept.move_to_end(key)
-                opened.check_scenario(sc)
-                self.reused += 1
-        return sc, opened
+    @staticmethod
+    def _key(vpath: Path, veh_over: dict) -> tuple[str, str]:
+        return str(Path(vpath).resolve()), json.dumps(veh_over, sort_keys=True, default=repr)
+
+    def get(self, vpath: Path, veh_over: dict):
+        """The kept vehicle of this file and overrides (None: not opened yet, or no longer kept)."""
+        key = self._key(vpath, veh_over)
+        opened = self.kept.get(key)
+        if opened is not None:
+            self.kept.move_to_end(key)
+            self.reused += 1
+        return opened
+
+    def put(self, vpath: Path, veh_over: dict, opened) -> None:
+        """Keep a vehicle just opened and built (the least recently used out beyond ``keep``)."""
+        self.kept[self._key(vpath, veh_over)] = opened
+        self.built += 1
+        while len(self.kept) > self.keep:
+            self.kept.popitem(last=False)
 
 
 #: this worker process's vehicles (one batch runs per process at a time)

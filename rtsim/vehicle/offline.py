@@ -26,7 +26,7 @@ from .car.config import load_vehicle
 from .car.inputs import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, INPUT_NAMES, NSTATE
 from .car.observer import driver_view, vehicle_state_values
 from .car.sim import VehicleSim
-from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT
+from .car.offline_kernel import apply_commands
 
 
 
@@ -116,7 +116,7 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
     t0 = time.perf_counter()
     try:
         with CompileClock() as clock:       # a first run compiles at its first step: not step time
-            if progress is None and ctl.source is None:
+            if progress is None and ctl.source is None and getattr(driver, "car_loop", None) is not None:
                 res = _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, forced,
                                      t0)
             else:
@@ -147,11 +147,7 @@ def _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state
         cmd = driver.step(sim.data.t[0] + dt, state)
         if ctl.source is not None:
             ctl.apply(n, cmd)
-        io.commands[CMD_THROTTLE] = cmd[I_THROTTLE]
-        io.commands[CMD_BRAKE] = cmd[I_BRAKE]
-        io.commands[CMD_STEER] = cmd[I_STEER]
-        io.extra[EX_TORQUE_LEFT] = cmd[I_TORQUE_RL]
-        io.extra[EX_TORQUE_RIGHT] = cmd[I_TORQUE_RR]
+        apply_commands(io, cmd)
         if forced == n + 1:
             force_failure(sim)
         ts = clock()
@@ -171,22 +167,20 @@ _CYCLES_PER_S: list[float] = []
 
 def _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, forced,
                    t0) -> RunResult:
-    """The loop of `_loop` in one compiled call (rtsim.vehicle.car.offline_kernel: the same rows and
-    fault, bit for bit) for a run without progress reports or controller; the time inside the steps
-    from the cycle counter."""
+    """The loop of `_loop` in one compiled call, the driver's (``driver.car_loop``, drivers.car_loop: the
+    same rows and fault, bit for bit), for a run without progress reports or controller; the time
+    inside the steps from the cycle counter."""
     from rtsim.jit import cycles_per_second
 
     from .car.energy import FLOW_KEYS
-    from .car.offline_kernel import offline_loop
 
     if not _CYCLES_PER_S:
         _CYCLES_PER_S.append(cycles_per_second())
     cycles = np.zeros(1, dtype=np.int64)
-    status, n, nrow = offline_loop(sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, sim.io,
-                                   sim.dt, driver.packed, driver.speed, driver.path, driver.flags, nsteps, every, rows,
-                                   keep.astype(np.int64), sim.has_eps, -1 if forced is None else forced, state,
-                                   driver.out, sens, observed,
-                                   np.zeros(len(FLOW_KEYS)), cycles)
+    status, n, nrow = driver.car_loop(sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states,
+                                      sim.io, sim.dt, driver.packed, driver.speed, driver.path, driver.flags, nsteps,
+                                      every, rows, keep.astype(np.int64), sim.has_eps, -1 if forced is None else forced,
+                                      state, driver.out, sens, observed, np.zeros(len(FLOW_KEYS)), cycles)
     wall = time.perf_counter() - t0
     step_s = float(cycles[0]) / _CYCLES_PER_S[0]
     if status != OK:

@@ -1,32 +1,51 @@
-"""The car's offline loop in one compiled call: per step the driver reads the vehicle (driver_view), its
-kernel gives the commands for the step's end (drivers.driver.driver_step), the car takes one step
-(vehicle_advance); at every `every`-th step, and before the first, a row of the log: time, the sensors
-as reported (sensor_stage, noise drawn from the sensor model's own state), the observer's state channels
-`keep` and the power audit's channels (rtsim.vehicle.car.energy: the same differences and sums, in the
-same order, as `energy_row`). The same kernels in the same order as the Python loop of
-rtsim.vehicle.offline, so the rows are the same bit for bit; what the Python loop spent between the
-steps (a dispatch of each kernel, the audit's row) is gone.
-
-The time inside the car's steps is counted with the processor's cycle counter around each
-vehicle_advance (rtsim.jit.read_cycles): `cycles` out, seconds with rtsim.jit.cycles_per_second."""
+"""The car's side of a compiled offline loop (drivers.car_loop runs it with the driver's kernel): a
+driver's inputs into the car's commands, and one row of the log -- time, the sensors as reported
+(sensor_stage, noise drawn from the sensor model's own state), the observer's state channels `keep`
+and the power audit's channels (rtsim.vehicle.car.energy: the same differences and sums, in the same
+order, as `energy_row`) -- with the kernels the Python loop of rtsim.vehicle.offline calls, so the rows
+are the same bit for bit."""
 from __future__ import annotations
 
-import numpy as np
-
-from drivers.driver import driver_step
-from rtsim.jit import kernel, read_cycles
+from rtsim.jit import kernel
 
 from .effect_kernels import sensor_stage
 from .energy import _EPS_OUT, _FLOW_PORTS, _ROW_FLOWS, FLOW_KEYS
 from .energy_kernels import A_EMF, A_STORED, A_STORED0, A_SUPPLY, A_WINDING, NSTORED
 from .inputs import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR
 from .layout import PORT_EPS
-from .observer import driver_view, vehicle_state_values
-from .step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT, OK, vehicle_advance
+from .observer import vehicle_state_values
+from .step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT
 from ..kit.eps import PORT_MOTOR_EM
 
 NFLOW = len(FLOW_KEYS)
 I_MOTOR_EM = PORT_EPS + PORT_MOTOR_EM
+
+
+@kernel
+def apply_commands(io, cmd):
+    """A driver's inputs (rtsim.vehicle.car.inputs layout) into the car's commands and drive torques."""
+    io.commands[CMD_THROTTLE] = cmd[I_THROTTLE]
+    io.commands[CMD_BRAKE] = cmd[I_BRAKE]
+    io.commands[CMD_STEER] = cmd[I_STEER]
+    io.extra[EX_TORQUE_LEFT] = cmd[I_TORQUE_RL]
+    io.extra[EX_TORQUE_RIGHT] = cmd[I_TORQUE_RR]
+
+
+@kernel
+def log_row(m, d, veh, vd, parts, states, io, keep, has_eps, sens, observed, flows, row):
+    """One row of an offline run's log (rtsim.vehicle.offline._log): time, the sensors as reported (the
+    sensor model's noise drawn from its own state), the observer's state channels `keep`, the power
+    audit's channels; sens, observed and flows are scratch."""
+    ns = sens.shape[0]
+    nk = keep.shape[0]
+    sensor_stage(m, d, veh, io.signals, parts.effects, parts.sensors, states.sensors, sens)
+    row[0] = d.t[0]
+    for i in range(ns):
+        row[1 + i] = sens[i]
+    vehicle_state_values(d, veh, vd, io.signals, observed)
+    for i in range(nk):
+        row[1 + ns + i] = observed[keep[i]]
+    _audit_row(vd.audit_e, vd.e_base, io.eps_out, has_eps, flows, row[1 + ns + nk:])
 
 
 @kernel
@@ -57,44 +76,3 @@ def _audit_row(a, e_base, eps_out, has_eps, flows, out):
     else:
         for j in range(k, out.shape[0]):
             out[j] = 0.0
-
-
-@kernel
-def offline_loop(m, d, veh, vd, road, parts, states, io, h, packed, speed, path, flags, nsteps, every, rows,
-                 keep, has_eps, forced, state, cmd, sens, observed, flows, cycles):
-    """Steps 0..nsteps of an offline run (rows as rtsim.vehicle.offline._loop logs them). Returns
-    (status, steps done, rows written); cmd is the driver's output array, cycles[0] += the cycles spent
-    inside vehicle_advance; step number `forced` (-1: none) fails as rtsim.model_fault's test-only hook
-    makes it (the first generalized velocity NaN before it)."""
-    nrow = 0
-    ns = sens.shape[0]
-    nk = keep.shape[0]
-    for n in range(nsteps + 1):
-        if n % every == 0:
-            row = rows[nrow]
-            sensor_stage(m, d, veh, io.signals, parts.effects, parts.sensors, states.sensors, sens)
-            row[0] = d.t[0]
-            for i in range(ns):
-                row[1 + i] = sens[i]
-            vehicle_state_values(d, veh, vd, io.signals, observed)
-            for i in range(nk):
-                row[1 + ns + i] = observed[keep[i]]
-            _audit_row(vd.audit_e, vd.e_base, io.eps_out, has_eps, flows, row[1 + ns + nk:])
-            nrow += 1
-        if n == nsteps:
-            break
-        driver_view(d, veh, state)
-        driver_step(packed, speed, path, flags, d.t[0] + h, state, cmd)
-        io.commands[CMD_THROTTLE] = cmd[I_THROTTLE]
-        io.commands[CMD_BRAKE] = cmd[I_BRAKE]
-        io.commands[CMD_STEER] = cmd[I_STEER]
-        io.extra[EX_TORQUE_LEFT] = cmd[I_TORQUE_RL]
-        io.extra[EX_TORQUE_RIGHT] = cmd[I_TORQUE_RR]
-        if forced == n + 1:
-            d.qd[0] = np.nan
-        c0 = read_cycles()
-        status, _ = vehicle_advance(m, d, veh, vd, road, parts, states, io, h, 1)
-        cycles[0] += read_cycles() - c0
-        if status != OK:
-            return status, n, nrow
-    return OK, nsteps, nrow
