@@ -90,5 +90,11 @@ class Driver:
         return self.out
 
     @property
+    def car_loop(self):
+        """The compiled offline loop of a car driven by this driver (drivers.car_loop.car_offline_loop)."""
+        from .car_loop import car_offline_loop
+        return car_offline_loop
+
+    @property
     def closed_loop(self) -> bool:
         return bool(self.flags.any())

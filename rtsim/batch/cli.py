@@ -16,6 +16,7 @@ from pathlib import Path
 from .expand import expand
 from .plan import load_plan
 from .results import Journal, sorted_rows, write_tables
+from .run import TIMING
 
 
 def add_arguments(p) -> None:
@@ -35,7 +36,7 @@ def add_arguments(p) -> None:
 
 def columns(plan, params: list[str]) -> list[str]:
     return ["run_id", "case", "scenario", "vehicle", "seed", *params, "status", "verdict", "failed", "error",
-            "simulated_s", *plan.metrics, "wall_s", "worker", "copy_of"]
+            "simulated_s", *plan.metrics, "wall_s", *TIMING, "worker", "copy_of"]
 
 
 def same_runs(specs: list[dict]) -> dict[str, str]:
@@ -81,8 +82,27 @@ def copy_row(row: dict, spec: dict, job: dict) -> dict:
         src = folder / f"{row['run_id']}.{job['per_run']}"
         if src.is_file():
             shutil.copyfile(src, folder / f"{spec['run_id']}.{job['per_run']}")
-    return {**row, "run_id": spec["run_id"], "seed": spec["seed"], "wall_s": 0.0, "worker": "",
+    return {**row, "run_id": spec["run_id"], "seed": spec["seed"], "wall_s": 0.0, "step_s": 0.0, "outside_s": 0.0,
+            "outside_pct": float("nan"), "worker": "",
             "copy_of": row["run_id"]}
+
+
+def timing_summary(rows: list[dict]) -> str:
+    """Where the simulated runs' wall time went (rows of runs simulated now, copies left out): the time
+    in the model's steps and outside them in all, and the median and largest share outside per run."""
+    import math
+    import statistics
+
+    runs = [r for r in rows if r.get("worker") and math.isfinite(r.get("step_s", math.nan))
+            and math.isfinite(r.get("wall_s", math.nan)) and r["wall_s"] > 0]
+    if not runs:
+        return ""
+    wall = sum(r["wall_s"] for r in runs)
+    step = sum(r["step_s"] for r in runs)
+    pct = [r["outside_pct"] for r in runs]
+    return (f"; time in the model's steps {step:.2f} s, outside them {wall - step:.2f} s "
+            f"({100.0 * (wall - step) / wall:.1f} % of {wall:.2f} s; per run median {statistics.median(pct):.1f} %, "
+            f"max {max(pct):.1f} %)")
 
 
 def main(args) -> int:
@@ -129,9 +149,11 @@ def main(args) -> int:
     t0 = time.perf_counter()
     n = [0]
     times: list[tuple[str, float]] = []
+    ran: list[dict] = []
 
     def on_row(row: dict) -> None:
         journal.append(row)
+        ran.append(row)
         for s in waiting.pop(row["run_id"], ()):
             journal.append(copy_row(row, s, job))
         n[0] += 1
@@ -160,6 +182,6 @@ def main(args) -> int:
     count = {v: sum(r["verdict"] == v for r in rows) for v in ("pass", "fail", "error")}
     rate = f", {n[0] / wall:.2f} runs/s" if n[0] and wall > 0 else ""
     print(f"{plan.name}: {len(rows)}/{len(specs)} runs in the table ({n[0]} run now in {wall:.1f} s{rate}): "
-          f"{count['pass']} pass, {count['fail']} fail, {count['error']} error -> {csv_path}, {pq}"
+          f"{count['pass']} pass, {count['fail']} fail, {count['error']} error{timing_summary(ran)} -> {csv_path}, {pq}"
           + ("" if args.no_report else f", {out / 'report.html'}"))
     return 0 if count["pass"] == len(specs) else 1

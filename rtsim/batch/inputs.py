@@ -32,11 +32,12 @@ def split_overrides(overrides: dict) -> tuple[dict, dict]:
     return veh, scen
 
 
-def open_run(scenario: str | Path, vehicle: str | Path | None, overrides: dict, build: bool = True):
+def open_run(scenario: str | Path, vehicle: str | Path | None, overrides: dict, build: bool = True, kept=None):
     """(scenario, opened vehicle) of a run as it runs: the scenario file, then the vehicle (the given
     file, else the scenario's, else the default car), both read under the run's overrides; with
     ``build`` the model is built under them too (their values are read on load). ConfigError (or the
-    vehicle's RtsimError refusing a batch) when they cannot be."""
+    vehicle's RtsimError refusing a batch) when they cannot be. ``kept``: a worker's opened vehicles
+    (rtsim.batch.models.OpenedVehicles), asked for the vehicle first and given the one opened."""
     from drivers.scenario import load_scenario
     from rtsim.configfile import overrides as with_overrides
     from rtsim.vehicle.registry import DEFAULT_VEHICLE, open_vehicle
@@ -47,12 +48,18 @@ def open_run(scenario: str | Path, vehicle: str | Path | None, overrides: dict, 
     with with_overrides(files):
         sc = load_scenario(scen, check_files=True)
         vpath = Path(vehicle) if vehicle else (sc.vehicle_path or DEFAULT_VEHICLE)
+        opened = None if kept is None else kept.get(vpath, veh_over)
+        if opened is not None:
+            opened.check_scenario(sc)
+            return sc, opened
         files[vpath.resolve()] = veh_over
         opened = open_vehicle(vpath)
         opened.refuse("batch")
         opened.check_scenario(sc)
         if build:
             opened.model
+        if kept is not None:
+            kept.put(vpath, veh_over, opened)
     return sc, opened
 
 

@@ -4,7 +4,13 @@ the batch goes on.
 
 The spec's dotted-path overrides are applied to the vehicle's and the scenario's TOML tables as they are
 read, before validation (rtsim.configfile.overrides), so the one loader checks them like any value in
-the file (file, key, value, allowed range)."""
+the file (file, key, value, allowed range). A worker opens and builds each distinct vehicle once
+(rtsim.batch.models; ``job["build_once"] = False`` builds every run's afresh).
+
+Where a run's wall time goes: ``step_s`` is the time inside the model's steps (NaN for a kind that does
+not measure it), ``outside_s`` the rest of the run's wall time (reading and validating its files,
+building or reusing the model, the start on the road, the driver and the logged rows between the steps,
+the metrics) and ``outside_pct`` that rest in per cent of the wall time: step_s + outside_s = wall_s."""
 from __future__ import annotations
 
 import math
@@ -18,16 +24,31 @@ from rtsim.errors import ConfigError, SimulationError
 
 from .inputs import open_run
 from .metrics import compute
+from .models import WORKER
 
-def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object]:
-    """(status, message, columns, data, writer) of the spec's run, on the vehicle the registry opens
-    (rtsim.vehicle.registry: the spec's vehicle, else the scenario's, else the default car)."""
-    sc, vehicle = open_run(spec["scenario"], spec["vehicle"], spec["overrides"])
+#: the timing columns of a row, after wall_s (s, s, %)
+TIMING = ("step_s", "outside_s", "outside_pct")
+
+def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object, float]:
+    """(status, message, columns, data, writer, step time in s) of the spec's run, on the vehicle the
+    registry opens (rtsim.vehicle.registry: the spec's vehicle, else the scenario's, else the default
+    car), kept by this worker from an earlier run of the same vehicle unless ``job["build_once"]`` is
+    False."""
+    opener = WORKER.open_run if job.get("build_once", True) else open_run
+    sc, vehicle = opener(spec["scenario"], spec["vehicle"], spec["overrides"])
     res = vehicle.run_offline(sc, seed=spec["seed"])
     from bridge.mcap_log import write_offline
     write = {"csv": lambda p: write_offline(res, Path(p).with_suffix(".csv")),
              "mcap": lambda p: write_offline(res, Path(p).with_suffix(".mcap"))}
-    return res.status, res.message, res.columns, res.data, write
+    return res.status, res.message, res.columns, res.data, write, res.step_s
+
+
+def timing(wall: float, step: float) -> dict:
+    """The timing columns of a run of `wall` s of which `step` s were in the model's steps."""
+    if not math.isfinite(step):
+        return {"step_s": math.nan, "outside_s": math.nan, "outside_pct": math.nan}
+    outside = wall - step
+    return {"step_s": step, "outside_s": outside, "outside_pct": 100.0 * outside / wall if wall > 0 else math.nan}
 
 
 def verdict(status: str, metrics: dict, criteria: list) -> tuple[str, str]:
@@ -45,11 +66,11 @@ def verdict(status: str, metrics: dict, criteria: list) -> tuple[str, str]:
 def run_one(spec: dict, job: dict) -> dict:
     """The result row of one run: run id, case, scenario, vehicle, seed, the swept parameters, status
     (ok, fall, failed, config_error, error), verdict, failed criteria, error text, simulated time (s),
-    the metrics, wall time (s) and the worker (host:pid)."""
+    the metrics, wall time (s), the timing columns (TIMING) and the worker (host:pid)."""
     t0 = time.perf_counter()
-    status, error, columns, data = "ok", "", (), None
+    status, error, columns, data, step = "ok", "", (), None, 0.0
     try:
-        status, error, columns, data, write = _simulate(spec, job)
+        status, error, columns, data, write, step = _simulate(spec, job)
         if job.get("per_run", "none") != "none" and job.get("out_dir"):
             folder = Path(job["out_dir"]) / "runs"
             folder.mkdir(parents=True, exist_ok=True)
@@ -65,11 +86,12 @@ def run_one(spec: dict, job: dict) -> dict:
         {m: math.nan for m in job["metrics"]}
     ver, failed = verdict(status, metrics, job.get("criteria", []))
     simulated = float(data[-1, 0]) if data is not None and len(data) else math.nan
+    wall = time.perf_counter() - t0
     return {"run_id": spec["run_id"], "case": spec["case"], "scenario": Path(spec["scenario"]).stem,
             "vehicle": Path(spec["vehicle"]).stem if spec["vehicle"] else "", "seed": spec["seed"],
             **{k: spec["params"].get(k) for k in job["param_keys"]},
             "status": status, "verdict": ver, "failed": failed, "error": error, "simulated_s": simulated,
-            **metrics, "wall_s": time.perf_counter() - t0, "worker": f"{socket.gethostname()}:{os.getpid()}"}
+            **metrics, "wall_s": wall, **timing(wall, step), "worker": f"{socket.gethostname()}:{os.getpid()}"}
 
 
 def lost_row(spec: dict, job: dict, reason: str) -> dict:
@@ -78,7 +100,7 @@ def lost_row(spec: dict, job: dict, reason: str) -> dict:
             "vehicle": Path(spec["vehicle"]).stem if spec["vehicle"] else "", "seed": spec["seed"],
             **{k: spec["params"].get(k) for k in job["param_keys"]}, "status": "error", "verdict": "error",
             "failed": "", "error": reason, "simulated_s": math.nan, **{m: math.nan for m in job["metrics"]},
-            "wall_s": math.nan, "worker": ""}
+            "wall_s": math.nan, **{c: math.nan for c in TIMING}, "worker": ""}
 
 
 def warm(spec: dict, job: dict) -> None:

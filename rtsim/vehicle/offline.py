@@ -16,6 +16,7 @@ import numpy as np
 from rtsim.channels import CAR, COMMANDS, ChannelDictionary
 from rtsim.compile_status import CompileClock
 from rtsim.errors import ConfigError, SimulationError
+from rtsim.mbs.model import OK
 from rtsim.model_fault import ModelFault, describe_error, force_failure, test_fault_step, test_fault_time
 from rtsim.road.config import load_road
 
@@ -25,7 +26,7 @@ from .car.config import load_vehicle
 from .car.inputs import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, INPUT_NAMES, NSTATE
 from .car.observer import driver_view, vehicle_state_values
 from .car.sim import VehicleSim
-from .car.step import CMD_BRAKE, CMD_STEER, CMD_THROTTLE, EX_TORQUE_LEFT, EX_TORQUE_RIGHT
+from .car.offline_kernel import apply_commands
 
 
 
@@ -52,6 +53,7 @@ class RunResult:
     steps: int
     fault: ModelFault | None = None   # the model failure that ended the run early (rows up to it)
     compile_s: float = 0.0    # s numba spent compiling kernels during the loop (0 when all were cached)
+    step_s: float = 0.0       # s of wall time inside the model's steps (sim.step), compilations excluded
 
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.columns.index(name)]
@@ -114,9 +116,14 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
     t0 = time.perf_counter()
     try:
         with CompileClock() as clock:       # a first run compiles at its first step: not step time
-            res = _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state, sens, observed,
-                        keep, io, ctl, t0)
+            if progress is None and ctl.source is None and getattr(driver, "car_loop", None) is not None:
+                res = _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, forced,
+                                     t0)
+            else:
+                res = _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state, sens, observed,
+                            keep, io, ctl, t0)
         res.wall_s, res.compile_s = max(res.wall_s - clock.seconds, 0.0), clock.seconds
+        res.step_s = max(res.step_s - clock.seconds, 0.0)
         return res
     finally:
         ctl.close()
@@ -126,6 +133,8 @@ def _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state
           ctl, t0) -> RunResult:
     dt = sc.dt
     nrow = 0
+    step_s = 0.0                        # the model's steps alone (the driver and the logging are not in it)
+    clock = time.perf_counter
     for n in range(nsteps + 1):
         if n % every == 0:
             _log(sim, sens, observed, keep, rows[nrow])
@@ -138,20 +147,48 @@ def _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state
         cmd = driver.step(sim.data.t[0] + dt, state)
         if ctl.source is not None:
             ctl.apply(n, cmd)
-        io.commands[CMD_THROTTLE] = cmd[I_THROTTLE]
-        io.commands[CMD_BRAKE] = cmd[I_BRAKE]
-        io.commands[CMD_STEER] = cmd[I_STEER]
-        io.extra[EX_TORQUE_LEFT] = cmd[I_TORQUE_RL]
-        io.extra[EX_TORQUE_RIGHT] = cmd[I_TORQUE_RR]
+        apply_commands(io, cmd)
         if forced == n + 1:
             force_failure(sim)
+        ts = clock()
         try:
             sim.step(1)
         except SimulationError as exc:
             wall = time.perf_counter() - t0
-            return RunResult(columns, rows[:nrow], wall, n, describe_error(sim, exc, n + 1))
+            return RunResult(columns, rows[:nrow], wall, n, describe_error(sim, exc, n + 1),
+                             step_s=step_s + clock() - ts)
+        step_s += clock() - ts
     wall = time.perf_counter() - t0
-    return RunResult(columns, rows[:nrow], wall, nsteps)
+    return RunResult(columns, rows[:nrow], wall, nsteps, step_s=step_s)
+
+
+_CYCLES_PER_S: list[float] = []
+
+
+def _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, forced,
+                   t0) -> RunResult:
+    """The loop of `_loop` in one compiled call, the driver's (``driver.car_loop``, drivers.car_loop: the
+    same rows and fault, bit for bit), for a run without progress reports or controller; the time
+    inside the steps from the cycle counter."""
+    from rtsim.jit import cycles_per_second
+
+    from .car.energy import FLOW_KEYS
+
+    if not _CYCLES_PER_S:
+        _CYCLES_PER_S.append(cycles_per_second())
+    cycles = np.zeros(1, dtype=np.int64)
+    status, n, nrow = driver.car_loop(sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states,
+                                      sim.io, sim.dt, driver.packed, driver.speed, driver.path, driver.flags, nsteps,
+                                      every, rows, keep.astype(np.int64), sim.has_eps, -1 if forced is None else forced,
+                                      state, driver.out, sens, observed, np.zeros(len(FLOW_KEYS)), cycles)
+    wall = time.perf_counter() - t0
+    step_s = float(cycles[0]) / _CYCLES_PER_S[0]
+    if status != OK:
+        try:
+            sim.sim._raise(status, int(sim.data.stats[0]) + 1)
+        except SimulationError as exc:
+            return RunResult(columns, rows[:nrow], wall, n, describe_error(sim, exc, n + 1), step_s=step_s)
+    return RunResult(columns, rows[:nrow], wall, nsteps, step_s=step_s)
 
 
 class _Controlled:

@@ -79,6 +79,7 @@ class OfflineRun:
     vehicle_id: str = ""
     channels: Any = None         # the columns' ChannelDictionary (an MCAP's schemas)
     scene: Any = None            # what the 3D scene is drawn from (bridge.mcap_log.write_run's ``sim``)
+    step_s: float = float("nan")  # s of wall time inside the model's steps (NaN: the kind does not measure it)
 
     def column(self, name: str):
         return self.data[:, self.columns.index(name)]

@@ -23,7 +23,8 @@ import numpy as np
 
 from rtsim.channels import ENERGY, ENERGY_FLOWS, ENERGY_STORED
 
-from ..kit.eps import PORT_MOTOR_EM, PORT_TORSION_BAR
+from ..kit.eps import (EO_ASSIST_TORQUE, EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_POWER, EO_SW_TORQUE,
+                       EO_TB_TORQUE, EO_VOLTAGE, PORT_MOTOR_EM, PORT_TORSION_BAR)
 from .energy_kernels import A_DRIVER_ANGLE, A_EMF, A_JOINTS, A_SIZE, A_STORED, A_STORED0, A_SUPPLY, A_WINDING, NSTORED
 from .layout import CAR_PORT_NAMES, NPORT, PORT_ARB, PORT_EPS, PORT_SPRING
 from .step import AUDIT_SIZE
@@ -37,6 +38,31 @@ assert len(PORT_NAMES) == NPORT and len(STORED_NAMES) == NSTORED and A_SIZE <= A
 STORED_PORTS = (PORT_SPRING, PORT_ARB, PORT_EPS + PORT_TORSION_BAR)
 
 
+#: the names of Balance.flows, in its order: the ports that store nothing (but the motor's electromagnetic
+#: one), then the driver's angle, the joints and the motor's supply, winding and conversion
+FLOW_KEYS = (*(n for i, n in enumerate(PORT_NAMES) if i not in STORED_PORTS and i != PORT_EPS + PORT_MOTOR_EM),
+             "driver_angle", "joints", "motor_supply", "motor_winding", "motor_conversion")
+_FLOW_PORTS = np.array([PORT_NAMES.index(n) for n in FLOW_KEYS[:-5]] + [A_DRIVER_ANGLE, A_JOINTS], dtype=np.int64)
+_ROW_FLOWS = np.array([FLOW_KEYS.index(n) for n in ENERGY_FLOWS], dtype=np.int64)   # the row's order
+
+
+def flow_values(a: np.ndarray, e_base: np.ndarray) -> np.ndarray:
+    """Balance.flows of the audit array `a` as an array in FLOW_KEYS order (J)."""
+    out = np.empty(len(FLOW_KEYS))
+    n = _FLOW_PORTS.size
+    out[:n] = a[_FLOW_PORTS]
+    out[n] = a[A_SUPPLY] - e_base[0]
+    out[n + 1] = -(a[A_WINDING] - e_base[1])
+    # the motor's conversion: mechanical work of Kt i less the electrical energy converted (0 exactly)
+    out[n + 2] = a[PORT_EPS + PORT_MOTOR_EM] - (a[A_EMF] - e_base[2])
+    return out
+
+
+def stored_values(a: np.ndarray) -> np.ndarray:
+    """The stored energies' change since the audit's start (J), STORED_NAMES order."""
+    return a[A_STORED:A_STORED + NSTORED] - a[A_STORED0:A_STORED0 + NSTORED]
+
+
 class Balance:
     """The audit's summary from its array (VehicleData.audit_e, or a recorded row of energy columns)."""
 
@@ -47,19 +73,13 @@ class Balance:
         self.supply = float(a[A_SUPPLY] - e_base[0])
         self.winding = float(a[A_WINDING] - e_base[1])
         self.emf = float(a[A_EMF] - e_base[2])
-        self.stored = {n: float(a[A_STORED + j] - a[A_STORED0 + j]) for j, n in enumerate(STORED_NAMES)}
+        self.stored = dict(zip(STORED_NAMES, stored_values(a).tolist()))
+        self._flows = dict(zip(FLOW_KEYS, flow_values(a, e_base).tolist()))
 
     @property
     def flows(self) -> dict[str, float]:
         """Work done on the vehicle by every non-storing port (J): inputs positive, losses negative."""
-        out = {n: self.ports[n] for i, n in enumerate(PORT_NAMES) if i not in STORED_PORTS and i != PORT_EPS + PORT_MOTOR_EM}
-        out["driver_angle"] = self.driver_angle
-        out["joints"] = self.joints
-        out["motor_supply"] = self.supply
-        out["motor_winding"] = -self.winding
-        # the motor's conversion: mechanical work of Kt i less the electrical energy converted (0 exactly)
-        out["motor_conversion"] = self.ports["motor_em"] - self.emf
-        return out
+        return dict(self._flows)
 
     @property
     def stored_change(self) -> float:
@@ -77,29 +97,25 @@ class Balance:
 
 
 ENERGY_NAMES = tuple(c.name for c in ENERGY)
+#: the EPS outputs of the audit's row, in its order
+_EPS_OUT = np.array([EO_CURRENT, EO_VOLTAGE, EO_POWER, EO_MOTOR_SPEED, EO_MOTOR_ANGLE, EO_TB_TORQUE, EO_SW_TORQUE,
+                     EO_ASSIST_TORQUE], dtype=np.int64)
 
 
 def energy_row(sim, out: np.ndarray) -> None:
-    """The audit's channels (rtsim.channels.ENERGY order) of a VehicleSim at its present step."""
-    from ..kit.eps import (EO_ASSIST_TORQUE, EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_POWER, EO_SW_TORQUE,
-                           EO_TB_TORQUE, EO_VOLTAGE)
-    b = Balance(sim.vd.audit_e, sim.vd.e_base)
-    flows = b.flows
-    k = 0
-    for n in ENERGY_FLOWS:
-        out[k] = flows[n]
-        k += 1
-    for n in ENERGY_STORED:
-        out[k] = b.stored[n]
-        k += 1
-    out[k] = b.residual
-    k += 1
+    """The audit's channels (rtsim.channels.ENERGY order) of a VehicleSim at its present step: the
+    flows, the stored energies' changes, the residual (Balance.residual, summed in the same order) and,
+    with EPS, the EPS's outputs."""
+    a = sim.vd.audit_e
+    flows = flow_values(a, sim.vd.e_base)
+    stored = stored_values(a)
+    nf = _ROW_FLOWS.size
+    out[:nf] = flows[_ROW_FLOWS]
+    out[nf:nf + NSTORED] = stored
+    out[nf + NSTORED] = sum(stored.tolist()) - sum(flows.tolist())
+    k = nf + NSTORED + 1
     if sim.has_eps:
-        e = sim.io.eps_out
-        for j in (EO_CURRENT, EO_VOLTAGE, EO_POWER, EO_MOTOR_SPEED, EO_MOTOR_ANGLE, EO_TB_TORQUE, EO_SW_TORQUE,
-                  EO_ASSIST_TORQUE):
-            out[k] = e[j]
-            k += 1
+        out[k:k + _EPS_OUT.size] = sim.io.eps_out[_EPS_OUT]
     else:
         out[k:] = 0.0
 

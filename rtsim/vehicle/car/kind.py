@@ -71,7 +71,7 @@ class CarKind(VehicleKind):
         res = run(sim, sc, progress, seed=seed)
         out = OfflineRun(res.columns, res.data, res.wall_s, res.steps, status="ok" if res.fault is None else "failed",
                          message="" if res.fault is None else res.fault.line(), fault=res.fault,
-                         vehicle_id=sim.vm.config.id, channels=sim.vm.channels, scene=sim)
+                         vehicle_id=sim.vm.config.id, channels=sim.vm.channels, scene=sim, step_s=res.step_s)
         dist = float(np.sum(np.hypot(np.diff(res.column("pos_x")), np.diff(res.column("pos_y")))))
         peak = float(res.column("speed").max()) if len(res.data) else 0.0
         out.line = (f"{sc.name}: {res.data[-1, 0] if len(res.data) else 0.0:g} s simulated in {res.wall_s:.2f} s "

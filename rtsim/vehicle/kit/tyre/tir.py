@@ -40,6 +40,7 @@ values for the linearised model (`P_LIN_*`, computed here at Fz = FNOMIN, gamma 
 """
 from __future__ import annotations
 
+import functools
 import math
 import re
 from dataclasses import dataclass, field
@@ -517,7 +518,8 @@ def parse_tir(text: str, source: str = "<string>") -> TyreProperties:
 
 
 def load_tir(path: str | Path) -> TyreProperties:
-    """Read and parse a .tir file (ConfigError if it is missing, unreadable or invalid)."""
+    """Read and parse a .tir file (ConfigError if it is missing, unreadable or invalid). The file is read
+    at each call; a text parsed before gives the same (immutable) properties again without parsing."""
     path = Path(path)
     note_read(path)
     try:
@@ -528,7 +530,12 @@ def load_tir(path: str | Path) -> TyreProperties:
         text = path.read_text(encoding="latin-1")     # old MF-Tool files carry latin-1 comments
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
-    return parse_tir(text, str(path))
+    return _parsed(text, str(path))
+
+
+@functools.lru_cache(maxsize=16)
+def _parsed(text: str, source: str) -> TyreProperties:
+    return parse_tir(text, source)
 
 
 # ---- packing --------------------------------------------------------------------------------------

@@ -1,0 +1,61 @@
+"""A worker's opened vehicles, kept across its runs: each distinct vehicle (its file and the run's vehicle
+overrides) is read, validated and built once per worker process, and every later run of it gets the same
+opened vehicle, whose compiled model is immutable arrays (each run makes its own state: rtsim.vehicle's
+``run_offline`` builds a fresh simulation on it). A run's scenario is read per run (its overrides differ
+from run to run; reading it takes a few ms). A run whose vehicle overrides differ from every kept one in
+any value -- a plain parameter such as the chassis mass as much as a change of topology -- is a new
+vehicle: validated and built afresh (its values are read on load, so a bad one is that run's config
+error as before). The input files are taken not to change during a batch (a run id hashes them at the
+start: rtsim.batch.inputs).
+
+The worker keeps at most ``KEEP`` vehicles (the least recently used goes first), so a random sweep
+over a continuous parameter does not fill its memory."""
+from __future__ import annotations
+
+import json
+from collections import OrderedDict
+from pathlib import Path
+
+from .inputs import open_run
+
+KEEP = 32
+
+
+class OpenedVehicles:
+    """(resolved vehicle file, its overrides) -> opened vehicle with its model built; ``built`` counts the
+    vehicles opened and built, ``reused`` the runs that got a kept one."""
+
+    def __init__(self, keep: int = KEEP):
+        self.keep = keep
+        self.kept: OrderedDict = OrderedDict()
+        self.built = 0
+        self.reused = 0
+
+    def open_run(self, scenario: str | Path, vehicle: str | Path | None, overrides: dict):
+        """(scenario, opened vehicle) of a run, as rtsim.batch.inputs.open_run opens them (same loaders,
+        same order, same errors), the vehicle a kept one when this worker opened it before."""
+        return open_run(scenario, vehicle, overrides, kept=self)
+
+    @staticmethod
+    def _key(vpath: Path, veh_over: dict) -> tuple[str, str]:
+        return str(Path(vpath).resolve()), json.dumps(veh_over, sort_keys=True, default=repr)
+
+    def get(self, vpath: Path, veh_over: dict):
+        """The kept vehicle of this file and overrides (None: not opened yet, or no longer kept)."""
+        key = self._key(vpath, veh_over)
+        opened = self.kept.get(key)
+        if opened is not None:
+            self.kept.move_to_end(key)
+            self.reused += 1
+        return opened
+
+    def put(self, vpath: Path, veh_over: dict, opened) -> None:
+        """Keep a vehicle just opened and built (the least recently used out beyond ``keep``)."""
+        self.kept[self._key(vpath, veh_over)] = opened
+        self.built += 1
+        while len(self.kept) > self.keep:
+            self.kept.popitem(last=False)
+
+
+#: this worker process's vehicles (one batch runs per process at a time)
+WORKER = OpenedVehicles()
