@@ -161,37 +161,49 @@ max = 1
 
 
 def test_batch_with_a_controller_fmu_equals_the_python_controller(tmp_path, fmu):
-    """`rtsim batch` (per_run = "mcap": every sample as written) of a scenario naming the PI FMU: each run's
-    recorded sensor and state samples equal an offline run of the same law written in Python within 1e-9."""
+    """`rtsim batch` (per_run = "mcap": every sample as written) of a scenario naming the PI FMU, swept over
+    two mapping files (targets 19 and 10 m/s): each run's recorded sensor and state samples equal an offline
+    run of the same law written in Python with that target within 1e-9."""
+    import csv
+
     from bridge.mcap_recorder import read_recording
     from rtsim.cli import main
 
     car = open_vehicle(None)
     mapping = write(tmp_path, "pi.toml", PI_MAP.format(fmu=fmu, step=STEP))
+    write(tmp_path, "slow.toml", PI_MAP.format(fmu=fmu, step=STEP).replace("v_ref = 19.0", "v_ref = 10.0"))
     sc = scenario(tmp_path, mapping, duration=1.0)
     plan = write(tmp_path, "plan.toml", f"""name = "fmu_eq"
 metrics = ["distance"]
 per_run = "mcap"
 [[cases]]
 scenario = "{sc}"
+[grid]
+"scenario.controller" = ["pi.toml", "slow.toml"]
 """)
     out = tmp_path / "batch"
     assert main(["batch", str(plan), "--workers", "1", "--out", str(out)]) == 0
-    (rec,) = sorted((out / "runs").glob("*.mcap"))
-    msgs, _ = read_recording(rec)
+    target = {r["run_id"]: {"pi.toml": 19.0, "slow.toml": 10.0}[r["scenario.controller"]]
+              for r in csv.DictReader((out / "results.csv").open())}
+    assert sorted(target.values()) == [10.0, 19.0]
     spec = load_scenario(sc, check_files=True)
-    ref = run(sim_for(car.model, spec), spec, controller=PythonPiSpeed(STEP, v_ref=19.0))
-    col = {c: i for i, c in enumerate(ref.columns)}
-    rows = {round(float(t), 9): r for t, r in zip(ref.column("time"), ref.data)}
-    compared = 0
-    for topic in ("sensors", "state"):
-        (key,) = [k for k in msgs if k.endswith("/" + topic)]
-        assert len(msgs[key]) == len(rows)
-        for m in msgs[key]:
-            r = rows[round(m.data["time"], 9)]
-            for name, value in m.data.items():
-                if name != "time" and isinstance(value, float) and math.isfinite(value):
-                    assert abs(value - r[col[name]]) <= 1e-9, f"{topic} {name} at t = {m.data['time']}"
-                    compared += 1
-    assert compared > 1000
-    assert ref.column("throttle_angle")[-1] > 0.0           # the law drove the car (towards 19 m/s)
+    ends = {}
+    for run_id, v_ref in target.items():
+        msgs, _ = read_recording(out / "runs" / f"{run_id}.mcap")
+        ref = run(sim_for(car.model, spec), spec, controller=PythonPiSpeed(STEP, v_ref=v_ref))
+        col = {c: i for i, c in enumerate(ref.columns)}
+        rows = {round(float(t), 9): r for t, r in zip(ref.column("time"), ref.data)}
+        compared = 0
+        for topic in ("sensors", "state"):
+            (key,) = [k for k in msgs if k.endswith("/" + topic)]
+            assert len(msgs[key]) == len(rows)
+            for m in msgs[key]:
+                r = rows[round(m.data["time"], 9)]
+                for name, value in m.data.items():
+                    if name != "time" and isinstance(value, float) and math.isfinite(value):
+                        assert abs(value - r[col[name]]) <= 1e-9, f"{v_ref}: {topic} {name} at t = {m.data['time']}"
+                        compared += 1
+        assert compared > 1000
+        ends[v_ref] = ref.column("speed")[-1]
+    # from 15 m/s: the 19 m/s target opens the throttle, the 10 m/s one brakes
+    assert ends[19.0] > 15.0 > ends[10.0] + 0.5, ends
