@@ -207,3 +207,32 @@ scenario = "{sc}"
         ends[v_ref] = ref.column("speed")[-1]
     # from 15 m/s: the 19 m/s target opens the throttle, the 10 m/s one brakes
     assert ends[19.0] > 15.0 > ends[10.0] + 0.5, ends
+
+
+def test_a_case_id_hashes_the_mapping_and_its_fmu(tmp_path, fmu):
+    """Resuming reruns a case whose controller changed: its run id changes with the mapping file and with
+    the FMU's content, and not otherwise."""
+    import shutil
+
+    from rtsim.ecutest.case import case_id
+
+    own = shutil.copy(fmu, tmp_path / "own.fmu")
+    write(tmp_path, "pi.toml", PI_MAP.format(fmu="own.fmu", step=STEP))
+    cat = write(tmp_path, "cat.toml", f"""name = "ids"
+scenario = "{_plain(tmp_path, 'cruise.toml')}"
+controller = "pi.toml"
+[[cases]]
+name = "a"
+[[cases.expect]]
+kind = "bounds"
+signal = "state.speed"
+max = 100
+""")
+    first = case_id(load_catalogue(cat), 0)
+    assert case_id(load_catalogue(cat), 0) == first
+    write(tmp_path, "pi.toml", PI_MAP.format(fmu="own.fmu", step=STEP).replace("19.0", "18.0"))
+    second = case_id(load_catalogue(cat), 0)
+    assert second != first
+    with open(own, "ab") as fh:                 # the same mapping, another FMU file content
+        fh.write(b"\0")
+    assert case_id(load_catalogue(cat), 0) not in (first, second)
