@@ -26,6 +26,8 @@ STEP = 0.01          # s, the controller's communication step
 V0 = 15.0            # m/s, the start and the target speed
 DURATION = 6.0       # s of simulated time per case
 PI = example_module("pi_speed").PARAMS
+#: the end of a catalogue naming the controller pi.toml, with one case of one expectation
+ONE_CASE = 'controller = "pi.toml"\n[[cases]]\nname = "a"\n[[cases.expect]]\nkind = "bounds"\nsignal = "state.speed"\nmax = 100\n'
 
 
 @pytest.fixture(scope="module")
@@ -133,15 +135,7 @@ controller = "novar.toml"
 
 def test_bad_mapping_in_a_catalogue_is_one_line(tmp_path, fmu):
     write(tmp_path, "pi.toml", PI_MAP.format(fmu=fmu, step=-1.0))
-    cat = write(tmp_path, "cat.toml", """name = "bad"
-controller = "pi.toml"
-[[cases]]
-name = "a"
-[[cases.expect]]
-kind = "bounds"
-signal = "state.speed"
-max = 1
-""")
+    cat = write(tmp_path, "cat.toml", 'name = "bad"\n' + ONE_CASE)
     with pytest.raises(ConfigError) as exc:
         load_catalogue(cat)
     line = str(exc.value)
@@ -218,16 +212,7 @@ def test_a_case_id_hashes_the_mapping_and_its_fmu(tmp_path, fmu):
 
     own = shutil.copy(fmu, tmp_path / "own.fmu")
     write(tmp_path, "pi.toml", PI_MAP.format(fmu="own.fmu", step=STEP))
-    cat = write(tmp_path, "cat.toml", f"""name = "ids"
-scenario = "{_plain(tmp_path, 'cruise.toml')}"
-controller = "pi.toml"
-[[cases]]
-name = "a"
-[[cases.expect]]
-kind = "bounds"
-signal = "state.speed"
-max = 100
-""")
+    cat = write(tmp_path, "cat.toml", f'name = "ids"\nscenario = "{_plain(tmp_path, "cruise.toml")}"\n' + ONE_CASE)
     first = case_id(load_catalogue(cat), 0)
     assert case_id(load_catalogue(cat), 0) == first
     write(tmp_path, "pi.toml", PI_MAP.format(fmu="own.fmu", step=STEP).replace("19.0", "18.0"))
