@@ -6,7 +6,11 @@ runs can share one); then the expectations judged on the recording (rtsim.ecutes
 The ECU is a process started for the case (``[ecu] command``): it drives simulated time in lockstep (as the
 shipped demo controllers do with ``--lockstep``) and the case ends when it exits, after ``--duration`` s of
 simulated time; or an ECU already on a bus (``[ecu] channel``, realtime): the service then runs the case's
-duration. ``timeout`` (wall s) only bounds a hung case. Every process started here is stopped here."""
+duration. Or no ECU at all: a controller FMU (``controller``, its mapping file; rtsim.fmu) is the command
+source, through the service's own path for it (rtsim.service.controller), and the case is the lockstep clock:
+it steps the service through the case's duration. A controller given beside an ECU drives what the ECU does
+not command (the service's priority rules). ``timeout`` (wall s) only bounds a hung case. Every process
+started here is stopped here."""
 from __future__ import annotations
 
 import hashlib
@@ -87,11 +91,36 @@ def case_id(cat: LoadedCatalogue, index: int) -> str:
     scenario = cat.config(case, "scenario") or default_scenario(vehicle)
     files = run_inputs(scenario, vehicle, {}).files
     spec = cat.spec.model_dump(mode="json", exclude={"cases"})
-    words = list(cat.spec.ecu.command or []) + list(cat.spec.ecu.args) + list(case.ecu_args)
+    ecu = cat.spec.ecu
+    words = (list(ecu.command or []) + list(ecu.args) if ecu is not None else []) + list(case.ecu_args)
     scripts = {w: digest(script_path(cat, w)) for w in words if w.endswith(".py")}
+    mapping = cat.controller(case)
+    if mapping is not None:                 # the controller FMU: its mapping file and the FMU itself
+        scripts.update({str(mapping.path): digest(mapping.path), str(mapping.fmu): digest(mapping.fmu)})
     blob = json.dumps({"catalogue": spec, "case": case.model_dump(mode="json"), "files": files,
                        "scripts": scripts}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def _step_through(svc, duration: float) -> dict:
+    """Run the lockstep service ``svc`` on a thread and step it through ``duration`` s of simulated time (1 s
+    a request), then stop it: the clock of a case without an ECU. Its closing summary; a step refused (a
+    model fault, the service stopped by the case's timeout) ends the stepping early."""
+    summary: dict = {}
+    th = threading.Thread(target=lambda: summary.update(svc.run() or {}), name="rtsim-test-service", daemon=True)
+    th.start()
+    n, chunk, done = int(round(duration / svc.sim.dt)), max(1, int(round(1.0 / svc.sim.dt))), 0
+    try:
+        while done < n and th.is_alive():
+            k = min(chunk, n - done)
+            if not svc.control({"op": "step", "n": k}).get("ok"):
+                break
+            done += k
+    finally:
+        svc.stop()
+        th.join()
+    summary.setdefault("sim_time", done * svc.sim.dt)
+    return summary
 
 
 def _faults_file(specs, path: Path) -> Path:
@@ -146,7 +175,7 @@ def _run(cat: LoadedCatalogue, case: Case, index: int, cdir: Path, log) -> dict:
     record = cdir / "session.mcap"
     record.unlink(missing_ok=True)
     duration = cat.duration(case)
-    external = cat.spec.ecu.channel
+    external = cat.external
     channel = external or worker_hub().channel
     kw = {k: v for k in ("vehicle", "scenario") if (v := cat.config(case, k)) is not None}
     opts = ServeOptions(mode=cat.spec.mode, record=record, zenoh=False, can_interface="remote", can_channel=channel,
@@ -161,9 +190,10 @@ def _run(cat: LoadedCatalogue, case: Case, index: int, cdir: Path, log) -> dict:
         if "svc" in holder:
             holder["svc"].stop()
     try:
-        svc = Service(opts, out=say)        # its bus port listens from here: the ECU's first frames are kept
-        holder["svc"] = svc
-        if not external:                    # (started before, on this worker's running hub, its first step
+        svc = Service(opts, out=say, controller=cat.controller(case))   # its bus port listens from here: the
+        holder["svc"] = svc                                               # ECU's first frames are kept
+        clocked = cat.spec.ecu is None      # no ECU: this case steps the lockstep service itself
+        if not external and not clocked:    # (started before, on this worker's running hub, its first step
             cmd = ecu_command(cat, case, channel)   # request could reach the bus before the service did)
             say("ecu: " + " ".join(cmd))
             ecu = EcuProcess(cmd, cwd=ROOT, on_exit=on_exit, echo=lambda line: say("ecu: " + line))
@@ -174,6 +204,8 @@ def _run(cat: LoadedCatalogue, case: Case, index: int, cdir: Path, log) -> dict:
             if ended.is_set():              # the ECU ended while the service was built
                 svc.close()
                 summary = {}
+            elif clocked:
+                summary = _step_through(svc, duration)
             else:
                 summary = svc.run()
         finally:
@@ -184,6 +216,9 @@ def _run(cat: LoadedCatalogue, case: Case, index: int, cdir: Path, log) -> dict:
             ecu.stop()
         if "svc" in holder:
             holder["svc"].close()          # (idempotent: closed by run() already when it ran)
+    if clocked and summary.get("sim_time", 0.0) < duration - 0.5 * svc.sim.dt:
+        return {"status": "error", "message": f"the case did not end within its timeout ({cat.spec.timeout:g} s "
+                f"wall): stopped at t = {summary.get('sim_time', 0.0):.3f} s of {duration:g} s"}
     say(json.dumps({"service": {k: summary.get(k) for k in ("sim_time", "steps", "run_state", "accepted_frames")}}))
     ecu_info = {}
     if ecu is not None:

@@ -15,6 +15,9 @@ is one line naming the file, the key, the value and the allowed range).
     # an ECU already on a python-can-remote bus (realtime only; the catalogue then runs its hub's cases
     # one at a time)
 
+    # or, instead of [ecu] (or beside it): a controller FMU as the command source (docs/fmu.md):
+    # controller = "pi.toml"            # its mapping file (relative to this file); a case may give its own
+
     [[cases]]
     name = "brake_timeout_hold"
     [[cases.faults]]                    # the fault spec of rtsim.faults (docs/faults.md)
@@ -182,6 +185,7 @@ class Case(Strict):
     scenario: Optional[str] = None
     vehicle: Optional[str] = None
     duration: Optional[Window] = None
+    controller: Optional[str] = Field(None, min_length=1, description="a controller FMU's mapping file")
     ecu_args: list[str] = []
     faults: list[dict] = []
     expect: list[Expectation] = Field(min_length=1)
@@ -196,7 +200,9 @@ class Catalogue(Strict):
     scenario: Optional[str] = None
     duration: Window = 5.0
     timeout: Range(1.0, 86400.0, "s") = Field(300.0, description="wall-clock bound of one case (hung ECU)")
-    ecu: Ecu
+    controller: Optional[str] = Field(None, min_length=1, description="a controller FMU's mapping file "
+                                      "(rtsim.fmu.mapping), the command source of every case without its own")
+    ecu: Optional[Ecu] = None
     cases: list[Case] = Field(min_length=1)
 
     @model_validator(mode="after")
@@ -206,7 +212,12 @@ class Catalogue(Strict):
             if c.name in seen:
                 raise bad(f"cases[{i}].name", c.name, f"used by cases[{seen[c.name]}] too (names are unique)")
             seen[c.name] = i
-        if self.ecu.channel is not None and self.mode != "realtime":
+            if self.ecu is None and self.controller is None and c.controller is None:
+                raise bad(f"cases[{i}].controller", None, "give [ecu] (the ECU under test) or a controller "
+                                                         "(a controller FMU's mapping file) for every case")
+        if self.ecu is None and self.mode != "lockstep":
+            raise bad("mode", self.mode, "a catalogue without [ecu] steps its controller FMU in lockstep mode only")
+        if self.ecu is not None and self.ecu.channel is not None and self.mode != "realtime":
             raise bad("mode", self.mode, "an ECU already on the bus (ecu.channel) runs in realtime mode only")
         return self
 
@@ -227,6 +238,20 @@ class LoadedCatalogue:
             return (self.path.parent / value).resolve()
         from rtsim.vehicle.registry import resolve_scenario, resolve_vehicle
         return (resolve_scenario if what == "scenario" else resolve_vehicle)(value)
+
+    @property
+    def external(self) -> Optional[str]:
+        """The bus of an ECU already running (``[ecu] channel``), else None."""
+        return self.spec.ecu.channel if self.spec.ecu is not None else None
+
+    def controller(self, case: Case):
+        """The case's controller FMU (its own mapping file, else the catalogue's) as a loaded mapping
+        (rtsim.fmu.mapping.load_mapping, relative to the catalogue), or None."""
+        value = case.controller or self.spec.controller
+        if value is None:
+            return None
+        from rtsim.fmu.mapping import load_mapping
+        return load_mapping(self.path.parent / value)
 
     def duration(self, case: Case) -> float:
         return case.duration if case.duration is not None else self.spec.duration
@@ -249,6 +274,12 @@ def load_catalogue(path: str | Path) -> LoadedCatalogue:
                               f"names no fault of this case (its faults: {', '.join(sorted(ids)) or 'none'})")
             if e.signal.startswith("fault.") and e.signal[6:] not in ids:
                 raise problem(path, f"cases[{i}].expect[{j}].signal", e.signal, "names no fault of this case")
+        if case.controller or spec.controller:
+            key = f"cases[{i}].controller" if case.controller else "controller"
+            try:
+                LoadedCatalogue(spec, path, []).controller(case)
+            except Exception as exc:  # noqa: BLE001  (the mapping's own one-line error, naming its file)
+                raise problem(path, key, case.controller or spec.controller, str(exc)) from None
         for what in ("scenario", "vehicle"):
             try:
                 LoadedCatalogue(spec, path, []).config(case, what)

@@ -62,12 +62,14 @@ def run_catalogue(path: str | Path, out: Path, workers: int = 1, mode: str | Non
 
     cat = load_catalogue(path)
     if mode is not None and mode != cat.spec.mode:
-        if cat.spec.ecu.channel is not None and mode == "lockstep":
+        if cat.external is not None and mode == "lockstep":
             raise ConfigError(f"{path}: --mode lockstep: an ECU already on the bus (ecu.channel) runs in realtime")
+        if cat.spec.ecu is None and mode != "lockstep":
+            raise ConfigError(f"{path}: --mode {mode}: a catalogue without [ecu] steps its controller FMU in lockstep")
         cat.spec = cat.spec.model_copy(update={"mode": mode})
     if workers < 1:
         raise ConfigError(f"--workers {workers}: at least 1")
-    if cat.spec.ecu.channel is not None:
+    if cat.external is not None:
         workers = 1                                  # one bus, one service at a time
     picked = [i for i, c in enumerate(cat.spec.cases) if select is None or select in c.name]
     ids = {i: case_id(cat, i) for i in picked}
