@@ -6,11 +6,13 @@ list items as [i]), the offending value and what is allowed:
     configs/vehicles/x.toml: steering.kp = -1.0: out of range (allowed 0 <= kp <= 1e+06 N m/rad)
     configs/roads/x.toml: heigth = 1.0: unknown key (allowed: type, height, mu, rolling_resistance)
 
-Ranges are declared with `Range(lo, hi, unit)` (an annotated float: within the bounds, finite unless a
-closed bound is itself infinite, the unit in the message), or with pydantic's `Field(ge=, le=, gt=, lt=)`
-on a model's field; a config dataclass (a kit part's section) declares its fields' ranges with `Range`
-too and calls `check_declared_ranges(self)` in its `__post_init__`, so a part built in code is checked
-by the same declaration as one read from a file. Checks across keys raise `bad(key, value, reason)`
+Ranges are declared one way, with `Range(lo, hi, unit)` (an annotated float, or an int with
+`integer=True`: within the bounds, finite unless a closed bound is itself infinite, the unit in the
+message); a vector or a table's nodes declare their element's range (`tuple[Coord, Coord, Coord]`,
+`list[Range(...)]`: the error names the element, `wheel_centre[2]`). Pydantic models and config
+dataclasses alike (a kit part's section calls `check_declared_ranges(self)` in its `__post_init__`, so a
+part built in code is checked by the same declaration as one read from a file); pydantic's
+`Field(ge=, gt=, le=, lt=)` is not used on config models (tests/test_config_ranges.py). Checks across keys raise `bad(key, value, reason)`
 inside a model validator; checks after validation (files that must exist, sampled profiles) raise
 `problem(source, key, value, reason)`.
 Vehicles, roads, scenarios, drivers and the service's settings all load through here, so `overrides`
@@ -67,16 +69,25 @@ def range_text(leaf: str, lo: float, hi: float, unit: str = "", lo_open: bool = 
             f"{'<' if hi_open else '<='} {hi:g}{unit})")
 
 
-def Range(lo: float, hi: float, unit: str = "", lo_open: bool = False, hi_open: bool = False):
-    """A float within [lo, hi] (open at either end if asked; `in_range`); its errors show the whole
-    range and the unit."""
+def _integer(x: Any) -> Any:
+    if isinstance(x, bool) or not isinstance(x, int):
+        raise PydanticCustomError("not_integer", "must be an integer")
+    return x
+
+
+def Range(lo: float, hi: float, unit: str = "", lo_open: bool = False, hi_open: bool = False,
+          integer: bool = False):
+    """A float (an int if `integer`) within [lo, hi] (open at either end if asked; `in_range`); its
+    errors show the whole range and the unit."""
     def check(x: float) -> float:
         if not in_range(x, lo, hi, lo_open, hi_open):
             raise PydanticCustomError("out_of_range", "out of range",
                                       {"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open, "unit": unit})
         return x
     check.declared_range = (lo, hi, unit, lo_open, hi_open)
-    return Annotated[float, BeforeValidator(_number), AfterValidator(check)]
+    check.integer = integer
+    return Annotated[int if integer else float, BeforeValidator(_integer if integer else _number),
+                     AfterValidator(check)]
 
 
 def Positive(unit: str = ""):
@@ -89,30 +100,65 @@ def NonNegative(unit: str = ""):
     return Range(0.0, math.inf, unit, hi_open=True)
 
 
+def _range_check(annotation):
+    for m in getattr(annotation, "__metadata__", ()):
+        if getattr(getattr(m, "func", None), "declared_range", None) is not None:
+            return m.func
+    return None
+
+
 def declared_range(annotation) -> tuple | None:
     """(lo, hi, unit, lo_open, hi_open) of a `Range` annotation, else None."""
-    for m in getattr(annotation, "__metadata__", ()):
-        r = getattr(getattr(m, "func", None), "declared_range", None)
-        if r is not None:
-            return r
+    check = _range_check(annotation)
+    return None if check is None else check.declared_range
+
+
+def _element_checks(annotation) -> tuple:
+    """(kind, checks) of a dataclass field's annotation: ("one", check) for a `Range`, ("each", [check per
+    position, or one for all]) for a tuple or list of `Range`s, with None allowed (an optional field)."""
+    if (c := _range_check(annotation)) is not None:
+        return "one", c
+    origin = typing.get_origin(annotation)
+    if origin in (Union, types.UnionType):
+        for a in typing.get_args(annotation):
+            if a is not type(None) and (found := _element_checks(a)) is not None:
+                return found
+    if origin in (tuple, list):
+        checks = [_range_check(a) for a in typing.get_args(annotation) if a is not Ellipsis]
+        if checks and all(c is not None for c in checks):
+            return "each", checks
     return None
 
 
 @functools.cache
 def _dataclass_ranges(cls) -> tuple:
     hints = typing.get_type_hints(cls, include_extras=True)
-    return tuple((f.name, r) for f in dataclasses.fields(cls) if (r := declared_range(hints.get(f.name))) is not None)
+    return tuple((f.name, r) for f in dataclasses.fields(cls) if (r := _element_checks(hints.get(f.name))) is not None)
+
+
+def _check_value(key: str, leaf: str, x: Any, check) -> None:
+    lo, hi, unit, lo_open, hi_open = check.declared_range
+    if check.integer and (isinstance(x, bool) or not isinstance(x, int)):
+        raise bad(key, x, "must be an integer")
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise bad(key, x, "must be a number")
+    if not in_range(float(x), lo, hi, lo_open, hi_open):
+        raise bad(key, x, range_text(leaf, lo, hi, unit, lo_open, hi_open))
 
 
 def check_declared_ranges(obj) -> None:
-    """In a config dataclass's __post_init__: every field declared with `Range` within it, else the
-    error about that key (as `bad`: rtsim.configfile formats it with the file and the section's key)."""
-    for name, (lo, hi, unit, lo_open, hi_open) in _dataclass_ranges(type(obj)):
+    """In a config dataclass's __post_init__: every field declared with `Range` (or a vector of them)
+    within it, else the error about that key (as `bad`: rtsim.configfile formats it with the file and
+    the section's key; a vector's element as key[i])."""
+    for name, (kind, checks) in _dataclass_ranges(type(obj)):
         x = getattr(obj, name)
-        if isinstance(x, bool) or not isinstance(x, (int, float)):
-            raise bad(name, x, "must be a number")
-        if not in_range(float(x), lo, hi, lo_open, hi_open):
-            raise bad(name, x, range_text(name, lo, hi, unit, lo_open, hi_open))
+        if kind == "one":
+            _check_value(name, name, x, checks)
+        elif x is not None:
+            if not isinstance(x, (tuple, list)):
+                raise bad(name, x, "must be a list [...]")
+            for i, v in enumerate(x):
+                _check_value(f"{name}[{i}]", f"{name}[{i}]", v, checks[min(i, len(checks) - 1)])
 
 
 def range_fields(ranges: dict, defaults: dict) -> dict:

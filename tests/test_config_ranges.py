@@ -32,7 +32,6 @@ NOT_YET_RANGED = {
     "rtsim.ecutest.catalog.Bounds": {"max", "min"},
     "rtsim.faults.spec.Condition": {"value"},
     "rtsim.faults.spec.FaultSpec": {"params", "target"},
-    "rtsim.road.config.GradeRoadConfig": {"origin"},
     "rtsim.vehicle.car.config.Axle": {"travel_m"},
     "rtsim.vehicle.car.config.Chassis": {"cg_m", "inertia_kgm2", "ixz_kgm2"},
     "rtsim.vehicle.car.config.DoubleWishboneHardpoints": {

@@ -38,7 +38,7 @@ from typing import Any, Literal, Optional
 
 from pydantic import Field, model_validator
 
-from rtsim.configfile import Strict, bad, load, problem
+from rtsim.configfile import Range, Strict, bad, load, problem
 
 from .metrics import METRICS
 
@@ -75,7 +75,7 @@ class Distribution(Strict):
 
 
 class RandomSample(Strict):
-    samples: int = Field(ge=1, le=1_000_000, description="number of random points")
+    samples: Range(1, 1_000_000, integer=True) = Field(description="number of random points")
     params: dict[str, Distribution] = Field(min_length=1)
 
     @model_validator(mode="after")
@@ -101,9 +101,9 @@ class Criterion(Strict):
 class Plan(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$")
     description: str = ""
-    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="seed of the random sample")
-    seed_base: int = Field(default=0, ge=0, le=2**32 - 1, description="first run seed (sensor noise)")
-    repetitions: int = Field(default=1, ge=1, le=10_000)
+    seed: Range(0, 2**32 - 1, integer=True) = Field(default=0, description="seed of the random sample")
+    seed_base: Range(0, 2**32 - 1, integer=True) = Field(default=0, description="first run seed (sensor noise)")
+    repetitions: Range(1, 10_000, integer=True) = 1
     metrics: list[str] = Field(min_length=1)
     per_run: Literal["none", "csv", "mcap"] = "none"
     cases: list[Case] = Field(min_length=1)

@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 import math
 
 from drivers.base import INPUT_NAMES
-from rtsim.configfile import validate
+from rtsim.configfile import Range, validate
 from rtsim.errors import ConfigError, RtsimError
 from rtsim.faults.spec import FaultSpec
 
@@ -49,7 +49,7 @@ class NoArgs(_Args):
 
 class StepArgs(_Args):
     """step (lockstep mode only)."""
-    n: int = Field(1, ge=1, le=1_000_000, description="steps to run, each one step of the model")
+    n: Range(1, 1_000_000, integer=True) = Field(1, description="steps to run, each one step of the model")
 
 
 class LoadScenarioArgs(_Args):
