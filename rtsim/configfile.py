@@ -113,9 +113,10 @@ def declared_range(annotation) -> tuple | None:
     return None if check is None else check.declared_range
 
 
-def _element_checks(annotation) -> tuple:
-    """(kind, checks) of a dataclass field's annotation: ("one", check) for a `Range`, ("each", [check per
-    position, or one for all]) for a tuple or list of `Range`s, with None allowed (an optional field)."""
+def _element_checks(annotation) -> tuple | None:
+    """What a dataclass field's annotation declares: ("one", check) for a `Range`, ("each", [declaration
+    per position, or one for all]) for a tuple or list (of tuples ...) of `Range`s; an optional field may
+    be None."""
     if (c := _range_check(annotation)) is not None:
         return "one", c
     origin = typing.get_origin(annotation)
@@ -124,9 +125,9 @@ def _element_checks(annotation) -> tuple:
             if a is not type(None) and (found := _element_checks(a)) is not None:
                 return found
     if origin in (tuple, list):
-        checks = [_range_check(a) for a in typing.get_args(annotation) if a is not Ellipsis]
-        if checks and all(c is not None for c in checks):
-            return "each", checks
+        subs = [_element_checks(a) for a in typing.get_args(annotation) if a is not Ellipsis]
+        if subs and all(c is not None for c in subs):
+            return "each", subs
     return None
 
 
@@ -136,29 +137,31 @@ def _dataclass_ranges(cls) -> tuple:
     return tuple((f.name, r) for f in dataclasses.fields(cls) if (r := _element_checks(hints.get(f.name))) is not None)
 
 
-def _check_value(key: str, leaf: str, x: Any, check) -> None:
-    lo, hi, unit, lo_open, hi_open = check.declared_range
-    if check.integer and (isinstance(x, bool) or not isinstance(x, int)):
+def _check_value(key: str, x: Any, declared: tuple) -> None:
+    kind, what = declared
+    if kind == "each":
+        if not isinstance(x, (tuple, list)):
+            raise bad(key, x, "must be a list [...]")
+        for i, v in enumerate(x):
+            _check_value(f"{key}[{i}]", v, what[min(i, len(what) - 1)])
+        return
+    lo, hi, unit, lo_open, hi_open = what.declared_range
+    if what.integer and (isinstance(x, bool) or not isinstance(x, int)):
         raise bad(key, x, "must be an integer")
     if isinstance(x, bool) or not isinstance(x, (int, float)):
         raise bad(key, x, "must be a number")
     if not in_range(float(x), lo, hi, lo_open, hi_open):
-        raise bad(key, x, range_text(leaf, lo, hi, unit, lo_open, hi_open))
+        raise bad(key, x, range_text(key.rsplit(".", 1)[-1], lo, hi, unit, lo_open, hi_open))
 
 
 def check_declared_ranges(obj) -> None:
-    """In a config dataclass's __post_init__: every field declared with `Range` (or a vector of them)
-    within it, else the error about that key (as `bad`: rtsim.configfile formats it with the file and
-    the section's key; a vector's element as key[i])."""
-    for name, (kind, checks) in _dataclass_ranges(type(obj)):
+    """In a config dataclass's __post_init__: every field declared with `Range` (or a vector or table of
+    them) within it, else the error about that key (as `bad`: rtsim.configfile formats it with the file
+    and the section's key; a vector's element as key[i])."""
+    for name, declared in _dataclass_ranges(type(obj)):
         x = getattr(obj, name)
-        if kind == "one":
-            _check_value(name, name, x, checks)
-        elif x is not None:
-            if not isinstance(x, (tuple, list)):
-                raise bad(name, x, "must be a list [...]")
-            for i, v in enumerate(x):
-                _check_value(f"{name}[{i}]", f"{name}[{i}]", v, checks[min(i, len(checks) - 1)])
+        if x is not None or declared[0] == "one":
+            _check_value(name, x, declared)
 
 
 def range_fields(ranges: dict, defaults: dict) -> dict:

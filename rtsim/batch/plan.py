@@ -59,8 +59,12 @@ class Case(Strict):
         return self
 
 
+#: a metric's or a swept key's value: any finite number, in its own unit (a grid may sweep any key)
+Finite = Range(-math.inf, math.inf, "the key's or metric's unit", lo_open=True, hi_open=True)
+
+
 class Distribution(Strict):
-    uniform: Optional[tuple[float, float]] = None
+    uniform: Optional[tuple[Finite, Finite]] = None
     choice: Optional[list[Value]] = Field(default=None, min_length=1)
 
     @model_validator(mode="after")
@@ -69,8 +73,8 @@ class Distribution(Strict):
             raise bad("uniform", self.uniform, "give exactly one of uniform = [lo, hi] or choice = [...]")
         if self.uniform is not None:
             lo, hi = self.uniform
-            if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
-                raise bad("uniform", list(self.uniform), "must be [lo, hi], finite, lo <= hi")
+            if not lo <= hi:
+                raise bad("uniform", list(self.uniform), "must be [lo, hi], lo <= hi")
         return self
 
 
@@ -86,8 +90,8 @@ class RandomSample(Strict):
 
 class Criterion(Strict):
     metric: str
-    min: Optional[float] = None
-    max: Optional[float] = None
+    min: Optional[Finite] = None
+    max: Optional[Finite] = None
 
     @model_validator(mode="after")
     def _check(self):

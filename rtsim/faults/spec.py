@@ -42,7 +42,7 @@ class Condition(Strict):
     """``channel > value`` (or ``<``), on the channel's value or its magnitude (``abs``)."""
     channel: str
     op: str
-    value: float
+    value: Range(-math.inf, math.inf, "the channel's unit", lo_open=True, hi_open=True)   # finite
     magnitude: bool = False
 
     def text(self) -> str:
@@ -69,7 +69,7 @@ class FaultSpec(Strict):
     """One fault (module docstring); ``params`` holds the kind's parameters, defaults filled in."""
     id: str = Field(pattern=r"^[A-Za-z0-9_.-]{1,64}$", description="the fault's name, unique in the session")
     kind: str = Field(description="a fault kind of the catalogue (rtsim faults --list)")
-    target: str | int = Field(description="sensor channel, frame name or id, \"bus\", or actuator")
+    target: str | Range(0, 1_000_000, "frame id", integer=True) = Field(description="sensor channel, frame name or id, \"bus\", or actuator")
     at: Optional[Seconds] = Field(None, description="onset time (the step at it)")
     when: Optional[str] = Field(None, description="onset condition: CHANNEL > VALUE, abs(CHANNEL) > VALUE, ...")
     after: Optional[str] = Field(None, description="onset after this fault's onset")

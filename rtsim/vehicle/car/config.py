@@ -24,6 +24,7 @@ from rtsim.errors import ConfigError, ModelError
 
 from ..kit.actuators import over_defaults
 from ..kit.brake import BrakeConfig
+from ..kit.design_frame import Moments, Product, Vec3
 from ..kit.eps import EpsConfig
 from ..kit.inertia import inertia_problem
 from ..kit.linkage_checks import STEERING_RATIO_RANGE, short_link, steering_arm, steering_ratio
@@ -34,15 +35,14 @@ from ..kit.steering import SteeringConfig
 
 from .effects import validate_effects
 
-Vec3 = tuple[float, float, float]
 MAX_TRAVEL_M = 0.3       # m: wheel travel either way from design ride height
 
 
 class Chassis(Strict):
     mass_kg: Range(50, 5000, "kg", lo_open=True) = Field(description="sprung mass")
     cg_m: Vec3 = Field(description="centre of mass of the sprung mass, design frame")
-    inertia_kgm2: tuple[float, float, float] = Field(description="Ixx, Iyy, Izz about the sprung CG")
-    ixz_kgm2: float = 0.0
+    inertia_kgm2: Moments = Field(description="Ixx, Iyy, Izz about the sprung CG")
+    ixz_kgm2: Product = 0.0
 
     @model_validator(mode="after")
     def _positive_inertia(self):
@@ -146,7 +146,8 @@ class Axle(Strict):
         "constraint holds at the design height); no spring, damper, anti-roll bar or travel stops"))
     anti_roll_bar_n_per_m: Range(0, 1e6, "N/m") = Field(
         default=0.0, description="force per metre of left-right travel difference")
-    travel_m: tuple[float, float] = Field(default=(-0.08, 0.08), description="rebound, bump limits of the fit")
+    travel_m: tuple[Range(-MAX_TRAVEL_M, 0.0, "m", hi_open=True), Range(0.0, MAX_TRAVEL_M, "m", lo_open=True)] = Field(
+        default=(-0.08, 0.08), description="rebound, bump limits of the fit, from the design ride height")
     travel_stop_margin_m: Range(0.0, 0.05, "m") = Field(
         default=0.008, description="the rebound and bump stops (rtsim.vehicle.kit.end_stop) engage this far inside travel_m, so a "
         "wheel hanging in the air or slammed into bump stays within the fitted kinematics")
@@ -188,11 +189,7 @@ class Axle(Strict):
 
     @model_validator(mode="after")
     def _physical(self):
-        """Travel limits in order around the design ride height; no degenerate link in the linkage."""
-        rebound, bump = self.travel_m
-        if not -MAX_TRAVEL_M <= rebound < 0.0 < bump <= MAX_TRAVEL_M:
-            raise bad("travel_m", self.travel_m, f"need -{MAX_TRAVEL_M:g} <= rebound < 0 < bump <= {MAX_TRAVEL_M:g} m "
-                      "(wheel travel from the design ride height, rebound first)")
+        """No degenerate link in the linkage."""
         link = short_link(self.suspension, self.hardpoints.model_dump())
         if link is not None:
             raise bad(f"hardpoints.{link[0]}", link[1], link[2])
@@ -225,7 +222,7 @@ class Aero(Strict):
 class SensorNoise(Strict):
     """What one sensor reports of its physical value (rtsim.vehicle.kit.sensor_model), channel units."""
     noise_std: Range(0, math.inf, hi_open=True) = 0.0
-    bias: float = 0.0
+    bias: Range(-math.inf, math.inf, "channel units", lo_open=True, hi_open=True) = 0.0   # any finite
     scale: Range(0, 10, lo_open=True) = 1.0
     quantum: Range(0, math.inf, hi_open=True) = 0.0
     delay_s: Range(0, 0.5, "s") = 0.0

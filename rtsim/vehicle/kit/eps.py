@@ -135,9 +135,9 @@ DRIVER_ANGLE, DRIVER_TORQUE = 0.0, 1.0
 class AssistLaw(Strict):
     """Motor current command (A) against torsion-bar torque (N m, the law is odd in it) and vehicle
     speed (m/s): current_a[i][j] at torque_nm[i], speed_mps[j]."""
-    torque_nm: list[float] = Field(min_length=2, max_length=24)
-    speed_mps: list[float] = Field(min_length=1, max_length=12)
-    current_a: list[list[float]]
+    torque_nm: list[Range(0.0, 50.0, "N m")] = Field(min_length=2, max_length=24)
+    speed_mps: list[Range(0.0, 100.0, "m/s")] = Field(min_length=1, max_length=12)
+    current_a: list[list[Range(-500.0, 500.0, "A")]]     # the drive's limit: current_limit_a <= 500 A
 
     @model_validator(mode="after")
     def _grid(self):

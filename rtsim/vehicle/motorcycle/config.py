@@ -19,12 +19,12 @@ from pydantic import Field, model_validator
 from rtsim.configfile import Range, Strict, bad, load_toml, validate
 from rtsim.errors import ConfigError
 
+from ..kit.design_frame import Moments, Product, Vec2
 from ..kit.inertia import inertia_problem
 from ..kit.linkage_checks import MIN_LINK_M
 from ..kit.spring_damper import Characteristic
 from ..kit.tyre.two_wheel import TwoWheelTyreSpec, sport_front, sport_rear
 
-Vec2 = tuple[float, float]
 
 
 class Body(Strict):
@@ -33,8 +33,8 @@ class Body(Strict):
     mass: positive, checked by MotorcycleConfig)."""
     mass_kg: Range(0, 2000, "kg")
     cg_m: Vec2 = Field(default=(0.0, 0.0), description="centre of mass (x, z), design frame")
-    inertia_kgm2: tuple[float, float, float] = Field(default=(0.0, 0.0, 0.0), description="Ixx, Iyy, Izz about the CG")
-    ixz_kgm2: float = 0.0
+    inertia_kgm2: Moments = Field(default=(0.0, 0.0, 0.0), description="Ixx, Iyy, Izz about the CG")
+    ixz_kgm2: Product = 0.0
 
     @model_validator(mode="after")
     def _physical(self):
@@ -180,12 +180,16 @@ class Chain(Strict):
     rear_sprocket_radius_m: Range(0.02, 0.3, "m", lo_open=True)
 
 
+CrankTorque = Range(0.0, 2000.0, "N m")
+
+
 class Powertrain(Strict):
     """Engine, clutch and gearbox (rtsim.vehicle.motorcycle.engine); the final ratio is the chain's
     sprocket radii (rear / front). Engine speeds in rpm here, rad/s in the kernel."""
-    engine_speed_rpm: list[float] = Field(min_length=2, max_length=16, description="axis of the torque tables")
-    full_load_torque_nm: list[float] = Field(min_length=2, max_length=16, description="at full throttle, crank")
-    closed_throttle_torque_nm: list[float] = Field(min_length=2, max_length=16, description=(
+    engine_speed_rpm: list[Range(0.0, 25000.0, "rpm", lo_open=True)] = Field(
+        min_length=2, max_length=16, description="axis of the torque tables")
+    full_load_torque_nm: list[CrankTorque] = Field(min_length=2, max_length=16, description="at full throttle, crank")
+    closed_throttle_torque_nm: list[CrankTorque] = Field(min_length=2, max_length=16, description=(
         "friction and pumping torque with the throttle shut (engine braking), a positive magnitude"))
     idle_rpm: Range(300, 5000, "rpm")
     launch_rpm: Range(300, 15000, "rpm") = Field(description="clutch slip speed at full throttle")
@@ -194,7 +198,7 @@ class Powertrain(Strict):
         default=200.0, description="fuel ramp below the limit")
     clutch_capacity_nm: Range(0, 2000, "N m", lo_open=True)
     primary_ratio: Range(1.0, 4.0)
-    gear_ratios: list[float] = Field(min_length=1, max_length=8, description="first to top")
+    gear_ratios: list[Range(0.3, 5.0)] = Field(min_length=1, max_length=8, description="first to top")
     efficiency: Range(0.5, 1.0, lo_open=True) = Field(default=0.92, description="gearbox and chain")
     gear: Range(0, 8, integer=True) = Field(default=0, description="0: automatic, else the fixed gear")
     upshift_rpm: Range(1000, 25000, "rpm")
@@ -209,17 +213,15 @@ class Powertrain(Strict):
             v = getattr(self, key)
             if len(v) != len(w):
                 raise bad(key, v, f"needs as many values as engine_speed_rpm ({len(w)})")
-            if any(not (0.0 <= x <= 2000.0) for x in v):
-                raise bad(key, v, "values must lie in 0 .. 2000 N m")
-        if any(b <= a for a, b in zip(w, w[1:])) or w[0] <= 0:
-            raise bad("engine_speed_rpm", w, "must be positive and strictly increasing")
+        if any(b <= a for a, b in zip(w, w[1:])):
+            raise bad("engine_speed_rpm", w, "must be strictly increasing")
         if not w[0] <= self.idle_rpm < self.launch_rpm < self.rev_limit_rpm <= w[-1]:
             raise bad("launch_rpm", self.launch_rpm, "need engine_speed_rpm[0] <= idle_rpm < launch_rpm < "
                       f"rev_limit_rpm <= engine_speed_rpm[-1] (got {w[0]:g}, {self.idle_rpm:g}, {self.launch_rpm:g}, "
                       f"{self.rev_limit_rpm:g}, {w[-1]:g})")
         r = self.gear_ratios
-        if any(not (0.3 <= x <= 5.0) for x in r) or any(b >= a for a, b in zip(r, r[1:])):
-            raise bad("gear_ratios", r, "must lie in 0.3 .. 5 and decrease from first to top gear")
+        if any(b >= a for a, b in zip(r, r[1:])):
+            raise bad("gear_ratios", r, "must decrease from first to top gear")
         if self.gear > len(r):
             raise bad("gear", self.gear, f"the gearbox has gears 1..{len(r)} (0: automatic)")
         if not self.idle_rpm < self.downshift_rpm < self.upshift_rpm < self.rev_limit_rpm - self.limiter_band_rpm:
