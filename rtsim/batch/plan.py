@@ -74,7 +74,7 @@ class Distribution(Strict):
         if self.uniform is not None:
             lo, hi = self.uniform
             if not lo <= hi:
-                raise bad("uniform", list(self.uniform), "must be [lo, hi], lo <= hi")
+                raise bad("uniform", list(self.uniform), "must be [lo, hi], finite, lo <= hi")
         return self
 
 
