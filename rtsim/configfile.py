@@ -319,7 +319,9 @@ def _message(err: dict, data: Any, root) -> str:
         value = ctx["value"]
         reason = err["msg"]
     elif kind == "out_of_range":
-        reason = range_text(_leaf(loc), ctx["lo"], ctx["hi"], ctx["unit"], ctx["lo_open"], ctx["hi_open"])
+        info = _field_at(root, loc) if root is not None else None
+        desc = f"; {info.description}" if info is not None and info.description else ""
+        reason = range_text(_leaf(loc), ctx["lo"], ctx["hi"], ctx["unit"], ctx["lo_open"], ctx["hi_open"])[:-1] + desc + ")"
     elif kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
         reason = f"out of range (allowed {_allowed(root, loc, _leaf(loc), ctx)})"
     elif kind == "missing":
