@@ -194,3 +194,114 @@ def test_a_kit_sections_bad_value_names_the_file_key_value_and_range():
     with pytest.raises(ConfigError) as exc:
         load_vehicle(path, data)
     assert str(exc.value) == f"{path}: steering.kp = -1.0: out of range (allowed 0 <= kp < inf N m/rad)"
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _open_vehicle(path):
+    from rtsim.vehicle.registry import open_vehicle
+    return open_vehicle(path)
+
+
+def _load_road(path):
+    from rtsim.road.config import load_road
+    return load_road(path)
+
+
+def _load_plan(path):
+    from rtsim.batch.plan import load_plan
+    return load_plan(path)
+
+
+def _load_scenario(path):
+    from drivers.scenario import load_scenario
+    return load_scenario(path)
+
+
+def _load_catalogue(path):
+    from rtsim.ecutest.catalog import load_catalogue
+    return load_catalogue(path)
+
+
+# (module converted, loader, shipped file, {dotted key: bad value} set in the file's table as it is read,
+#  the key (and element) and value the line names, the allowed range it states)
+FILE_SAMPLES = [
+    ("car.config (hardpoint in mm)", _open_vehicle, "configs/vehicles/xbw.toml",
+     {"front.hardpoints.wheel_centre": [0.0, 750.0, 0.3]}, "front.hardpoints.wheel_centre[1] = 750.0",
+     "-10 <= wheel_centre[1] <= 10 m, design frame"),
+    ("car.config (travel)", _open_vehicle, "configs/vehicles/eps_car.toml",
+     {"front.travel_m": [-0.08, 80.0]}, "front.travel_m[1] = 80.0", "0 < travel_m[1] <= 0.3 m"),
+    ("car.config (Field bound before)", _open_vehicle, "configs/vehicles/xbw.toml",
+     {"chassis.mass_kg": 20.0}, "chassis.mass_kg = 20.0", "50 < mass_kg <= 5000 kg"),
+    ("kit.design_frame (inertia in kg mm^2)", _open_vehicle, "configs/vehicles/xbw.toml",
+     {"chassis.inertia_kgm2": [5.0e8, 2.0e9, 2.2e9]}, "chassis.inertia_kgm2[0] = 500000000.0",
+     "0 <= inertia_kgm2[0] <= 100000 kg m^2"),
+    ("motorcycle.config (cg in mm)", _open_vehicle, "configs/vehicles/motorcycle.toml",
+     {"rear_frame.cg_m": [720.0, 0.52]}, "rear_frame.cg_m[0] = 720.0", "-10 <= cg_m[0] <= 10 m, design frame"),
+    ("motorcycle.config (torque curve)", _open_vehicle, "configs/vehicles/motorcycle.toml",
+     {"powertrain.gear_ratios": [2.6, 50.0]}, "powertrain.gear_ratios[1] = 50.0", "0.3 <= gear_ratios[1] <= 5"),
+    ("kit.brake", _open_vehicle, "configs/vehicles/xbw.toml",
+     {"brakes.front.pads": 20}, "brakes.front.pads = 20", "1 <= pads <= 16 pads"),
+    ("kit.brake (valve)", _open_vehicle, "configs/vehicles/eps_car.toml",
+     {"brakes.proportioning_ratio": 1.5}, "brakes.proportioning_ratio = 1.5", "0 <= proportioning_ratio <= 1"),
+    ("kit.powertrain (gearbox)", _open_vehicle, "configs/vehicles/eps_car.toml",
+     {"powertrain.gearbox.wheel_radius": 300.0}, "powertrain.gearbox.wheel_radius = 300.0",
+     "0.05 < wheel_radius < 2 m"),
+    ("kit.powertrain (engine table)", _open_vehicle, "configs/vehicles/xbw.toml",
+     {"powertrain.engine.speed_nodes": [0.0, 100.0, 5000.0]}, "powertrain.engine.speed_nodes[2] = 5000.0",
+     "0 <= speed_nodes[2] <= 2000 rad/s"),
+    ("kit.powertrain (converter)", _open_vehicle, "configs/vehicles/xbw.toml",
+     {"powertrain.converter.lockup_gear": 9}, "powertrain.converter.lockup_gear = 9", "1 <= lockup_gear <= 6"),
+    ("kit.eps (assist table)", _open_vehicle, "configs/vehicles/eps_car.toml",
+     {"eps.assist.speed_mps": [0.0, 8.0, 16.0, 25.0, 350.0]}, "eps.assist.speed_mps[4] = 350.0",
+     "0 <= speed_mps[4] <= 100 m/s"),
+    ("kit.eps (Field bound before)", _open_vehicle, "configs/vehicles/eps_car.toml",
+     {"eps.rack_mass_kg": 0.0}, "eps.rack_mass_kg = 0.0", "0 < rack_mass_kg <= 50 kg"),
+    ("kit.spring_damper (table in mm)", _open_vehicle, "configs/vehicles/eps_car.toml",
+     {"front.spring.spring_table": {"x": [-100.0, 0.0, 100.0], "force_n": [-6600.0, 0.0, 10300.0]}},
+     "front.spring.spring_table.x[0] = -100.0", "-10 <= x[0] <= 10 m or m/s"),
+    ("road.config", _load_road, "configs/roads/flat.toml",
+     {"mu": 0.0}, "mu = 0.0", "0 < mu <= "),
+    ("batch.plan", _load_plan, "configs/batch/smoke.toml",
+     {"repetitions": 0}, "repetitions = 0", "1 <= repetitions <= 10000"),
+    ("drivers.scenario (gear)", _load_scenario, "configs/scenarios/motorcycle_counter_steer.toml",
+     {"two_wheeler.gear": 12}, "two_wheeler.gear = 12", "0 <= gear <= 8"),
+    ("drivers.scenario (lane spacing)", _load_scenario, "configs/scenarios/opendrive_curve.toml",
+     {"inputs.path_follower.spacing": 50.0}, "inputs.path_follower.spacing = 50.0", "0.05 <= spacing <= 10 m"),
+]
+
+
+@pytest.mark.parametrize("what, loader, shipped, bad_keys, named, allowed", FILE_SAMPLES,
+                         ids=[s[0] for s in FILE_SAMPLES])
+def test_a_bad_value_in_a_file_names_the_file_key_value_and_range(what, loader, shipped, bad_keys, named, allowed):
+    """A converted field's Range reaches the error line of a file (the value set in the file's table as
+    it is read, as a batch's grid point is): file, dotted key (and element), value, allowed range."""
+    from rtsim.configfile import overrides
+    path = ROOT / shipped
+    with overrides({path.resolve(): bad_keys}), pytest.raises(ConfigError) as exc:
+        loader(path)
+    line = str(exc.value)
+    assert "\n" not in line
+    assert line.startswith(f"{path}: ") and f"{named}: out of range (allowed {allowed}" in line, line
+
+
+def test_an_ecutest_bound_and_a_fault_target_name_their_range(tmp_path):
+    """The two sections read from lists of tables (no dotted key reaches them): an expectation's bound
+    must be finite, a fault's frame id within its range."""
+    text = (ROOT / "tests" / "ecu_small_catalog.toml").read_text()
+    catalogue = tmp_path / "catalogue.toml"
+    assert 'kind = "bounds"\nsignal = "ecu.BRAKE_CMD.brake_pressure_cmd"\nmax = 0\n' in text
+    catalogue.write_text(text.replace('signal = "ecu.BRAKE_CMD.brake_pressure_cmd"\nmax = 0\n',
+                                      'signal = "ecu.BRAKE_CMD.brake_pressure_cmd"\nmax = inf\n', 1))
+    (tmp_path / "ecu_small.py").write_text("")
+    with pytest.raises(ConfigError) as exc:
+        _load_catalogue(catalogue)
+    assert str(exc.value).startswith(f"{catalogue}: ") and \
+        "cases[0].expect[1].max = inf: out of range (allowed -inf < max < inf the signal's unit)" in str(exc.value), str(exc.value)
+
+    from rtsim.faults.spec import load_fault_specs
+    with pytest.raises(ConfigError) as exc:
+        load_fault_specs([{"id": "f", "kind": "stuck_last", "target": -3, "at": 1.0}], "s.toml")
+    assert "faults[0].target = -3: out of range (allowed 0 <= target <= 1e+06 frame id)" in str(exc.value), \
+        str(exc.value)
