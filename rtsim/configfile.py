@@ -226,23 +226,33 @@ def _leaf(loc: tuple) -> str:
     return "value" + idx
 
 
-def _key(loc: tuple, data: Any) -> str:
-    """Dotted key of an error location as TOML writes it, list items as [i]. Parts pydantic inserts that
-    are not keys of the data (a union's tag or member name) are left out, found by walking the data along
-    the path."""
-    out = ""
+def _data_loc(loc: tuple, data: Any) -> tuple:
+    """The parts of an error location that are keys of the data (or list indices). Parts pydantic
+    inserts that are not (a union's tag or member name) are left out, found by walking the data along
+    the path: a key missing from a table while the next part is in it, or any name below a value that is
+    no table."""
+    out = []
     here = data
     for n, part in enumerate(loc):
         last = n == len(loc) - 1
         if isinstance(here, dict) and not last and (part not in here or (
                 part in here.values() and loc[n + 1] in here)):
             continue
+        if isinstance(part, str) and out and here is not None and not isinstance(here, (dict, list, tuple)):
+            continue
+        out.append(part)
         if isinstance(part, int):
-            out += f"[{part}]"
             here = here[part] if isinstance(here, (list, tuple)) and -len(here) <= part < len(here) else None
         else:
-            out += ("." if out else "") + _part(str(part))
             here = here.get(part) if isinstance(here, dict) else None
+    return tuple(out)
+
+
+def _key(loc: tuple, data: Any) -> str:
+    """Dotted key of an error location as TOML writes it, list items as [i] (`_data_loc`'s parts)."""
+    out = ""
+    for part in _data_loc(loc, data):
+        out += f"[{part}]" if isinstance(part, int) else ("." if out else "") + _part(str(part))
     return out
 
 
@@ -319,9 +329,11 @@ def _message(err: dict, data: Any, root) -> str:
         value = ctx["value"]
         reason = err["msg"]
     elif kind == "out_of_range":
-        info = _field_at(root, loc) if root is not None else None
+        where = _data_loc(loc, data) if data is not None else loc
+        info = _field_at(root, where) if root is not None else None
         desc = f"; {info.description}" if info is not None and info.description else ""
-        reason = range_text(_leaf(loc), ctx["lo"], ctx["hi"], ctx["unit"], ctx["lo_open"], ctx["hi_open"])[:-1] + desc + ")"
+        reason = range_text(_leaf(where), ctx["lo"], ctx["hi"], ctx["unit"], ctx["lo_open"], ctx["hi_open"])
+        reason = reason[:-1] + desc + ")"
     elif kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
         reason = f"out of range (allowed {_allowed(root, loc, _leaf(loc), ctx)})"
     elif kind == "missing":

@@ -303,5 +303,5 @@ def test_an_ecutest_bound_and_a_fault_target_name_their_range(tmp_path):
     from rtsim.faults.spec import load_fault_specs
     with pytest.raises(ConfigError) as exc:
         load_fault_specs([{"id": "f", "kind": "stuck_last", "target": -3, "at": 1.0}], "s.toml")
-    assert "faults[0].target = -3: out of range (allowed 0 <= target <= 1e+06 frame id)" in str(exc.value), \
-        str(exc.value)
+    assert str(exc.value) == ('s.toml: faults[0].target = -3: out of range (allowed 0 <= target <= 1e+06 frame id; '
+                              'sensor channel, frame name or id, "bus", or actuator)')
