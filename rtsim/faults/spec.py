@@ -37,7 +37,8 @@ Positive = Range(0.0, MAX_TIME, "s", lo_open=True)
 _CONDITION = re.compile(r"^\s*(abs\(\s*)?([A-Za-z_][A-Za-z0-9_]*)\s*(\))?\s*(>|<)\s*([-+0-9.eE]+)\s*$")
 #: a target is named (sensor channel, frame name, "bus", actuator) or a frame's id; the union is told by the
 #: value's type, so a bad id is reported against the id's range alone
-Target = Annotated[Union[Annotated[str, Tag("name")], Annotated[Range(0, 1_000_000, "frame id", integer=True), Tag("id")]],
+FrameId = Range(0, 1_000_000, "frame id", integer=True)
+Target = Annotated[Union[Annotated[str, Tag("name")], Annotated[FrameId, Tag("id")]],
                    Discriminator(lambda v: "id" if isinstance(v, int) and not isinstance(v, bool) else "name")]
 COMMON = ("id", "kind", "target", "at", "when", "after", "after_delay", "duration")
 

@@ -149,23 +149,28 @@ class Axle(Strict):
     travel_m: tuple[Range(-MAX_TRAVEL_M, 0.0, "m", hi_open=True), Range(0.0, MAX_TRAVEL_M, "m", lo_open=True)] = Field(
         default=(-0.08, 0.08), description="rebound, bump limits of the fit, from the design ride height")
     travel_stop_margin_m: Range(0.0, 0.05, "m") = Field(
-        default=0.008, description="the rebound and bump stops (rtsim.vehicle.kit.end_stop) engage this far inside travel_m, so a "
+        default=0.008, description="the rebound and bump stops (rtsim.vehicle.kit.end_stop) engage this far "
+        "inside travel_m, so a "
         "wheel hanging in the air or slammed into bump stays within the fitted kinematics")
     travel_stop_stiffness_n_per_m: Range(1e4, 1e8, "N/m") = Field(
-        default=1.0e6, description="the travel stops' stiffness at the wheel (rebound strap / hydraulic stop, bump stop solid)")
+        default=1.0e6, description="the travel stops' stiffness at the wheel (rebound strap / hydraulic stop, "
+        "bump stop solid)")
     travel_stop_damping_ns_per_m: Range(0.0, 1e6, "N s/m") = Field(
         default=5.0e3, description="the travel stops' damping at the wheel")
     pivot_inertia_kgm2: Range(0, 20, "kg m^2") = Field(
-        default=0.0, description="wheel, hub and knuckle about the kingpin (a car with [eps]: each front wheel steers freely "
+        default=0.0, description="wheel, hub and knuckle about the kingpin (a car with [eps]: each front wheel "
+        "steers freely "
         "about its kingpin, tied to the rack by its tie rod; steer-by-wire: their own inertia about a "
         "diameter through the wheel centre, reflected to the rack through the linkage, the wheel "
         "centre's motion being the unsprung mass's)")
     compliance_steer_rad_per_n: Range(-1e-4, 1e-4, "rad/N") = Field(
-        default=0.0, description="elastokinematic steer induced by the lateral tyre force (positive: towards the force)")
+        default=0.0, description="elastokinematic steer induced by the lateral tyre force (positive: towards "
+        "the force)")
     compliance_steer_rad_per_nm: Range(-1e-3, 1e-3, "rad/(N m)") = Field(
         default=0.0, description="steer induced by the aligning moment")
     anti_pitch_arm_m: Range(0.05, 20, "m", lo_open=True) | None = Field(
-        default=None, description="axle reaction ('Brouilhet effect'): the longitudinal tyre force's moment about the wheel "
+        default=None, description="axle reaction ('Brouilhet effect'): the longitudinal tyre force's moment "
+        "about the wheel "
         "centre, Fx r, taken by an arm of this length between wheel and body (side-view swing arm)")
     anti_roll_arm_m: Range(0.05, 20, "m", lo_open=True) | None = Field(
         default=None, description="axle reaction of the lateral tyre force, Fy r over this arm (front-view swing arm)")

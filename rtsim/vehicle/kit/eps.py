@@ -208,7 +208,8 @@ class EpsConfig(Strict):
     assist_damping_a_s_per_rad: Range(0, 10, "A s/rad") = Field(
         default=0.02, description="current against motor speed")
     hands_bandwidth_hz: Range(1, 100, "Hz") = Field(
-        default=8.0, description="angle mode: the steering-wheel angle follows the driver's command through the hands, a "
+        default=8.0, description="angle mode: the steering-wheel angle follows the driver's command through the "
+        "hands, a "
         "critically damped second-order lag of this natural frequency (no impulsive torques)")
     rack_travel_m: Range(0.005, 0.2, "m") = Field(
         default=0.065, description="rack travel from centre to either end stop (rtsim.vehicle.kit.end_stop)")
