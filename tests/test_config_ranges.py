@@ -87,10 +87,11 @@ def _fields(cls):
 
 
 def _walk():
-    """(model's module.qualname, field name, its kinds, its metadata) over every Strict model and the
-    config dataclasses reachable from them."""
+    """(model's module.qualname, field name, its kinds, its metadata) over every Strict model, the
+    service's settings, and the config dataclasses reachable from them."""
     _import_all()
-    todo, seen = list(_subclasses(Strict)), set()
+    from rtsim.service.config import ServeOptions     # `rtsim serve`'s settings (its file's sections derive from it)
+    todo, seen = [*_subclasses(Strict), ServeOptions], set()
     while todo:
         cls = todo.pop()
         if cls in seen:
@@ -219,6 +220,11 @@ def _load_scenario(path):
     return load_scenario(path)
 
 
+def _load_service_config(path):
+    from rtsim.service.config import load_service_config
+    return load_service_config(path)
+
+
 def _load_catalogue(path):
     from rtsim.ecutest.catalog import load_catalogue
     return load_catalogue(path)
@@ -263,6 +269,8 @@ FILE_SAMPLES = [
      "front.spring.spring_table.x[0] = -100.0", "-10 <= x[0] <= 10 m or m/s"),
     ("road.config", _load_road, "configs/roads/flat.toml",
      {"mu": 0.0}, "mu = 0.0", "0 < mu <= "),
+    ("service.config", _load_service_config, "configs/service.toml",
+     {"simulation.loop_priority": 120}, "simulation.loop_priority = 120", "1 <= loop_priority <= 99 SCHED_FIFO"),
     ("batch.plan", _load_plan, "configs/batch/smoke.toml",
      {"repetitions": 0}, "repetitions = 0", "1 <= repetitions <= 10000"),
     ("drivers.scenario (gear)", _load_scenario, "configs/scenarios/motorcycle_counter_steer.toml",
