@@ -168,6 +168,9 @@ def test_the_walk_sees_a_planted_unranged_number():
 class _Part:
     gain: Range(0.0, 10.0, "N/m") = 1.0
     limit: Range(0.0, math.inf, "N (inf: none)", lo_open=True) = math.inf
+    count: Range(1, 4, integer=True) = 2
+    point: tuple[Range(-1.0, 1.0, "m"), Range(0.0, 2.0, "m")] = (0.0, 1.0)
+    table: tuple[tuple[Range(-5.0, 5.0, "N"), ...], ...] = ((0.0, 1.0), (2.0, 3.0))
 
     def __post_init__(self) -> None:
         check_declared_ranges(self)
@@ -176,7 +179,14 @@ class _Part:
 @pytest.mark.parametrize("kw, text", [({"gain": 11.0}, "out of range (allowed 0 <= gain <= 10 N/m)"),
                                       ({"gain": math.nan}, "out of range (allowed 0 <= gain <= 10 N/m)"),
                                       ({"limit": 0.0}, "out of range (allowed 0 < limit <= inf N (inf: none))"),
-                                      ({"gain": "x"}, "must be a number")])
+                                      ({"gain": "x"}, "must be a number"),
+                                      ({"count": 2.0}, "must be an integer"),
+                                      ({"count": 5}, "out of range (allowed 1 <= count <= 4)"),
+                                      ({"point": (0.0, 3.0)}, "out of range (allowed 0 <= point[1] <= 2 m)"),
+                                      ({"point": (-1.5, 1.0)}, "out of range (allowed -1 <= point[0] <= 1 m)"),
+                                      ({"table": ((0.0, 1.0), (2.0, math.inf))},
+                                       "out of range (allowed -5 <= table[1][1] <= 5 N)"),
+                                      ({"table": 3.0}, "must be a list")])
 def test_a_config_dataclass_built_in_code_is_checked_by_its_declared_ranges(kw, text):
     with pytest.raises(Exception) as exc:
         _Part(**kw)
