@@ -12,8 +12,9 @@ message); a vector or a table's nodes declare their element's range (`tuple[Coor
 `list[Range(...)]`: the error names the element, `wheel_centre[2]`). Pydantic models and config
 dataclasses alike (a kit part's section calls `check_declared_ranges(self)` in its `__post_init__`, so a
 part built in code is checked by the same declaration as one read from a file); pydantic's
-`Field(ge=, gt=, le=, lt=)` is not used on config models (tests/test_config_ranges.py). Checks across keys raise `bad(key, value, reason)`
-inside a model validator; checks after validation (files that must exist, sampled profiles) raise
+`Field(ge=, gt=, le=, lt=)` is not used on config models (tests/test_config_ranges.py). Checks across
+keys (rules, not ranges: min < max, increasing nodes) raise `bad(key, value, reason)` inside a model
+validator; checks after validation (files that must exist, sampled profiles) raise
 `problem(source, key, value, reason)`.
 Vehicles, roads, scenarios, drivers and the service's settings all load through here, so `overrides`
 (a batch's grid point: dotted keys set in a file's table as it is read) is checked like the file itself.
