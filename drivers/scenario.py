@@ -299,9 +299,9 @@ class _PathFollowerBase(_Model):
     y: Optional[list[Coord]] = None
     file: Optional[str] = None
     closed: StrictBool = False
-    lane: Optional[Annotated[int, Field(strict=True, ge=-100, le=100)]] = None   # OpenDRIVE lane id
+    lane: Optional[Range(-100, 100, integer=True)] = None   # OpenDRIVE lane id
     road_id: Optional[str] = None          # OpenDRIVE road id (needed when the file has several roads)
-    spacing: Annotated[float, Field(strict=True, ge=0.05, le=10.0)] = 0.5   # m, lane centre line points
+    spacing: Range(0.05, 10.0, "m") = 0.5   # m, lane centre line points
 
     @model_validator(mode="after")
     def _check(self):
@@ -445,7 +445,7 @@ TWO_WHEELER_LIMITS = {"steering_torque": (-500.0, 500.0, "N*m"), "throttle": (0.
 
 
 class TwoWheelerSpec(_Model):
-    gear: Optional[int] = Field(default=None, ge=0, le=8, strict=True)
+    gear: Range(0, 8, integer=True) | None = None
     steering_torque: Optional[ProfileSpec] = None
     throttle: Optional[ProfileSpec] = None
     brake_front: Optional[ProfileSpec] = None

@@ -6,12 +6,15 @@ list items as [i]), the offending value and what is allowed:
     configs/vehicles/x.toml: steering.kp = -1.0: out of range (allowed 0 <= kp <= 1e+06 N m/rad)
     configs/roads/x.toml: heigth = 1.0: unknown key (allowed: type, height, mu, rolling_resistance)
 
-Ranges are declared with `Range(lo, hi, unit)` (an annotated float: within the bounds, finite unless a
-closed bound is itself infinite, the unit in the message), or with pydantic's `Field(ge=, le=, gt=, lt=)`
-on a model's field; a config dataclass (a kit part's section) declares its fields' ranges with `Range`
-too and calls `check_declared_ranges(self)` in its `__post_init__`, so a part built in code is checked
-by the same declaration as one read from a file. Checks across keys raise `bad(key, value, reason)`
-inside a model validator; checks after validation (files that must exist, sampled profiles) raise
+Ranges are declared one way, with `Range(lo, hi, unit)` (an annotated float, or an int with
+`integer=True`: within the bounds, finite unless a closed bound is itself infinite, the unit in the
+message); a vector or a table's nodes declare their element's range (`tuple[Coord, Coord, Coord]`,
+`list[Range(...)]`: the error names the element, `wheel_centre[2]`). Pydantic models and config
+dataclasses alike (a kit part's section calls `check_declared_ranges(self)` in its `__post_init__`, so a
+part built in code is checked by the same declaration as one read from a file); pydantic's
+`Field(ge=, gt=, le=, lt=)` is not used on config models (tests/test_config_ranges.py). Checks across
+keys (rules, not ranges: min < max, increasing nodes) raise `bad(key, value, reason)` inside a model
+validator; checks after validation (files that must exist, sampled profiles) raise
 `problem(source, key, value, reason)`.
 Vehicles, roads, scenarios, drivers and the service's settings all load through here, so `overrides`
 (a batch's grid point: dotted keys set in a file's table as it is read) is checked like the file itself.
@@ -67,16 +70,25 @@ def range_text(leaf: str, lo: float, hi: float, unit: str = "", lo_open: bool = 
             f"{'<' if hi_open else '<='} {hi:g}{unit})")
 
 
-def Range(lo: float, hi: float, unit: str = "", lo_open: bool = False, hi_open: bool = False):
-    """A float within [lo, hi] (open at either end if asked; `in_range`); its errors show the whole
-    range and the unit."""
+def _integer(x: Any) -> Any:
+    if isinstance(x, bool) or not isinstance(x, int):
+        raise PydanticCustomError("not_integer", "must be an integer")
+    return x
+
+
+def Range(lo: float, hi: float, unit: str = "", lo_open: bool = False, hi_open: bool = False,
+          integer: bool = False):
+    """A float (an int if `integer`) within [lo, hi] (open at either end if asked; `in_range`); its
+    errors show the whole range and the unit."""
     def check(x: float) -> float:
         if not in_range(x, lo, hi, lo_open, hi_open):
             raise PydanticCustomError("out_of_range", "out of range",
                                       {"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open, "unit": unit})
         return x
     check.declared_range = (lo, hi, unit, lo_open, hi_open)
-    return Annotated[float, BeforeValidator(_number), AfterValidator(check)]
+    check.integer = integer
+    return Annotated[int if integer else float, BeforeValidator(_integer if integer else _number),
+                     AfterValidator(check)]
 
 
 def Positive(unit: str = ""):
@@ -89,30 +101,68 @@ def NonNegative(unit: str = ""):
     return Range(0.0, math.inf, unit, hi_open=True)
 
 
+def _range_check(annotation):
+    for m in getattr(annotation, "__metadata__", ()):
+        if getattr(getattr(m, "func", None), "declared_range", None) is not None:
+            return m.func
+    return None
+
+
 def declared_range(annotation) -> tuple | None:
     """(lo, hi, unit, lo_open, hi_open) of a `Range` annotation, else None."""
-    for m in getattr(annotation, "__metadata__", ()):
-        r = getattr(getattr(m, "func", None), "declared_range", None)
-        if r is not None:
-            return r
+    check = _range_check(annotation)
+    return None if check is None else check.declared_range
+
+
+def _element_checks(annotation) -> tuple | None:
+    """What a dataclass field's annotation declares: ("one", check) for a `Range`, ("each", [declaration
+    per position, or one for all]) for a tuple or list (of tuples ...) of `Range`s; an optional field may
+    be None."""
+    if (c := _range_check(annotation)) is not None:
+        return "one", c
+    origin = typing.get_origin(annotation)
+    if origin in (Union, types.UnionType):
+        for a in typing.get_args(annotation):
+            if a is not type(None) and (found := _element_checks(a)) is not None:
+                return found
+    if origin in (tuple, list):
+        subs = [_element_checks(a) for a in typing.get_args(annotation) if a is not Ellipsis]
+        if subs and all(c is not None for c in subs):
+            return "each", subs
     return None
 
 
 @functools.cache
 def _dataclass_ranges(cls) -> tuple:
     hints = typing.get_type_hints(cls, include_extras=True)
-    return tuple((f.name, r) for f in dataclasses.fields(cls) if (r := declared_range(hints.get(f.name))) is not None)
+    return tuple((f.name, r) for f in dataclasses.fields(cls) if (r := _element_checks(hints.get(f.name))) is not None)
+
+
+def _check_value(key: str, x: Any, declared: tuple) -> None:
+    kind, what = declared
+    if kind == "each":
+        if not isinstance(x, (tuple, list)):
+            raise bad(key, x, "must be a list [...]")
+        for i, v in enumerate(x):
+            _check_value(f"{key}[{i}]", v, what[min(i, len(what) - 1)])
+        return
+    lo, hi, unit, lo_open, hi_open = what.declared_range
+    if what.integer and (isinstance(x, bool) or not isinstance(x, int)):
+        raise bad(key, x, "must be an integer")
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise bad(key, x, "must be a number")
+    if not in_range(float(x), lo, hi, lo_open, hi_open):
+        raise bad(key, x, range_text(key.rsplit(".", 1)[-1], lo, hi, unit, lo_open, hi_open))
 
 
 def check_declared_ranges(obj) -> None:
-    """In a config dataclass's __post_init__: every field declared with `Range` within it, else the
-    error about that key (as `bad`: rtsim.configfile formats it with the file and the section's key)."""
-    for name, (lo, hi, unit, lo_open, hi_open) in _dataclass_ranges(type(obj)):
+    """In a config dataclass's __post_init__: every field declared with `Range` (or a vector or table of
+    them) within it, else the error about that key (as `bad`: rtsim.configfile formats it with the file
+    and the section's key; a vector's element as key[i])."""
+    for name, declared in _dataclass_ranges(type(obj)):
         x = getattr(obj, name)
-        if isinstance(x, bool) or not isinstance(x, (int, float)):
-            raise bad(name, x, "must be a number")
-        if not in_range(float(x), lo, hi, lo_open, hi_open):
-            raise bad(name, x, range_text(name, lo, hi, unit, lo_open, hi_open))
+        if x is not None or declared[0] == "one":
+            _check_value(name, x, declared)
 
 
 def range_fields(ranges: dict, defaults: dict) -> dict:
@@ -177,23 +227,33 @@ def _leaf(loc: tuple) -> str:
     return "value" + idx
 
 
-def _key(loc: tuple, data: Any) -> str:
-    """Dotted key of an error location as TOML writes it, list items as [i]. Parts pydantic inserts that
-    are not keys of the data (a union's tag or member name) are left out, found by walking the data along
-    the path."""
-    out = ""
+def _data_loc(loc: tuple, data: Any) -> tuple:
+    """The parts of an error location that are keys of the data (or list indices). Parts pydantic
+    inserts that are not (a union's tag or member name) are left out, found by walking the data along
+    the path: a key missing from a table while the next part is in it, or any name below a value that is
+    no table."""
+    out = []
     here = data
     for n, part in enumerate(loc):
         last = n == len(loc) - 1
         if isinstance(here, dict) and not last and (part not in here or (
                 part in here.values() and loc[n + 1] in here)):
             continue
+        if isinstance(part, str) and out and here is not None and not isinstance(here, (dict, list, tuple)):
+            continue
+        out.append(part)
         if isinstance(part, int):
-            out += f"[{part}]"
             here = here[part] if isinstance(here, (list, tuple)) and -len(here) <= part < len(here) else None
         else:
-            out += ("." if out else "") + _part(str(part))
             here = here.get(part) if isinstance(here, dict) else None
+    return tuple(out)
+
+
+def _key(loc: tuple, data: Any) -> str:
+    """Dotted key of an error location as TOML writes it, list items as [i] (`_data_loc`'s parts)."""
+    out = ""
+    for part in _data_loc(loc, data):
+        out += f"[{part}]" if isinstance(part, int) else ("." if out else "") + _part(str(part))
     return out
 
 
@@ -270,7 +330,11 @@ def _message(err: dict, data: Any, root) -> str:
         value = ctx["value"]
         reason = err["msg"]
     elif kind == "out_of_range":
-        reason = range_text(_leaf(loc), ctx["lo"], ctx["hi"], ctx["unit"], ctx["lo_open"], ctx["hi_open"])
+        where = _data_loc(loc, data) if data is not None else loc
+        info = _field_at(root, where) if root is not None else None
+        desc = f"; {info.description}" if info is not None and info.description else ""
+        reason = range_text(_leaf(where), ctx["lo"], ctx["hi"], ctx["unit"], ctx["lo_open"], ctx["hi_open"])
+        reason = reason[:-1] + desc + ")"
     elif kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
         reason = f"out of range (allowed {_allowed(root, loc, _leaf(loc), ctx)})"
     elif kind == "missing":

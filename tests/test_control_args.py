@@ -32,7 +32,7 @@ def test_every_zenoh_op_has_a_declaration():
     ("step", {"n": 5.0}, ["n = 5.0", "integer"]),
     ("step", {"n": "5"}, ["n = '5'"]),
     ("step", {"n": True}, ["n = True"]),
-    ("step", {"n": 0}, ["n = 0", "greater than or equal to 1"]),
+    ("step", {"n": 0}, ["n = 0", "out of range (allowed 1 <= n <= 1e+06)"]),
     ("pause", {"now": True}, ["unknown argument 'now'", "none"]),
     ("resume", {"x": 1}, ["unknown argument 'x'"]),
     ("reset", {"scenario": "hil_flat"}, ["unknown argument 'scenario'"]),

@@ -96,7 +96,7 @@ def write(tmp_path, text, name="road.toml"):
     ('type = "flat"\nheigth = 1.0\n', r"heigth = 1.0: unknown key \(allowed: type, height, mu, rolling_resistance\)"),
     ('type = "hill"\n', r"type = 'hill': not one of 'flat', 'grade', 'mesh'"),
     ('height = 1.0\n', r"type: missing"),
-    ('type = "mesh"\nsurvey = "campus_survey.csv"\ngrid_spacing = "fine"\n', r"grid_spacing = 'fine': input should be a valid number"),
+    ('type = "mesh"\nsurvey = "campus_survey.csv"\ngrid_spacing = "fine"\n', r"grid_spacing = 'fine': must be a number"),
     ('type = "mesh"\nsurvey = "campus_survey.csv"\ngrid_spacing = 0.01\n', r"grid_spacing = 0.01: out of range \(allowed 0.05 <= grid_spacing <= 10"),
     ('type = "mesh"\nsurvey = "nowhere.csv"\ngrid_spacing = 0.5\n', r"survey = 'nowhere.csv': file not found"),
     ('type = "grade"\ngrade = 0.1\norigin = [0.0, 1.0]\n', r"origin\[2\]: missing"),

@@ -38,7 +38,7 @@ from typing import Any, Literal, Optional
 
 from pydantic import Field, model_validator
 
-from rtsim.configfile import Strict, bad, load, problem
+from rtsim.configfile import Range, Strict, bad, load, problem
 
 from .metrics import METRICS
 
@@ -59,8 +59,12 @@ class Case(Strict):
         return self
 
 
+#: a metric's or a swept key's value: any finite number, in its own unit (a grid may sweep any key)
+Finite = Range(-math.inf, math.inf, "the key's or metric's unit", lo_open=True, hi_open=True)
+
+
 class Distribution(Strict):
-    uniform: Optional[tuple[float, float]] = None
+    uniform: Optional[tuple[Finite, Finite]] = None
     choice: Optional[list[Value]] = Field(default=None, min_length=1)
 
     @model_validator(mode="after")
@@ -69,13 +73,13 @@ class Distribution(Strict):
             raise bad("uniform", self.uniform, "give exactly one of uniform = [lo, hi] or choice = [...]")
         if self.uniform is not None:
             lo, hi = self.uniform
-            if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+            if not lo <= hi:
                 raise bad("uniform", list(self.uniform), "must be [lo, hi], finite, lo <= hi")
         return self
 
 
 class RandomSample(Strict):
-    samples: int = Field(ge=1, le=1_000_000, description="number of random points")
+    samples: Range(1, 1_000_000, integer=True) = Field(description="number of random points")
     params: dict[str, Distribution] = Field(min_length=1)
 
     @model_validator(mode="after")
@@ -86,8 +90,8 @@ class RandomSample(Strict):
 
 class Criterion(Strict):
     metric: str
-    min: Optional[float] = None
-    max: Optional[float] = None
+    min: Optional[Finite] = None
+    max: Optional[Finite] = None
 
     @model_validator(mode="after")
     def _check(self):
@@ -101,9 +105,9 @@ class Criterion(Strict):
 class Plan(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$")
     description: str = ""
-    seed: int = Field(default=0, ge=0, le=2**32 - 1, description="seed of the random sample")
-    seed_base: int = Field(default=0, ge=0, le=2**32 - 1, description="first run seed (sensor noise)")
-    repetitions: int = Field(default=1, ge=1, le=10_000)
+    seed: Range(0, 2**32 - 1, integer=True) = Field(default=0, description="seed of the random sample")
+    seed_base: Range(0, 2**32 - 1, integer=True) = Field(default=0, description="first run seed (sensor noise)")
+    repetitions: Range(1, 10_000, integer=True) = 1
     metrics: list[str] = Field(min_length=1)
     per_run: Literal["none", "csv", "mcap"] = "none"
     cases: list[Case] = Field(min_length=1)

@@ -43,6 +43,7 @@ Events (``after``): ``start``, ``fault:<id>`` (its onset), ``fault_end:<id>``, o
 """
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 from typing import Annotated, Literal, Optional, Union
@@ -59,6 +60,7 @@ SIGNAL_PATTERN = rf"^{_SIGNAL}$"
 EVENT_PATTERN = r"^(start|fault:[A-Za-z0-9_.-]{1,64}|fault_end:[A-Za-z0-9_.-]{1,64})$"
 Time = Range(0.0, 3600.0, "s")
 Window = Range(0.0, 3600.0, "s", lo_open=True)
+SignalValue = Range(-math.inf, math.inf, "the signal's unit", lo_open=True, hi_open=True)   # any finite
 
 
 def parse_condition(text: str, signal: bool) -> tuple[Optional[str], str, float, bool]:
@@ -106,8 +108,8 @@ class Bounds(_Expect):
     """Every sample of ``signal`` in [min, max] from ``start`` to ``end`` s after the event (end: the case's
     end when left out)."""
     kind: Literal["bounds"]
-    min: Optional[float] = None
-    max: Optional[float] = None
+    min: Optional[SignalValue] = None
+    max: Optional[SignalValue] = None
     start: Time = 0.0
     end: Optional[Window] = None
 

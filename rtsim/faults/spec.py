@@ -22,9 +22,9 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import Any, Optional
+from typing import Annotated, Any, Optional, Union
 
-from pydantic import Field, model_validator
+from pydantic import Discriminator, Field, Tag, model_validator
 
 from rtsim.configfile import Range, Strict, bad, load_toml, validate
 
@@ -35,6 +35,11 @@ MAX_TIME = 1e6
 Seconds = Range(0.0, MAX_TIME, "s")
 Positive = Range(0.0, MAX_TIME, "s", lo_open=True)
 _CONDITION = re.compile(r"^\s*(abs\(\s*)?([A-Za-z_][A-Za-z0-9_]*)\s*(\))?\s*(>|<)\s*([-+0-9.eE]+)\s*$")
+#: a target is named (sensor channel, frame name, "bus", actuator) or a frame's id; the union is told by the
+#: value's type, so a bad id is reported against the id's range alone
+FrameId = Range(0, 1_000_000, "frame id", integer=True)
+Target = Annotated[Union[Annotated[str, Tag("name")], Annotated[FrameId, Tag("id")]],
+                   Discriminator(lambda v: "id" if isinstance(v, int) and not isinstance(v, bool) else "name")]
 COMMON = ("id", "kind", "target", "at", "when", "after", "after_delay", "duration")
 
 
@@ -42,7 +47,7 @@ class Condition(Strict):
     """``channel > value`` (or ``<``), on the channel's value or its magnitude (``abs``)."""
     channel: str
     op: str
-    value: float
+    value: Range(-math.inf, math.inf, "the channel's unit", lo_open=True, hi_open=True)   # finite
     magnitude: bool = False
 
     def text(self) -> str:
@@ -69,7 +74,7 @@ class FaultSpec(Strict):
     """One fault (module docstring); ``params`` holds the kind's parameters, defaults filled in."""
     id: str = Field(pattern=r"^[A-Za-z0-9_.-]{1,64}$", description="the fault's name, unique in the session")
     kind: str = Field(description="a fault kind of the catalogue (rtsim faults --list)")
-    target: str | int = Field(description="sensor channel, frame name or id, \"bus\", or actuator")
+    target: Target = Field(description="sensor channel, frame name or id, \"bus\", or actuator")
     at: Optional[Seconds] = Field(None, description="onset time (the step at it)")
     when: Optional[str] = Field(None, description="onset condition: CHANNEL > VALUE, abs(CHANNEL) > VALUE, ...")
     after: Optional[str] = Field(None, description="onset after this fault's onset")

@@ -45,14 +45,13 @@ from typing import Annotated, Literal, Union
 
 from pydantic import Field, TypeAdapter
 
-from rtsim.configfile import Strict, load, problem
+from rtsim.configfile import Range, Strict, load, problem
 from rtsim.road.model import MU_RANGE, RR_RANGE, Road, make_grade, make_mesh, make_plane
 from rtsim.road.survey import read_survey, survey_to_mesh
 
-_MU = Field(1.0, gt=MU_RANGE[0], le=MU_RANGE[1], allow_inf_nan=False, strict=True,
-            description="friction scale of the road surface")
-_RR = Field(0.010, ge=RR_RANGE[0], le=RR_RANGE[1], allow_inf_nan=False, strict=True,
-            description="rolling-resistance coefficient")
+Mu = Range(MU_RANGE[0], MU_RANGE[1], lo_open=True)    # friction scale of the road surface
+RollingResistance = Range(RR_RANGE[0], RR_RANGE[1])    # rolling-resistance coefficient
+Place = Range(-1e5, 1e5, "m")                           # a coordinate of a road's point, world frame
 
 
 class _Road(Strict):
@@ -61,61 +60,53 @@ class _Road(Strict):
 
 class FlatRoadConfig(_Road):
     type: Literal["flat"]
-    height: float = Field(0.0, ge=-1e4, le=1e4, allow_inf_nan=False, strict=True,
-                          description="surface height, m")
-    mu: float = _MU
-    rolling_resistance: float = _RR
+    height: Range(-1e4, 1e4, "m") = Field(0.0, description="surface height, m")
+    mu: Mu = 1.0
+    rolling_resistance: RollingResistance = 0.010
 
 
 class GradeRoadConfig(_Road):
     type: Literal["grade"]
-    grade: float = Field(ge=-0.5, le=0.5, allow_inf_nan=False, strict=True,
-                         description="rise over run along the heading, positive uphill")
-    heading_deg: float = Field(0.0, ge=-360.0, le=360.0, allow_inf_nan=False, strict=True,
-                               description="direction of travel, degrees from +x towards +y")
-    origin: tuple[float, float, float] = Field((0.0, 0.0, 0.0),
-                                               description="a point (x, y, z) of the surface, m")
-    mu: float = _MU
-    rolling_resistance: float = _RR
+    grade: Range(-0.5, 0.5) = Field(description="rise over run along the heading, positive uphill")
+    heading_deg: Range(-360.0, 360.0, "deg") = Field(
+        0.0, description="direction of travel, degrees from +x towards +y")
+    origin: tuple[Place, Place, Place] = Field((0.0, 0.0, 0.0), description="a point (x, y, z) of the surface, m")
+    mu: Mu = 1.0
+    rolling_resistance: RollingResistance = 0.010
 
 
 class MeshRoadConfig(_Road):
     type: Literal["mesh"]
     survey: str = Field(min_length=1, strict=True, description="survey CSV path, relative to the TOML file")
-    grid_spacing: float = Field(ge=0.05, le=10.0, allow_inf_nan=False, strict=True,
-                                description="grid spacing, m")
-    alpha_radius: float | None = Field(None, gt=0.0, le=1e3, allow_inf_nan=False, strict=True,
-                                       description="alpha-shape radius, m (default from point spacing)")
-    mu: float = _MU
-    rolling_resistance: float = _RR
+    grid_spacing: Range(0.05, 10.0, "m") = Field(description="grid spacing, m")
+    alpha_radius: Range(0.0, 1e3, "m", lo_open=True) | None = Field(
+        None, description="alpha-shape radius, m (default from point spacing)")
+    mu: Mu = 1.0
+    rolling_resistance: RollingResistance = 0.010
     smooth_normals: bool = Field(True, strict=True,
                                  description="contact normals interpolated from vertex normals, so tyre "
                                              "forces are continuous across triangle edges")
-    off_survey_friction: float = Field(0.6, gt=MU_RANGE[0], le=MU_RANGE[1], allow_inf_nan=False,
-                                       strict=True, description="friction scale of the ground beyond "
+    off_survey_friction: Mu = Field(
+        0.6, description="friction scale of the ground beyond "
                                                                 "the survey (grass, gravel: about 0.6)")
-    off_survey_rolling_resistance: float = Field(0.02, ge=RR_RANGE[0], le=RR_RANGE[1],
-                                                 allow_inf_nan=False, strict=True,
-                                                 description="rolling resistance of the ground beyond "
+    off_survey_rolling_resistance: RollingResistance = Field(
+        0.02, description="rolling resistance of the ground beyond "
                                                              "the survey")
 
 
 class OpenDriveRoadConfig(_Road):
     type: Literal["opendrive"]
     file: str = Field(min_length=1, strict=True, description="OpenDRIVE (.xodr) path, relative to the TOML file")
-    mu: float = _MU
-    rolling_resistance: float = _RR
-    ds_max: float = Field(1.0, ge=0.05, le=10.0, allow_inf_nan=False, strict=True,
-                          description="largest mesh step along the reference line, m")
-    dt_max: float = Field(1.0, ge=0.05, le=10.0, allow_inf_nan=False, strict=True,
-                          description="largest mesh step across a lane, m")
+    mu: Mu = 1.0
+    rolling_resistance: RollingResistance = 0.010
+    ds_max: Range(0.05, 10.0, "m") = Field(1.0, description="largest mesh step along the reference line, m")
+    dt_max: Range(0.05, 10.0, "m") = Field(1.0, description="largest mesh step across a lane, m")
     smooth_normals: bool = Field(True, strict=True,
                                  description="contact normals interpolated from vertex normals")
-    off_survey_friction: float = Field(0.6, gt=MU_RANGE[0], le=MU_RANGE[1], allow_inf_nan=False,
-                                       strict=True, description="friction scale of the ground beyond the road")
-    off_survey_rolling_resistance: float = Field(0.02, ge=RR_RANGE[0], le=RR_RANGE[1],
-                                                 allow_inf_nan=False, strict=True,
-                                                 description="rolling resistance of the ground beyond the road")
+    off_survey_friction: Mu = Field(
+        0.6, description="friction scale of the ground beyond the road")
+    off_survey_rolling_resistance: RollingResistance = Field(
+        0.02, description="rolling resistance of the ground beyond the road")
 
 
 RoadConfig = Annotated[Union[FlatRoadConfig, GradeRoadConfig, MeshRoadConfig, OpenDriveRoadConfig],

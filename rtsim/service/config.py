@@ -25,6 +25,7 @@ StateRate = Range(1.0, 1000.0, "Hz")
 StatusRate = Range(1.0, 10.0, "Hz")
 Spin = Range(0.0, 0.01, "s")
 WallTime = Range(0.0, 1e9, "s", lo_open=True)
+Port = Range(1, 65535, "TCP port", integer=True)
 
 
 def setting(default: Any, help: str, key: str | None, flag: str | None = None, **kw):
@@ -53,15 +54,16 @@ class ServeOptions(BaseModel):
     mode: Literal["realtime", "lockstep", "fast"] = setting(
         "realtime", "realtime (default): paced by the wall clock; lockstep: steps only on request (CAN "
         "SIM_STEP_REQ or Zenoh control op=step); fast: as fast as possible", "simulation.mode")
-    max_catch_up: int = setting(20, "after a stall, steps run back to back before the rest are skipped "
-                                "(default 20)", "simulation.max_catch_up", ge=0, le=10000)
-    loop_cpu: Optional[int] = setting(
+    max_catch_up: Range(0, 10000, "steps", integer=True) = setting(
+        20, "after a stall, steps run back to back before the rest are skipped (default 20)",
+        "simulation.max_catch_up")
+    loop_cpu: Optional[Range(0, 4095, "CPU", integer=True)] = setting(
         None, "pin the loop thread (only it) to this CPU, Linux (default: not pinned); give it a core nothing "
-        "else runs on, e.g. pages and other work on the others", "simulation.loop_cpu", ge=0, le=4095)
-    loop_priority: Optional[int] = setting(
+        "else runs on, e.g. pages and other work on the others", "simulation.loop_cpu")
+    loop_priority: Optional[Range(1, 99, "SCHED_FIFO priority", integer=True)] = setting(
         None, "run the loop thread (only it) under SCHED_FIFO at this real-time priority, Linux, needs the "
         "privilege (default: the normal scheduler); with --loop-cpu other processes on its CPU wait for it",
-        "simulation.loop_priority", ge=1, le=99)
+        "simulation.loop_priority")
     hold_pressure: Optional[Pressure] = setting(
         None, "brake pressure applied when the brake command times out, kPa (default 3000)",
         "simulation.hold_pressure")
@@ -70,9 +72,9 @@ class ServeOptions(BaseModel):
                                            "can.interface")
     can_channel: Optional[str] = setting(None, "python-can channel (vcan0, can0, 127.0.0.1:54701, ...)",
                                          "can.channel")
-    can_hub_port: Optional[int] = setting(
+    can_hub_port: Optional[Port] = setting(
         None, "port of the loopback CAN hub on 127.0.0.1 (used when no --can-interface is given and the kernel "
-        "has no vcan0; default: $RTSIM_CAN_HUB_PORT, else 54701)", "can.hub_port", ge=1, le=65535)
+        "has no vcan0; default: $RTSIM_CAN_HUB_PORT, else 54701)", "can.hub_port")
     start_hub: bool = setting(True, "do not start the embedded loopback CAN hub", "can.start_hub", "--no-hub")
     zenoh: bool = setting(True, "do not publish over Zenoh", "zenoh.enabled", "--no-zenoh")
     zenoh_listen: list[str] = setting([DEFAULT_ZENOH_LISTEN], f"Zenoh listen endpoint (repeatable; default "
@@ -92,9 +94,9 @@ class ServeOptions(BaseModel):
                                "has no valid command or the user takes over)", "simulation.user_input",
                                "--no-user-input")
     record: Optional[Path] = setting(None, "record the session to MCAP (FILE.mcap)", "record.path")
-    foxglove_port: Optional[int] = setting(None, "serve a Foxglove WebSocket on this port (ws://HOST:PORT: the "
+    foxglove_port: Optional[Range(0, 65535, "TCP port (0: a free one)", integer=True)] = setting(None, "serve a Foxglove WebSocket on this port (ws://HOST:PORT: the "
                                            "topics, 3D scene and road; 0: a free port; default off)",
-                                           "foxglove.port", ge=0, le=65535)
+                                           "foxglove.port")
     foxglove_host: str = setting("127.0.0.1", "address the Foxglove server binds to (default 127.0.0.1; "
                                  "another than loopback only with --foxglove-allow-remote)", "foxglove.host")
     foxglove_allow_remote: bool = setting(False, "let the Foxglove server bind to an address off loopback",

@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 import math
 
 from drivers.base import INPUT_NAMES
-from rtsim.configfile import validate
+from rtsim.configfile import Range, range_text, validate
 from rtsim.errors import ConfigError, RtsimError
 from rtsim.faults.spec import FaultSpec
 
@@ -49,7 +49,7 @@ class NoArgs(_Args):
 
 class StepArgs(_Args):
     """step (lockstep mode only)."""
-    n: int = Field(1, ge=1, le=1_000_000, description="steps to run, each one step of the model")
+    n: Range(1, 1_000_000, integer=True) = Field(1, description="steps to run, each one step of the model")
 
 
 class LoadScenarioArgs(_Args):
@@ -97,6 +97,9 @@ def _reason(op: str, model: type[BaseModel], exc: ValidationError) -> str:
         what = f"{name} = {value!r} is not a finite number"
     elif kind == "missing":
         what = f"argument {name!r} missing"
+    elif kind == "out_of_range":
+        c = e["ctx"]
+        what = f"{name} = {value!r}: {range_text(name, c['lo'], c['hi'], c['unit'], c['lo_open'], c['hi_open'])}"
     else:
         what = f"{name} = {value!r}: {e['msg'][0].lower()}{e['msg'][1:]}"
     more = f" (and {len(errs) - 1} more)" if len(errs) > 1 else ""

@@ -10,6 +10,7 @@ channel) switch on effects of the catalogue rtsim.vehicle.car.effects; absent: n
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Literal
@@ -18,11 +19,12 @@ import numpy as np
 from pydantic import Field, field_validator, model_validator
 
 from rtsim.channels import SENSOR_NAMES
-from rtsim.configfile import Strict, bad, load_toml, problem, validate
+from rtsim.configfile import Range, Strict, bad, load_toml, problem, validate
 from rtsim.errors import ConfigError, ModelError
 
 from ..kit.actuators import over_defaults
 from ..kit.brake import BrakeConfig
+from ..kit.design_frame import Moments, Product, Vec3
 from ..kit.eps import EpsConfig
 from ..kit.inertia import inertia_problem
 from ..kit.linkage_checks import STEERING_RATIO_RANGE, short_link, steering_arm, steering_ratio
@@ -33,15 +35,14 @@ from ..kit.steering import SteeringConfig
 
 from .effects import validate_effects
 
-Vec3 = tuple[float, float, float]
 MAX_TRAVEL_M = 0.3       # m: wheel travel either way from design ride height
 
 
 class Chassis(Strict):
-    mass_kg: float = Field(gt=50, le=5000, description="sprung mass")
+    mass_kg: Range(50, 5000, "kg", lo_open=True) = Field(description="sprung mass")
     cg_m: Vec3 = Field(description="centre of mass of the sprung mass, design frame")
-    inertia_kgm2: tuple[float, float, float] = Field(description="Ixx, Iyy, Izz about the sprung CG")
-    ixz_kgm2: float = 0.0
+    inertia_kgm2: Moments = Field(description="Ixx, Iyy, Izz about the sprung CG")
+    ixz_kgm2: Product = 0.0
 
     @model_validator(mode="after")
     def _positive_inertia(self):
@@ -108,13 +109,13 @@ class SpringDamper(Strict):
     and a two-rate damper, or tables: `spring_table` (x: compression from the design ride height, m;
     force_n: the force above the static preload, so the car sits at design height) and `damper_table`
     (x: compression speed, m/s; force_n: damping force, 0 at 0)."""
-    stiffness_n_per_m: float | None = Field(default=None, gt=0, le=1e6)
-    free_length_m: float | None = Field(default=None, gt=0, le=2.0,
-                                        description="unset: chosen so the car sits at design ride height")
-    bump_stop_clearance_m: float = Field(default=0.05, gt=0, le=0.3)
-    bump_stop_stiffness_n_per_m: float = Field(default=2e5, ge=0, le=1e7)
-    damping_bump_ns_per_m: float | None = Field(default=None, gt=0, le=1e5)
-    damping_rebound_ns_per_m: float | None = Field(default=None, gt=0, le=1e5)
+    stiffness_n_per_m: Range(0, 1e6, "N/m", lo_open=True) | None = None
+    free_length_m: Range(0, 2.0, "m", lo_open=True) | None = Field(
+        default=None, description="unset: chosen so the car sits at design ride height")
+    bump_stop_clearance_m: Range(0, 0.3, "m", lo_open=True) = 0.05
+    bump_stop_stiffness_n_per_m: Range(0, 1e7, "N/m") = 2e5
+    damping_bump_ns_per_m: Range(0, 1e5, "N s/m", lo_open=True) | None = None
+    damping_rebound_ns_per_m: Range(0, 1e5, "N s/m", lo_open=True) | None = None
     spring_table: Characteristic | None = None
     damper_table: Characteristic | None = None
 
@@ -134,38 +135,45 @@ class SpringDamper(Strict):
 class Axle(Strict):
     suspension: Literal["double_wishbone", "macpherson", "vertical_slider"]
     hardpoints: DoubleWishboneHardpoints | MacPhersonHardpoints | VerticalSliderHardpoints
-    static_camber_rad: float = Field(default=0.0, ge=-0.1, le=0.1, description="positive: top leans out")
-    static_toe_rad: float = Field(default=0.0, ge=-0.05, le=0.05, description="positive: toe-in")
-    unsprung_mass_kg: float = Field(gt=1, le=200, description="per corner")
-    wheel_spin_inertia_kgm2: float = Field(gt=0.05, le=20, description="per wheel, incl. brake and shaft")
+    static_camber_rad: Range(-0.1, 0.1, "rad") = Field(default=0.0, description="positive: top leans out")
+    static_toe_rad: Range(-0.05, 0.05, "rad") = Field(default=0.0, description="positive: toe-in")
+    unsprung_mass_kg: Range(1, 200, "kg", lo_open=True) = Field(description="per corner")
+    wheel_spin_inertia_kgm2: Range(0.05, 20, "kg m^2", lo_open=True) = Field(
+        description="per wheel, incl. brake and shaft")
     spring: SpringDamper | None = Field(default=None, description="the spring and damper (not with rigid)")
     rigid: bool = Field(default=False, description=(
         "no suspension: the wheel's carrier is bolted to the chassis (a vertical slider whose travel a "
         "constraint holds at the design height); no spring, damper, anti-roll bar or travel stops"))
-    anti_roll_bar_n_per_m: float = Field(default=0.0, ge=0, le=1e6,
-                                         description="force per metre of left-right travel difference")
-    travel_m: tuple[float, float] = Field(default=(-0.08, 0.08), description="rebound, bump limits of the fit")
-    travel_stop_margin_m: float = Field(default=0.008, ge=0.0, le=0.05, description=(
-        "the rebound and bump stops (rtsim.vehicle.kit.end_stop) engage this far inside travel_m, so a "
-        "wheel hanging in the air or slammed into bump stays within the fitted kinematics"))
-    travel_stop_stiffness_n_per_m: float = Field(default=1.0e6, ge=1e4, le=1e8, description=(
-        "the travel stops' stiffness at the wheel (rebound strap / hydraulic stop, bump stop solid)"))
-    travel_stop_damping_ns_per_m: float = Field(default=5.0e3, ge=0.0, le=1e6, description=(
-        "the travel stops' damping at the wheel"))
-    pivot_inertia_kgm2: float = Field(default=0.0, ge=0, le=20, description=(
-        "wheel, hub and knuckle about the kingpin (a car with [eps]: each front wheel steers freely "
+    anti_roll_bar_n_per_m: Range(0, 1e6, "N/m") = Field(
+        default=0.0, description="force per metre of left-right travel difference")
+    travel_m: tuple[Range(-MAX_TRAVEL_M, 0.0, "m", hi_open=True), Range(0.0, MAX_TRAVEL_M, "m", lo_open=True)] = Field(
+        default=(-0.08, 0.08), description="rebound, bump limits of the fit, from the design ride height")
+    travel_stop_margin_m: Range(0.0, 0.05, "m") = Field(
+        default=0.008, description="the rebound and bump stops (rtsim.vehicle.kit.end_stop) engage this far "
+        "inside travel_m, so a "
+        "wheel hanging in the air or slammed into bump stays within the fitted kinematics")
+    travel_stop_stiffness_n_per_m: Range(1e4, 1e8, "N/m") = Field(
+        default=1.0e6, description="the travel stops' stiffness at the wheel (rebound strap / hydraulic stop, "
+        "bump stop solid)")
+    travel_stop_damping_ns_per_m: Range(0.0, 1e6, "N s/m") = Field(
+        default=5.0e3, description="the travel stops' damping at the wheel")
+    pivot_inertia_kgm2: Range(0, 20, "kg m^2") = Field(
+        default=0.0, description="wheel, hub and knuckle about the kingpin (a car with [eps]: each front wheel "
+        "steers freely "
         "about its kingpin, tied to the rack by its tie rod; steer-by-wire: their own inertia about a "
         "diameter through the wheel centre, reflected to the rack through the linkage, the wheel "
-        "centre's motion being the unsprung mass's)"))
-    compliance_steer_rad_per_n: float = Field(default=0.0, ge=-1e-4, le=1e-4, description=(
-        "elastokinematic steer induced by the lateral tyre force (positive: towards the force)"))
-    compliance_steer_rad_per_nm: float = Field(default=0.0, ge=-1e-3, le=1e-3, description=(
-        "steer induced by the aligning moment"))
-    anti_pitch_arm_m: float | None = Field(default=None, gt=0.05, le=20, description=(
-        "axle reaction ('Brouilhet effect'): the longitudinal tyre force's moment about the wheel "
-        "centre, Fx r, taken by an arm of this length between wheel and body (side-view swing arm)"))
-    anti_roll_arm_m: float | None = Field(default=None, gt=0.05, le=20, description=(
-        "axle reaction of the lateral tyre force, Fy r over this arm (front-view swing arm)"))
+        "centre's motion being the unsprung mass's)")
+    compliance_steer_rad_per_n: Range(-1e-4, 1e-4, "rad/N") = Field(
+        default=0.0, description="elastokinematic steer induced by the lateral tyre force (positive: towards "
+        "the force)")
+    compliance_steer_rad_per_nm: Range(-1e-3, 1e-3, "rad/(N m)") = Field(
+        default=0.0, description="steer induced by the aligning moment")
+    anti_pitch_arm_m: Range(0.05, 20, "m", lo_open=True) | None = Field(
+        default=None, description="axle reaction ('Brouilhet effect'): the longitudinal tyre force's moment "
+        "about the wheel "
+        "centre, Fx r, taken by an arm of this length between wheel and body (side-view swing arm)")
+    anti_roll_arm_m: Range(0.05, 20, "m", lo_open=True) | None = Field(
+        default=None, description="axle reaction of the lateral tyre force, Fy r over this arm (front-view swing arm)")
 
     @model_validator(mode="after")
     def _hardpoints_match(self):
@@ -186,11 +194,7 @@ class Axle(Strict):
 
     @model_validator(mode="after")
     def _physical(self):
-        """Travel limits in order around the design ride height; no degenerate link in the linkage."""
-        rebound, bump = self.travel_m
-        if not -MAX_TRAVEL_M <= rebound < 0.0 < bump <= MAX_TRAVEL_M:
-            raise bad("travel_m", self.travel_m, f"need -{MAX_TRAVEL_M:g} <= rebound < 0 < bump <= {MAX_TRAVEL_M:g} m "
-                      "(wheel travel from the design ride height, rebound first)")
+        """No degenerate link in the linkage."""
         link = short_link(self.suspension, self.hardpoints.model_dump())
         if link is not None:
             raise bad(f"hardpoints.{link[0]}", link[1], link[2])
@@ -216,22 +220,22 @@ class Tyres(Strict):
 
 
 class Aero(Strict):
-    drag_area_m2: float = Field(default=0.7, ge=0, le=5, description="Cd * A")
-    air_density_kg_m3: float = Field(default=1.2, gt=0.5, le=1.5)
+    drag_area_m2: Range(0, 5, "m^2") = Field(default=0.7, description="Cd * A")
+    air_density_kg_m3: Range(0.5, 1.5, "kg/m^3", lo_open=True) = 1.2
 
 
 class SensorNoise(Strict):
     """What one sensor reports of its physical value (rtsim.vehicle.kit.sensor_model), channel units."""
-    noise_std: float = Field(default=0.0, ge=0)
-    bias: float = 0.0
-    scale: float = Field(default=1.0, gt=0, le=10)
-    quantum: float = Field(default=0.0, ge=0)
-    delay_s: float = Field(default=0.0, ge=0, le=0.5)
+    noise_std: Range(0, math.inf, hi_open=True) = 0.0
+    bias: Range(-math.inf, math.inf, "channel units", lo_open=True, hi_open=True) = 0.0   # any finite
+    scale: Range(0, 10, lo_open=True) = 1.0
+    quantum: Range(0, math.inf, hi_open=True) = 0.0
+    delay_s: Range(0, 0.5, "s") = 0.0
 
 
 class Sensors(Strict):
     imu_position_m: Vec3 = Field(description="accelerometer/gyro mounting point, design frame")
-    rate_hz: float = Field(default=500.0, gt=0, le=10000)
+    rate_hz: Range(0, 10000, "Hz", lo_open=True) = 500.0
     channels: dict[str, SensorNoise] = Field(default_factory=dict,
                                             description="per channel noise, bias, quantisation, delay (off by default)")
 

@@ -48,6 +48,8 @@ import numpy as np
 from rtsim.jit import kernel
 
 from .layout import offsets
+from rtsim.configfile import Range, check_declared_ranges
+
 from .actuators import (LAG_NPAR, LAG_Y, LagConfig, check, part_config, pydantic_config, lag_init, lag_state_size,
                         lag_step)
 
@@ -103,21 +105,15 @@ SLIDE = 0.0
 @dataclass(frozen=True)
 class BrakeAxleConfig:
     """One axle's calipers (seed eq. 5)."""
-    pads: int = 2                     # n, friction pads per caliper
-    mu: float = 0.38                  # sliding pad/disc friction coefficient
-    mu_static: float = 0.45           # static friction coefficient (>= mu)
-    piston_area: float = 1.81e-3      # A, m^2 (48 mm piston)
-    effective_radius: float = 0.095   # R, m, disc centre to pad centre of pressure
+    pads: Range(1, 16, "pads", integer=True) = 2                  # n, friction pads per caliper
+    mu: Range(0.0, 2.0, lo_open=True) = 0.38                       # sliding pad/disc friction coefficient
+    mu_static: Range(0.0, 3.0, lo_open=True) = 0.45                # static friction coefficient (>= mu)
+    piston_area: Range(0.0, 0.1, "m^2", lo_open=True, hi_open=True) = 1.81e-3   # A (48 mm piston)
+    effective_radius: Range(0.0, 1.0, "m", lo_open=True, hi_open=True) = 0.095  # R, disc centre to pads
 
     def __post_init__(self) -> None:
-        check(1 <= self.pads <= 16, "pads", self.pads, "expected 1..16 pads")
-        check(0.0 < self.mu <= 2.0, "mu", self.mu, "expected 0 < mu <= 2")
-        check(self.mu <= self.mu_static <= 3.0, "mu_static", self.mu_static,
-              f"expected mu ({self.mu}) <= mu_static <= 3")
-        check(0.0 < self.piston_area < 0.1, "piston_area", self.piston_area,
-              "expected an area in m^2, 0 < A < 0.1")
-        check(0.0 < self.effective_radius < 1.0, "effective_radius", self.effective_radius,
-              "expected a radius in m, 0 < R < 1")
+        check_declared_ranges(self)
+        check(self.mu <= self.mu_static, "mu_static", self.mu_static, f"expected mu ({self.mu}) <= mu_static <= 3")
 
     def gain(self) -> float:
         """N*m per kPa: n mu A R * 1000."""
@@ -137,35 +133,24 @@ def _default_actuator() -> LagConfig:
 class BrakeConfig:
     front: BrakeAxleConfig = field(default_factory=BrakeAxleConfig)
     rear: BrakeAxleConfig = field(default_factory=_default_rear)
-    proportioning_knee: float = 2500.0    # kPa, rear pressure = line pressure up to here
-    proportioning_ratio: float = 0.4      # -, rear pressure slope above the knee
+    proportioning_knee: Range(0.0, math.inf, "kPa", hi_open=True) = 2500.0   # rear = line pressure up to here
+    proportioning_ratio: Range(0.0, 1.0) = 0.4                             # rear pressure slope above the knee
     actuator: LagConfig = field(default_factory=_default_actuator)   # kPa, kPa/s
     # stick spring: stands for the pads' and caliper's shear compliance. 1e5 N*m/rad is ~4x the tyre's
     # contact spring seen at the wheel (Kx / sigma r^2 ~ 2.6e4), so a held wheel adds little compliance
     # of its own to the car rocking on its tyres after a stop (3e4 doubled it); 3e5 stalls Newton at
     # the validation's 2 ms fitting step. Damping ratio ~0.8 with the wheel's spin inertia.
-    anchor_stiffness: float = 1.0e5       # N*m/rad
-    anchor_damping: float = 450.0         # N*m*s/rad
-    omega_eps: float = 0.05               # rad/s, sliding-law regularisation band
-    omega_stick: float = 0.05             # rad/s, a slowing wheel sticks below this speed
+    anchor_stiffness: Range(0.0, 1e9, "N m/rad", lo_open=True, hi_open=True) = 1.0e5
+    anchor_damping: Range(0.0, 1e7, "N m s/rad", hi_open=True) = 450.0
+    omega_eps: Range(0.0, 10.0, "rad/s", lo_open=True) = 0.05     # sliding-law regularisation band
+    omega_stick: Range(0.0, 10.0, "rad/s", lo_open=True) = 0.05   # a slowing wheel sticks below this speed
 
     def __post_init__(self) -> None:
+        check_declared_ranges(self)
         check(self.actuator.min >= 0.0, "actuator.min", self.actuator.min,
               "expected a pressure >= 0 kPa")
         check(math.isfinite(self.actuator.max), "actuator.max", self.actuator.max,
               "expected a finite maximum pressure in kPa")
-        check(self.proportioning_knee >= 0.0, "proportioning_knee", self.proportioning_knee,
-              "expected a pressure >= 0 kPa")
-        check(0.0 <= self.proportioning_ratio <= 1.0, "proportioning_ratio",
-              self.proportioning_ratio, "expected 0 <= ratio <= 1")
-        check(0.0 < self.anchor_stiffness < 1e9, "anchor_stiffness", self.anchor_stiffness,
-              "expected 0 < k < 1e9 N*m/rad")
-        check(0.0 <= self.anchor_damping < 1e7, "anchor_damping", self.anchor_damping,
-              "expected 0 <= c < 1e7 N*m*s/rad")
-        check(0.0 < self.omega_eps <= 10.0, "omega_eps", self.omega_eps,
-              "expected 0 < omega_eps <= 10 rad/s")
-        check(0.0 < self.omega_stick <= 10.0, "omega_stick", self.omega_stick,
-              "expected 0 < omega_stick <= 10 rad/s")
 
 
 def brake_config(data=None, where: str = "brake") -> BrakeConfig:

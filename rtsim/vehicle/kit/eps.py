@@ -40,7 +40,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from rtsim.configfile import Strict
+from rtsim.configfile import Range, Strict
 from rtsim.jit import inline_kernel, kernel
 from rtsim.mbs.envelope import add_entry
 
@@ -135,9 +135,9 @@ DRIVER_ANGLE, DRIVER_TORQUE = 0.0, 1.0
 class AssistLaw(Strict):
     """Motor current command (A) against torsion-bar torque (N m, the law is odd in it) and vehicle
     speed (m/s): current_a[i][j] at torque_nm[i], speed_mps[j]."""
-    torque_nm: list[float] = Field(min_length=2, max_length=24)
-    speed_mps: list[float] = Field(min_length=1, max_length=12)
-    current_a: list[list[float]]
+    torque_nm: list[Range(0.0, 50.0, "N m")] = Field(min_length=2, max_length=24)
+    speed_mps: list[Range(0.0, 100.0, "m/s")] = Field(min_length=1, max_length=12)
+    current_a: list[list[Range(-500.0, 500.0, "A")]]     # the drive's limit: current_limit_a <= 500 A
 
     @model_validator(mode="after")
     def _grid(self):
@@ -174,48 +174,49 @@ class EpsConfig(Strict):
     """A column-pinion electric power steering (units in the key names; defaults: a mid-size car's)."""
     driver_input: Literal["angle", "torque"] = Field(
         default="angle", description="the driver imposes the steering-wheel angle or a torque")
-    steering_wheel_inertia_kgm2: float = Field(default=0.035, gt=0, le=1)
-    column_inertia_kgm2: float = Field(default=0.005, gt=0, le=1)
-    column_damping_nms_per_rad: float = Field(default=0.04, ge=0, le=10)
-    torsion_bar_nm_per_rad: float = Field(default=2.0 * 180.0 / math.pi, gt=0, le=2000)
-    torsion_bar_damping_nms_per_rad: float = Field(default=0.02, ge=0, le=10)
-    pinion_inertia_kgm2: float = Field(default=2.0e-4, gt=0, le=0.1)
-    pinion_friction_nm: float = Field(default=0.3, ge=0, le=20)
-    pinion_friction_band_rad_s: float = Field(default=0.02, gt=0, le=1)
-    rack_travel_per_rad_m: float = Field(default=7.5e-3, gt=1e-3, le=0.05,
-                                         description="rack travel per pinion radian")
-    rack_mass_kg: float = Field(default=3.0, gt=0, le=50)
-    rack_damping_ns_per_m: float = Field(default=300.0, ge=0, le=1e5)
-    rack_friction_n: float = Field(default=120.0, ge=0, le=5000)
-    rack_friction_band_m_s: float = Field(default=2.0e-4, gt=0, le=0.1)
-    rack_efficiency: float = Field(default=0.92, gt=0.3, le=1, description="pinion driving the rack")
-    rack_efficiency_back: float = Field(default=0.88, gt=0.3, le=1, description="rack driving the pinion")
-    gear_ratio: float = Field(default=17.0, gt=1, le=100, description="motor turns per pinion turn (worm)")
-    gear_efficiency: float = Field(default=0.85, gt=0.3, le=1, description="motor driving")
-    gear_efficiency_back: float = Field(default=0.75, gt=0.3, le=1, description="back-driven")
-    motor_resistance_ohm: float = Field(default=0.06, gt=0, le=10, description="winding + drive")
-    motor_inductance_h: float = Field(default=1.0e-4, gt=0, le=0.1)
-    motor_torque_constant_nm_per_a: float = Field(default=0.055, gt=0, le=5)
-    motor_inertia_kgm2: float = Field(default=5.0e-5, gt=0, le=0.01)
-    motor_damping_nms_per_rad: float = Field(default=1.0e-4, ge=0, le=1)
-    motor_friction_nm: float = Field(default=0.015, ge=0, le=2)
-    motor_friction_band_rad_s: float = Field(default=0.3, gt=0, le=10)
-    current_limit_a: float = Field(default=70.0, gt=0, le=500)
-    supply_voltage_v: float = Field(default=13.5, gt=0, le=100)
-    current_loop_gain_v_per_a: float = Field(
-        default=0.05, ge=0, le=10, description="proportional gain on the current error (with "
+    steering_wheel_inertia_kgm2: Range(0, 1, "kg m^2", lo_open=True) = 0.035
+    column_inertia_kgm2: Range(0, 1, "kg m^2", lo_open=True) = 0.005
+    column_damping_nms_per_rad: Range(0, 10, "N m s/rad") = 0.04
+    torsion_bar_nm_per_rad: Range(0, 2000, "N m/rad", lo_open=True) = 2.0 * 180.0 / math.pi
+    torsion_bar_damping_nms_per_rad: Range(0, 10, "N m s/rad") = 0.02
+    pinion_inertia_kgm2: Range(0, 0.1, "kg m^2", lo_open=True) = 2.0e-4
+    pinion_friction_nm: Range(0, 20, "N m") = 0.3
+    pinion_friction_band_rad_s: Range(0, 1, "rad/s", lo_open=True) = 0.02
+    rack_travel_per_rad_m: Range(1e-3, 0.05, "m/rad", lo_open=True) = Field(
+        default=7.5e-3, description="rack travel per pinion radian")
+    rack_mass_kg: Range(0, 50, "kg", lo_open=True) = 3.0
+    rack_damping_ns_per_m: Range(0, 1e5, "N s/m") = 300.0
+    rack_friction_n: Range(0, 5000, "N") = 120.0
+    rack_friction_band_m_s: Range(0, 0.1, "m/s", lo_open=True) = 2.0e-4
+    rack_efficiency: Range(0.3, 1, lo_open=True) = Field(default=0.92, description="pinion driving the rack")
+    rack_efficiency_back: Range(0.3, 1, lo_open=True) = Field(default=0.88, description="rack driving the pinion")
+    gear_ratio: Range(1, 100, lo_open=True) = Field(default=17.0, description="motor turns per pinion turn (worm)")
+    gear_efficiency: Range(0.3, 1, lo_open=True) = Field(default=0.85, description="motor driving")
+    gear_efficiency_back: Range(0.3, 1, lo_open=True) = Field(default=0.75, description="back-driven")
+    motor_resistance_ohm: Range(0, 10, "ohm", lo_open=True) = Field(default=0.06, description="winding + drive")
+    motor_inductance_h: Range(0, 0.1, "H", lo_open=True) = 1.0e-4
+    motor_torque_constant_nm_per_a: Range(0, 5, "N m/A", lo_open=True) = 0.055
+    motor_inertia_kgm2: Range(0, 0.01, "kg m^2", lo_open=True) = 5.0e-5
+    motor_damping_nms_per_rad: Range(0, 1, "N m s/rad") = 1.0e-4
+    motor_friction_nm: Range(0, 2, "N m") = 0.015
+    motor_friction_band_rad_s: Range(0, 10, "rad/s", lo_open=True) = 0.3
+    current_limit_a: Range(0, 500, "A", lo_open=True) = 70.0
+    supply_voltage_v: Range(0, 100, "V", lo_open=True) = 13.5
+    current_loop_gain_v_per_a: Range(0, 10, "V/A") = Field(
+        default=0.05, description="proportional gain on the current error (with "
         "feed-forward of R i* and the back-emf)")
-    assist_damping_a_s_per_rad: float = Field(default=0.02, ge=0, le=10,
-                                              description="current against motor speed")
-    hands_bandwidth_hz: float = Field(default=8.0, ge=1, le=100, description=(
-        "angle mode: the steering-wheel angle follows the driver's command through the hands, a "
-        "critically damped second-order lag of this natural frequency (no impulsive torques)"))
-    rack_travel_m: float = Field(default=0.065, ge=0.005, le=0.2, description=(
-        "rack travel from centre to either end stop (rtsim.vehicle.kit.end_stop)"))
-    rack_stop_stiffness_n_per_m: float = Field(default=5.0e6, ge=1e5, le=1e8, description=(
-        "the rack end stops' contact stiffness (steel stop with a polyurethane ring)"))
-    rack_stop_damping_ns_per_m: float = Field(default=2.0e4, ge=0, le=1e6, description=(
-        "the rack end stops' damping (fades in over the first 0.5 mm of contact)"))
+    assist_damping_a_s_per_rad: Range(0, 10, "A s/rad") = Field(
+        default=0.02, description="current against motor speed")
+    hands_bandwidth_hz: Range(1, 100, "Hz") = Field(
+        default=8.0, description="angle mode: the steering-wheel angle follows the driver's command through the "
+        "hands, a "
+        "critically damped second-order lag of this natural frequency (no impulsive torques)")
+    rack_travel_m: Range(0.005, 0.2, "m") = Field(
+        default=0.065, description="rack travel from centre to either end stop (rtsim.vehicle.kit.end_stop)")
+    rack_stop_stiffness_n_per_m: Range(1e5, 1e8, "N/m") = Field(
+        default=5.0e6, description="the rack end stops' contact stiffness (steel stop with a polyurethane ring)")
+    rack_stop_damping_ns_per_m: Range(0, 1e6, "N s/m") = Field(
+        default=2.0e4, description="the rack end stops' damping (fades in over the first 0.5 mm of contact)")
     assist: AssistLaw = Field(default_factory=_default_assist)
 
 

@@ -58,6 +58,8 @@ import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
 from .layout import offsets
+from rtsim.configfile import Range, check_declared_ranges
+
 from .actuators import (LAG_NPAR, LAG_Y, LagConfig, check, part_config, pydantic_config, lag_init,
                         lag_state_size, lag_step, saturate)
 
@@ -180,70 +182,69 @@ def _strictly_increasing(xs) -> bool:
     return all(b > a for a, b in zip(xs, xs[1:]))
 
 
+MAX_ENGINE_SPEED = 2000.0     # rad/s (19 000 rpm)
+MAX_GEARS = 6
+ThrottleAngle = Range(0.0, 1.6, "rad")                      # throttle plate: closed 0 .. wide open ~pi/2
+EngineSpeed = Range(0.0, MAX_ENGINE_SPEED, "rad/s")
+Ratio = Range(0.0, 20.0, lo_open=True)                      # a gear's or the final drive's speed ratio
+ShiftSpeed = Range(0.0, 100.0, "m/s")
+
+
 @pydantic_config
 @dataclass(frozen=True)
 class EngineConfig:
-    throttle_nodes: tuple[float, ...] = _MAP[0]             # rad
-    speed_nodes: tuple[float, ...] = _MAP[1]                # rad/s
-    torque_table: tuple[tuple[float, ...], ...] = _MAP[2]   # N*m, [throttle][speed]
-    inertia: float = 0.15               # kg*m^2, crankshaft + flywheel + converter pump and fluid
-    idle_speed: float = 800.0 * RPM     # rad/s
-    idle_kp: float = 0.002              # rad of bypass opening per rad/s of speed error
-    idle_ki: float = 0.005              # rad per (rad/s * s)
-    idle_max_opening: float = 0.12      # rad, equivalent throttle angle of the bypass at full opening
-    rev_limit: float = 6500.0 * RPM     # rad/s, fuel cut
-    rev_limit_band: float = 100.0 * RPM  # rad/s
+    throttle_nodes: tuple[ThrottleAngle, ...] = _MAP[0]
+    speed_nodes: tuple[EngineSpeed, ...] = _MAP[1]
+    torque_table: tuple[tuple[Range(-2000.0, 5000.0, "N m at the crank"), ...], ...] = _MAP[2]   # [throttle][speed]
+    inertia: Range(0.0, 10.0, "kg m^2", lo_open=True, hi_open=True) = 0.15   # crank + flywheel + pump and fluid
+    idle_speed: Range(0.0, MAX_ENGINE_SPEED, "rad/s", lo_open=True) = 800.0 * RPM
+    idle_kp: Range(0.0, 10.0, "rad per rad/s") = 0.002       # bypass opening per rad/s of speed error
+    idle_ki: Range(0.0, 10.0, "rad per rad/s s") = 0.005
+    idle_max_opening: ThrottleAngle = 0.12     # equivalent throttle angle of the bypass at full opening
+    rev_limit: Range(0.0, MAX_ENGINE_SPEED, "rad/s", lo_open=True) = 6500.0 * RPM   # fuel cut
+    rev_limit_band: Range(0.0, 200.0, "rad/s", lo_open=True) = 100.0 * RPM
 
     def __post_init__(self) -> None:
+        check_declared_ranges(self)
         th, w, tab = self.throttle_nodes, self.speed_nodes, self.torque_table
-        check(len(th) >= 2 and _strictly_increasing(th) and th[0] >= 0.0, "throttle_nodes", th,
-              "expected >= 2 strictly increasing angles >= 0 rad")
-        check(len(w) >= 2 and _strictly_increasing(w) and w[0] >= 0.0, "speed_nodes", w,
-              "expected >= 2 strictly increasing speeds >= 0 rad/s")
+        check(len(th) >= 2 and _strictly_increasing(th), "throttle_nodes", th,
+              "expected >= 2 strictly increasing angles")
+        check(len(w) >= 2 and _strictly_increasing(w), "speed_nodes", w, "expected >= 2 strictly increasing speeds")
         check(len(tab) == len(th) and all(len(r) == len(w) for r in tab), "torque_table",
               f"{len(tab)} rows", f"expected {len(th)} rows (throttle) of {len(w)} values (speed)")
-        check(all(math.isfinite(v) for r in tab for v in r), "torque_table", "non-finite",
-              "expected finite torques in N*m")
-        check(0.0 < self.inertia < 10.0, "inertia", self.inertia, "expected 0 < J < 10 kg*m^2")
-        check(0.0 < self.idle_speed < self.rev_limit, "idle_speed", self.idle_speed,
+        check(self.idle_speed < self.rev_limit, "idle_speed", self.idle_speed,
               "expected 0 < idle speed < rev limit (rad/s)")
-        check(self.idle_kp >= 0.0, "idle_kp", self.idle_kp, "expected >= 0")
-        check(self.idle_ki >= 0.0, "idle_ki", self.idle_ki, "expected >= 0")
-        check(0.0 <= self.idle_max_opening <= th[-1], "idle_max_opening", self.idle_max_opening,
+        check(self.idle_max_opening <= th[-1], "idle_max_opening", self.idle_max_opening,
               f"expected 0..{th[-1]} rad")
-        check(self.rev_limit_band > 0.0, "rev_limit_band", self.rev_limit_band, "expected > 0 rad/s")
 
 
 @pydantic_config
 @dataclass(frozen=True)
 class ConverterConfig:
-    speed_ratio_nodes: tuple[float, ...] = (0.0, 0.2, 0.4, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95)
-    k_factor: tuple[float, ...] = (26.0, 26.2, 26.8, 28.4, 30.0, 33.0, 35.8, 41.5, 57.0)  # (rad/s)/sqrt(N*m)
-    torque_ratio_nodes: tuple[float, ...] = (0.0, 0.2, 0.4, 0.6, 0.7, 0.8, 0.85, 1.0)
-    torque_ratio: tuple[float, ...] = (2.1, 1.86, 1.62, 1.38, 1.25, 1.12, 1.0, 1.0)
-    overrun_capacity_scale: float = 1.0   # capacity multiplier when the turbine drives the pump
+    speed_ratio_nodes: tuple[Range(0.0, 1.0, "turbine/pump speed", hi_open=True), ...] = (
+        0.0, 0.2, 0.4, 0.6, 0.7, 0.8, 0.85, 0.9, 0.95)
+    k_factor: tuple[Range(0.0, 1e4, "(rad/s)/sqrt(N m)", lo_open=True, hi_open=True), ...] = (
+        26.0, 26.2, 26.8, 28.4, 30.0, 33.0, 35.8, 41.5, 57.0)
+    torque_ratio_nodes: tuple[Range(0.0, 1.0, "turbine/pump speed"), ...] = (0.0, 0.2, 0.4, 0.6, 0.7, 0.8, 0.85, 1.0)
+    torque_ratio: tuple[Range(1.0, 5.0, "turbine/pump torque"), ...] = (2.1, 1.86, 1.62, 1.38, 1.25, 1.12, 1.0, 1.0)
+    overrun_capacity_scale: Range(0.0, 10.0, lo_open=True) = 1.0   # capacity multiplier, turbine driving the pump
     lockup: bool = False                  # lock-up clutch fitted
-    lockup_gear: int = 3                  # engages only in this gear
-    lockup_speed: float = 18.0            # m/s, engages above (releases 10 % below)
-    lockup_capacity: float = 250.0        # N*m
-    lockup_damping: float = 30.0          # N*m*s/rad, slip damping of the engaged clutch
+    lockup_gear: Range(1, MAX_GEARS, integer=True) = 3   # engages only in this gear
+    lockup_speed: Range(0.0, 100.0, "m/s") = 18.0        # engages above (releases 10 % below)
+    lockup_capacity: Range(0.0, 5000.0, "N m", lo_open=True) = 250.0
+    lockup_damping: Range(0.0, 1e4, "N m s/rad", lo_open=True) = 30.0   # slip damping of the engaged clutch
 
     def __post_init__(self) -> None:
+        check_declared_ranges(self)
         sr, k = self.speed_ratio_nodes, self.k_factor
-        check(len(sr) >= 2 and sr[0] == 0.0 and _strictly_increasing(sr) and sr[-1] < 1.0, "speed_ratio_nodes", sr, "expected >= 2 strictly increasing ratios from 0 to below 1")
-        check(len(k) == len(sr) and all(0.0 < v < 1e4 for v in k), "k_factor", k,
-              f"expected {len(sr)} finite K factors > 0 in (rad/s)/sqrt(N*m)")
+        check(len(sr) >= 2 and sr[0] == 0.0 and _strictly_increasing(sr), "speed_ratio_nodes", sr,
+              "expected >= 2 strictly increasing ratios from 0 to below 1")
+        check(len(k) == len(sr), "k_factor", k, f"expected {len(sr)} K factors, one per speed ratio node")
         tn, tr = self.torque_ratio_nodes, self.torque_ratio
-        check(len(tn) >= 2 and tn[0] == 0.0 and _strictly_increasing(tn) and tn[-1] <= 1.0, "torque_ratio_nodes", tn, "expected >= 2 strictly increasing ratios from 0 up to 1")
-        check(len(tr) == len(tn) and all(1.0 <= v <= 5.0 for v in tr), "torque_ratio", tr,
-              f"expected {len(tn)} torque ratios in 1..5")
+        check(len(tn) >= 2 and tn[0] == 0.0 and _strictly_increasing(tn), "torque_ratio_nodes", tn,
+              "expected >= 2 strictly increasing ratios from 0 up to 1")
+        check(len(tr) == len(tn), "torque_ratio", tr, f"expected {len(tn)} torque ratios, one per node")
         check(tr[-1] == 1.0, "torque_ratio", tr, "expected the last torque ratio (coupling) = 1")
-        check(0.0 < self.overrun_capacity_scale <= 10.0, "overrun_capacity_scale",
-              self.overrun_capacity_scale, "expected 0 < scale <= 10")
-        check(self.lockup_speed >= 0.0, "lockup_speed", self.lockup_speed, "expected >= 0 m/s")
-        check(self.lockup_capacity > 0.0, "lockup_capacity", self.lockup_capacity, "expected > 0 N*m")
-        check(self.lockup_damping > 0.0, "lockup_damping", self.lockup_damping,
-              "expected > 0 N*m*s/rad")
 
     def coupling_point(self) -> float:
         """Speed ratio from which the torque ratio is 1."""
@@ -256,25 +257,22 @@ class ConverterConfig:
 @pydantic_config
 @dataclass(frozen=True)
 class GearboxConfig:
-    ratios: tuple[float, ...] = (2.45, 1.45, 1.00)   # forward gears, a small 3-speed automatic
-    reverse_ratio: float = 2.18
-    final_drive: float = 3.9
-    efficiency: float = 0.95              # gearbox and final drive together
-    wheel_radius: float = 0.28            # m, converts wheel speed to vehicle speed for the schedule
-    schedule_throttle: tuple[float, ...] = (0.0, 0.3, 0.7, 1.4)   # rad
-    upshift_speeds: tuple[tuple[float, ...], ...] = ((3.5, 6.0, 10.0, 15.0), (6.5, 11.0, 17.0, 25.0))
-    downshift_speeds: tuple[tuple[float, ...], ...] = ((2.0, 3.5, 6.0, 10.0), (4.5, 7.5, 11.0, 19.0))
-    shift_delay: float = 0.2              # s a shift request must persist
-    shift_time: float = 0.25              # s for the ratio change
+    ratios: tuple[Ratio, ...] = (2.45, 1.45, 1.00)   # forward gears, a small 3-speed automatic
+    reverse_ratio: Ratio = 2.18
+    final_drive: Ratio = 3.9
+    efficiency: Range(0.5, 1.0) = 0.95    # gearbox and final drive together
+    wheel_radius: Range(0.05, 2.0, "m", lo_open=True, hi_open=True) = 0.28   # wheel speed to vehicle speed
+    schedule_throttle: tuple[ThrottleAngle, ...] = (0.0, 0.3, 0.7, 1.4)
+    upshift_speeds: tuple[tuple[ShiftSpeed, ...], ...] = ((3.5, 6.0, 10.0, 15.0), (6.5, 11.0, 17.0, 25.0))
+    downshift_speeds: tuple[tuple[ShiftSpeed, ...], ...] = ((2.0, 3.5, 6.0, 10.0), (4.5, 7.5, 11.0, 19.0))
+    shift_delay: Range(0.0, 5.0, "s") = 0.2   # a shift request must persist
+    shift_time: Range(0.0, 5.0, "s") = 0.25   # for the ratio change
 
     def __post_init__(self) -> None:
+        check_declared_ranges(self)
         r = self.ratios
-        check(2 <= len(r) <= 6 and all(v > 0.0 for v in r) and all(b < a for a, b in zip(r, r[1:])),
-              "ratios", r, "expected 2..6 positive, decreasing ratios")
-        check(self.reverse_ratio > 0.0, "reverse_ratio", self.reverse_ratio, "expected > 0")
-        check(self.final_drive > 0.0, "final_drive", self.final_drive, "expected > 0")
-        check(0.5 <= self.efficiency <= 1.0, "efficiency", self.efficiency, "expected 0.5..1")
-        check(0.05 < self.wheel_radius < 2.0, "wheel_radius", self.wheel_radius, "expected m")
+        check(2 <= len(r) <= MAX_GEARS and all(b < a for a, b in zip(r, r[1:])),
+              "ratios", r, f"expected 2..{MAX_GEARS} decreasing ratios")
         st = self.schedule_throttle
         check(len(st) >= 1 and _strictly_increasing(st), "schedule_throttle", st,
               "expected strictly increasing throttle angles (rad)")
@@ -284,8 +282,6 @@ class GearboxConfig:
         for k, (up, dn) in enumerate(zip(self.upshift_speeds, self.downshift_speeds)):
             check(all(0.0 <= d < u for u, d in zip(up, dn)), f"downshift_speeds[{k}]", dn,
                   f"expected 0 <= downshift < upshift speed {up} at each throttle (hysteresis)")
-        check(0.0 <= self.shift_delay <= 5.0, "shift_delay", self.shift_delay, "expected 0..5 s")
-        check(0.0 <= self.shift_time <= 5.0, "shift_time", self.shift_time, "expected 0..5 s")
 
 
 def _default_throttle() -> LagConfig:

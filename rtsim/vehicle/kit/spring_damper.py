@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field, model_validator
 
-from rtsim.configfile import Strict
+from rtsim.configfile import Range, Strict
 from rtsim.jit import inline_kernel
 
 from .tables import TABLE_POINTS, table_1d, table_eval
@@ -22,8 +22,8 @@ from .tables import TABLE_POINTS, table_1d, table_eval
 class Characteristic(Strict):
     """A nonlinear law as a table of points (piecewise linear, continued with the end slopes): force
     (N, compression positive) against travel (m) or travel rate (m/s), x increasing."""
-    x: list[float] = Field(min_length=2, max_length=TABLE_POINTS)
-    force_n: list[float] = Field(min_length=2, max_length=TABLE_POINTS)
+    x: list[Range(-10.0, 10.0, "m or m/s")] = Field(min_length=2, max_length=TABLE_POINTS)
+    force_n: list[Range(-1e6, 1e6, "N")] = Field(min_length=2, max_length=TABLE_POINTS)
 
     @model_validator(mode="after")
     def _points(self):

@@ -16,25 +16,25 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from rtsim.configfile import Strict, bad, load_toml, validate
+from rtsim.configfile import Range, Strict, bad, load_toml, validate
 from rtsim.errors import ConfigError
 
+from ..kit.design_frame import Moments, Product, Vec2
 from ..kit.inertia import inertia_problem
 from ..kit.linkage_checks import MIN_LINK_M
 from ..kit.spring_damper import Characteristic
 from ..kit.tyre.two_wheel import TwoWheelTyreSpec, sport_front, sport_rear
 
-Vec2 = tuple[float, float]
 
 
 class Body(Strict):
     """A rigid body's mass properties (massless bodies: mass_kg = 0). The inertia tensor is a rigid body's:
     principal moments non-negative and within the triangle inequalities (a body of the vehicle file with
     mass: positive, checked by MotorcycleConfig)."""
-    mass_kg: float = Field(ge=0, le=2000)
+    mass_kg: Range(0, 2000, "kg")
     cg_m: Vec2 = Field(default=(0.0, 0.0), description="centre of mass (x, z), design frame")
-    inertia_kgm2: tuple[float, float, float] = Field(default=(0.0, 0.0, 0.0), description="Ixx, Iyy, Izz about the CG")
-    ixz_kgm2: float = 0.0
+    inertia_kgm2: Moments = Field(default=(0.0, 0.0, 0.0), description="Ixx, Iyy, Izz about the CG")
+    ixz_kgm2: Product = 0.0
 
     @model_validator(mode="after")
     def _physical(self):
@@ -47,10 +47,10 @@ class Body(Strict):
 class Wheel(Strict):
     """A wheel is a body of the model (its in-plane axes are coordinates): mass and both moments positive,
     and spin <= 2 x diametral (the triangle inequality of an axisymmetric body: equal for a thin disc)."""
-    mass_kg: float = Field(gt=0, le=100, description="wheel, tyre, disc(s) and sprocket")
-    radius_m: float = Field(gt=0.1, le=1.0, description="unloaded outer radius of the tyre")
-    spin_inertia_kgm2: float = Field(gt=0, le=10, description="about the axle")
-    diametral_inertia_kgm2: float = Field(gt=0, le=10, description="about a diameter")
+    mass_kg: Range(0, 100, "kg", lo_open=True) = Field(description="wheel, tyre, disc(s) and sprocket")
+    radius_m: Range(0.1, 1.0, "m", lo_open=True) = Field(description="unloaded outer radius of the tyre")
+    spin_inertia_kgm2: Range(0, 10, "kg m^2", lo_open=True) = Field(description="about the axle")
+    diametral_inertia_kgm2: Range(0, 10, "kg m^2", lo_open=True) = Field(description="about a diameter")
 
     @model_validator(mode="after")
     def _physical(self):
@@ -62,14 +62,14 @@ class Wheel(Strict):
 
 
 class Geometry(Strict):
-    wheelbase_m: float = Field(gt=0.3, le=3.0)
-    caster_deg: float = Field(ge=0, le=45, description="steering axis from the vertical (rake)")
-    trail_m: float | None = Field(default=None, ge=-0.2, le=0.3, description="ground trail; or fork_offset_m")
-    fork_offset_m: float | None = Field(default=None, ge=-0.2, le=0.3,
-                                        description="front wheel centre ahead of the steering axis")
-    fork_length_m: float = Field(gt=0.05, le=1.5, description=(
-        "along the steering axis from the head point (top of the fork) down to the foot of the front wheel "
-        "centre, at the design travel"))
+    wheelbase_m: Range(0.3, 3.0, "m", lo_open=True)
+    caster_deg: Range(0, 45, "deg") = Field(description="steering axis from the vertical (rake)")
+    trail_m: Range(-0.2, 0.3, "m") | None = Field(default=None, description="ground trail; or fork_offset_m")
+    fork_offset_m: Range(-0.2, 0.3, "m") | None = Field(
+        default=None, description="front wheel centre ahead of the steering axis")
+    fork_length_m: Range(0.05, 1.5, "m", lo_open=True) = Field(
+        description="along the steering axis from the head point (top of the fork) down to the foot of the front wheel "
+        "centre, at the design travel")
     swingarm_pivot_m: Vec2 = Field(description="swingarm pivot (x, z)")
 
     @model_validator(mode="after")
@@ -80,20 +80,20 @@ class Geometry(Strict):
 
 
 class Damper(Strict):
-    compression_ns_per_m: float = Field(default=0.0, ge=0, le=1e5)
-    rebound_ns_per_m: float = Field(default=0.0, ge=0, le=1e5)
+    compression_ns_per_m: Range(0, 1e5, "N s/m") = 0.0
+    rebound_ns_per_m: Range(0, 1e5, "N s/m") = 0.0
     table: Characteristic | None = Field(default=None, description="instead of the two rates")
 
 
 class Spring(Strict):
     """Spring force against the element's compression from its fully extended length (m): a linear rate
     with preload, or a table; stops: top-out below 0 and bottom-out beyond the stroke (linear stops)."""
-    stiffness_n_per_m: float = Field(default=0.0, ge=0, le=1e7)
-    preload_n: float = Field(default=0.0, ge=0, le=1e5)
+    stiffness_n_per_m: Range(0, 1e7, "N/m") = 0.0
+    preload_n: Range(0, 1e5, "N") = 0.0
     table: Characteristic | None = None
-    stroke_m: float = Field(gt=0, le=0.5)
-    top_out_n_per_m: float = Field(default=2e6, ge=0, le=1e8)
-    bottom_out_n_per_m: float = Field(default=2e6, ge=0, le=1e8)
+    stroke_m: Range(0, 0.5, "m", lo_open=True)
+    top_out_n_per_m: Range(0, 1e8, "N/m") = 2e6
+    bottom_out_n_per_m: Range(0, 1e8, "N/m") = 2e6
 
 
 def _within_stroke(part):
@@ -108,7 +108,7 @@ def _within_stroke(part):
 class Fork(Strict):
     spring: Spring
     damper: Damper = Damper()
-    design_travel_m: float = Field(default=0.0, ge=0, le=0.5, description="compression at the design position")
+    design_travel_m: Range(0, 0.5, "m") = Field(default=0.0, description="compression at the design position")
 
     _stroke = model_validator(mode="after")(_within_stroke)
 
@@ -118,7 +118,7 @@ class Shock(Strict):
     swingarm_mount_m: Vec2 = Field(description="shock's lower eye on the swingarm (x, z), design position")
     spring: Spring
     damper: Damper = Damper()
-    design_travel_m: float = Field(default=0.0, ge=0, le=0.5, description="compression at the design position")
+    design_travel_m: Range(0, 0.5, "m") = Field(default=0.0, description="compression at the design position")
 
     _stroke = model_validator(mode="after")(_within_stroke)
 
@@ -144,9 +144,9 @@ class Suspension(Strict):
 
 
 class Steering(Strict):
-    damper_nms_per_rad: float = Field(default=0.0, ge=0, le=200, description="steering damper")
-    lock_rad: float = Field(default=0.6, gt=0, le=1.5, description="steering stops at +-lock")
-    stop_nm_per_rad: float = Field(default=2000.0, ge=0, le=1e6)
+    damper_nms_per_rad: Range(0, 200, "N m s/rad") = Field(default=0.0, description="steering damper")
+    lock_rad: Range(0, 1.5, "rad", lo_open=True) = Field(default=0.6, description="steering stops at +-lock")
+    stop_nm_per_rad: Range(0, 1e6, "N m/rad") = 2000.0
 
 
 class Tyres(Strict):
@@ -176,30 +176,35 @@ class Tyres(Strict):
 
 class Chain(Strict):
     front_sprocket_m: Vec2 = Field(description="gearbox output sprocket centre (x, z), on the rear frame")
-    front_sprocket_radius_m: float = Field(gt=0.01, le=0.2)
-    rear_sprocket_radius_m: float = Field(gt=0.02, le=0.3)
+    front_sprocket_radius_m: Range(0.01, 0.2, "m", lo_open=True)
+    rear_sprocket_radius_m: Range(0.02, 0.3, "m", lo_open=True)
+
+
+CrankTorque = Range(0.0, 2000.0, "N m")
 
 
 class Powertrain(Strict):
     """Engine, clutch and gearbox (rtsim.vehicle.motorcycle.engine); the final ratio is the chain's
     sprocket radii (rear / front). Engine speeds in rpm here, rad/s in the kernel."""
-    engine_speed_rpm: list[float] = Field(min_length=2, max_length=16, description="axis of the torque tables")
-    full_load_torque_nm: list[float] = Field(min_length=2, max_length=16, description="at full throttle, crank")
-    closed_throttle_torque_nm: list[float] = Field(min_length=2, max_length=16, description=(
+    engine_speed_rpm: list[Range(0.0, 25000.0, "rpm", lo_open=True)] = Field(
+        min_length=2, max_length=16, description="axis of the torque tables")
+    full_load_torque_nm: list[CrankTorque] = Field(min_length=2, max_length=16, description="at full throttle, crank")
+    closed_throttle_torque_nm: list[CrankTorque] = Field(min_length=2, max_length=16, description=(
         "friction and pumping torque with the throttle shut (engine braking), a positive magnitude"))
-    idle_rpm: float = Field(ge=300, le=5000)
-    launch_rpm: float = Field(ge=300, le=15000, description="clutch slip speed at full throttle")
-    rev_limit_rpm: float = Field(ge=1000, le=25000)
-    limiter_band_rpm: float = Field(default=200.0, gt=0, le=2000, description="fuel ramp below the limit")
-    clutch_capacity_nm: float = Field(gt=0, le=2000)
-    primary_ratio: float = Field(ge=1.0, le=4.0)
-    gear_ratios: list[float] = Field(min_length=1, max_length=8, description="first to top")
-    efficiency: float = Field(default=0.92, gt=0.5, le=1.0, description="gearbox and chain")
-    gear: int = Field(default=0, ge=0, le=8, description="0: automatic, else the fixed gear")
-    upshift_rpm: float = Field(ge=1000, le=25000)
-    downshift_rpm: float = Field(ge=300, le=25000)
-    shift_time_s: float = Field(default=0.05, ge=0, le=1, description="drive interrupted per shift")
-    shift_hold_s: float = Field(default=0.5, ge=0, le=10, description="minimum time between automatic shifts")
+    idle_rpm: Range(300, 5000, "rpm")
+    launch_rpm: Range(300, 15000, "rpm") = Field(description="clutch slip speed at full throttle")
+    rev_limit_rpm: Range(1000, 25000, "rpm")
+    limiter_band_rpm: Range(0, 2000, "rpm", lo_open=True) = Field(
+        default=200.0, description="fuel ramp below the limit")
+    clutch_capacity_nm: Range(0, 2000, "N m", lo_open=True)
+    primary_ratio: Range(1.0, 4.0)
+    gear_ratios: list[Range(0.3, 5.0)] = Field(min_length=1, max_length=8, description="first to top")
+    efficiency: Range(0.5, 1.0, lo_open=True) = Field(default=0.92, description="gearbox and chain")
+    gear: Range(0, 8, integer=True) = Field(default=0, description="0: automatic, else the fixed gear")
+    upshift_rpm: Range(1000, 25000, "rpm")
+    downshift_rpm: Range(300, 25000, "rpm")
+    shift_time_s: Range(0, 1, "s") = Field(default=0.05, description="drive interrupted per shift")
+    shift_hold_s: Range(0, 10, "s") = Field(default=0.5, description="minimum time between automatic shifts")
 
     @model_validator(mode="after")
     def _consistent(self):
@@ -208,17 +213,15 @@ class Powertrain(Strict):
             v = getattr(self, key)
             if len(v) != len(w):
                 raise bad(key, v, f"needs as many values as engine_speed_rpm ({len(w)})")
-            if any(not (0.0 <= x <= 2000.0) for x in v):
-                raise bad(key, v, "values must lie in 0 .. 2000 N m")
-        if any(b <= a for a, b in zip(w, w[1:])) or w[0] <= 0:
-            raise bad("engine_speed_rpm", w, "must be positive and strictly increasing")
+        if any(b <= a for a, b in zip(w, w[1:])):
+            raise bad("engine_speed_rpm", w, "must be strictly increasing")
         if not w[0] <= self.idle_rpm < self.launch_rpm < self.rev_limit_rpm <= w[-1]:
             raise bad("launch_rpm", self.launch_rpm, "need engine_speed_rpm[0] <= idle_rpm < launch_rpm < "
                       f"rev_limit_rpm <= engine_speed_rpm[-1] (got {w[0]:g}, {self.idle_rpm:g}, {self.launch_rpm:g}, "
                       f"{self.rev_limit_rpm:g}, {w[-1]:g})")
         r = self.gear_ratios
-        if any(not (0.3 <= x <= 5.0) for x in r) or any(b >= a for a, b in zip(r, r[1:])):
-            raise bad("gear_ratios", r, "must lie in 0.3 .. 5 and decrease from first to top gear")
+        if any(b >= a for a, b in zip(r, r[1:])):
+            raise bad("gear_ratios", r, "must decrease from first to top gear")
         if self.gear > len(r):
             raise bad("gear", self.gear, f"the gearbox has gears 1..{len(r)} (0: automatic)")
         if not self.idle_rpm < self.downshift_rpm < self.upshift_rpm < self.rev_limit_rpm - self.limiter_band_rpm:
@@ -233,17 +236,18 @@ class Powertrain(Strict):
 
 
 class Brakes(Strict):
-    front_nm_per_kpa: float = Field(gt=0, le=10, description="front brake torque per line pressure")
-    rear_nm_per_kpa: float = Field(gt=0, le=10)
-    max_pressure_kpa: float = Field(default=12000.0, gt=0, le=30000)
-    slip_speed_rad_s: float = Field(default=0.5, gt=0, le=10, description="smooth Coulomb regularisation")
+    front_nm_per_kpa: Range(0, 10, "N m/kPa", lo_open=True) = Field(description="front brake torque per line pressure")
+    rear_nm_per_kpa: Range(0, 10, "N m/kPa", lo_open=True)
+    max_pressure_kpa: Range(0, 30000, "kPa", lo_open=True) = 12000.0
+    slip_speed_rad_s: Range(0, 10, "rad/s", lo_open=True) = Field(
+        default=0.5, description="smooth Coulomb regularisation")
 
 
 class Aero(Strict):
-    drag_area_m2: float = Field(default=0.0, ge=0, le=2, description="Cd A")
-    lift_area_m2: float = Field(default=0.0, ge=-2, le=2, description="Cl A, positive lifting")
+    drag_area_m2: Range(0, 2, "m^2") = Field(default=0.0, description="Cd A")
+    lift_area_m2: Range(-2, 2, "m^2") = Field(default=0.0, description="Cl A, positive lifting")
     centre_of_pressure_m: Vec2 = (0.7, 0.7)
-    air_density_kg_m3: float = Field(default=1.2, gt=0.5, le=1.5)
+    air_density_kg_m3: Range(0.5, 1.5, "kg/m^3", lo_open=True) = 1.2
 
 
 class Sensors(Strict):
