@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from collections import namedtuple
 from dataclasses import asdict, dataclass
+from enum import IntEnum
 
 import numpy as np
 from pydantic import create_model
@@ -43,41 +44,49 @@ from rtsim.jit import inline_kernel, kernel
 
 from .base import I_BRAKE, I_THROTTLE, LIMITS, S_SPEED
 
-# Parameter indices (par).
-P_KP = 0          # 1/s, proportional gain (m/s^2 per m/s)
-P_KI = 1          # 1/s^2, integral gain
-P_KD = 2          # -, derivative gain on the measured acceleration
-P_TAU_D = 3       # s, derivative filter time constant
-P_THR_GAIN = 4    # rad per m/s^2 of demand
-P_THR_MAX = 5     # rad, maximum throttle angle
-P_BRK_GAIN = 6    # kPa per m/s^2 of deceleration demand
-P_BRK_MAX = 7     # kPa, maximum brake pressure
-P_BAND = 8        # m/s^2, half width of the dead band between throttle and brake
-P_HOLD_P = 9      # kPa, brake pressure that holds the car at standstill
-P_HOLD_RATE = 10  # kPa/s, rate at which the hold pressure is applied
-P_V_STOP = 11     # m/s, speed below which the car counts as stopped
-P_V_EPS = 12      # m/s, target speed below which the target counts as zero
-P_I_MAX = 13      # m/s^2, integrator clip
-P_BY_DIST = 14    # 0: target over time, 1: over distance
-P_A_RES0 = 15     # m/s^2, road-load feed-forward, constant part (rolling resistance / mass)
-P_A_RES2 = 16     # 1/m, road-load feed-forward, quadratic part (aero drag / mass)
-P_FF_GAIN = 17    # -, weight of the feed-forward
-NPAR = 18
 
-# Controller state indices (st).
-ST_INIT = 0   # 0 until the first call
-ST_T = 1      # time of the previous call
-ST_V = 2      # speed at the previous call
-ST_I = 3      # integrator, m/s^2
-ST_SIDE = 4   # +1 throttle side, -1 brake side
-ST_DVF = 5    # filtered measured acceleration, m/s^2
-ST_DIST = 6   # odometer, m
-ST_HOLD = 7   # 1 while holding at standstill
-ST_BRK = 8    # last brake output, kPa (for the hold ramp)
-ST_VREF = 9   # diagnostics: target speed, m/s
-ST_AREF = 10  # diagnostics: target acceleration, m/s^2
-ST_U = 11     # diagnostics: demand u, m/s^2
-NST = 12
+class SpeedPar(IntEnum):
+    """The speed follower's parameter array (par), one slot per gain or limit."""
+    KP = 0          # 1/s, proportional gain (m/s^2 per m/s)
+    KI = 1          # 1/s^2, integral gain
+    KD = 2          # -, derivative gain on the measured acceleration
+    TAU_D = 3       # s, derivative filter time constant
+    THR_GAIN = 4    # rad per m/s^2 of demand
+    THR_MAX = 5     # rad, maximum throttle angle
+    BRK_GAIN = 6    # kPa per m/s^2 of deceleration demand
+    BRK_MAX = 7     # kPa, maximum brake pressure
+    BAND = 8        # m/s^2, half width of the dead band between throttle and brake
+    HOLD_P = 9      # kPa, brake pressure that holds the car at standstill
+    HOLD_RATE = 10  # kPa/s, rate at which the hold pressure is applied
+    V_STOP = 11     # m/s, speed below which the car counts as stopped
+    V_EPS = 12      # m/s, target speed below which the target counts as zero
+    I_MAX = 13      # m/s^2, integrator clip
+    BY_DIST = 14    # 0: target over time, 1: over distance
+    A_RES0 = 15     # m/s^2, road-load feed-forward, constant part (rolling resistance / mass)
+    A_RES2 = 16     # 1/m, road-load feed-forward, quadratic part (aero drag / mass)
+    FF_GAIN = 17    # -, weight of the feed-forward
+
+
+NPAR = len(SpeedPar)     # slots in par
+
+
+class SpeedState(IntEnum):
+    """The speed follower's controller state array (st): memory between calls and diagnostics."""
+    INIT = 0   # 0 until the first call
+    T = 1      # time of the previous call
+    V = 2      # speed at the previous call
+    I = 3      # integrator, m/s^2
+    SIDE = 4   # +1 throttle side, -1 brake side
+    DVF = 5    # filtered measured acceleration, m/s^2
+    DIST = 6   # odometer, m
+    HOLD = 7   # 1 while holding at standstill
+    BRK = 8    # last brake output, kPa (for the hold ramp)
+    VREF = 9   # diagnostics: target speed, m/s
+    AREF = 10  # diagnostics: target acceleration, m/s^2
+    U = 11     # diagnostics: demand u, m/s^2
+
+
+NST = len(SpeedState)    # slots in st
 
 SpeedFollower = namedtuple("SpeedFollower", ["par", "tab_x", "tab_v", "st"])
 
@@ -192,83 +201,83 @@ def speed_follower_step(sf, t, state, out):
     p = sf.par
     st = sf.st
     v = state[S_SPEED]
-    if st[ST_INIT] == 0.0 or t < st[ST_T]:
-        st[ST_INIT] = 1.0
-        st[ST_T] = t
-        st[ST_V] = v
-        st[ST_I] = 0.0
-        st[ST_SIDE] = 0.0
-        st[ST_DVF] = 0.0
-        st[ST_DIST] = 0.0
-        st[ST_HOLD] = 0.0
-        st[ST_BRK] = p[P_HOLD_P]  # a car that starts held is held at once, not after a ramp
-    dt = t - st[ST_T]
-    st[ST_DIST] += 0.5 * (v + st[ST_V]) * dt
+    if st[SpeedState.INIT] == 0.0 or t < st[SpeedState.T]:
+        st[SpeedState.INIT] = 1.0
+        st[SpeedState.T] = t
+        st[SpeedState.V] = v
+        st[SpeedState.I] = 0.0
+        st[SpeedState.SIDE] = 0.0
+        st[SpeedState.DVF] = 0.0
+        st[SpeedState.DIST] = 0.0
+        st[SpeedState.HOLD] = 0.0
+        st[SpeedState.BRK] = p[SpeedPar.HOLD_P]  # a car that starts held is held at once, not after a ramp
+    dt = t - st[SpeedState.T]
+    st[SpeedState.DIST] += 0.5 * (v + st[SpeedState.V]) * dt
     if dt > 0.0:
-        raw = (v - st[ST_V]) / dt
-        st[ST_DVF] += (raw - st[ST_DVF]) * (dt / (p[P_TAU_D] + dt))
-    st[ST_T] = t
-    st[ST_V] = v
+        raw = (v - st[SpeedState.V]) / dt
+        st[SpeedState.DVF] += (raw - st[SpeedState.DVF]) * (dt / (p[SpeedPar.TAU_D] + dt))
+    st[SpeedState.T] = t
+    st[SpeedState.V] = v
 
-    if p[P_BY_DIST] != 0.0:
-        v_ref, slope = _lookup(sf.tab_x, sf.tab_v, st[ST_DIST])
+    if p[SpeedPar.BY_DIST] != 0.0:
+        v_ref, slope = _lookup(sf.tab_x, sf.tab_v, st[SpeedState.DIST])
         a_ref = slope * v_ref
     else:
         v_ref, slope = _lookup(sf.tab_x, sf.tab_v, t)
         a_ref = slope
-    st[ST_VREF] = v_ref
-    st[ST_AREF] = a_ref
+    st[SpeedState.VREF] = v_ref
+    st[SpeedState.AREF] = a_ref
 
     # standstill hold
-    if v_ref <= p[P_V_EPS]:
-        if abs(v) <= p[P_V_STOP]:
-            st[ST_HOLD] = 1.0
+    if v_ref <= p[SpeedPar.V_EPS]:
+        if abs(v) <= p[SpeedPar.V_STOP]:
+            st[SpeedState.HOLD] = 1.0
     else:
-        st[ST_HOLD] = 0.0
-    if st[ST_HOLD] != 0.0:
-        brk = min(st[ST_BRK] + p[P_HOLD_RATE] * dt, p[P_HOLD_P])
-        if st[ST_BRK] > p[P_HOLD_P]:
-            brk = max(st[ST_BRK] - p[P_HOLD_RATE] * dt, p[P_HOLD_P])
+        st[SpeedState.HOLD] = 0.0
+    if st[SpeedState.HOLD] != 0.0:
+        brk = min(st[SpeedState.BRK] + p[SpeedPar.HOLD_RATE] * dt, p[SpeedPar.HOLD_P])
+        if st[SpeedState.BRK] > p[SpeedPar.HOLD_P]:
+            brk = max(st[SpeedState.BRK] - p[SpeedPar.HOLD_RATE] * dt, p[SpeedPar.HOLD_P])
         out[I_THROTTLE] = 0.0
         out[I_BRAKE] = brk
-        st[ST_BRK] = brk
-        st[ST_I] = 0.0
-        st[ST_SIDE] = -1.0
-        st[ST_U] = 0.0
+        st[SpeedState.BRK] = brk
+        st[SpeedState.I] = 0.0
+        st[SpeedState.SIDE] = -1.0
+        st[SpeedState.U] = 0.0
         return
 
     e = v_ref - v
     sgn = 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
-    ff = p[P_FF_GAIN] * (a_ref + p[P_A_RES0] * sgn + p[P_A_RES2] * v * abs(v))
-    u = ff + p[P_KP] * e + st[ST_I] - p[P_KD] * st[ST_DVF]
-    st[ST_U] = u
+    ff = p[SpeedPar.FF_GAIN] * (a_ref + p[SpeedPar.A_RES0] * sgn + p[SpeedPar.A_RES2] * v * abs(v))
+    u = ff + p[SpeedPar.KP] * e + st[SpeedState.I] - p[SpeedPar.KD] * st[SpeedState.DVF]
+    st[SpeedState.U] = u
 
-    side = st[ST_SIDE]
+    side = st[SpeedState.SIDE]
     if side == 0.0:
         side = 1.0 if u >= 0.0 else -1.0
-    elif side > 0.0 and u < -p[P_BAND]:
+    elif side > 0.0 and u < -p[SpeedPar.BAND]:
         side = -1.0
-    elif side < 0.0 and u > p[P_BAND]:
+    elif side < 0.0 and u > p[SpeedPar.BAND]:
         side = 1.0
-    st[ST_SIDE] = side
+    st[SpeedState.SIDE] = side
 
-    u_hi = p[P_THR_MAX] / p[P_THR_GAIN]
-    u_lo = -p[P_BRK_MAX] / p[P_BRK_GAIN]
+    u_hi = p[SpeedPar.THR_MAX] / p[SpeedPar.THR_GAIN]
+    u_lo = -p[SpeedPar.BRK_MAX] / p[SpeedPar.BRK_GAIN]
     if side > 0.0:
-        thr = min(max(u, 0.0), u_hi) * p[P_THR_GAIN]
+        thr = min(max(u, 0.0), u_hi) * p[SpeedPar.THR_GAIN]
         brk = 0.0
     else:
         thr = 0.0
-        brk = min(max(-u, 0.0), -u_lo) * p[P_BRK_GAIN]
+        brk = min(max(-u, 0.0), -u_lo) * p[SpeedPar.BRK_GAIN]
     out[I_THROTTLE] = thr
     out[I_BRAKE] = brk
-    st[ST_BRK] = brk
+    st[SpeedState.BRK] = brk
 
     # anti-windup: conditional integration at the pedal limits, then clip
     saturated = (side > 0.0 and u >= u_hi and e > 0.0) or (side < 0.0 and u <= u_lo and e < 0.0)
     if not saturated:
-        st[ST_I] += p[P_KI] * e * dt
-    if st[ST_I] > p[P_I_MAX]:
-        st[ST_I] = p[P_I_MAX]
-    elif st[ST_I] < -p[P_I_MAX]:
-        st[ST_I] = -p[P_I_MAX]
+        st[SpeedState.I] += p[SpeedPar.KI] * e * dt
+    if st[SpeedState.I] > p[SpeedPar.I_MAX]:
+        st[SpeedState.I] = p[SpeedPar.I_MAX]
+    elif st[SpeedState.I] < -p[SpeedPar.I_MAX]:
+        st[SpeedState.I] = -p[SpeedPar.I_MAX]

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from drivers.base import I_BRAKE, I_THROTTLE, NINPUT, NSTATE, S_SPEED
-from drivers.speed_follower import ST_DIST, SpeedFollowerParams, speed_follower, speed_follower_step
+from drivers.speed_follower import SpeedFollowerParams, SpeedState, speed_follower, speed_follower_step
 
 DT = 1e-3
 M = 1300.0           # kg
@@ -115,7 +115,7 @@ def test_target_over_distance():
     sf = speed_follower([0.0, 100.0, 200.0], [10.0, 10.0, 5.0], by="distance", params=PARAMS)
     T, V, TH, BR = simulate(sf, 40.0, v0=10.0)
     dist = np.concatenate(([0.0], np.cumsum(0.5 * (V[1:] + V[:-1]) * DT)))
-    assert sf.st[ST_DIST] == pytest.approx(dist[-1] + V[-1] * 0.0, rel=1e-6)   # its odometer agrees
+    assert sf.st[SpeedState.DIST] == pytest.approx(dist[-1] + V[-1] * 0.0, rel=1e-6)   # its odometer agrees
     for d, v_ref, tol in ((80.0, 10.0, 0.1), (150.0, 7.5, 0.3), (260.0, 5.0, 0.05)):
         i = int(np.searchsorted(dist, d))
         assert abs(V[i] - v_ref) < tol, (d, V[i])
