@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from collections import namedtuple
 from dataclasses import asdict, dataclass
+from enum import IntEnum
 
 import numpy as np
 from pydantic import create_model
@@ -46,41 +47,49 @@ from .base import I_STEER, S_SPEED, S_X, S_Y, S_YAW
 from rtsim.road.paths import circle_points, nearest_segment, on_segment, point_ahead, polyline, seg_project, wrap_angle
 
 __all__ = ["PathFollower", "PathFollowerParams", "PATH_FOLLOWER_RANGES", "path_follower", "path_follower_step",
-           "reset", "circle_points"]
+           "reset", "circle_points", "PathPar", "PathState"]
 
 PURE_PURSUIT = 0
 STANLEY = 1
 METHODS = {"pure_pursuit": PURE_PURSUIT, "stanley": STANLEY}
 
-# Parameter indices (par).
-P_METHOD = 0      # PURE_PURSUIT or STANLEY
-P_WB = 1          # m, wheelbase
-P_RATIO = 2       # -, steering ratio (steering-wheel angle / road-wheel angle)
-P_LA_MIN = 3      # m, minimum look-ahead (pure pursuit)
-P_LA_GAIN = 4     # s, look-ahead per unit speed (pure pursuit)
-P_LA_MAX = 5      # m, maximum look-ahead (pure pursuit)
-P_K = 6           # 1/s, Stanley cross-track gain
-P_V_SOFT = 7      # m/s, Stanley softening speed
-P_MAX_WHEEL = 8   # rad, road-wheel angle limit
-P_MAX_RATE = 9    # rad/s, steering-wheel rate limit
-P_REAR = 10       # m, distance from the state's reference point back to the rear axle
-P_CLOSED = 11     # 1 for a closed path
-P_NSEG = 12       # number of segments
-P_LENGTH = 13     # m, total path length
-NPAR = 14
 
-# State indices (st).
-ST_INIT = 0
-ST_IDX = 1    # segment nearest to the reference point at the last call
-ST_T = 2      # time of the last call
-ST_SW = 3     # last steering-wheel output, rad
-ST_E = 4      # diagnostics: signed cross-track error of the reference point (left positive), m
-ST_S = 5      # diagnostics: arc length of the nearest point, m
-ST_HE = 6     # diagnostics: path heading minus yaw, rad
-ST_DELTA = 7  # diagnostics: road-wheel angle before limits, rad
-ST_GX = 8     # diagnostics: goal point x (pure pursuit), m
-ST_GY = 9     # diagnostics: goal point y, m
-NST = 10
+class PathPar(IntEnum):
+    """The path follower's parameter array (par): geometry, gains and limits."""
+    METHOD = 0      # PURE_PURSUIT or STANLEY
+    WB = 1          # m, wheelbase
+    RATIO = 2       # -, steering ratio (steering-wheel angle / road-wheel angle)
+    LA_MIN = 3      # m, minimum look-ahead (pure pursuit)
+    LA_GAIN = 4     # s, look-ahead per unit speed (pure pursuit)
+    LA_MAX = 5      # m, maximum look-ahead (pure pursuit)
+    K = 6           # 1/s, Stanley cross-track gain
+    V_SOFT = 7      # m/s, Stanley softening speed
+    MAX_WHEEL = 8   # rad, road-wheel angle limit
+    MAX_RATE = 9    # rad/s, steering-wheel rate limit
+    REAR = 10       # m, distance from the state's reference point back to the rear axle
+    CLOSED = 11     # 1 for a closed path
+    NSEG = 12       # number of segments
+    LENGTH = 13     # m, total path length
+
+
+NPAR = len(PathPar)      # slots in par
+
+
+class PathState(IntEnum):
+    """The path follower's state array (st): memory between calls and diagnostics."""
+    INIT = 0
+    IDX = 1    # segment nearest to the reference point at the last call
+    T = 2      # time of the last call
+    SW = 3     # last steering-wheel output, rad
+    E = 4      # diagnostics: signed cross-track error of the reference point (left positive), m
+    S = 5      # diagnostics: arc length of the nearest point, m
+    HE = 6     # diagnostics: path heading minus yaw, rad
+    DELTA = 7  # diagnostics: road-wheel angle before limits, rad
+    GX = 8     # diagnostics: goal point x (pure pursuit), m
+    GY = 9     # diagnostics: goal point y, m
+
+
+NST = len(PathState)     # slots in st
 
 PathFollower = namedtuple("PathFollower", ["px", "py", "ps", "hd", "seg_len", "par", "st"])
 
@@ -133,20 +142,20 @@ def path_follower(x, y, method: str = "pure_pursuit", closed: bool = False,
     px, py, ps, hd, seg, closed = polyline(x, y, closed)
     nseg = seg.size
     par = np.zeros(NPAR)
-    par[P_METHOD] = METHODS[method]
-    par[P_WB] = params.wheelbase
-    par[P_RATIO] = params.steering_ratio
-    par[P_LA_MIN] = params.la_min
-    par[P_LA_GAIN] = params.la_gain
-    par[P_LA_MAX] = params.la_max
-    par[P_K] = params.k_stanley
-    par[P_V_SOFT] = params.v_soft
-    par[P_MAX_WHEEL] = params.max_wheel_angle
-    par[P_MAX_RATE] = params.max_rate
-    par[P_REAR] = params.rear_offset
-    par[P_CLOSED] = 1.0 if closed else 0.0
-    par[P_NSEG] = nseg
-    par[P_LENGTH] = ps[-1]
+    par[PathPar.METHOD] = METHODS[method]
+    par[PathPar.WB] = params.wheelbase
+    par[PathPar.RATIO] = params.steering_ratio
+    par[PathPar.LA_MIN] = params.la_min
+    par[PathPar.LA_GAIN] = params.la_gain
+    par[PathPar.LA_MAX] = params.la_max
+    par[PathPar.K] = params.k_stanley
+    par[PathPar.V_SOFT] = params.v_soft
+    par[PathPar.MAX_WHEEL] = params.max_wheel_angle
+    par[PathPar.MAX_RATE] = params.max_rate
+    par[PathPar.REAR] = params.rear_offset
+    par[PathPar.CLOSED] = 1.0 if closed else 0.0
+    par[PathPar.NSEG] = nseg
+    par[PathPar.LENGTH] = ps[-1]
     return PathFollower(px, py, ps, hd, seg, par, np.zeros(NST))
 
 
@@ -166,20 +175,20 @@ def _wrap(a):
 @inline_kernel
 def _proj(pf, i, x, y):
     """Parameter u along segment i of the point nearest to (x, y), and the squared distance."""
-    return seg_project(pf.px, pf.py, i, x, y, int(pf.par[P_NSEG]), pf.par[P_CLOSED] != 0.0)
+    return seg_project(pf.px, pf.py, i, x, y, int(pf.par[PathPar.NSEG]), pf.par[PathPar.CLOSED] != 0.0)
 
 
 @inline_kernel
 def _nearest(pf, x, y):
     """Segment nearest to (x, y), walking from the last one (whole path on the first call)."""
-    return nearest_segment(pf.px, pf.py, int(pf.par[P_NSEG]), pf.par[P_CLOSED] != 0.0,
-                           pf.st[ST_INIT] == 0.0, int(pf.st[ST_IDX]), x, y)
+    return nearest_segment(pf.px, pf.py, int(pf.par[PathPar.NSEG]), pf.par[PathPar.CLOSED] != 0.0,
+                           pf.st[PathState.INIT] == 0.0, int(pf.st[PathState.IDX]), x, y)
 
 
 @inline_kernel
 def _point_ahead(pf, i, u, dist):
     """Point at arc length `dist` ahead of parameter u on segment i."""
-    return point_ahead(pf.px, pf.py, pf.seg_len, int(pf.par[P_NSEG]), pf.par[P_CLOSED] != 0.0, i, u, dist)
+    return point_ahead(pf.px, pf.py, pf.seg_len, int(pf.par[PathPar.NSEG]), pf.par[PathPar.CLOSED] != 0.0, i, u, dist)
 
 
 @kernel
@@ -191,50 +200,50 @@ def path_follower_step(pf, t, state, out):
     yaw = state[S_YAW]
     c = math.cos(yaw)
     s = math.sin(yaw)
-    wb = p[P_WB]
-    rx = state[S_X] - p[P_REAR] * c
-    ry = state[S_Y] - p[P_REAR] * s
-    if p[P_METHOD] == STANLEY:
+    wb = p[PathPar.WB]
+    rx = state[S_X] - p[PathPar.REAR] * c
+    ry = state[S_Y] - p[PathPar.REAR] * s
+    if p[PathPar.METHOD] == STANLEY:
         qx = rx + wb * c
         qy = ry + wb * s
     else:
         qx = rx
         qy = ry
-    if st[ST_INIT] == 0.0 or t < st[ST_T]:
-        st[ST_INIT] = 0.0
-        st[ST_T] = t
-        st[ST_SW] = 0.0
+    if st[PathState.INIT] == 0.0 or t < st[PathState.T]:
+        st[PathState.INIT] = 0.0
+        st[PathState.T] = t
+        st[PathState.SW] = 0.0
     i = _nearest(pf, qx, qy)
-    st[ST_INIT] = 1.0
-    st[ST_IDX] = i
+    st[PathState.INIT] = 1.0
+    st[PathState.IDX] = i
     u, d2 = _proj(pf, i, qx, qy)
     e, h = on_segment(pf.px, pf.py, pf.hd, pf.seg_len, i, u, qx, qy)
     he = _wrap(h - yaw)
-    st[ST_E] = e
-    st[ST_S] = pf.ps[i] + u * pf.seg_len[i]
-    st[ST_HE] = he
+    st[PathState.E] = e
+    st[PathState.S] = pf.ps[i] + u * pf.seg_len[i]
+    st[PathState.HE] = he
 
-    if p[P_METHOD] == STANLEY:
-        delta = he - math.atan(p[P_K] * e / (p[P_V_SOFT] + v))
+    if p[PathPar.METHOD] == STANLEY:
+        delta = he - math.atan(p[PathPar.K] * e / (p[PathPar.V_SOFT] + v))
     else:
-        la = min(max(p[P_LA_GAIN] * v, p[P_LA_MIN]), p[P_LA_MAX])
+        la = min(max(p[PathPar.LA_GAIN] * v, p[PathPar.LA_MIN]), p[PathPar.LA_MAX])
         gx, gy = _point_ahead(pf, i, u, la)
-        st[ST_GX] = gx
-        st[ST_GY] = gy
+        st[PathState.GX] = gx
+        st[PathState.GY] = gy
         dx = c * (gx - rx) + s * (gy - ry)
         dy = -s * (gx - rx) + c * (gy - ry)
         ld2 = dx * dx + dy * dy
         delta = 0.0
         if ld2 > 1e-12:
             delta = math.atan(wb * 2.0 * dy / ld2)
-    st[ST_DELTA] = delta
-    lim = p[P_MAX_WHEEL]
+    st[PathState.DELTA] = delta
+    lim = p[PathPar.MAX_WHEEL]
     delta = min(max(delta, -lim), lim)
-    sw = p[P_RATIO] * delta
-    dt = t - st[ST_T]
-    step = p[P_MAX_RATE] * dt
-    prev = st[ST_SW]
+    sw = p[PathPar.RATIO] * delta
+    dt = t - st[PathState.T]
+    step = p[PathPar.MAX_RATE] * dt
+    prev = st[PathState.SW]
     sw = min(max(sw, prev - step), prev + step)
-    st[ST_SW] = sw
-    st[ST_T] = t
+    st[PathState.SW] = sw
+    st[PathState.T] = t
     out[I_STEER] = sw

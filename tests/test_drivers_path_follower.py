@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from drivers.base import I_STEER, NINPUT, NSTATE, S_SPEED, S_X, S_Y, S_YAW
-from drivers.path_follower import (P_LENGTH, ST_DELTA, ST_E, ST_IDX, ST_S, circle_points, path_follower,
-                                   path_follower_step)
+from drivers.path_follower import PathPar, PathState, circle_points, path_follower, path_follower_step
 
 DT = 1e-3
 WB = 2.6      # m
@@ -36,7 +35,7 @@ def simulate(pf, x, y, yaw, v, t_end):
         else:
             x += v * DT * math.cos(yaw)
             y += v * DT * math.sin(yaw)
-        X[k], Y[k], H[k], SW[k], S[k], E[k] = x, y, yaw, sw, pf.st[ST_S], pf.st[ST_E]
+        X[k], Y[k], H[k], SW[k], S[k], E[k] = x, y, yaw, sw, pf.st[PathState.S], pf.st[PathState.E]
     return X, Y, H, SW, S, E
 
 
@@ -84,7 +83,7 @@ def test_self_crossing_path_keeps_its_branch():
     y = a * np.sin(u) * np.cos(u) / (1.0 + np.sin(u) ** 2)
     pf = path_follower(x, y, closed=True, wheelbase=WB, steering_ratio=RATIO, la_min=4.0)
     h0 = math.atan2(y[1] - y[0], x[1] - x[0])
-    length = pf.par[P_LENGTH]
+    length = pf.par[PathPar.LENGTH]
     X, Y, H, SW, S, E = simulate(pf, x[0], y[0], h0, 8.0, 30.0)   # 240 m: crosses the origin 2 times
     ds = np.diff(S)
     ds[ds < -0.5 * length] += length                           # lap wrap
@@ -104,7 +103,7 @@ def test_angle_and_rate_limits():
         path_follower_step(pf, k * DT, state, out)
         sw.append(out[I_STEER])
     sw = np.array(sw)
-    assert pf.st[ST_DELTA] < -0.4                               # the law asks for more than the limit
+    assert pf.st[PathState.DELTA] < -0.4                               # the law asks for more than the limit
     assert sw[0] == 0.0                                         # starts from the centred wheel
     assert np.max(np.abs(np.diff(sw))) <= 5.0 * DT * (1.0 + 1e-9)
     assert sw[-1] == pytest.approx(-0.4 * RATIO)                # held at the angle limit
@@ -123,7 +122,7 @@ def test_nearest_index_tracking_amortised():
     for k in range(200):
         state[S_X] = 20.0 * k * DT + 1000.0
         path_follower_step(pf, k * DT, state, out)
-        idx.append(pf.st[ST_IDX])
+        idx.append(pf.st[PathState.IDX])
     d = np.diff(idx)
     assert idx[0] == pytest.approx(10000, abs=1) and np.all((d >= 0) & (d <= 1))
 
