@@ -20,7 +20,7 @@ import pytest
 
 from bridge.can_codec import Codec
 from drivers.scenario import load_scenario
-from drivers.rider import P_TYRE_LEAN, RO_THROTTLE
+from drivers.rider import RiderPar, RO_THROTTLE
 from rtsim.service.loop import HilLoop
 from rtsim.service.server import build_sim
 from rtsim.vehicle.motorcycle.plant import IN_ASSIST, IN_RIDER_TORQUE, IN_THROTTLE
@@ -58,7 +58,7 @@ def test_the_rider_in_the_loop_rides_as_offline(riding):
     sim, sc, loop = riding
     mm, _dbc, q = MODELS[(VEHICLE.resolve(), "two_wheeler")]
     r = sc.rider()
-    r.par[P_TYRE_LEAN] = tyre_lean_ratio(mm)
+    r.par[RiderPar.TYRE_LEAN] = tyre_lean_ratio(mm)
     off = TwoWheelerSim(mm, dt=sim.dt, speed=sc.spec.initial.speed, q=q)
     Ride(off, r).run(loop.sim_time)
     assert loop.run_state == "running" and loop.sim_time == pytest.approx(9.0)

@@ -58,13 +58,13 @@ def one_call(rd, **kw):
 def test_curvilinear_coordinates_straight_line(y, yaw):
     rd = rider([0.0, 100.0], [0.0, 0.0])
     one_call(rd, x=30.0, y=y, yaw=yaw, u=5.0)
-    assert rd.st[R.ST_S] == pytest.approx(30.0, abs=1e-12)
-    assert rd.st[R.ST_N] == pytest.approx(y, abs=1e-12)          # left of the path positive
-    assert rd.st[R.ST_PSI_E] == pytest.approx(yaw, abs=1e-12)    # yaw - path heading
+    assert rd.st[R.RiderState.S] == pytest.approx(30.0, abs=1e-12)
+    assert rd.st[R.RiderState.N] == pytest.approx(y, abs=1e-12)          # left of the path positive
+    assert rd.st[R.RiderState.PSI_E] == pytest.approx(yaw, abs=1e-12)    # yaw - path heading
     la = 1.0 + 0.6 * 5.0
     rd2 = rider([0.0, 100.0], [0.0, 0.0], la_min=1.0, la_time=0.6)
     one_call(rd2, x=30.0, y=y, yaw=yaw, u=5.0)
-    assert rd2.st[R.ST_E_LA] == pytest.approx(y + la * math.sin(yaw), abs=1e-12)
+    assert rd2.st[R.RiderState.E_LA] == pytest.approx(y + la * math.sin(yaw), abs=1e-12)
 
 
 def test_curvilinear_coordinates_circle():
@@ -78,9 +78,9 @@ def test_curvilinear_coordinates_circle():
         tangent = a + 0.5 * math.pi
         one_call(rd, x=rr * math.cos(a), y=rr * math.sin(a), yaw=tangent + he, u=5.0)
         arc = 2.0 * math.pi * rad * k / n
-        assert rd.st[R.ST_S] == pytest.approx(arc, rel=1e-4)
-        assert rd.st[R.ST_N] == pytest.approx(d, abs=1e-3)
-        assert rd.st[R.ST_PSI_E] == pytest.approx(he, abs=2e-4)     # heading interpolated on the chord
+        assert rd.st[R.RiderState.S] == pytest.approx(arc, rel=1e-4)
+        assert rd.st[R.RiderState.N] == pytest.approx(d, abs=1e-3)
+        assert rd.st[R.RiderState.PSI_E] == pytest.approx(he, abs=2e-4)     # heading interpolated on the chord
 
 
 def test_curvature_of_a_sampled_circle():
@@ -136,18 +136,18 @@ def test_lean_reference_on_a_circle():
     one_call(rd, yaw=0.0, u=u, r=u / rad)
     ref = -math.atan(u * u / (rad * G))
     assert ref < 0.0                                           # leaning left into a left turn
-    assert rd.st[R.ST_KAPPA] == pytest.approx(1.0 / rad, rel=1e-3)
-    assert rd.st[R.ST_PHI_FF] == pytest.approx(ref, rel=1e-3)
-    assert rd.st[R.ST_PHI_REF] == pytest.approx(ref, rel=1e-3)    # on the path: no correction
+    assert rd.st[R.RiderState.KAPPA] == pytest.approx(1.0 / rad, rel=1e-3)
+    assert rd.st[R.RiderState.PHI_FF] == pytest.approx(ref, rel=1e-3)
+    assert rd.st[R.RiderState.PHI_REF] == pytest.approx(ref, rel=1e-3)    # on the path: no correction
     assert R.roll_reference(u, 1.0 / rad) == pytest.approx(ref)
     # the preview looks ahead: on a straight leading into a left bend the lean starts before it
     x = np.concatenate((np.linspace(0.0, 50.0, 101), 50.0 + rad * np.sin(np.linspace(0.01, 1.0, 60))))
     y = np.concatenate((np.zeros(101), rad * (1.0 - np.cos(np.linspace(0.01, 1.0, 60)))))
     rd = rider(x, y, preview_dist=0.0, preview_time=0.5)
     one_call(rd, x=46.0, u=u)                                  # 6 m preview reaches the bend
-    assert rd.st[R.ST_KAPPA] == pytest.approx(1.0 / rad, rel=0.01) and rd.st[R.ST_PHI_FF] < 0.0
+    assert rd.st[R.RiderState.KAPPA] == pytest.approx(1.0 / rad, rel=0.01) and rd.st[R.RiderState.PHI_FF] < 0.0
     one_call(rd, x=40.0, u=u)                                  # ... not yet
-    assert rd.st[R.ST_KAPPA] == pytest.approx(0.0, abs=1e-9)
+    assert rd.st[R.RiderState.KAPPA] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_signs_of_the_corrections():
@@ -157,18 +157,19 @@ def test_signs_of_the_corrections():
     for pos in (dict(y=0.5), dict(yaw=0.1), dict(y=-0.5, yaw=0.0)):
         one_call(rd, x=50.0, u=8.0, **pos)
         side = 1.0 if pos.get("y", 0.0) >= 0.0 else -1.0
-        assert side * rd.st[R.ST_PHI_REF] > 0.0 and side * rd.st[R.ST_TAU_CMD] > 0.0
+        assert side * rd.st[R.RiderState.PHI_REF] > 0.0 and side * rd.st[R.RiderState.TAU_CMD] > 0.0
     one_call(rd, x=50.0, u=8.0, phi=0.1)
-    assert rd.st[R.ST_PHI_REF] == 0.0 and rd.st[R.ST_TAU_CMD] == pytest.approx(-0.1 * rd.par[R.P_P_ROLL])
+    assert rd.st[R.RiderState.PHI_REF] == 0.0
+    assert rd.st[R.RiderState.TAU_CMD] == pytest.approx(-0.1 * rd.par[R.RiderPar.P_ROLL])
     one_call(rd, x=50.0, u=8.0, phidot=0.1)
-    assert rd.st[R.ST_TAU_CMD] == pytest.approx(-0.1 * rd.par[R.P_D_ROLL])
+    assert rd.st[R.RiderState.TAU_CMD] == pytest.approx(-0.1 * rd.par[R.RiderPar.D_ROLL])
     # a big error: the lean correction is clipped
     one_call(rd, x=50.0, u=8.0, y=30.0)
-    assert rd.st[R.ST_PHI_REF] == pytest.approx(rd.par[R.P_MAX_CORR])
+    assert rd.st[R.RiderState.PHI_REF] == pytest.approx(rd.par[R.RiderPar.MAX_CORR])
     # the report's variant: the path correction goes to the torque
     rd = rider([0.0, 200.0], [0.0, 0.0], path_to_torque=True, p_n=5.0, p_psi=0.0, d_n=0.0)
     one_call(rd, x=50.0, u=8.0, y=0.5)
-    assert rd.st[R.ST_PHI_REF] == 0.0 and rd.st[R.ST_TAU_CMD] == pytest.approx(5.0 * 0.5)
+    assert rd.st[R.RiderState.PHI_REF] == 0.0 and rd.st[R.RiderState.TAU_CMD] == pytest.approx(5.0 * 0.5)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -184,7 +185,7 @@ def test_reaction_delay_is_a_pure_transport_delay():
     for k in range(300):
         phi = 0.0 if k < k0 else -0.05                          # the step in the demanded torque
         rider_step(rd, view_of(t=k * period, x=5.0 + k * period, u=1.0, phi=phi), out)
-        cmd.append(rd.st[R.ST_TAU])
+        cmd.append(rd.st[R.RiderState.TAU])
         got.append(out[RO_TORQUE])
     cmd, got = np.array(cmd), np.array(got)
     assert cmd[k0] > cmd[k0 - 1] + 1.0                          # the demand steps at k0 ...
@@ -363,16 +364,16 @@ def test_rider_section_of_a_scenario(tmp_path):
     f.write_text(SCENARIO)
     sc = load_scenario(f)
     rd = sc.rider()
-    assert rd.par[R.P_P_ROLL] == 120.0 and rd.par[R.P_NDELAY] == 100 and rd.par[R.P_CLOSED] == 1.0
-    assert rd.par[R.P_D_ROLL] == R.RiderParams().d_roll              # defaults for the rest
-    assert rd.par[R.P_LENGTH] == pytest.approx(20.0 + 30.0 * (math.pi + 2.0 * math.atan(3.0)), rel=1e-3)
+    assert rd.par[R.RiderPar.P_ROLL] == 120.0 and rd.par[R.RiderPar.NDELAY] == 100 and rd.par[R.RiderPar.CLOSED] == 1.0
+    assert rd.par[R.RiderPar.D_ROLL] == R.RiderParams().d_roll              # defaults for the rest
+    assert rd.par[R.RiderPar.LENGTH] == pytest.approx(20.0 + 30.0 * (math.pi + 2.0 * math.atan(3.0)), rel=1e-3)
     assert rd.tab_v[0] == 6.0 and sc.driver() is not None
     f.write_text(SCENARIO.replace("p_roll = 120.0", "p_roll = -1.0"))
     with pytest.raises(ConfigError, match=r"rider.p_roll = -1.0: out of range \(allowed 0 <= p_roll <= 100000 N m/rad\)"):
         load_scenario(f)
     f.write_text(SCENARIO.replace("speed = 6.0", "speed = [5.0, 8.0]\ndistance = [0.0, 50.0]"))
     rd = load_scenario(f).rider()
-    assert list(rd.tab_x) == [0.0, 50.0] and rd.par[R.P_SPEED_BY_S] == 1.0
+    assert list(rd.tab_x) == [0.0, 50.0] and rd.par[R.RiderPar.SPEED_BY_S] == 1.0
     f.write_text(SCENARIO.replace("[rider.figure_eight]", "x = [0, 1]\ny = [0, 0]\n[rider.figure_eight]"))
     with pytest.raises(ConfigError, match=r"exactly one of"):
         load_scenario(f)

@@ -35,8 +35,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtsim.errors import SimulationError
-from rtsim.vehicle.motorcycle.rider import (NRO, NRV, ST_N, ST_PHI_REF, ST_V_REF, RV_DELTA, RV_DELTADOT, RV_PHI,
-                                            RV_PHIDOT, RV_R, RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, Rider, rider_step)
+from rtsim.vehicle.motorcycle.rider import (NRO, NRV, RiderState, RV_DELTA, RV_DELTADOT, RV_PHI, RV_PHIDOT, RV_R, RV_T,
+                                            RV_U, RV_V, RV_X, RV_Y, RV_YAW, Rider, rider_step)
 from rtsim.vehicle.motorcycle.sim import TwoWheelerSim, rear_contact
 from rtsim.vehicle.motorcycle.step import U_BRAKE_FRONT, U_BRAKE_REAR, U_DRIVE_TORQUE, U_STEER_TORQUE
 
@@ -125,7 +125,7 @@ class InverseDynamics:
         _view(s, self.view)
         rider_step(self.ref, self.view, self.out)          # updates the path tracking and the lean reference
         st = self.ref.st
-        phi_r, u_r = st[ST_PHI_REF], st[ST_V_REF]
+        phi_r, u_r = st[RiderState.PHI_REF], st[RiderState.V_REF]
         u_now = s.velocity[0]
         target = np.array([phi_r + (s.roll - phi_r) * math.exp(-o.horizon / o.t_roll),
                            u_r + (u_now - u_r) * math.exp(-o.horizon / o.t_speed)])
@@ -149,7 +149,7 @@ class InverseDynamics:
         resid = float(y[0] - target[0])
         for _ in range(self.i_steps):
             s.step()
-            self.rows.append((s.time, x[0], x[1], s.roll, phi_r, s.steer, s.velocity[0], u_r, st[ST_N], resid))
+            self.rows.append((s.time, x[0], x[1], s.roll, phi_r, s.steer, s.velocity[0], u_r, st[RiderState.N], resid))
         self.simulated_steps += self.i_steps
         self.k += 1
 

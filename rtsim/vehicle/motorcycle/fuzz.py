@@ -92,11 +92,11 @@ class TwoWheelerFuzzRig:
         from rtsim.road.config import read_road_config
 
         from .hil import TwoWheelerHil
-        from .rider import P_TYRE_LEAN
+        from .rider import RiderPar
 
         mu = read_road_config(road_path).mu
         if rider is not None:
-            rider.par[P_TYRE_LEAN] = self.tyre_lean
+            rider.par[RiderPar.TYRE_LEAN] = self.tyre_lean
         sim = TwoWheelerHil(self.mm, self.dbc, self.q_static, self.dt, speed=speed, rider=rider, mu=mu)
         sim.io.commands[[INVALID_SLOTS[n] for n in INVALID_SLOTS]] = 0.0      # every bus command valid
         return sim

@@ -75,7 +75,7 @@ class TwoWheelerKind(VehicleKind):
     def service_sim(self, opened, sc, dt, models, rider):
         """On the flat road of the scenario (the two-wheeler's tyres run on the plane z = 0 only), its
         friction scale the tyres' road friction; with the scenario's rider unless ``rider`` is False."""
-        from .rider import P_TYRE_LEAN
+        from .rider import RiderPar
         from rtsim.errors import ConfigError
         from rtsim.road.config import FlatRoadConfig, read_road_config
 
@@ -102,7 +102,7 @@ class TwoWheelerKind(VehicleKind):
         if rider:
             r = sc.rider()
             if "tyre_lean" not in sc.spec.rider.model_fields_set:      # the vehicle's own tyres' crown correction
-                r.par[P_TYRE_LEAN] = tyre_lean_ratio(mm)
+                r.par[RiderPar.TYRE_LEAN] = tyre_lean_ratio(mm)
         sim = TwoWheelerHil(mm, dbc, q, dt if dt is not None else sc.dt, speed=ini.speed, x=ini.x, y=ini.y,
                             yaw=ini.yaw, rider=r, mu=road.mu)
         sim.user_inputs = opened.user_inputs

@@ -16,8 +16,7 @@ from __future__ import annotations
 
 from rtsim.jit import kernel
 
-from .rider import (P_D_ROLL, P_D_STEER, P_I_ROLL, P_I_ROLL_MAX, P_MAX_ROLL, P_MAX_ROLL_RATE, P_MAX_TORQUE,
-                    P_P_ROLL, RV_DELTADOT, RV_PHI, RV_PHIDOT)
+from .rider import RiderPar, RV_DELTADOT, RV_PHI, RV_PHIDOT
 
 W_ON, W_REF, W_INT = 0, 1, 2     # the loop's state: switched on (1.0), reference (rad), integral (N m)
 NW = 3
@@ -32,19 +31,20 @@ def lean_torque(par, view, demand, w, h):
         w[W_ON] = 1.0
         w[W_REF] = phi
         w[W_INT] = 0.0
-    step = par[P_MAX_ROLL_RATE] * h
+    step = par[RiderPar.MAX_ROLL_RATE] * h
     dref = demand - w[W_REF]
     if dref > step:
         dref = step
     elif dref < -step:
         dref = -step
     ref = w[W_REF] + dref
-    lim = par[P_MAX_ROLL]
+    lim = par[RiderPar.MAX_ROLL]
     ref = min(max(ref, -lim), lim)
     w[W_REF] = ref
     e = ref - phi
-    imax = par[P_I_ROLL_MAX]
-    w[W_INT] = min(max(w[W_INT] + par[P_I_ROLL] * e * h, -imax), imax)
-    tau = par[P_P_ROLL] * e - par[P_D_ROLL] * view[RV_PHIDOT] + w[W_INT] - par[P_D_STEER] * view[RV_DELTADOT]
-    tmax = par[P_MAX_TORQUE]
+    imax = par[RiderPar.I_ROLL_MAX]
+    w[W_INT] = min(max(w[W_INT] + par[RiderPar.I_ROLL] * e * h, -imax), imax)
+    tau = (par[RiderPar.P_ROLL] * e - par[RiderPar.D_ROLL] * view[RV_PHIDOT] + w[W_INT]
+           - par[RiderPar.D_STEER] * view[RV_DELTADOT])
+    tmax = par[RiderPar.MAX_TORQUE]
     return min(max(tau, -tmax), tmax)

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .rider import ST_N, ST_PHI_REF
+from .rider import RiderState
 from rtsim.channels import TWO_WHEELER_STATE, Channel, ChannelDictionary
 from rtsim.errors import ConfigError, SimulationError
 from rtsim.model_fault import ModelFault, describe_error, force_failure, test_fault_step, test_fault_time
@@ -142,13 +142,13 @@ def _row(ride: Ride, row: np.ndarray) -> None:
     st = ride.rider.st if ride.rider is not None else None
     n = len(TWO_WHEELER_STATE)
     plant_state(s.data, idx, s.parts.par, ride.params.pp, s.parts.tyre, ride.state.inp, ride.engine_state,
-                st[ST_N] if st is not None else 0.0, row[1:1 + n])
+                st[RiderState.N] if st is not None else 0.0, row[1:1 + n])
     kp = idx[K_P]
     qdd = s.data.qdd
     yaw = s.yaw
     row[0] = s.time
     row[1 + n:] = (qdd[kp] * math.cos(yaw) + qdd[kp + 1] * math.sin(yaw), _pitch(s) - ride.pitch0,
-                   u[U_BRAKE_FRONT], u[U_BRAKE_REAR], st[ST_PHI_REF] if st is not None else 0.0)
+                   u[U_BRAKE_FRONT], u[U_BRAKE_REAR], st[RiderState.PHI_REF] if st is not None else 0.0)
 
 
 def run(ride: Ride, sc, progress=None) -> MotorcycleRun:

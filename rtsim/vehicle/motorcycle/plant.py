@@ -41,7 +41,7 @@ import numpy as np
 from rtsim.channels import TWO_WHEELER_SENSORS, TWO_WHEELER_STATE
 from rtsim.jit import inline_kernel, kernel
 from .rider import (RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_DELTA, RV_DELTADOT, RV_PHI,
-                           RV_PHIDOT, RV_R, RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, NRO, NRV, ST_N, rider_step)
+                           RV_PHIDOT, RV_R, RV_T, RV_U, RV_V, RV_X, RV_Y, RV_YAW, NRO, NRV, RiderState, rider_step)
 
 from rtsim.mbs.model import gravity
 
@@ -351,4 +351,4 @@ def plant_state(d, idx, par, pp, tyre, inp, es, path_offset, out):
 @kernel
 def rider_offset_kernel(rider, pp):
     """The rider's lateral offset from the path, m (0 without a rider)."""
-    return rider.st[ST_N] if pp[PP_RIDER] > 0.5 else 0.0
+    return rider.st[RiderState.N] if pp[PP_RIDER] > 0.5 else 0.0

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .rider import (ST_KAPPA, ST_N, ST_PHI_FF, RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_PHI,
-                           RV_DELTA, RV_U, RV_X, RV_Y, rider_step)
+from .rider import (RiderState, RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_PHI, RV_DELTA, RV_U, RV_X, RV_Y,
+                    rider_step)
 
 from .build import MotorcycleModel, combine
 from .layout import K_PHI_R
@@ -79,8 +79,8 @@ class Ride:
         s.step()
         if self.rider is not None:
             st = self.rider.st
-            self.log.append((s.time, x, y, v[RV_PHI], v[RV_DELTA], out[RO_TORQUE], u, st[ST_N], st[ST_PHI_FF],
-                             st[ST_KAPPA]))
+            self.log.append((s.time, x, y, v[RV_PHI], v[RV_DELTA], out[RO_TORQUE], u, st[RiderState.N],
+                             st[RiderState.PHI_FF], st[RiderState.KAPPA]))
 
     def run(self, seconds: float) -> np.ndarray:
         for _ in range(int(round(seconds / self.sim.dt))):

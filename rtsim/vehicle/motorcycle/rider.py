@@ -72,6 +72,7 @@ from __future__ import annotations
 import math
 from collections import namedtuple
 from dataclasses import asdict, dataclass
+from enum import IntEnum
 
 import numpy as np
 from pydantic import create_model
@@ -107,69 +108,77 @@ RO_BRAKE_F = 2    # kPa, front brake pressure
 RO_BRAKE_R = 3    # kPa, rear brake pressure
 NRO = 4
 
-# Parameter indices (par).
-P_P_ROLL = 0      # N m/rad
-P_D_ROLL = 1      # N m s/rad
-P_I_ROLL = 2      # N m/(rad s)
-P_I_ROLL_MAX = 3  # N m
-P_TAU_REF = 4     # s, filter of the lean feed-forward's derivative
-P_P_N = 5         # rad/m (N m/m with path_to_torque)
-P_D_N = 6         # rad s/m
-P_P_PSI = 7       # rad/rad
-P_D_PSI = 8       # rad s/rad
-P_I_N = 9         # rad/(m s)
-P_I_N_MAX = 10    # rad
-P_MAX_CORR = 11   # rad, clip of the path correction of the lean reference
-P_MAX_ROLL = 12   # rad, clip of the lean reference
-P_PREV_DIST = 13  # m, curvature preview distance at standstill
-P_PREV_TIME = 14  # s, curvature preview per unit speed
-P_LA_MIN = 15     # m, look-ahead distance at standstill
-P_LA_TIME = 16    # s, look-ahead per unit speed
-P_D_STEER = 17    # N m s/rad, damping of the steer rate
-P_MAX_TORQUE = 18  # N m
-P_MAX_RATE = 19   # N m/s
-P_KP_V = 20       # 1/s, speed PI (m/s^2 per m/s)
-P_KI_V = 21       # 1/s^2
-P_I_V_MAX = 22    # m/s^2
-P_THR_GAIN = 23   # s^2/m, throttle per m/s^2 of demand
-P_BAND = 24       # m/s^2, coasting band below zero demand
-P_BRAKE_FRONT = 25  # -, share of the deceleration given to the front brake
-P_FRONT_GAIN = 26  # kPa per m/s^2 (front)
-P_REAR_GAIN = 27  # kPa per m/s^2 (rear)
-P_BRAKE_MAX = 28  # kPa
-P_NDELAY = 29     # calls of reaction delay (round(delay / period))
-P_TO_TORQUE = 30  # 1: path correction added to the torque
-P_SPEED_BY_S = 31  # 1: target speed over arc length s, 0: over time
-P_CLOSED = 32     # 1 for a closed path
-P_NSEG = 33       # number of segments
-P_LENGTH = 34     # m, path length
-P_MAX_ROLL_RATE = 35  # rad/s, rate limit of the lean feed-forward
-P_TYRE_LEAN = 36  # -, k = rho / (h - rho) of the tyres' crown radius rho and the mass centre's height h
-NPAR = 37
 
-# State indices (st).
-ST_INIT = 0
-ST_T = 1          # s, time of the last call
-ST_IDX = 2        # segment nearest to the reference point at the last call
-ST_HEAD = 3       # next row of the delay buffer
-ST_TAU = 4        # N m, last torque after limits (before the delay)
-ST_I_ROLL = 5     # N m, roll integrator
-ST_I_N = 6        # rad, path integrator
-ST_I_V = 7        # m/s^2, speed integrator
-ST_PHI_FF_PREV = 8
-ST_DPHI_FF = 9    # rad/s, filtered derivative of the lean feed-forward phi_ff
-ST_S = 10         # diagnostics: arc length of the reference point, m
-ST_N = 11         # diagnostics: lateral offset of the reference point, left positive, m
-ST_PSI_E = 12     # diagnostics: yaw - path heading, rad
-ST_E_LA = 13      # diagnostics: lateral error at the look-ahead distance, m
-ST_KAPPA = 14     # diagnostics: preview curvature, 1/m
-ST_PHI_FF = 15    # diagnostics: -atan(u^2 kappa / g), rad
-ST_PHI_REF = 16   # diagnostics: lean reference, rad
-ST_CORR = 17      # diagnostics: path correction (rad, or N m with path_to_torque)
-ST_V_REF = 18     # diagnostics: target speed, m/s
-ST_A_DEM = 19     # diagnostics: acceleration demand, m/s^2
-ST_TAU_CMD = 20   # diagnostics: torque demand before limits, N m
-NST = 21
+class RiderPar(IntEnum):
+    """The rider's parameter array (par): gains, limits, preview and path geometry."""
+    P_ROLL = 0      # N m/rad
+    D_ROLL = 1      # N m s/rad
+    I_ROLL = 2      # N m/(rad s)
+    I_ROLL_MAX = 3  # N m
+    TAU_REF = 4     # s, filter of the lean feed-forward's derivative
+    P_N = 5         # rad/m (N m/m with path_to_torque)
+    D_N = 6         # rad s/m
+    P_PSI = 7       # rad/rad
+    D_PSI = 8       # rad s/rad
+    I_N = 9         # rad/(m s)
+    I_N_MAX = 10    # rad
+    MAX_CORR = 11   # rad, clip of the path correction of the lean reference
+    MAX_ROLL = 12   # rad, clip of the lean reference
+    PREV_DIST = 13  # m, curvature preview distance at standstill
+    PREV_TIME = 14  # s, curvature preview per unit speed
+    LA_MIN = 15     # m, look-ahead distance at standstill
+    LA_TIME = 16    # s, look-ahead per unit speed
+    D_STEER = 17    # N m s/rad, damping of the steer rate
+    MAX_TORQUE = 18  # N m
+    MAX_RATE = 19   # N m/s
+    KP_V = 20       # 1/s, speed PI (m/s^2 per m/s)
+    KI_V = 21       # 1/s^2
+    I_V_MAX = 22    # m/s^2
+    THR_GAIN = 23   # s^2/m, throttle per m/s^2 of demand
+    BAND = 24       # m/s^2, coasting band below zero demand
+    BRAKE_FRONT = 25  # -, share of the deceleration given to the front brake
+    FRONT_GAIN = 26  # kPa per m/s^2 (front)
+    REAR_GAIN = 27  # kPa per m/s^2 (rear)
+    BRAKE_MAX = 28  # kPa
+    NDELAY = 29     # calls of reaction delay (round(delay / period))
+    TO_TORQUE = 30  # 1: path correction added to the torque
+    SPEED_BY_S = 31  # 1: target speed over arc length s, 0: over time
+    CLOSED = 32     # 1 for a closed path
+    NSEG = 33       # number of segments
+    LENGTH = 34     # m, path length
+    MAX_ROLL_RATE = 35  # rad/s, rate limit of the lean feed-forward
+    TYRE_LEAN = 36  # -, k = rho / (h - rho) of the tyres' crown radius rho and the mass centre's height h
+
+
+NPAR = len(RiderPar)     # slots in par
+
+
+class RiderState(IntEnum):
+    """The rider's state array (st): memory between calls and diagnostics."""
+    INIT = 0
+    T = 1          # s, time of the last call
+    IDX = 2        # segment nearest to the reference point at the last call
+    HEAD = 3       # next row of the delay buffer
+    TAU = 4        # N m, last torque after limits (before the delay)
+    I_ROLL = 5     # N m, roll integrator
+    I_N = 6        # rad, path integrator
+    I_V = 7        # m/s^2, speed integrator
+    PHI_FF_PREV = 8
+    DPHI_FF = 9    # rad/s, filtered derivative of the lean feed-forward phi_ff
+    S = 10         # diagnostics: arc length of the reference point, m
+    N = 11         # diagnostics: lateral offset of the reference point, left positive, m
+    PSI_E = 12     # diagnostics: yaw - path heading, rad
+    E_LA = 13      # diagnostics: lateral error at the look-ahead distance, m
+    KAPPA = 14     # diagnostics: preview curvature, 1/m
+    PHI_FF = 15    # diagnostics: -atan(u^2 kappa / g), rad
+    PHI_REF = 16   # diagnostics: lean reference, rad
+    CORR = 17      # diagnostics: path correction (rad, or N m with path_to_torque)
+    V_REF = 18     # diagnostics: target speed, m/s
+    A_DEM = 19     # diagnostics: acceleration demand, m/s^2
+    TAU_CMD = 20   # diagnostics: torque demand before limits, N m
+
+
+NST = len(RiderState)    # slots in st
 
 Rider = namedtuple("Rider", ["px", "py", "ps", "hd", "seg_len", "kap", "tab_x", "tab_v", "par", "st", "buf"])
 
@@ -293,14 +302,14 @@ def rider(path_x, path_y, closed: bool = False, speed=10.0, speed_by: str = "s",
                               "max_torque_rate", "kp_speed", "ki_speed", "speed_i_max", "throttle_gain",
                               "band", "brake_front", "front_gain", "rear_gain", "brake_max")):
         par[i] = getattr(params, name)
-    par[P_MAX_ROLL_RATE] = params.max_roll_rate
-    par[P_TYRE_LEAN] = params.tyre_lean
-    par[P_NDELAY] = round(params.delay / params.period)
-    par[P_TO_TORQUE] = 1.0 if params.path_to_torque else 0.0
-    par[P_SPEED_BY_S] = 1.0 if speed_by == "s" else 0.0
-    par[P_CLOSED] = 1.0 if closed else 0.0
-    par[P_NSEG] = seg.size
-    par[P_LENGTH] = ps[-1]
+    par[RiderPar.MAX_ROLL_RATE] = params.max_roll_rate
+    par[RiderPar.TYRE_LEAN] = params.tyre_lean
+    par[RiderPar.NDELAY] = round(params.delay / params.period)
+    par[RiderPar.TO_TORQUE] = 1.0 if params.path_to_torque else 0.0
+    par[RiderPar.SPEED_BY_S] = 1.0 if speed_by == "s" else 0.0
+    par[RiderPar.CLOSED] = 1.0 if closed else 0.0
+    par[RiderPar.NSEG] = seg.size
+    par[RiderPar.LENGTH] = ps[-1]
     return Rider(px, py, ps, hd, seg, kap, tab_x, tab_v, par, np.zeros(NST), np.zeros((NBUF, NRO)))
 
 
@@ -344,22 +353,22 @@ def rider_step(r, view, out):
     p = r.par
     st = r.st
     t = view[RV_T]
-    first = st[ST_INIT] == 0.0 or t < st[ST_T]
+    first = st[RiderState.INIT] == 0.0 or t < st[RiderState.T]
     if first:
         for k in range(NST):
             st[k] = 0.0
-    dt = 0.0 if first else t - st[ST_T]
+    dt = 0.0 if first else t - st[RiderState.T]
     x = view[RV_X]
     y = view[RV_Y]
     yaw = view[RV_YAW]
     u = view[RV_U]
     v = view[RV_V]
-    closed = p[P_CLOSED] != 0.0
-    nseg = int(p[P_NSEG])
+    closed = p[RiderPar.CLOSED] != 0.0
+    nseg = int(p[RiderPar.NSEG])
 
     # curvilinear coordinates of the reference point
-    i = nearest_segment(r.px, r.py, nseg, closed, first, int(st[ST_IDX]), x, y)
-    st[ST_IDX] = i
+    i = nearest_segment(r.px, r.py, nseg, closed, first, int(st[RiderState.IDX]), x, y)
+    st[RiderState.IDX] = i
     f, d2 = seg_project(r.px, r.py, i, x, y, nseg, closed)
     n, heading = on_segment(r.px, r.py, r.hd, r.seg_len, i, f, x, y)
     s = r.ps[i] + f * r.seg_len[i]
@@ -371,64 +380,65 @@ def rider_step(r, view, out):
     sdot = (u * cp - v * sp) / max(1.0 - n * kap0, 0.1)
     psidot = view[RV_R] - kap0 * sdot
     uf = max(u, 0.0)
-    la = p[P_LA_MIN] + p[P_LA_TIME] * uf
+    la = p[RiderPar.LA_MIN] + p[RiderPar.LA_TIME] * uf
     e = n + la * sp
     edot = ndot + la * cp * psidot
 
     # lean reference: preview curvature, then the path correction
-    kap = value_at(r.ps, r.kap, closed, s + p[P_PREV_DIST] + p[P_PREV_TIME] * uf, 0.0)
+    kap = value_at(r.ps, r.kap, closed, s + p[RiderPar.PREV_DIST] + p[RiderPar.PREV_TIME] * uf, 0.0)
     phi_ff = -math.atan(u * u * kap / G)
-    phi_ff += math.asin(p[P_TYRE_LEAN] * math.sin(phi_ff))
+    phi_ff += math.asin(p[RiderPar.TYRE_LEAN] * math.sin(phi_ff))
     if not first:
-        lim = p[P_MAX_ROLL_RATE] * dt
-        phi_ff = min(max(phi_ff, st[ST_PHI_FF_PREV] - lim), st[ST_PHI_FF_PREV] + lim)
-    st[ST_I_N] = _clip(st[ST_I_N] + p[P_I_N] * e * dt, p[P_I_N_MAX])
-    corr = p[P_P_N] * e + p[P_D_N] * edot + p[P_P_PSI] * psi + p[P_D_PSI] * psidot + st[ST_I_N]
+        lim = p[RiderPar.MAX_ROLL_RATE] * dt
+        phi_ff = min(max(phi_ff, st[RiderState.PHI_FF_PREV] - lim), st[RiderState.PHI_FF_PREV] + lim)
+    st[RiderState.I_N] = _clip(st[RiderState.I_N] + p[RiderPar.I_N] * e * dt, p[RiderPar.I_N_MAX])
+    corr = (p[RiderPar.P_N] * e + p[RiderPar.D_N] * edot + p[RiderPar.P_PSI] * psi + p[RiderPar.D_PSI] * psidot
+            + st[RiderState.I_N])
     tau_path = 0.0
-    if p[P_TO_TORQUE] != 0.0:
+    if p[RiderPar.TO_TORQUE] != 0.0:
         tau_path = corr
-        phi_ref = _clip(phi_ff, p[P_MAX_ROLL])
+        phi_ref = _clip(phi_ff, p[RiderPar.MAX_ROLL])
     else:
-        corr = _clip(corr, p[P_MAX_CORR])
-        phi_ref = _clip(phi_ff + corr, p[P_MAX_ROLL])
+        corr = _clip(corr, p[RiderPar.MAX_CORR])
+        phi_ref = _clip(phi_ff + corr, p[RiderPar.MAX_ROLL])
     if dt > 0.0:
-        raw = (phi_ff - st[ST_PHI_FF_PREV]) / dt
-        st[ST_DPHI_FF] += (raw - st[ST_DPHI_FF]) * dt / (p[P_TAU_REF] + dt)
-    st[ST_PHI_FF_PREV] = phi_ff
+        raw = (phi_ff - st[RiderState.PHI_FF_PREV]) / dt
+        st[RiderState.DPHI_FF] += (raw - st[RiderState.DPHI_FF]) * dt / (p[RiderPar.TAU_REF] + dt)
+    st[RiderState.PHI_FF_PREV] = phi_ff
 
     # roll loop -> steering torque
     err = phi_ref - view[RV_PHI]
-    st[ST_I_ROLL] = _clip(st[ST_I_ROLL] + p[P_I_ROLL] * err * dt, p[P_I_ROLL_MAX])
-    tau = (p[P_P_ROLL] * err + p[P_D_ROLL] * (st[ST_DPHI_FF] - view[RV_PHIDOT]) + st[ST_I_ROLL] + tau_path
-           - p[P_D_STEER] * view[RV_DELTADOT])
-    st[ST_TAU_CMD] = tau
-    tau = _clip(tau, p[P_MAX_TORQUE])
-    step = p[P_MAX_RATE] * dt
-    tau = min(max(tau, st[ST_TAU] - step), st[ST_TAU] + step)
-    st[ST_TAU] = tau
+    st[RiderState.I_ROLL] = _clip(st[RiderState.I_ROLL] + p[RiderPar.I_ROLL] * err * dt, p[RiderPar.I_ROLL_MAX])
+    tau = (p[RiderPar.P_ROLL] * err + p[RiderPar.D_ROLL] * (st[RiderState.DPHI_FF] - view[RV_PHIDOT])
+           + st[RiderState.I_ROLL] + tau_path - p[RiderPar.D_STEER] * view[RV_DELTADOT])
+    st[RiderState.TAU_CMD] = tau
+    tau = _clip(tau, p[RiderPar.MAX_TORQUE])
+    step = p[RiderPar.MAX_RATE] * dt
+    tau = min(max(tau, st[RiderState.TAU] - step), st[RiderState.TAU] + step)
+    st[RiderState.TAU] = tau
 
     # speed PI -> throttle and brakes
-    if p[P_SPEED_BY_S] != 0.0:
+    if p[RiderPar.SPEED_BY_S] != 0.0:
         vref, slope = _table(r.tab_x, r.tab_v, s)
         aref = vref * slope
     else:
         vref, aref = _table(r.tab_x, r.tab_v, t)
     ev = vref - u
-    a = aref + p[P_KP_V] * ev + st[ST_I_V]
+    a = aref + p[RiderPar.KP_V] * ev + st[RiderState.I_V]
     thr = 0.0
     decel = 0.0
     if a > 0.0:
-        thr = min(p[P_THR_GAIN] * a, 1.0)
-    elif a < -p[P_BAND]:
+        thr = min(p[RiderPar.THR_GAIN] * a, 1.0)
+    elif a < -p[RiderPar.BAND]:
         decel = -a
-    bf = min(p[P_BRAKE_FRONT] * decel * p[P_FRONT_GAIN], p[P_BRAKE_MAX])
-    br = min((1.0 - p[P_BRAKE_FRONT]) * decel * p[P_REAR_GAIN], p[P_BRAKE_MAX])
-    saturated = (thr >= 1.0 and ev > 0.0) or (bf >= p[P_BRAKE_MAX] and br >= p[P_BRAKE_MAX] and ev < 0.0)
+    bf = min(p[RiderPar.BRAKE_FRONT] * decel * p[RiderPar.FRONT_GAIN], p[RiderPar.BRAKE_MAX])
+    br = min((1.0 - p[RiderPar.BRAKE_FRONT]) * decel * p[RiderPar.REAR_GAIN], p[RiderPar.BRAKE_MAX])
+    saturated = (thr >= 1.0 and ev > 0.0) or (bf >= p[RiderPar.BRAKE_MAX] and br >= p[RiderPar.BRAKE_MAX] and ev < 0.0)
     if not saturated:
-        st[ST_I_V] = _clip(st[ST_I_V] + p[P_KI_V] * ev * dt, p[P_I_V_MAX])
+        st[RiderState.I_V] = _clip(st[RiderState.I_V] + p[RiderPar.KI_V] * ev * dt, p[RiderPar.I_V_MAX])
 
     # reaction delay
-    head = int(st[ST_HEAD])
+    head = int(st[RiderState.HEAD])
     if first:
         for k in range(NBUF):
             r.buf[k, RO_TORQUE] = tau
@@ -440,22 +450,22 @@ def rider_step(r, view, out):
     r.buf[head, RO_THROTTLE] = thr
     r.buf[head, RO_BRAKE_F] = bf
     r.buf[head, RO_BRAKE_R] = br
-    k = head - int(p[P_NDELAY])
+    k = head - int(p[RiderPar.NDELAY])
     if k < 0:
         k += NBUF
     for j in range(NRO):
         out[j] = r.buf[k, j]
-    st[ST_HEAD] = head + 1 if head + 1 < NBUF else 0
+    st[RiderState.HEAD] = head + 1 if head + 1 < NBUF else 0
 
-    st[ST_INIT] = 1.0
-    st[ST_T] = t
-    st[ST_S] = s
-    st[ST_N] = n
-    st[ST_PSI_E] = psi
-    st[ST_E_LA] = e
-    st[ST_KAPPA] = kap
-    st[ST_PHI_FF] = phi_ff
-    st[ST_PHI_REF] = phi_ref
-    st[ST_CORR] = corr
-    st[ST_V_REF] = vref
-    st[ST_A_DEM] = a
+    st[RiderState.INIT] = 1.0
+    st[RiderState.T] = t
+    st[RiderState.S] = s
+    st[RiderState.N] = n
+    st[RiderState.PSI_E] = psi
+    st[RiderState.E_LA] = e
+    st[RiderState.KAPPA] = kap
+    st[RiderState.PHI_FF] = phi_ff
+    st[RiderState.PHI_REF] = phi_ref
+    st[RiderState.CORR] = corr
+    st[RiderState.V_REF] = vref
+    st[RiderState.A_DEM] = a
