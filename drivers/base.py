@@ -13,7 +13,7 @@ The first three are the ECU's actuator commands (`rtsim.channels.COMMAND_NAMES`)
 only in *torque mode*, the seed validation's way of driving the model: the measured rear wheel torques
 replace the engine (the throttle is then unused).
 
-Inputs. Closed-loop drivers read the vehicle state as a float array laid out as `S_*` (ISO 8855
+Inputs. Closed-loop drivers read the vehicle state as a float array laid out as `DriverView` (ISO 8855
 axes: x forward, y left, yaw positive turning left, from the x axis). The vehicle model fills it each
 step; tests fill it from their own simple models. Position and yaw are those of the vehicle reference
 point the vehicle model reports; the path follower takes the offset to the rear axle as a parameter.
@@ -29,10 +29,10 @@ from pathlib import Path
 import rtsim.jit
 from rtsim.channels import BY_NAME
 
-# the layouts of the vehicle state a closed-loop driver reads (S_*) and of its outputs (I_*): the car's,
+# the layouts of the vehicle state a closed-loop driver reads (DriverView) and of its outputs (I_*): the car's,
 # declared by the vehicle (rtsim.vehicle.car.inputs)
 from rtsim.vehicle.car.inputs import (I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR,  # noqa: F401
-                                      INPUT_NAMES, NINPUT, NSTATE, S_SPEED, S_X, S_Y, S_YAW, STATE_NAMES)
+                                      INPUT_NAMES, NINPUT, NSTATE, DriverView, STATE_NAMES)
 
 INPUT_INDEX = {name: i for i, name in enumerate(INPUT_NAMES)}
 INPUT_UNITS = {name: BY_NAME[name].unit for name in INPUT_NAMES}

@@ -1,7 +1,7 @@
 """A complete driver: open-loop profiles for some channels, closed-loop followers for others.
 
 `Driver.step(t, state)` returns the input array (layout `drivers.base.INPUT_NAMES`) for time t and the
-vehicle state (layout `drivers.base.S_*`); it is one call of the compiled kernel `driver_step`, which
+vehicle state (layout `drivers.base.DriverView`); it is one call of the compiled kernel `driver_step`, which
 evaluates every packed profile, then lets the speed follower overwrite throttle and brake and the
 path follower overwrite the steering-wheel angle. A real-time loop written in numba calls
 `driver_step(d.packed, d.speed, d.path, d.flags, t, state, out)` itself with the same arrays.

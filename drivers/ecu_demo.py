@@ -42,7 +42,7 @@ from bridge.can_pack import SensorDecoder
 from rtsim.errors import RtsimError
 
 from . import bus_controller
-from .base import I_BRAKE, I_STEER, I_THROTTLE, NSTATE, S_SPEED, S_X, S_Y, S_YAW
+from .base import I_BRAKE, I_STEER, I_THROTTLE, NSTATE, DriverView
 from .driver import Driver
 from .path_follower import path_follower
 from .speed_follower import speed_follower
@@ -109,17 +109,17 @@ class DemoEcu:
             h = t - self._prev_t
             v = 0.5 * ((wl - self._prev_wheels[0]) + (wr - self._prev_wheels[1])) / h * self.r
             s = self.state
-            s[S_SPEED] = v
-            s[S_YAW] += values[self._igz] * h
-            s[S_X] += v * h * math.cos(s[S_YAW])
-            s[S_Y] += v * h * math.sin(s[S_YAW])
+            s[DriverView.SPEED] = v
+            s[DriverView.YAW] += values[self._igz] * h
+            s[DriverView.X] += v * h * math.cos(s[DriverView.YAW])
+            s[DriverView.Y] += v * h * math.sin(s[DriverView.YAW])
             self.distance += abs(v) * h
             self.peak_speed = max(self.peak_speed, v)
         self._prev_t, self._prev_wheels = t, (wl, wr)
 
     # -- drivers ---------------------------------------------------------------------------------
     def _start_lane_change(self, t: float) -> None:
-        x0, y0, yaw0 = self.state[S_X], self.state[S_Y], self.state[S_YAW]
+        x0, y0, yaw0 = self.state[DriverView.X], self.state[DriverView.Y], self.state[DriverView.YAW]
         xs = np.arange(0.0, 400.0, 1.0)
         u = np.clip((xs - LANE_START) / LANE_LENGTH, 0.0, 1.0)
         ys = LANE_OFFSET * 0.5 * (1.0 - np.cos(math.pi * u))
@@ -134,7 +134,7 @@ class DemoEcu:
 
     def _lateral(self) -> float:
         x0, y0, c, s = self._lane_frame
-        return -s * (self.state[S_X] - x0) + c * (self.state[S_Y] - y0)
+        return -s * (self.state[DriverView.X] - x0) + c * (self.state[DriverView.Y] - y0)
 
     def on_sample(self, t: float, values: np.ndarray) -> bool:
         """Take one complete sensor sample; True when it is time to send commands (self.cmd)."""
@@ -147,7 +147,7 @@ class DemoEcu:
         if self.samples % COMMAND_EVERY:
             return False
         if self.phase == "straight_line":
-            if self.t >= PHASE_A_END and abs(self.state[S_SPEED]) < 0.05:
+            if self.t >= PHASE_A_END and abs(self.state[DriverView.SPEED]) < 0.05:
                 if self.manoeuvre == "straight_line":
                     self.done = True
                 else:
@@ -158,7 +158,7 @@ class DemoEcu:
             tl = self.t - self.phase_t0
             out = self.lane.step(tl, self.state)
             self.max_lateral = max(self.max_lateral, self._lateral())
-            if tl >= SPEED_TABLE[0][-1] and abs(self.state[S_SPEED]) < 0.05:
+            if tl >= SPEED_TABLE[0][-1] and abs(self.state[DriverView.SPEED]) < 0.05:
                 self.done = True
         self.cmd[0] = min(max(out[I_THROTTLE], 0.0), 1.4)
         self.cmd[1] = min(max(out[I_BRAKE], 0.0), 12000.0)

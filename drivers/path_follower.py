@@ -43,7 +43,7 @@ from pydantic import create_model
 from rtsim.configfile import Strict, check_ranges, range_fields
 from rtsim.jit import inline_kernel, kernel
 
-from .base import I_STEER, S_SPEED, S_X, S_Y, S_YAW
+from .base import I_STEER, DriverView
 from rtsim.road.paths import circle_points, nearest_segment, on_segment, point_ahead, polyline, seg_project, wrap_angle
 
 __all__ = ["PathFollower", "PathFollowerParams", "PATH_FOLLOWER_RANGES", "path_follower", "path_follower_step",
@@ -196,13 +196,13 @@ def path_follower_step(pf, t, state, out):
     """Write the steering-wheel angle (out[I_STEER], rad) for time t and the vehicle state."""
     p = pf.par
     st = pf.st
-    v = max(state[S_SPEED], 0.0)
-    yaw = state[S_YAW]
+    v = max(state[DriverView.SPEED], 0.0)
+    yaw = state[DriverView.YAW]
     c = math.cos(yaw)
     s = math.sin(yaw)
     wb = p[PathPar.WB]
-    rx = state[S_X] - p[PathPar.REAR] * c
-    ry = state[S_Y] - p[PathPar.REAR] * s
+    rx = state[DriverView.X] - p[PathPar.REAR] * c
+    ry = state[DriverView.Y] - p[PathPar.REAR] * s
     if p[PathPar.METHOD] == STANLEY:
         qx = rx + wb * c
         qy = ry + wb * s

@@ -106,8 +106,8 @@ from rtsim.faults.spec import FaultSpec
 from rtsim.fmu.mapping import Mapping, load_mapping
 from rtsim.errors import ConfigError
 
-from .base import INPUT_NAMES, INPUT_UNITS, LIMITS, NSTATE, S_SPEED, S_X, S_Y
-from .base import S_YAW, SENSOR_ALIASES, input_name
+from .base import INPUT_NAMES, INPUT_UNITS, LIMITS, NSTATE, DriverView
+from .base import SENSOR_ALIASES, input_name
 from .driver import Driver
 from .path_follower import PATH_FOLLOWER_RANGES, PathFollowerParams, path_follower
 from .profiles import Profile, pack, sample
@@ -562,7 +562,7 @@ class Scenario:
         """The state array the closed-loop drivers read (`drivers.base.S_*`) at t = 0."""
         s = np.zeros(NSTATE)
         ini = self.spec.initial
-        s[S_SPEED], s[S_X], s[S_Y], s[S_YAW] = ini.speed, ini.x, ini.y, ini.yaw
+        s[DriverView.SPEED], s[DriverView.X], s[DriverView.Y], s[DriverView.YAW] = ini.speed, ini.x, ini.y, ini.yaw
         return s
 
     def rider(self) -> Rider | None:

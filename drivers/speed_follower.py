@@ -42,7 +42,7 @@ from pydantic import create_model
 from rtsim.configfile import Strict, check_ranges, range_fields
 from rtsim.jit import inline_kernel, kernel
 
-from .base import I_BRAKE, I_THROTTLE, LIMITS, S_SPEED
+from .base import I_BRAKE, I_THROTTLE, LIMITS, DriverView
 
 
 class SpeedPar(IntEnum):
@@ -197,10 +197,10 @@ def _lookup(x, v, s):
 @kernel
 def speed_follower_step(sf, t, state, out):
     """Write throttle (out[I_THROTTLE], rad) and brake (out[I_BRAKE], kPa) for time t and the
-    measured state (state[S_SPEED], m/s). Updates the controller state sf.st."""
+    measured state (state[DriverView.SPEED], m/s). Updates the controller state sf.st."""
     p = sf.par
     st = sf.st
-    v = state[S_SPEED]
+    v = state[DriverView.SPEED]
     if st[SpeedState.INIT] == 0.0 or t < st[SpeedState.T]:
         st[SpeedState.INIT] = 1.0
         st[SpeedState.T] = t

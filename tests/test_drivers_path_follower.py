@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from drivers.base import I_STEER, NINPUT, NSTATE, S_SPEED, S_X, S_Y, S_YAW
+from drivers.base import I_STEER, NINPUT, NSTATE, DriverView
 from drivers.path_follower import PathPar, PathState, circle_points, path_follower, path_follower_step
 
 DT = 1e-3
@@ -23,7 +23,7 @@ def simulate(pf, x, y, yaw, v, t_end):
     out = np.zeros(NINPUT)
     X, Y, H, SW, S, E = (np.empty(n) for _ in range(6))
     for k in range(n):
-        state[S_SPEED], state[S_X], state[S_Y], state[S_YAW] = v, x, y, yaw
+        state[DriverView.SPEED], state[DriverView.X], state[DriverView.Y], state[DriverView.YAW] = v, x, y, yaw
         path_follower_step(pf, k * DT, state, out)
         sw = out[I_STEER]
         w = v * math.tan(sw / RATIO) / WB
@@ -97,7 +97,8 @@ def test_angle_and_rate_limits():
                        max_wheel_angle=0.4, max_rate=5.0)
     state = np.zeros(NSTATE)
     out = np.zeros(NINPUT)
-    state[S_SPEED], state[S_X], state[S_Y], state[S_YAW] = 5.0, 0.0, 8.0, 0.5   # far left, heading away
+    # far left, heading away
+    state[DriverView.SPEED], state[DriverView.X], state[DriverView.Y], state[DriverView.YAW] = 5.0, 0.0, 8.0, 0.5
     sw = []
     for k in range(2000):
         path_follower_step(pf, k * DT, state, out)
@@ -117,10 +118,10 @@ def test_nearest_index_tracking_amortised():
     pf = path_follower(xs, 0.5 * np.sin(xs / 50.0), wheelbase=WB, steering_ratio=RATIO)
     state = np.zeros(NSTATE)
     out = np.zeros(NINPUT)
-    state[S_SPEED] = 20.0
+    state[DriverView.SPEED] = 20.0
     idx = []
     for k in range(200):
-        state[S_X] = 20.0 * k * DT + 1000.0
+        state[DriverView.X] = 20.0 * k * DT + 1000.0
         path_follower_step(pf, k * DT, state, out)
         idx.append(pf.st[PathState.IDX])
     d = np.diff(idx)

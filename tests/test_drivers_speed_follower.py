@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from drivers.base import I_BRAKE, I_THROTTLE, NINPUT, NSTATE, S_SPEED
+from drivers.base import I_BRAKE, I_THROTTLE, NINPUT, NSTATE, DriverView
 from drivers.speed_follower import SpeedFollowerParams, SpeedState, speed_follower, speed_follower_step
 
 DT = 1e-3
@@ -41,7 +41,7 @@ def simulate(sf, t_end, v0=0.0, slope=0.0):
     a_grade = G * math.sin(slope)
     for k in range(n):
         t = k * DT
-        state[S_SPEED] = v
+        state[DriverView.SPEED] = v
         speed_follower_step(sf, t, state, out)
         T[k], V[k], TH[k], BR[k] = t, v, out[I_THROTTLE], out[I_BRAKE]
         thr += (out[I_THROTTLE] - thr) * DT / TAU

@@ -15,7 +15,7 @@ import pytest
 from scipy.optimize import brentq, fsolve
 
 from drivers.scenario import load_scenario
-from drivers.base import I_BRAKE, I_THROTTLE, NSTATE, S_SPEED
+from drivers.base import I_BRAKE, I_THROTTLE, NSTATE, DriverView
 from drivers.driver import Driver
 from drivers.speed_follower import speed_follower
 from rtsim.road.config import load_road
@@ -343,7 +343,7 @@ def test_assist_off_steering_wheel_torque_is_the_linkage_statics(model):
         sim.step()
         out = sim.io.eps_out
         log.append((t, out[E.EO_SW_TORQUE], out[E.EO_TB_TORQUE], _rack_load(sim), sim.data.qd[ir],
-                    sim.data.qd[ic], state[S_SPEED], out[E.EO_CURRENT]))
+                    sim.data.qd[ic], state[DriverView.SPEED], out[E.EO_CURRENT]))
     t, t_drv, t_tb, f_load, xd, w_col, speed, current = np.array(log).T
     assert np.all(current == 0.0)
     band = max(c.rack_friction_band_m_s, c.pinion_friction_band_rad_s * rp,
@@ -397,7 +397,7 @@ def test_energy_balance_closes_over_an_on_centre_weave(model):
         sim.io.commands[CMD_STEER] = amp * math.sin(2 * math.pi * 0.2 * t)
         sim.step()
         vehicle_state(sim, state)
-        ay.append(state[S_SPEED] * sim.sensors()[5])      # v r: the yaw-rate acceleration (gyro_z)
+        ay.append(state[DriverView.SPEED] * sim.sensors()[5])      # v r: the yaw-rate acceleration (gyro_z)
     assert 0.12 * G < max(ay) < 0.35 * G
     b = _balance(sim)
     assert abs(b.residual) <= 1e-6 * b.exchanged

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from drivers.base import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, S_SPEED
+from drivers.base import I_BRAKE, I_STEER, I_THROTTLE, I_TORQUE_RL, I_TORQUE_RR, DriverView
 from drivers.scenario import SCENARIO_DIR, load_all, load_scenario
 from rtsim.errors import ConfigError
 
@@ -88,10 +88,10 @@ def test_step_steer_80kph():
     assert 0.1 <= ramp <= 0.2
     # slower than the target: the follower opens the throttle; faster: it brakes
     slow = sc.initial_state()
-    slow[S_SPEED] = 20.0
+    slow[DriverView.SPEED] = 20.0
     assert sampled(sc, [0.0, 0.1], slow)[-1, I_THROTTLE] > 0.0
     fast = sc.initial_state()
-    fast[S_SPEED] = 25.0
+    fast[DriverView.SPEED] = 25.0
     assert sampled(sc, [0.0, 0.1], fast)[-1, I_BRAKE] > 0.0
 
 

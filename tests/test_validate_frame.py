@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.base import NSTATE, S_SPEED
+from drivers.base import NSTATE, DriverView
 from rtsim.validate.data import DataError, accel_frame, load_run
 from rtsim.validate.replay import GRAVITY, Replayer, level_frame
 
@@ -48,7 +48,7 @@ def test_level_frame_in_a_steady_turn_of_the_model():
     sim.io.commands[CMD_STEER] = 0.6
     for _ in range(500):                         # 5 s; a P controller on the speed every 10 ms
         vehicle_state(sim, state)
-        tq = 40.0 + 300.0 * (15.0 - state[S_SPEED])
+        tq = 40.0 + 300.0 * (15.0 - state[DriverView.SPEED])
         sim.io.extra[EX_TORQUE_LEFT] = sim.io.extra[EX_TORQUE_RIGHT] = tq
         sim.step(10)
     sim.physical_sensors(row)
@@ -56,7 +56,7 @@ def test_level_frame_in_a_steady_turn_of_the_model():
     s = {n: row[i] for i, n in enumerate(names)}
     r, roll = s["gyro_z"], s["roll"]
     assert r > 0.1 and roll > 0.01                  # turning left, rolled right side down
-    ay = state[S_SPEED] * r
+    ay = state[DriverView.SPEED] * r
     _, ly, _ = level_frame(*(np.array([s[c]]) for c in ("accel_x", "accel_y", "accel_z", "roll", "pitch")))
     assert abs(ly[0] - ay) <= 0.01 * ay, (ly[0], ay)
     body = ay * math.cos(roll) + GRAVITY * math.sin(roll)

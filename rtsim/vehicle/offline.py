@@ -86,7 +86,7 @@ def sim_for(model, sc) -> VehicleSim:
 
 
 def vehicle_state(sim: VehicleSim, out: np.ndarray) -> None:
-    """Speed, x, y, yaw of the centre of mass for the closed-loop drivers (rtsim.vehicle.car.inputs S_*)."""
+    """Speed, x, y, yaw of the centre of mass for the closed-loop drivers (rtsim.vehicle.car.inputs DriverView)."""
     driver_view(sim.data, sim.vm.vehicle, out)
 
 

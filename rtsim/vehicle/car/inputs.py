@@ -1,4 +1,4 @@
-"""The car's driving inputs: the layouts a driver reads and writes (``S_*``: the driver's view of the car;
+"""The car's driving inputs: the layouts a driver reads and writes (``DriverView``: the driver's view of the car;
 ``I_*``: its outputs, the car's input channels; declared here once, drivers.base names them for the
 drivers), the ranges of its input channels (what a driver, a replay or a person may command, SI) and
 what a person may drive of it (rtsim.vehicle.kit.user_inputs).
@@ -13,17 +13,24 @@ Released, both groups hold their rest values: the car coasts straight on."""
 from __future__ import annotations
 
 import math
+from enum import IntEnum
 
 from rtsim.channels import COMMAND_NAMES
 
 from ..kit.user_inputs import ControlGroup, UserChannel, UserInputs
 
 # --- the driver's view of the car: the state a closed-loop driver reads (drivers.base), ISO 8855 --------
-S_SPEED = 0   # m/s, longitudinal speed of the reference point (forward positive)
-S_X = 1       # m, position x in the road frame
-S_Y = 2       # m, position y in the road frame
-S_YAW = 3     # rad, yaw angle from the road x axis, positive turning left
-NSTATE = 4
+
+
+class DriverView(IntEnum):
+    """The driver's view of the car (the state array a closed-loop driver reads), ISO 8855."""
+    SPEED = 0   # m/s, longitudinal speed of the reference point (forward positive)
+    X = 1       # m, position x in the road frame
+    Y = 2       # m, position y in the road frame
+    YAW = 3     # rad, yaw angle from the road x axis, positive turning left
+
+
+NSTATE = len(DriverView)   # slots in the driver's view
 STATE_NAMES = ("speed", "x", "y", "yaw")
 
 # --- the driver's outputs: one float per input channel of the car, in the order of INPUT_NAMES ---------

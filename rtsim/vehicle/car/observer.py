@@ -13,7 +13,7 @@ from math import asin, atan2, sqrt
 from rtsim.channels import STATE_NAMES, WHEELS
 from rtsim.jit import kernel
 
-from .inputs import S_SPEED, S_X, S_Y, S_YAW
+from .inputs import DriverView
 from .step import TyreOut
 from .layout import CI_PHI, STEER_RACK
 from .sensors import SG_BRAKE_PRESSURE, SG_ENGINE_SPEED, SG_SW_ANGLE, SG_THROTTLE
@@ -32,15 +32,16 @@ assert NSTATE_OUT == X_PHI + 1 and len(WHEELS) == 4
 
 @kernel
 def driver_view(d, veh, out):
-    """What the closed-loop drivers read (rtsim.vehicle.car.inputs S_*: speed m/s along the heading, x, y m and yaw
-    rad of the centre of mass) into out[0:4]."""
+    """What the closed-loop drivers read (rtsim.vehicle.car.inputs DriverView: speed m/s along the heading, x, y m
+    and yaw rad of the centre of mass) into out[0:4]."""
     q, qd = d.q, d.qd
     ci = veh.chassis_idx
     ux, uy = q[ci[3]], q[ci[4]]
-    out[S_X] = q[ci[0]]
-    out[S_Y] = q[ci[1]]
-    out[S_YAW] = atan2(uy, ux)
-    out[S_SPEED] = (qd[ci[0]] * ux + qd[ci[1]] * uy + qd[ci[2]] * q[ci[5]]) / max(1e-12, sqrt(ux * ux + uy * uy))
+    out[DriverView.X] = q[ci[0]]
+    out[DriverView.Y] = q[ci[1]]
+    out[DriverView.YAW] = atan2(uy, ux)
+    out[DriverView.SPEED] = ((qd[ci[0]] * ux + qd[ci[1]] * uy + qd[ci[2]] * q[ci[5]])
+                             / max(1e-12, sqrt(ux * ux + uy * uy)))
 
 
 @kernel

@@ -7,7 +7,7 @@ calls, per step of ``h`` s:
 - ``served_drive(v, state)``: the vehicle's own in-loop driver acts (a two-wheeler's rider, inside its
   step); returns True when the scenario's driver (drivers.driver, run by the service) is to write the
   commands the bus does not carry, after this stage wrote what that driver reads into ``state``
-  (drivers.base S_*: speed, position, yaw);
+  (drivers.base DriverView: speed, position, yaw);
 - ``served_user(v, usr, slot, bus_ok, takeover, work, h)``: the user's commands (rtsim.service.user_input)
   after the watchdog: ``usr`` one value per user channel of the vehicle (NaN: not driven), ``slot`` per
   channel the command slot it competes with (-1: none), ``bus_ok`` a bit mask (bit u: the bus holds a
