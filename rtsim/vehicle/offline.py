@@ -116,14 +116,16 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
     t0 = time.perf_counter()
     try:
         with CompileClock() as clock:       # a first run compiles at its first step: not step time
-            if progress is None and ctl.source is None and getattr(driver, "car_loop", None) is not None:
+            compiled = progress is None and ctl.source is None and getattr(driver, "car_loop", None) is not None
+            if compiled:
                 res = _compiled_loop(sim, driver, nsteps, every, columns, rows, state, sens, observed, keep, forced,
                                      t0)
             else:
                 res = _loop(sim, sc, progress, forced, nsteps, every, columns, rows, driver, state, sens, observed,
                             keep, io, ctl, t0)
         res.wall_s, res.compile_s = max(res.wall_s - clock.seconds, 0.0), clock.seconds
-        res.step_s = max(res.step_s - clock.seconds, 0.0)
+        if not compiled:        # the Python loop's step timer holds the first step's compile; the cycle count does not
+            res.step_s = max(res.step_s - clock.seconds, 0.0)
         return res
     finally:
         ctl.close()
