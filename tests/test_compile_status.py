@@ -3,6 +3,7 @@ this test pins the behaviour), and the progress lines appear when a process comp
 its kernels are cached. Each case runs a tiny kernel module of its own, in a fresh process."""
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -63,3 +64,41 @@ def test_a_changed_source_is_not_cached(tmp_path):
     lines = _run(tmp_path, "tinykernel:twice")
     assert lines[0] == "cached before: False"
     assert lines[-1] == "cached after: True"
+
+
+WORKER_MODULE = KERNEL_MODULE + textwrap.dedent("""
+
+    def os_pid():
+        import os
+        return os.getpid()
+
+
+    def compile_in_worker():
+        from rtsim.compile_status import worker_progress
+        with worker_progress("batch"):
+            return twice(2.0)
+""")
+
+POOL_SCRIPT = textwrap.dedent("""
+    import multiprocessing as mp
+    import sys
+    from concurrent.futures import ProcessPoolExecutor
+    sys.path.insert(0, sys.argv[1])
+    import tinyworker
+    with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as pool:
+        print("worker pid:", pool.submit(tinyworker.os_pid).result(), "result:",
+              pool.submit(tinyworker.compile_in_worker).result())
+""")
+
+
+def test_a_worker_process_reports_its_own_compiles_on_stderr(tmp_path):
+    """numba's compile events fire in the process that compiles: a batch or test worker names itself."""
+    (tmp_path / "tinyworker.py").write_text(WORKER_MODULE)
+    out = subprocess.run([sys.executable, "-c", POOL_SCRIPT, str(tmp_path)], cwd=ROOT, capture_output=True,
+                         text=True, timeout=300, env={**os.environ, "PYTHONPATH": str(tmp_path)})
+    assert out.returncode == 0, out.stderr
+    pid = out.stdout.split()[2]
+    assert out.stdout.split()[-1] == "4.0"
+    lines = out.stderr.splitlines()
+    assert f"rtsim batch (worker {pid}): compiling kernels (first run only)..." in lines, lines
+    assert any(l.startswith(f"rtsim batch (worker {pid}): kernels compiled in ") for l in lines), lines

@@ -61,6 +61,13 @@ def _init(warm_specs: list[dict], job: dict, turn=None, lock_dir: str | None = N
     CPU, the motorcycle's 20 s more)."""
     if parent is not None:
         die_with_parent(parent)
+    from rtsim.compile_status import worker_progress
+
+    with worker_progress("batch"):
+        _warm_all(warm_specs, job, turn, lock_dir)
+
+
+def _warm_all(warm_specs: list[dict], job: dict, turn, lock_dir: str | None) -> None:
     if turn is None or lock_dir is None or len(warm_specs) < 2:
         for spec in warm_specs:
             warm(spec, job)

@@ -21,6 +21,8 @@ import threading
 import time
 from pathlib import Path
 
+from rtsim.compile_status import worker_progress
+
 from .catalog import Case, LoadedCatalogue, load_catalogue
 from .expect import judge
 
@@ -147,7 +149,8 @@ def run_case(catalogue: str, index: int, out: str, run_id: str) -> dict:
     row = {"run_id": run_id, "case": index, "name": case.name, "worker": os.getpid()}
     log = (cdir / "log.txt").open("w", encoding="utf-8")
     try:
-        row.update(_run(cat, case, index, cdir, log))
+        with worker_progress("test"):        # a first start compiles the service here: say so
+            row.update(_run(cat, case, index, cdir, log))
     except Exception as exc:  # noqa: BLE001  (the row says what went wrong: one line)
         row.update(status="error", message=f"{type(exc).__name__}: {' '.join(str(exc).split())}")
     finally:
