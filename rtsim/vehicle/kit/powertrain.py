@@ -402,8 +402,25 @@ def _stable_root(f, lo: float, hi: float, near: float, n: int = 400) -> float:
     return float(min(roots, key=lambda r: abs(r - near)))
 
 
+_ROLLING: dict = {}          # powertrain_state_rolling's states by its arguments (this process's)
+
+
 def powertrain_state_rolling(params: np.ndarray, dt: float, wheel_speed: float, throttle: float = 0.0,
                              selector: float = 1.0) -> np.ndarray:
+    """``_rolling_state`` (below), kept per process for the same arguments (a copy each call): every run
+    of a batch starts its car from the same speed, and the root search takes milliseconds."""
+    key = (np.asarray(params, dtype=float).tobytes(), float(dt), float(wheel_speed), float(throttle), float(selector))
+    s = _ROLLING.get(key)
+    if s is None:
+        s = _rolling_state(params, dt, wheel_speed, throttle, selector)
+        if len(_ROLLING) >= 64:
+            _ROLLING.clear()
+        _ROLLING[key] = s
+    return s.copy()
+
+
+def _rolling_state(params: np.ndarray, dt: float, wheel_speed: float, throttle: float = 0.0,
+                  selector: float = 1.0) -> np.ndarray:
     """Initial state of a car already rolling with its driven wheels at `wheel_speed` (rad/s, mean of
     rl and rr) and the throttle settled at `throttle` (rad): the state powertrain_step keeps, so a
     scenario started at speed has no start-up transient. In D the gear is the schedule's
