@@ -37,6 +37,7 @@ class OpenedVehicles:
         self.built = 0
         self.rebuilt = 0
         self.reused = 0
+        self.roads: dict = {}        # the roads built in this worker (rtsim.road.config.keeping_roads)
 
     def open_run(self, scenario: str | Path, vehicle: str | Path | None, overrides: dict):
         """(scenario, opened vehicle) of a run, as rtsim.batch.inputs.open_run opens them (same loaders,
