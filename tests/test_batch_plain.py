@@ -124,3 +124,15 @@ def test_compile_reuses_the_symbolic_analysis_only_for_the_same_topology():
     two = _pendulum(2.0, True).compile(reuse=one)                # declared "reuse", topology differs
     assert two.structure != one.structure and two.model.nq == 4
     _arrays_equal(two.model, _pendulum(2.0, True).compile().model)
+
+
+@pytest.mark.parametrize("wheel_speed", [0.0, 3.0, 35.0, 80.0])
+def test_the_rolling_start_scans_in_one_compiled_call_to_the_same_bits(wheel_speed):
+    """The powertrain's rolling start (rtsim.vehicle.kit.powertrain) scans the engine's net torque on
+    400 speeds in one compiled call: the state of the point-by-point scan, bit for bit."""
+    from rtsim.vehicle.kit.powertrain import _rolling_state, powertrain_config, powertrain_params
+
+    p = powertrain_params(powertrain_config(None))
+    a = _rolling_state(p, 1e-3, wheel_speed)
+    b = _rolling_state(p, 1e-3, wheel_speed, compiled_scan=False)
+    assert a.tobytes() == b.tobytes()

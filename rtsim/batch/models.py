@@ -38,6 +38,7 @@ class OpenedVehicles:
         self.rebuilt = 0
         self.reused = 0
         self.roads: dict = {}        # the roads built in this worker (rtsim.road.config.keeping_roads)
+        self.tables: dict = {}       # the TOML files parsed in this worker (rtsim.configfile.keeping_tables)
 
     def open_run(self, scenario: str | Path, vehicle: str | Path | None, overrides: dict):
         """(scenario, opened vehicle) of a run, as rtsim.batch.inputs.open_run opens them (same loaders,
