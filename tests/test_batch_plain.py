@@ -136,3 +136,17 @@ def test_the_rolling_start_scans_in_one_compiled_call_to_the_same_bits(wheel_spe
     a = _rolling_state(p, 1e-3, wheel_speed)
     b = _rolling_state(p, 1e-3, wheel_speed, compiled_scan=False)
     assert a.tobytes() == b.tobytes()
+
+
+def test_a_two_wheelers_rows_carry_the_time_in_its_steps(worker):
+    """The motorcycle's offline ride times its model's steps (the rider and the logging outside them):
+    its rows have step_s, outside_s and outside_pct like a car's."""
+    spec = {"run_id": "m", "case": 0, "scenario": str(ROOT / "configs" / "scenarios" / "motorcycle_double_lane_change.toml"),
+            "vehicle": None, "seed": 0, "params": {}, "overrides": {"scenario.duration": 0.3}}
+    job = {**JOB, "metrics": ["peak_roll"]}
+    run.warm(spec, job)                 # kernels loaded (or compiled) first, as a batch worker does
+    row = run.run_one(spec, job)
+    assert row["status"] == "ok", row["error"]
+    assert 0.0 < row["step_s"] < row["wall_s"]
+    assert row["step_s"] + row["outside_s"] == pytest.approx(row["wall_s"], rel=1e-12)
+    assert 0.0 < row["outside_pct"] < 100.0

@@ -67,7 +67,7 @@ class TwoWheelerKind(VehicleKind):
         res = run(ride, sc, progress)
         out = OfflineRun(res.columns, res.data, res.wall_s, res.steps, res.status, res.message, res.fault,
                          res.summary, vehicle_id=ride.sim.mm.config.id, channels=CHANNELS,
-                         scene=scene_source(ride.sim.mm))
+                         scene=scene_source(ride.sim.mm), step_s=res.step_s)
         out.line = (f"{sc.name}: {res.summary.get('simulated_s')} s simulated in {res.wall_s:.2f} s, "
                     f"{len(res.data)} rows")
         return out
