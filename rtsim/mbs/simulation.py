@@ -41,9 +41,9 @@ class Trajectory:
     qd: np.ndarray   # (n, nq)
 
 
-#: assembled initial states by (mechanism, q0, qd0, t0, assemble): a weak reference to the mechanism, every
-#: field of its Data after the assembly, the position correction and the penalty references. A batch
-#: starts many runs of one model from the same place; the assembly (dense solves) is done once.
+#: assembled initial states by (mechanism, its settings, q0, qd0, t0, assemble): a weak reference to the
+#: mechanism, every field of its Data after the assembly, the position correction and the penalty references.
+#: A batch starts many runs of one model from the same place; the assembly (dense solves) is done once.
 _STARTS: dict = {}
 
 
@@ -66,7 +66,8 @@ class Simulation:
         self.data: Data = make_data(self.model, q0, qd0, t0)
         self.steps = 0
         self.position_correction = 0.0
-        key = (id(mech), q0.tobytes(), qd0.tobytes(), float(t0), bool(assemble))
+        key = (id(mech), repr(mech.settings), self.model.iset.tobytes(), self.model.fset.tobytes(), q0.tobytes(),
+               qd0.tobytes(), float(t0), bool(assemble))
         start = _STARTS.get(key)
         if start is not None and start[0]() is mech:
             _, fields, self.position_correction, self._mref, self._jn = start
