@@ -150,3 +150,36 @@ def test_a_two_wheelers_rows_carry_the_time_in_its_steps(worker):
     assert 0.0 < row["step_s"] < row["wall_s"]
     assert row["step_s"] + row["outside_s"] == pytest.approx(row["wall_s"], rel=1e-12)
     assert 0.0 < row["outside_pct"] < 100.0
+
+
+@pytest.mark.parametrize("overrides", [
+    {"rear_frame.mass_kg": 190.0},                                              # a mass
+    {"suspension.fork.spring.stiffness_n_per_m": 18000.0, "steering.damper_nms_per_rad": 8.0},   # a spring, a damper
+])
+def test_a_two_wheeler_builds_on_the_kept_model_bit_for_bit(worker, overrides):
+    """The two-wheeler takes nothing of a kept model but its symbolic analysis (for the same topology):
+    the rows of a run on it equal a fresh build's, bit for bit."""
+    scen = str(ROOT / "configs" / "scenarios" / "motorcycle_double_lane_change.toml")
+    spec = {"run_id": "m", "case": 0, "scenario": scen, "vehicle": str(ROOT / "configs" / "vehicles" / "motorcycle.toml"),
+            "seed": 0, "params": {}, "overrides": {"scenario.duration": 0.3}}
+    job = {**JOB, "metrics": ["peak_roll", "path_error_rms", "max_constraint_violation"]}
+    base = run.run_one(spec, job)
+    other = {**spec, "overrides": {**spec["overrides"], **{f"vehicle.{k}": v for k, v in overrides.items()}}}
+    patched = run.run_one(other, job)
+    fresh = run.run_one(other, {**job, "build_once": False})
+    assert base["status"] == patched["status"] == fresh["status"] == "ok", patched["error"]
+    assert worker.rebuilt == 1 and _bits(patched) == _bits(fresh) and _bits(patched) != _bits(base)
+    kept, new = list(worker.kept.values())
+    for f in SYMBOLIC:
+        assert getattr(new.model.mech.model, f) is getattr(kept.model.mech.model, f)
+
+
+def test_a_two_wheelers_topology_change_computes_its_symbolic_analysis(worker):
+    scen = ROOT / "configs" / "scenarios" / "motorcycle_double_lane_change.toml"
+    bike = ROOT / "configs" / "vehicles" / "motorcycle.toml"
+    _, a = worker.open_run(scen, bike, {})
+    _, b = worker.open_run(scen, bike, {"vehicle.suspension.locked": True})     # two more constraint rows
+    assert worker.rebuilt == 1                     # built on a: only a same topology would share its analysis
+    assert b.model.mech.model.nc == a.model.mech.model.nc + 2
+    assert b.model.mech.structure != a.model.mech.structure
+    assert b.model.mech.model.perm is not a.model.mech.model.perm

@@ -26,6 +26,15 @@ class TwoWheelerKind(VehicleKind):
         from .build import build_motorcycle
         return build_motorcycle(opened.config, opened.base)
 
+    #: every key: a rebuild takes nothing of the built model but its symbolic analysis, which the builder's
+    #: compile takes only for the same topology (a knife-edge tyre model, a locked suspension, a massless
+    #: body: computed afresh)
+    plain_parameters = ("*",)
+
+    def rebuild(self, opened, built):
+        from .build import build_motorcycle
+        return build_motorcycle(opened.config, opened.base, reuse=built.model)
+
     def describe(self, opened) -> dict:
         from rtsim.channels import two_wheeler_channels
 
