@@ -183,3 +183,20 @@ def test_a_two_wheelers_topology_change_computes_its_symbolic_analysis(worker):
     assert b.model.mech.model.nc == a.model.mech.model.nc + 2
     assert b.model.mech.structure != a.model.mech.structure
     assert b.model.mech.model.perm is not a.model.mech.model.perm
+
+
+def test_the_two_wheelers_static_pose_is_settled_once_per_model():
+    """Every ride of a two-wheeler starts from its static pose (1.5 s of settling simulated): kept per
+    model, each call gets copies equal to a settling simulated afresh, bit for bit."""
+    from rtsim.vehicle.motorcycle.sim import TO_FZ, TwoWheelerSim, static_pose
+    from rtsim.vehicle.registry import open_vehicle
+
+    mm = open_vehicle(ROOT / "configs" / "vehicles" / "motorcycle.toml").model
+    q1, f1 = static_pose(mm, seconds=0.3)
+    q2, f2 = static_pose(mm, seconds=0.3)
+    s = TwoWheelerSim(mm, dt=1e-3)
+    s.run(0.3)
+    assert q1 is not q2 and q1.tobytes() == q2.tobytes() == s.data.q.tobytes()
+    assert f1.tobytes() == f2.tobytes() == s.parts.tyre[:, TO_FZ].tobytes()
+    q1[:] = 0.0                                    # a caller's copy: the kept pose is untouched
+    assert static_pose(mm, seconds=0.3)[0].tobytes() == q2.tobytes()
