@@ -39,6 +39,18 @@ def driver_step(packed, speed, path, flags, t, state, out):
         path_follower_step(path, t, state, out)
 
 
+_IDLE: dict = {}
+
+
+def _idle(which: str):
+    """A copy of the idle follower (its arrays copied) that stands in for a missing one; built once per
+    process (a follower's construction takes a few tenths of a ms)."""
+    f = _IDLE.get(which)
+    if f is None:
+        f = _IDLE[which] = speed_follower([0.0], [0.0]) if which == "speed" else path_follower([0.0, 1.0], [0.0, 0.0])
+    return type(f)(*(a.copy() for a in f))
+
+
 class Driver:
     """Profiles per channel plus optional speed and path followers.
 
@@ -68,8 +80,8 @@ class Driver:
         self.flags = np.zeros(NFLAG, dtype=np.int64)
         self.flags[F_SPEED] = speed is not None
         self.flags[F_PATH] = path is not None
-        self.speed = speed if speed is not None else speed_follower([0.0], [0.0])
-        self.path = path if path is not None else path_follower([0.0, 1.0], [0.0, 0.0])
+        self.speed = speed if speed is not None else _idle("speed")
+        self.path = path if path is not None else _idle("path")
         self.out = np.zeros(NINPUT)
         self._state = np.zeros(NSTATE)
         #: the scenario's controller FMU mapping (rtsim.fmu.mapping) or a command source in its place

@@ -431,11 +431,34 @@ def note_read(path: str | Path) -> None:
         seen.add(Path(path).resolve())
 
 
+#: parsed tables by resolved path while `keeping_tables` is active (None: every load parses its file)
+_TABLES: contextvars.ContextVar[dict | None] = contextvars.ContextVar("rtsim_kept_tables", default=None)
+
+
+@contextmanager
+def keeping_tables(kept: dict):
+    """While active, `load_toml` parses a file once and gives a copy of its table at each later load
+    (``kept``: resolved path -> table): a batch worker reads the same files run after run, taken not to
+    change during the batch. Overrides, validation and the recorded reads are as without it."""
+    token = _TABLES.set(kept)
+    try:
+        yield kept
+    finally:
+        _TABLES.reset(token)
+
+
 def load_toml(path: str | Path) -> dict:
     """A TOML file's table (with the active `overrides` for it); ConfigError naming the file otherwise."""
     path = Path(path)
     note_read(path)
-    data = _read_toml(path)
+    kept = _TABLES.get()
+    if kept is None:
+        data = _read_toml(path)
+    else:
+        key = path.resolve()
+        if key not in kept:
+            kept[key] = _read_toml(path)
+        data = copy.deepcopy(kept[key])
     for key, value in _OVERRIDES.get().get(path.resolve(), {}).items():
         try:
             set_dotted(data, key, value)

@@ -56,6 +56,7 @@ def test_build_once_rows_equal_fresh_builds_bit_for_bit(worker):
     kept = [run.run_one(s, job) for s in specs]
     fresh = [run.run_one(s, {**job, "build_once": False}) for s in specs]
     assert worker.built == 4 and worker.reused == 4          # 2 cars x 2 masses, each built once
+    assert worker.rebuilt == 2                               # the second mass of each on the first's model
     for a, b in zip(kept, fresh):
         assert a["status"] == "ok", a["error"]
         ia, ib = _identity(a), _identity(b)
@@ -77,7 +78,7 @@ def test_another_vehicle_override_builds_afresh_a_scenario_override_does_not(wor
     assert b is a and worker.built == 1 and worker.reused == 1
     _, c = worker.open_run(scen, car, {**short, "vehicle.tyres.model": "linear"})       # another tyre model
     _, d = worker.open_run(scen, car, {**short, "vehicle.chassis.mass_kg": 1000.0})     # a plain parameter
-    assert worker.built == 3 and len({id(a), id(c), id(d)}) == 3
+    assert worker.built == 3 and worker.rebuilt == 1 and len({id(a), id(c), id(d)}) == 3   # d on a's model
     assert c.config.tyres.model == "linear" and a.config.tyres.model != "linear"
     assert d.model.config.chassis.mass_kg == 1000.0 != a.model.config.chassis.mass_kg
     _, e = worker.open_run(scen, car, {"vehicle.tyres.model": "linear", **short})       # the same as c

@@ -85,11 +85,14 @@ def _warm_all(warm_specs: list[dict], job: dict, turn, lock_dir: str | None) -> 
 
 
 def warm_specs(specs: list[dict]) -> list[dict]:
-    """One spec per kind of vehicle (car, two-wheeler: by scenario file) to load the kernels with."""
+    """One spec per scenario and vehicle file (at most 4) to load the kernels with: each kind of vehicle's
+    kernels are loaded, and each of those vehicles is built once (and kept, rtsim.batch.models) before
+    the worker's first run, like its kernels."""
     seen, out = set(), []
     for s in specs:
-        if s["scenario"] not in seen:
-            seen.add(s["scenario"])
+        key = (s["scenario"], s["vehicle"])
+        if key not in seen:
+            seen.add(key)
             out.append(s)
     return out[:4]
 

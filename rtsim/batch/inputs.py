@@ -37,7 +37,9 @@ def open_run(scenario: str | Path, vehicle: str | Path | None, overrides: dict, 
     file, else the scenario's, else the default car), both read under the run's overrides; with
     ``build`` the model is built under them too (their values are read on load). ConfigError (or the
     vehicle's RtsimError refusing a batch) when they cannot be. ``kept``: a worker's opened vehicles
-    (rtsim.batch.models.OpenedVehicles), asked for the vehicle first and given the one opened."""
+    (rtsim.batch.models.OpenedVehicles), asked for the vehicle first, else for a built one of the same file
+    whose overrides differ in plain parameters only (the model is then built on it), and given the one
+    opened."""
     from drivers.scenario import load_scenario
     from rtsim.configfile import overrides as with_overrides
     from rtsim.vehicle.registry import DEFAULT_VEHICLE, open_vehicle
@@ -57,6 +59,9 @@ def open_run(scenario: str | Path, vehicle: str | Path | None, overrides: dict, 
         opened.refuse("batch")
         opened.check_scenario(sc)
         if build:
+            built = None if kept is None else kept.built_like(vpath, veh_over)
+            if built is not None:
+                opened.build_on(built)
             opened.model
         if kept is not None:
             kept.put(vpath, veh_over, opened)

@@ -2,11 +2,16 @@
 overrides) is read, validated and built once per worker process, and every later run of it gets the same
 opened vehicle, whose compiled model is immutable arrays (each run makes its own state: rtsim.vehicle's
 ``run_offline`` builds a fresh simulation on it). A run's scenario is read per run (its overrides differ
-from run to run; reading it takes a few ms). A run whose vehicle overrides differ from every kept one in
-any value -- a plain parameter such as the chassis mass as much as a change of topology -- is a new
-vehicle: validated and built afresh (its values are read on load, so a bad one is that run's config
-error as before). The input files are taken not to change during a batch (a run id hashes them at the
-start: rtsim.batch.inputs).
+from run to run; reading it takes a few ms).
+
+A run whose vehicle overrides differ from every kept one's is another vehicle: read and validated (its
+values are read on load, so a bad one is that run's config error as before). When they differ from a kept
+vehicle of the same file in the kind's plain parameters only (``VehicleKind.plain``: a mass, a
+stiffness, a damper, a gain; the car's list is rtsim.vehicle.car.plain) its model is built on that one
+(``VehicleKind.rebuild``: the kept one's corner fits and symbolic analysis taken, every value computed
+again, bit for bit a fresh build's); any other difference (a tyre model, a hardpoint: the topology or
+the fits) builds it from scratch. The input files are taken not to change during a batch (a run id
+hashes them at the start: rtsim.batch.inputs).
 
 The worker keeps at most ``KEEP`` vehicles (the least recently used goes first), so a random sweep
 over a continuous parameter does not fill its memory."""
@@ -23,13 +28,17 @@ KEEP = 32
 
 class OpenedVehicles:
     """(resolved vehicle file, its overrides) -> opened vehicle with its model built; ``built`` counts the
-    vehicles opened and built, ``reused`` the runs that got a kept one."""
+    vehicles opened and built (``rebuilt`` of them on a kept one), ``reused`` the runs that got a kept
+    one."""
 
     def __init__(self, keep: int = KEEP):
         self.keep = keep
         self.kept: OrderedDict = OrderedDict()
         self.built = 0
+        self.rebuilt = 0
         self.reused = 0
+        self.roads: dict = {}        # the roads built in this worker (rtsim.road.config.keeping_roads)
+        self.tables: dict = {}       # the TOML files parsed in this worker (rtsim.configfile.keeping_tables)
 
     def open_run(self, scenario: str | Path, vehicle: str | Path | None, overrides: dict):
         """(scenario, opened vehicle) of a run, as rtsim.batch.inputs.open_run opens them (same loaders,
@@ -49,6 +58,22 @@ class OpenedVehicles:
             self.reused += 1
         return opened
 
+    def built_like(self, vpath: Path, veh_over: dict):
+        """The most recently used kept vehicle of this file whose overrides differ from ``veh_over`` in its
+        kind's plain parameters only (a key set in one and not the other counts as differing); None when
+        there is none. Counted in ``rebuilt``."""
+        file = str(Path(vpath).resolve())
+        for (kfile, kover), opened in reversed(self.kept.items()):
+            if kfile != file:
+                continue
+            over = json.loads(kover)
+            new = json.loads(json.dumps(veh_over, sort_keys=True, default=repr))
+            changed = {k for k in over.keys() | new.keys() if over.get(k, _MISSING) != new.get(k, _MISSING)}
+            if all(opened.kind.plain(k) for k in changed):
+                self.rebuilt += 1
+                return opened
+        return None
+
     def put(self, vpath: Path, veh_over: dict, opened) -> None:
         """Keep a vehicle just opened and built (the least recently used out beyond ``keep``)."""
         self.kept[self._key(vpath, veh_over)] = opened
@@ -56,6 +81,8 @@ class OpenedVehicles:
         while len(self.kept) > self.keep:
             self.kept.popitem(last=False)
 
+
+_MISSING = object()
 
 #: this worker process's vehicles (one batch runs per process at a time)
 WORKER = OpenedVehicles()

@@ -32,11 +32,17 @@ TIMING = ("step_s", "outside_s", "outside_pct")
 def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object, float]:
     """(status, message, columns, data, writer, step time in s) of the spec's run, on the vehicle the
     registry opens (rtsim.vehicle.registry: the spec's vehicle, else the scenario's, else the default
-    car), kept by this worker from an earlier run of the same vehicle unless ``job["build_once"]`` is
-    False."""
-    opener = WORKER.open_run if job.get("build_once", True) else open_run
-    sc, vehicle = opener(spec["scenario"], spec["vehicle"], spec["overrides"])
-    res = vehicle.run_offline(sc, seed=spec["seed"])
+    car), kept by this worker from an earlier run of the same vehicle, on the worker's kept roads and
+    parsed files (rtsim.road.config.keeping_roads, rtsim.configfile.keeping_tables), unless
+    ``job["build_once"]`` is False."""
+    from rtsim.configfile import keeping_tables
+    from rtsim.road.config import keeping_roads
+
+    once = job.get("build_once", True)
+    opener = WORKER.open_run if once else open_run
+    with keeping_tables(WORKER.tables if once else {}), keeping_roads(WORKER.roads if once else {}):
+        sc, vehicle = opener(spec["scenario"], spec["vehicle"], spec["overrides"])
+        res = vehicle.run_offline(sc, seed=spec["seed"])
     from bridge.mcap_log import write_offline
     write = {"csv": lambda p: write_offline(res, Path(p).with_suffix(".csv")),
              "mcap": lambda p: write_offline(res, Path(p).with_suffix(".mcap"))}

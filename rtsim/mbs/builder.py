@@ -62,11 +62,26 @@ def _factor_layout(nq: int, pairs: np.ndarray, perm, pinv, first, ptr) -> dict:
     return fac
 
 
+_ASM_FIELDS = ("asm_row", "asm_s", "asm_u", "asm_pos", "asm_mult")
+
+
+def _structure_digest(nq: int, pairs: np.ndarray, con_idx, con_act, con_nact) -> str:
+    """SHA-256 of what the symbolic analysis (envelope, factor layout, assembly lists) is computed from."""
+    import hashlib
+
+    h = hashlib.sha256(np.int64(nq).tobytes())
+    for a in (pairs, con_idx, con_act, con_nact):
+        a = np.ascontiguousarray(a, dtype=np.int64)
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
 def _assembly(fac: dict, con_idx, con_act, con_nact) -> dict:
     """Each constraint row's contributions to the factor's pattern: pairs of active slots s <= u (a pair on
     one coordinate through two slots counts twice; off-diagonal pairs are stored once)."""
     where = {(int(r), int(c)): p for p, (r, c) in enumerate(zip(fac["rowidx"], fac["pcol"]))}
-    out = {k: [] for k in ("asm_row", "asm_s", "asm_u", "asm_pos", "asm_mult")}
+    out = {k: [] for k in _ASM_FIELDS}
     for i in range(con_idx.shape[0]):
         act = con_act[i, :con_nact[i]]
         for a in range(act.size):
@@ -155,6 +170,7 @@ class Mechanism:
     mass_dense: np.ndarray
     settings: Settings
     conservative: bool
+    structure: str = ""           # digest of the topology the symbolic analysis depends on (compile's reuse)
 
     def coordinate(self, name: str) -> int:
         try:
@@ -595,7 +611,13 @@ class MechanismBuilder:
             idx[SCALAR] = scalar.index
         return idx, cst, 0.0
 
-    def compile(self) -> Mechanism:
+    def compile(self, reuse: Mechanism | None = None) -> Mechanism:
+        """The model's arrays. ``reuse``: a mechanism compiled before; when this one has its topology (the
+        same coordinates, the same pattern of the mass matrix, constraints, forces and couplings: the
+        ``structure`` digest) its symbolic analysis -- orderings, the envelope's and the factor's layout, the
+        constraint rows' assembly lists, all functions of the topology alone -- is taken instead of being
+        computed again; every value (mass matrix, gravity, constraint and force parameters) is computed
+        here as always, so the model equals a fresh compile's bit for bit."""
         nq = len(self._names)
         if nq == 0:
             raise ModelError(f"{self.name}: no coordinates")
@@ -634,8 +656,23 @@ class MechanismBuilder:
         for used in self._coupled:
             pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
         allpairs = np.vstack(pairs)
-        perm, pinv, first, ptr = envelope.symbolic(nq, allpairs)
-        fac = _factor_layout(nq, allpairs, perm, pinv, first, ptr)
+        con_act = np.zeros((nc, NSLOT), dtype=np.int64)
+        con_nact = np.zeros(nc, dtype=np.int64)
+        for i in range(nc):
+            act = _structural_slots(con_kind[i], con_idx[i], con_par[i])
+            con_nact[i] = act.size
+            con_act[i, :act.size] = act
+        structure = _structure_digest(nq, allpairs, con_idx, con_act, con_nact)
+        if reuse is not None and reuse.structure == structure:
+            m0 = reuse.model                 # the same topology: its symbolic analysis, shared (immutable)
+            perm, pinv, first, ptr = m0.perm, m0.pinv, m0.first, m0.ptr
+            fac = {"perm": m0.fperm, "pinv": m0.fpinv, "colptr": m0.fcolptr, "rowidx": m0.frowidx,
+                   "uptr": m0.fuptr, "upos": m0.fupos, "pcol": m0.fpcol, "w_map": m0.fw_map}
+            asm = {k: getattr(m0, k) for k in _ASM_FIELDS}
+        else:
+            perm, pinv, first, ptr = envelope.symbolic(nq, allpairs)
+            fac = _factor_layout(nq, allpairs, perm, pinv, first, ptr)
+            asm = _assembly(fac, con_idx, con_act, con_nact)
         nd = len(self._drivers)
         drv_kind = np.array([k for k, _ in self._drivers], dtype=np.int64)
         drv_par = np.array([p for _, p in self._drivers], dtype=float).reshape(nd, 4)
@@ -653,13 +690,6 @@ class MechanismBuilder:
         fset[FS_REUSE_RATE] = s.reuse_rate
         fset[FS_STALL_RATE], fset[FS_MIN_STEP] = s.stall_rate, s.min_step
         fset[FS_GRAVITY:FS_GRAVITY + 3] = self._gravity
-        con_act = np.zeros((nc, NSLOT), dtype=np.int64)
-        con_nact = np.zeros(nc, dtype=np.int64)
-        for i in range(nc):
-            act = _structural_slots(con_kind[i], con_idx[i], con_par[i])
-            con_nact[i] = act.size
-            con_act[i, :act.size] = act
-        asm = _assembly(fac, con_idx, con_act, con_nact)
         model = Model(
             nq=nq, nc=nc, dim=self.dim,
             con_kind=con_kind, con_idx=con_idx, con_cst=con_cst, con_par=con_par, con_drv=con_drv,
@@ -679,5 +709,5 @@ class MechanismBuilder:
             name=self.name, model=model, q0=np.array(self._q0), qd0=np.array(self._qd0),
             qd_given=np.array(self._qd_given), coordinate_names=list(self._names),
             constraint_names=[c["name"] for c in self._cons], force_names=[f["name"] for f in self._forces],
-            mass_dense=mass, settings=s, conservative=self._conservative,
+            mass_dense=mass, settings=s, conservative=self._conservative, structure=structure,
         )

@@ -39,7 +39,9 @@ Every error is a ConfigError naming the file, the key, the value and what is all
 """
 from __future__ import annotations
 
+import contextvars
 import math
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
@@ -119,9 +121,36 @@ def read_road_config(path) -> FlatRoadConfig | GradeRoadConfig | MeshRoadConfig 
     return load(_ADAPTER, Path(path))
 
 
+_KEPT: contextvars.ContextVar[dict | None] = contextvars.ContextVar("rtsim_kept_roads", default=None)
+
+
+@contextmanager
+def keeping_roads(kept: dict):
+    """While active, `load_road` of a road file it built before returns that road (``kept``: resolved
+    path -> Road, filled as roads are built): a batch worker builds each road once, its input files
+    taken not to change during the batch. A road is immutable arrays (each run's contact state is the
+    vehicle's)."""
+    token = _KEPT.set(kept)
+    try:
+        yield kept
+    finally:
+        _KEPT.reset(token)
+
+
 def load_road(path) -> Road:
-    """Read a road TOML file and build its arrays (survey paths are relative to the TOML file)."""
-    path = Path(path)
+    """Read a road TOML file and build its arrays (survey paths are relative to the TOML file); the kept
+    one inside `keeping_roads`."""
+    kept = _KEPT.get()
+    if kept is None:
+        return _build_road(Path(path))
+    key = Path(path).resolve()
+    road = kept.get(key)
+    if road is None:
+        road = kept[key] = _build_road(Path(path))
+    return road
+
+
+def _build_road(path: Path) -> Road:
     cfg = read_road_config(path)
     if isinstance(cfg, FlatRoadConfig):
         return make_plane(cfg.height, cfg.mu, cfg.rolling_resistance)

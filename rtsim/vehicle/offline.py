@@ -39,7 +39,8 @@ def columns_of(channels: ChannelDictionary) -> tuple[str, ...]:
 
 
 def _state_only(channels: ChannelDictionary) -> list[str]:
-    return [n for n in channels.state_names if n not in channels.sensor_names]
+    sensors = set(channels.sensor_names)
+    return [n for n in channels.state_names if n not in sensors]
 
 
 COLUMNS = columns_of(CAR)      # the rear-drive car's
@@ -109,7 +110,8 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
     state = np.zeros(NSTATE)
     sens = np.zeros(sim.nsensor)
     observed = np.zeros(len(sim.vm.channels.state))
-    keep = np.array([sim.vm.channels.state_names.index(n) for n in _state_only(sim.vm.channels)])
+    names = sim.vm.channels.state_names
+    keep = np.array([names.index(n) for n in _state_only(sim.vm.channels)])
     io = sim.io
     sim.seed_sensor_noise(seed)         # the sensor model's noise, reproducible
     ctl = _Controlled(sim, sc, controller)

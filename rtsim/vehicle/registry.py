@@ -128,6 +128,24 @@ class VehicleKind:
         """The model's size and key parameters in SI units; every kind reports ``DESCRIBE_FIELDS``."""
         raise NotImplementedError
 
+    #: the vehicle file's plain parameters: fnmatch patterns of dotted keys whose values the build turns into
+    #: numbers of the model's arrays without changing its topology (``plain``, ``rebuild``); none by default
+    plain_parameters: tuple[str, ...] = ()
+    #: keys a pattern of plain_parameters matches that do change the topology
+    not_plain: tuple[str, ...] = ()
+
+    def plain(self, key: str) -> bool:
+        """Whether the dotted key of the vehicle file is a plain parameter of this kind."""
+        from fnmatch import fnmatchcase
+
+        return key not in self.not_plain and any(fnmatchcase(key, p) for p in self.plain_parameters)
+
+    def rebuild(self, opened: "OpenedVehicle", built: "OpenedVehicle") -> Any:
+        """The model of ``opened``, whose config differs from the built vehicle ``built``'s in plain
+        parameters only: equal to ``build(opened)`` bit for bit, taking what ``built`` computed that they
+        do not change (the default builds afresh)."""
+        return self.build(opened)
+
     def scenario_problem(self, opened: "OpenedVehicle", sc) -> str | None:
         """Why the scenario cannot drive this vehicle (None: it can)."""
         return None
@@ -197,6 +215,12 @@ class OpenedVehicle:
         if self._model is None:
             self._model = self.kind.build(self)
         return self._model
+
+    def build_on(self, built: "OpenedVehicle") -> None:
+        """Build the model on the built vehicle ``built``, whose config differs from this one's in plain
+        parameters only (``VehicleKind.rebuild``: the fresh build's model, bit for bit)."""
+        if self._model is None:
+            self._model = self.kind.rebuild(self, built)
 
     def describe(self) -> dict:
         info = self.kind.describe(self)

@@ -18,6 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from functools import lru_cache
+
 import numpy as np
 
 from rtsim.channels import ChannelDictionary, car_channels
@@ -86,7 +88,16 @@ def corner_kinematics(cfg: VehicleConfig) -> list[CornerKinematics]:
 
 def _knuckle_angle(c: dict, x: float) -> float:
     """Steer angle (rad) of a crank-rod knuckle (crank_rod_constants) at rack travel x (m), on the
-    assembled branch (bisection from 0 outwards; nan where the tie rod cannot reach)."""
+    assembled branch (bisection from 0 outwards; nan where the tie rod cannot reach). Kept per process for
+    the constants and x it was asked for (a batch builds the same linkage again and again)."""
+    key = tuple(sorted((k, tuple(np.ravel(v).tolist()) if isinstance(v, (np.ndarray, list, tuple)) else float(v))
+                       for k, v in c.items()))
+    return _knuckle_angle_of(key, float(x))
+
+
+@lru_cache(maxsize=256)
+def _knuckle_angle_of(key: tuple, x: float) -> float:
+    c = dict(key)
     piv, arm, end = np.asarray(c["pivot"]), np.asarray(c["arm"]), np.asarray(c["rod_end"])
 
     def gap(phi):
@@ -154,7 +165,14 @@ def steered_inertia_at_rack(cfg: VehicleConfig, corners: list[CornerKinematics])
     return m
 
 
-def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics] | None = None) -> VehicleModel:
+def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics] | None = None,
+                  reuse: VehicleModel | None = None) -> VehicleModel:
+    """The car's compiled model. ``reuse``: a model built before from a config that differs from ``cfg`` in
+    plain parameters only (rtsim.vehicle.car.plain: the corner fits and the topology are the same): its
+    corner fits and its symbolic analysis are taken (rtsim.mbs.builder compile's ``reuse``), every value
+    is computed again by the same code, so the model equals a fresh build's bit for bit."""
+    if reuse is not None:
+        corners = reuse.corners
     corners = corners or cached_corner_kinematics(cfg, corner_kinematics)
     if any(k.steered for k in corners):
         _check_rack_travel(cfg, base, corners)
@@ -219,7 +237,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     for a, b_ in (FRONT_AXLE, REAR_AXLE):
         b.couple(zs[a], zs[b_])
     b.gravity((0.0, 0.0, -G))
-    mech = b.compile()
+    mech = b.compile(reuse=None if reuse is None else reuse.mech)
     mech.model.iset[IS_TANGENT_FORCES] = 1
     # static loads from the weight split (sprung + unsprung), N
     xf, xr = design_w[0, 0], design_w[2, 0]

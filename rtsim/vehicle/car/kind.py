@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..registry import Demo, OfflineRun, VehicleKind
+from .plain import NOT_PLAIN, PLAIN
 
 EPS_DEMO_SCENARIO = "step_steer_80kph"      # the EPS ECU's manoeuvre
 
@@ -30,6 +31,14 @@ class CarKind(VehicleKind):
     def build(self, opened):
         from .build import build_vehicle
         return build_vehicle(opened.config, opened.base)
+
+    plain_parameters = tuple(PLAIN)
+    not_plain = NOT_PLAIN
+
+    def rebuild(self, opened, built):
+        """The car on the built one's corner fits and symbolic analysis (rtsim.vehicle.car.plain)."""
+        from .build import build_vehicle
+        return build_vehicle(opened.config, opened.base, reuse=built.model)
 
     def describe(self, opened) -> dict:
         from rtsim.road.model import make_plane

@@ -11,6 +11,7 @@ is built with). Points are the left corner's hardpoints, design frame, m.
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 
 import numpy as np
 
@@ -86,9 +87,26 @@ def steering_arm(geom: DoubleWishbone | VerticalSlider) -> float:
     return _distance(geom.tie_outer, [geom.lower_ball, geom.upper_ball])
 
 
+_RATIOS: dict = {}           # steering_ratio's results by linkage and rack ratio (this process's)
+
+
 def steering_ratio(geom: DoubleWishbone | VerticalSlider, rack_travel_per_rad: float) -> float:
     """Steering-wheel angle per road-wheel angle of a steered left corner at straight ahead (design ride
-    height), from its linkage; ModelError if the linkage cannot be assembled 1 mm either side."""
+    height), from its linkage; ModelError if the linkage cannot be assembled 1 mm either side. A result
+    is kept per process for the same linkage and ratio (validating a vehicle file asks it at every load)."""
+    key = (type(geom).__name__, float(rack_travel_per_rad),
+           *((f.name, None if getattr(geom, f.name) is None else tuple(np.ravel(getattr(geom, f.name)).tolist()))
+             for f in fields(geom)))
+    ratio = _RATIOS.get(key)
+    if ratio is None:
+        ratio = _steering_ratio(geom, rack_travel_per_rad)
+        if len(_RATIOS) >= 256:
+            _RATIOS.clear()
+        _RATIOS[key] = ratio
+    return ratio
+
+
+def _steering_ratio(geom: DoubleWishbone | VerticalSlider, rack_travel_per_rad: float) -> float:
     angles = []
     for s in (-RACK_STEP_M, RACK_STEP_M):
         if isinstance(geom, VerticalSlider):

@@ -389,12 +389,13 @@ def schedule_gear(params: np.ndarray, speed: float, throttle: float = 0.0) -> in
     return gear
 
 
-def _stable_root(f, lo: float, hi: float, near: float, n: int = 400) -> float:
+def _stable_root(f, lo: float, hi: float, near: float, n: int = 400, f_grid=None) -> float:
     """The zero of f in [lo, hi] where f falls through 0 (a stable equilibrium of J dw/dt = f) nearest
-    `near`; without one, the grid point of smallest |f|."""
+    `near`; without one, the grid point of smallest |f|. ``f_grid(xs)``: f at each of the points xs in
+    one call (the same values as f's)."""
     from scipy.optimize import brentq
     xs = np.linspace(lo, hi, n)
-    fs = np.array([f(x) for x in xs])
+    fs = np.array([f(x) for x in xs]) if f_grid is None else f_grid(xs)
     roots = [brentq(f, xs[i], xs[i + 1], xtol=1e-12) for i in range(n - 1)
              if fs[i] > 0.0 >= fs[i + 1]]
     if not roots:
@@ -402,8 +403,25 @@ def _stable_root(f, lo: float, hi: float, near: float, n: int = 400) -> float:
     return float(min(roots, key=lambda r: abs(r - near)))
 
 
+_ROLLING: dict = {}          # powertrain_state_rolling's states by its arguments (this process's)
+
+
 def powertrain_state_rolling(params: np.ndarray, dt: float, wheel_speed: float, throttle: float = 0.0,
                              selector: float = 1.0) -> np.ndarray:
+    """``_rolling_state`` (below), kept per process for the same arguments (a copy each call): every run
+    of a batch starts its car from the same speed, and the root search takes milliseconds."""
+    key = (np.asarray(params, dtype=float).tobytes(), float(dt), float(wheel_speed), float(throttle), float(selector))
+    s = _ROLLING.get(key)
+    if s is None:
+        s = _rolling_state(params, dt, wheel_speed, throttle, selector)
+        if len(_ROLLING) >= 64:
+            _ROLLING.clear()
+        _ROLLING[key] = s
+    return s.copy()
+
+
+def _rolling_state(params: np.ndarray, dt: float, wheel_speed: float, throttle: float = 0.0,
+                  selector: float = 1.0, compiled_scan: bool = True) -> np.ndarray:
     """Initial state of a car already rolling with its driven wheels at `wheel_speed` (rad/s, mean of
     rl and rr) and the throttle settled at `throttle` (rad): the state powertrain_step keeps, so a
     scenario started at speed has no start-up transient. In D the gear is the schedule's
@@ -433,17 +451,22 @@ def powertrain_state_rolling(params: np.ndarray, dt: float, wheel_speed: float, 
     def net(w, idle_i):
         return _engine_net(params, thr, idle_i, w, wt, coupled, locked)[0]
 
+    def grid(idle_i):           # net over a scan's points in one compiled call (compiled_scan)
+        if not compiled_scan:
+            return None
+        return lambda xs: _net_grid(params, thr, idle_i, xs, wt, coupled, locked, np.empty(xs.size))
+
     idle = params[PP_IDLE]
     top = 1.05 * max(params[PP_REV], abs(wt))     # an overrunning turbine may drag it past the limiter
     # above idle the integral winds down to zero (clamped); the engine settles where net(w, 0) = 0
-    w = _stable_root(lambda x: net(x, 0.0), 0.0, top, max(abs(wt), idle))
+    w = _stable_root(lambda x: net(x, 0.0), 0.0, top, max(abs(wt), idle), f_grid=grid(0.0))
     idle_i = 0.0
     if w < idle:
         # below idle the integral winds up until the engine idles: net(idle, I) = 0, net rising in I
         imax = params[PP_IDLE_MAX]
         if net(idle, imax) <= 0.0:
             idle_i = imax                      # the bypass cannot carry the load: engine below idle
-            w = _stable_root(lambda x: net(x, imax), 0.0, top, idle)
+            w = _stable_root(lambda x: net(x, imax), 0.0, top, idle, f_grid=grid(imax))
         elif net(idle, 0.0) < 0.0:
             from scipy.optimize import brentq
             idle_i = brentq(lambda i: net(idle, i), 0.0, imax, xtol=1e-14)
@@ -583,6 +606,14 @@ def converter_torques(p, wp, wt):
     if wp <= 0.0:
         dt_dwp = 0.0
     return t, t, dt_dwp, dt_dwt, dt_dwp, dt_dwt
+
+
+@kernel
+def _net_grid(p, thr, idle_i, ws, wt, coupled, locked, out):
+    """out[i] = _engine_net(...)[0] at each engine speed ws[i] (a root scan's points); returns out."""
+    for i in range(ws.size):
+        out[i] = _engine_net(p, thr, idle_i, ws[i], wt, coupled, locked)[0]
+    return out
 
 
 @kernel

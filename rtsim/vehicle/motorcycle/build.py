@@ -80,8 +80,11 @@ def combine(*bodies: Body) -> tuple[float, np.ndarray, np.ndarray]:
     return m, cg, inertia
 
 
-def build_motorcycle(cfg: MotorcycleConfig, base: Path, gravity=(0.0, 0.0, -EARTH_GRAVITY)) -> MotorcycleModel:
-    """The compiled two-wheeler; `gravity` (m/s^2, design frame): tilted for a road grade (rtsim.validate)."""
+def build_motorcycle(cfg: MotorcycleConfig, base: Path, gravity=(0.0, 0.0, -EARTH_GRAVITY),
+                     reuse: MotorcycleModel | None = None) -> MotorcycleModel:
+    """The compiled two-wheeler; `gravity` (m/s^2, design frame): tilted for a road grade (rtsim.validate).
+    ``reuse``: a model built before, whose symbolic analysis compile takes when the topology is the same
+    (rtsim.mbs.builder); every value is computed here, so the model equals a fresh build's bit for bit."""
     des = design(cfg)
     p0 = pose(des, np.zeros(11))
     # the projections refactor at the converged q: reusing the Newton factor for them feeds energy into
@@ -154,7 +157,7 @@ def build_motorcycle(cfg: MotorcycleConfig, base: Path, gravity=(0.0, 0.0, -EART
     b.gravity(tuple(float(g) for g in gravity))
     # the rear brake acts on the wheel's spin relative to the swingarm: its damping couples the two
     b.couple(refs["PHI_R"], refs["THETA"])
-    mech = b.compile()
+    mech = b.compile(reuse=None if reuse is None else reuse.mech)
     # the step's own forces (rtsim.vehicle.motorcycle.step) add stiffness and damping: the finishing stage
     # rebuilds W = M before they add theirs for the projections (otherwise they would be added twice)
     mech.model.iset[IS_TANGENT_FORCES] = 1

@@ -26,6 +26,15 @@ class TwoWheelerKind(VehicleKind):
         from .build import build_motorcycle
         return build_motorcycle(opened.config, opened.base)
 
+    #: every key: a rebuild takes nothing of the built model but its symbolic analysis, which the builder's
+    #: compile takes only for the same topology (a knife-edge tyre model, a locked suspension, a massless
+    #: body: computed afresh)
+    plain_parameters = ("*",)
+
+    def rebuild(self, opened, built):
+        from .build import build_motorcycle
+        return build_motorcycle(opened.config, opened.base, reuse=built.model)
+
     def describe(self, opened) -> dict:
         from rtsim.channels import two_wheeler_channels
 
@@ -67,7 +76,7 @@ class TwoWheelerKind(VehicleKind):
         res = run(ride, sc, progress)
         out = OfflineRun(res.columns, res.data, res.wall_s, res.steps, res.status, res.message, res.fault,
                          res.summary, vehicle_id=ride.sim.mm.config.id, channels=CHANNELS,
-                         scene=scene_source(ride.sim.mm))
+                         scene=scene_source(ride.sim.mm), step_s=res.step_s)
         out.line = (f"{sc.name}: {res.summary.get('simulated_s')} s simulated in {res.wall_s:.2f} s, "
                     f"{len(res.data)} rows")
         return out

@@ -29,6 +29,7 @@ import numpy as np
 
 from .rider import RiderState
 from rtsim.channels import TWO_WHEELER_STATE, Channel, ChannelDictionary
+from rtsim.compile_status import CompileClock
 from rtsim.errors import ConfigError, SimulationError
 from rtsim.model_fault import ModelFault, describe_error, force_failure, test_fault_step, test_fault_time
 from rtsim.configfile import problem
@@ -73,6 +74,7 @@ class MotorcycleRun:
     fall_time: float | None = None
     summary: dict = field(default_factory=dict)
     fault: ModelFault | None = None     # a model failure (not a fall) that ended the run: step, time, coordinate
+    step_s: float = 0.0                 # s of wall time inside the two-wheeler's steps (Ride.step_s), compilations excluded
 
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.columns.index(name)]
@@ -163,30 +165,33 @@ def run(ride: Ride, sc, progress=None) -> MotorcycleRun:
     fault = None
     t0 = time.perf_counter()
     n = 0
-    try:
-        for n in range(nsteps + 1):
-            if n % every == 0:
+    step0 = ride.step_s
+    with CompileClock() as clock:      # a first run compiles in its first steps: neither step time nor the run's
+        try:
+            for n in range(nsteps + 1):
+                if n % every == 0:
+                    _row(ride, rows[nrow])
+                    nrow += 1
+                    if progress is not None and nrow % 50 == 0:
+                        progress(n / nsteps)
+                if n == nsteps:
+                    break
+                if forced == n + 1:
+                    force_failure(ride.sim)
+                ride.step()
+                if abs(_pitch(ride.sim) - ride.pitch0) > PITCH_OVER:
+                    raise Fall(f"{ride.sim.mm.config.id}: pitched over at t = {ride.sim.time:.3f} s", ride.sim.time)
+        except SimulationError as exc:
+            status = "fall" if isinstance(exc, Fall) else "failed"
+            message, t_fall = str(exc), ride.sim.time
+            if status == "failed":
+                fault = describe_error(ride.sim, exc, n + 1)
+            if np.all(np.isfinite(ride.sim.data.q)):
                 _row(ride, rows[nrow])
                 nrow += 1
-                if progress is not None and nrow % 50 == 0:
-                    progress(n / nsteps)
-            if n == nsteps:
-                break
-            if forced == n + 1:
-                force_failure(ride.sim)
-            ride.step()
-            if abs(_pitch(ride.sim) - ride.pitch0) > PITCH_OVER:
-                raise Fall(f"{ride.sim.mm.config.id}: pitched over at t = {ride.sim.time:.3f} s", ride.sim.time)
-    except SimulationError as exc:
-        status = "fall" if isinstance(exc, Fall) else "failed"
-        message, t_fall = str(exc), ride.sim.time
-        if status == "failed":
-            fault = describe_error(ride.sim, exc, n + 1)
-        if np.all(np.isfinite(ride.sim.data.q)):
-            _row(ride, rows[nrow])
-            nrow += 1
     wall = time.perf_counter() - t0
-    res = MotorcycleRun(COLUMNS, rows[:nrow], wall, n, status, message, t_fall, fault=fault)
+    res = MotorcycleRun(COLUMNS, rows[:nrow], max(wall - clock.seconds, 0.0), n, status, message, t_fall, fault=fault,
+                        step_s=max(ride.step_s - step0 - clock.seconds, 0.0))
     res.summary = summarise(res, ride, sc)
     return res
 

@@ -6,6 +6,8 @@ the step turns into chain tension; a vehicle without one takes the throttle as a
 demand up to `max_wheel_torque_nm` (an ideal drive). Brake pressures map by the vehicle's brake gains."""
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from .rider import (RiderState, RO_BRAKE_F, RO_BRAKE_R, RO_THROTTLE, RO_TORQUE, RV_PHI, RV_DELTA, RV_U, RV_X, RV_Y,
@@ -59,6 +61,7 @@ class Ride:
         if unknown:
             raise ValueError(f"open-loop commands {sorted(unknown)}: use {', '.join(COMMANDS)}")
         self.log: list[tuple] = []
+        self.step_s = 0.0        # s of wall time inside the two-wheeler's steps (the sim's step alone)
 
     @property
     def wheel_speed(self) -> float:
@@ -76,7 +79,11 @@ class Ride:
         plant_inputs(self.params.pp, self.params.ep, self.state.es, self.commands, out, p.u, self.state.inp,
                      self.wheel_speed, s.dt)
         x, y, u = v[RV_X], v[RV_Y], v[RV_U]
-        s.step()
+        t0 = time.perf_counter()
+        try:
+            s.step()
+        finally:
+            self.step_s += time.perf_counter() - t0
         if self.rider is not None:
             st = self.rider.st
             self.log.append((s.time, x, y, v[RV_PHI], v[RV_DELTA], out[RO_TORQUE], u, st[RiderState.N],

@@ -5,6 +5,7 @@ never a NaN."""
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 
@@ -112,12 +113,23 @@ class TwoWheelerSim:
         return float(v[0] * c + v[1] * s), float(-v[0] * s + v[1] * c)
 
 
+_POSES: dict = {}      # static_pose's results by (model, seconds, dt): a weak reference to the model, q, loads
+
+
 def static_pose(mm: MotorcycleModel, seconds: float = 1.5, dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
     """The two-wheeler standing upright at rest with the rider on, settled by its own suspension and tyre
-    damping: (q, tyre loads front and rear, N). Straight running starts from this pose."""
-    s = TwoWheelerSim(mm, dt=dt)
-    s.run(seconds)
-    return s.data.q.copy(), s.parts.tyre[:, TO_FZ].copy()
+    damping: (q, tyre loads front and rear, N). Straight running starts from this pose. The settling
+    (`seconds` of simulation) is done once per process for the same model and step: later calls get
+    copies of its result (a batch starts every ride of a vehicle from it)."""
+    key = (id(mm), float(seconds), float(dt))
+    kept = _POSES.get(key)
+    if kept is None or kept[0]() is not mm:
+        s = TwoWheelerSim(mm, dt=dt)
+        s.run(seconds)
+        if len(_POSES) >= 16:
+            _POSES.clear()
+        kept = _POSES[key] = (weakref.ref(mm), s.data.q.copy(), s.parts.tyre[:, TO_FZ].copy())
+    return kept[1].copy(), kept[2].copy()
 
 
 def rear_contact(sim: TwoWheelerSim) -> np.ndarray:
