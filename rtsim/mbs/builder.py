@@ -47,6 +47,29 @@ def _structural_slots(kind: int, idx: np.ndarray, par) -> np.ndarray:
     return slots
 
 
+#: _row_structure's results by (kind, slot indices, par[1]): the rows of the models a worker builds repeat
+_ROWS: dict = {}
+
+
+def _lower_pairs(used) -> np.ndarray:
+    """(a, b) for a, b in the sorted coordinates ``used`` with b <= a, as an (n, 2) int64 array."""
+    return np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2)
+
+
+def _row_structure(kind: int, idx: np.ndarray, par) -> tuple[np.ndarray, np.ndarray]:
+    """(the row's structural slots, the lower pairs of the coordinates they hold), kept per process
+    (read only): functions of the row's kind, slot indices and component (par[1]) alone."""
+    key = (int(kind), idx.tobytes(), float(par[1]))
+    hit = _ROWS.get(key)
+    if hit is None:
+        act = _structural_slots(kind, idx, par)
+        hit = (act, _lower_pairs(np.unique(idx[act])))
+        if len(_ROWS) >= 4096:
+            _ROWS.clear()
+        _ROWS[key] = hit
+    return hit
+
+
 def _factor_layout(nq: int, pairs: np.ndarray, perm, pinv, first, ptr) -> dict:
     """The Cholesky factor's layout (rtsim.mbs.sparse) on the cheaper of minimum degree and the envelope's
     ordering, with the envelope slot of W for each of its positions."""
@@ -628,6 +651,8 @@ class MechanismBuilder:
         con_cst = np.zeros((nc, NSLOT))
         con_par = np.zeros((nc, 4))
         con_drv = -np.ones(nc, dtype=np.int64)
+        con_act = np.zeros((nc, NSLOT), dtype=np.int64)
+        con_nact = np.zeros(nc, dtype=np.int64)
         pairs = [np.array(np.nonzero(mass)).T]
         for i, con in enumerate(self._cons):
             idx, cst, const = self._row_slots(con["refs"], con["scalar"],
@@ -638,8 +663,10 @@ class MechanismBuilder:
             if con["kind"] == CON_LINEAR:
                 con_par[i, 0] = con["par"][0] + const   # the declared constant plus fixed refs
             con_drv[i] = con["drv"]
-            used = np.unique(idx[_structural_slots(con["kind"], idx, con["par"])])
-            pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
+            act, row_pairs = _row_structure(con["kind"], idx, con_par[i])
+            con_nact[i] = act.size
+            con_act[i, :act.size] = act
+            pairs.append(row_pairs)
         nf = len(self._forces)
         frc_kind = np.zeros(nf, dtype=np.int64)
         frc_idx = -np.ones((nf, NSLOT), dtype=np.int64)
@@ -651,17 +678,11 @@ class MechanismBuilder:
             idx, cst, _ = self._row_slots(refs, frc["scalar"])
             frc_kind[f], frc_idx[f], frc_cst[f], frc_par[f] = frc["kind"], idx, cst, frc["par"]
             used = np.unique(idx[idx >= 0])
-            pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
+            pairs.append(_lower_pairs(used))
             tangent = 1
         for used in self._coupled:
-            pairs.append(np.array([(a, b) for a in used for b in used if b <= a], dtype=np.int64).reshape(-1, 2))
+            pairs.append(_lower_pairs(used))
         allpairs = np.vstack(pairs)
-        con_act = np.zeros((nc, NSLOT), dtype=np.int64)
-        con_nact = np.zeros(nc, dtype=np.int64)
-        for i in range(nc):
-            act = _structural_slots(con_kind[i], con_idx[i], con_par[i])
-            con_nact[i] = act.size
-            con_act[i, :act.size] = act
         structure = _structure_digest(nq, allpairs, con_idx, con_act, con_nact)
         if reuse is not None and reuse.structure == structure:
             m0 = reuse.model                 # the same topology: its symbolic analysis, shared (immutable)

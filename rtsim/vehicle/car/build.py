@@ -197,7 +197,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         column, drv = add_eps(b, eps_params(cfg.eps), rack)
         if drv >= 0:
             driver_row = b.constraint_count - 1     # the driver's constraint row, just added
-    full_exps = _common_exponents(corners)
+    full_exps, vecs, springs, spring_at_design = _padded(corners)
     corner_idx = np.zeros((4, 6), dtype=np.int64)
     axis_coef = np.zeros((4, 3, full_exps.shape[0]))
     rotz_coef = np.zeros_like(axis_coef)
@@ -208,7 +208,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     zs = []
     for i, (name, kin) in enumerate(zip(WHEELS, corners)):
         axle = cfg.front if i < 2 else cfg.rear
-        vec = _pad(kin, full_exps)
+        vec = vecs[i]
         w0 = vec[OUT_CENTRE] @ _basis(full_exps, 0.0, 0.0)
         design_w[i] = w0
         z = b.length(f"z_{name}", 0.0, velocity=0.0)
@@ -230,7 +230,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         b.couple(wc)           # the tyre's 3x3 stiffness/damping block on the wheel centre
         corner_idx[i] = [*wc.idx, z.index, phi.index, steer.index if kin.steered else -1]
         axis_coef[i], rotz_coef[i], rots_coef[i] = vec[OUT_AXIS], vec[OUT_ROT_Z], vec[OUT_ROT_S]
-        spring_coef[i] = _pad_scalar(kin, full_exps)
+        spring_coef[i] = springs[i]
     # the tangent entries rtsim.vehicle.car.step adds: each wheel centre's 3x3 block (tyre stiffness
     # and damping, already coupled by its mass), each spin and travel diagonal, and the anti-roll bars
     # between the travels of an axle
@@ -250,8 +250,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     r_wheel = float(np.mean(design_w[:, 2]))       # wheel radius for the axle reactions (design height)
     for i in range(4):
         axle = cfg.front if i < 2 else cfg.rear
-        dl = _spring_slope(spring_coef[i], full_exps)
-        length0 = spring_coef[i] @ _basis(full_exps, 0.0, 0.0)
+        dl, length0 = spring_at_design[i]
         f_static = sprung[i] / max(-dl, 1e-6)          # spring compression force at design height
         susp[i, Susp.L0] = length0
         susp[i, Susp.PARTNER] = i ^ 1
@@ -318,6 +317,28 @@ def _basis(exps: np.ndarray, z: float, s: float) -> np.ndarray:
 def _spring_slope(coef: np.ndarray, exps: np.ndarray) -> float:
     """dL/dz at z = s = 0."""
     return float(sum(c for c, (a, bexp) in zip(coef, exps) if a == 1 and bexp == 0))
+
+
+#: _padded's results by corner list (id -> (the list, its result)): a model built on a kept one shares its
+#: corner list, so its padding is done once per worker process
+_PADDED: dict = {}
+
+
+def _padded(corners: list[CornerKinematics]) -> tuple[np.ndarray, list, list, list]:
+    """(the corners' common exponent table, each corner's vector coefficients and spring-length
+    coefficients on it, each spring's (dL/dz in m/m, length in m) at design height), kept for the same
+    corner list (read only)."""
+    hit = _PADDED.get(id(corners))
+    if hit is not None and hit[0] is corners:
+        return hit[1]
+    exps = _common_exponents(corners)
+    springs = [_pad_scalar(k, exps) for k in corners]
+    design = [(_spring_slope(c, exps), c @ _basis(exps, 0.0, 0.0)) for c in springs]
+    out = (exps, [_pad(k, exps) for k in corners], springs, design)
+    if len(_PADDED) >= 32:
+        _PADDED.clear()
+    _PADDED[id(corners)] = (corners, out)
+    return out
 
 
 def _common_exponents(corners: list[CornerKinematics]) -> np.ndarray:
