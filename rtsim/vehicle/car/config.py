@@ -256,6 +256,10 @@ class Interface(Strict):
     dbc: str = Field(default="../can/xbw.dbc", description="DBC file, relative to the vehicle file")
 
 
+#: the validated part configs (brakes, powertrain, steering) by (field, repr of the table), this process's
+_PARTS: dict = {}
+
+
 class VehicleConfig(Strict):
     name: str
     id: str = Field(pattern=r"^[a-z0-9_]+$", description="used in topic names: rtsim/<id>/...")
@@ -278,12 +282,23 @@ class VehicleConfig(Strict):
     effects: dict = Field(default_factory=dict, description="switchable effects, validated by "
                           "rtsim.vehicle.car.effects (canonical form after loading)")
 
-    @field_validator("brakes", "powertrain", "steering", mode="before")
+    @field_validator("brakes", "powertrain", "steering", mode="wrap")
     @classmethod
-    def _part_tables(cls, v, info):
-        """A partial table of a part overrides its defaults key by key (nested sections too)."""
-        part = {"brakes": BrakeConfig, "powertrain": PowertrainConfig, "steering": SteeringConfig}[info.field_name]
-        return over_defaults(part, v) if isinstance(v, Mapping) else v
+    def _part_tables(cls, v, handler, info):
+        """A partial table of a part overrides its defaults key by key (nested sections too). A part's
+        config is immutable and a function of its table alone: one validated before in this process
+        from the same table (the same repr: keys, order, types and values) is taken again (_PARTS)."""
+        if not isinstance(v, Mapping):
+            return handler(v)
+        key = (info.field_name, repr(v))
+        part = _PARTS.get(key)
+        if part is None:
+            kind = {"brakes": BrakeConfig, "powertrain": PowertrainConfig, "steering": SteeringConfig}[info.field_name]
+            part = handler(over_defaults(kind, v))
+            if len(_PARTS) >= 256:
+                _PARTS.clear()
+            _PARTS[key] = part
+        return part
 
     @field_validator("effects", mode="before")
     @classmethod
