@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.errors import ConfigError
-from rtsim.mbs.model import EARTH_GRAVITY
+from rtsim.mbs.model import EARTH_GRAVITY, OK
 from rtsim.road.config import load_road
 from rtsim.vehicle.kit.actuators import LAG_RATE, LAG_TAU
 from rtsim.vehicle.kit.brake import BP_ACT
@@ -72,6 +72,7 @@ from rtsim.vehicle.registry import open_vehicle
 from .benchmark import Benchmark
 from .data import ACCEL_FRAMES
 from .effectset import Effect, from_mapping, model_mapping
+from .replay_kernel import replay_grid
 from .signals import DERIVED, derive_wheel_speeds
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -112,6 +113,14 @@ def _start_rate(bench: Benchmark, run: int | None) -> float:
         return float(np.mean([np.polyfit(t[:k], row(c)[:k], 2)[1] for c in angles]))
     w = [row(c)[0] for c in ("wheel_speed_fl", "wheel_speed_fr") if c in bench.values]
     return float(np.mean(w)) if w else 0.0
+
+
+_EMPTY = np.zeros(0)
+
+
+def _grid(x: np.ndarray | None) -> np.ndarray:
+    """An input for the compiled grid loop: float64 and contiguous, or empty when not driven."""
+    return _EMPTY if x is None else np.ascontiguousarray(x, dtype=np.float64)
 
 
 def _delay(target: np.ndarray, y: np.ndarray, most: int) -> int:
@@ -324,11 +333,6 @@ class Replayer(InputCache):
         if abs(sub * dt - dtg) > 1e-9 * dtg or sub < 1:
             raise ConfigError(f"grid step {dtg} s is not a multiple of the model step {dt} s")
         out = np.zeros((n, NSENSOR))
-        row = np.zeros(NSENSOR)
-
-        def mid(x, k):
-            return 0.5 * (x[k] + x[k + 1])
-
         cmd, extra = sim.io.commands, sim.io.extra
         if inp.brake is not None:                  # the first inputs, held through the settling
             cmd[CMD_BRAKE] = max(0.0, float(inp.brake[0]))
@@ -341,21 +345,12 @@ class Replayer(InputCache):
             cmd[CMD_STEER] = float(steer[0])
         if inp.speed0 == 0.0:
             sim.step(int(round(SETTLE / dt)))
-        sim.physical_sensors(row)
-        out[0] = row
-        for k in range(n - 1):
-            if inp.brake is not None:
-                cmd[CMD_BRAKE] = max(0.0, mid(inp.brake, k))
-            if inp.torque_rl is not None:
-                extra[EX_TORQUE_LEFT] = mid(inp.torque_rl, k)
-                extra[EX_TORQUE_RIGHT] = mid(inp.torque_rr, k)
-            if inp.throttle is not None:
-                cmd[CMD_THROTTLE] = max(0.0, mid(inp.throttle, k))
-            if steer is not None:
-                cmd[CMD_STEER] = mid(steer, k)
-            sim.step(sub)
-            sim.physical_sensors(row)
-            out[k + 1] = row
+        sim.physical_sensors(out[0])
+        status, _ = replay_grid(sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, sim.io,
+                                sim.dt, sub, *(_grid(x) for x in (inp.brake, inp.torque_rl, inp.torque_rr,
+                                                                 inp.throttle, steer)), out)
+        if status != OK:
+            sim.sim._raise(status, int(sim.data.stats[0]) + 1)
         self.simulations += 1
         res = {name: out[:, i].copy() for i, name in enumerate(self.model.channels.sensor_names)}
         if self._accel_frame == "level":
