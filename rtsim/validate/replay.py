@@ -48,6 +48,7 @@ side down, pitch positive nose down), a = Ry(pitch) Rx(roll) f, and accel_z = a_
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -324,7 +325,28 @@ class Replayer(InputCache):
         return self._run(inp, effects, dt, self.steering_command(inp, dt))
 
     def _run(self, inp: ReplayInputs, effects: list[Effect], dt: float, steer: np.ndarray | None) -> dict:
-        """One replay at step dt with `steer` as the steering-wheel command."""
+        """One replay at step dt with `steer` as the steering-wheel command; a replay already made with
+        the same inputs, model effects, step and frame is not made again (`_memo_key`)."""
+        key = self._memo_key(inp, effects, dt, steer)
+        memo = self._cache.setdefault("replays", {})
+        if key not in memo:
+            memo[key] = self._replay(inp, effects, dt, steer)
+        return dict(memo[key])
+
+    def _memo_key(self, inp: ReplayInputs, effects: list[Effect], dt: float, steer: np.ndarray | None) -> str:
+        """What a replay depends on besides the model: the inputs on the grid, the start speed, the model
+        effects with their exact values (sensor effects act on the readings only), the step and the
+        accelerometer frame; as a digest. Replays are deterministic, so one made again would be the same
+        bit for bit (a sensor effect's iteration re-screens the model effects at the same trial values;
+        the last steering-matching pass is the replay the matched command then asks for)."""
+        h = hashlib.sha1(repr((float(dt), float(inp.speed0), self._accel_frame,
+                               model_mapping(effects))).encode())
+        for x in (inp.t, inp.brake, inp.torque_rl, inp.torque_rr, inp.throttle, steer):
+            h.update(b"-" if x is None else np.ascontiguousarray(x, dtype=np.float64).tobytes() + b"|")
+        return h.hexdigest()
+
+    def _replay(self, inp: ReplayInputs, effects: list[Effect], dt: float, steer: np.ndarray | None) -> dict:
+        """One replay, made (see _run)."""
         sim = self.new_sim(inp, effects, dt)
         t = inp.t
         n = t.size
