@@ -284,11 +284,18 @@ def _run_one(job: tuple[dict, Path]) -> dict:
     return _BENCH.run(job[0], job[1], workers=1)
 
 
+def _expected_cost(case: dict) -> tuple:
+    """Sort key, the costliest cases first: the longitudinal manoeuvre's model effects take the most
+    simulations, and each hidden effect adds an iteration."""
+    return (case["sim"] != "pitch", -len(case.get("hidden", ())))
+
+
 def run_cases(bench: Bench, cases: list[dict], out: Path, workers: int):
-    """Every case's scored record, in the cases' order. With `workers` > 1 the cases run side by side,
-    one per forked process (the model built once, shared, never rebuilt), each workflow in its own
-    process: a workflow's own parallel parts (the candidates of one iteration) leave a worker idle
-    between them, and a case's results do not depend on how many processes made them."""
+    """Every case's scored record, as they are done. With `workers` > 1 the cases run side by side, one
+    per forked process (the model built once, shared, never rebuilt), each workflow in its own process
+    (a workflow's own parallel parts, the candidates of one iteration, leave a worker idle between
+    them; a case's results do not depend on how many processes made them), the costliest first so
+    that no long case is left running alone at the end."""
     global _BENCH
     _BENCH = bench
     if workers <= 1 or len(cases) <= 1:
@@ -296,8 +303,9 @@ def run_cases(bench: Bench, cases: list[dict], out: Path, workers: int):
             yield bench.run(case, out, workers)
         return
     import multiprocessing
+    jobs = [(c, out) for c in sorted(cases, key=_expected_cost)]
     with multiprocessing.get_context("fork").Pool(min(workers, len(cases))) as pool:
-        yield from pool.imap(_run_one, [(c, out) for c in cases], chunksize=1)
+        yield from pool.imap_unordered(_run_one, jobs, chunksize=1)
 
 
 def field(args) -> int:
@@ -324,6 +332,8 @@ def field(args) -> int:
             print(f"[{k + 1}/{len(cases)}] {rec['id']} {rec['label']}: {rec['status']} "
                   f"(named {[n['effect'] for n in rec['found']]}; {rec['seconds']['workflow']:.0f} s)", flush=True)
     total = time.perf_counter() - t0
+    order = {c["id"]: k for k, c in enumerate(cases)}
+    records.sort(key=lambda r: order[r["id"]])
     from .bench_score import rates
     summary = {"set": "reduced" if args.reduced else args.set, "cases": records, "rates": rates(records),
                "seconds": {"total": total, "setup": setup, "prepare": prep, "generate": gen, "truth": tru,
