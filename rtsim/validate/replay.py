@@ -1,6 +1,8 @@
 """Replaying the benchmark's mean inputs into the vehicle model (the seed's third phase): the model is
 built once per workflow run, and every re-simulation starts a fresh VehicleSim on it (5 ms) with the
-effect set under test (`set_effects`), so no state can leak from one simulation into the next.
+effect set under test (`set_effects`), so no state can leak from one simulation into the next. A
+replay's grid loop is one compiled call (rtsim.validate.replay_kernel.replay_grid), and a replay is made
+once per inputs, model effects, step and frame for the benchmark in hand (`Replayer._run`).
 
 Inputs, as the seed drove its model: the measured rear-wheel torques (torque mode) and the brake line
 pressure; the steering-wheel angle when the manoeuvre steers; the throttle angle when the runs carry
