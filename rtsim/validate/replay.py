@@ -330,10 +330,15 @@ class Replayer(InputCache):
         """One replay at step dt with `steer` as the steering-wheel command; a replay already made with
         the same inputs, model effects, step and frame is not made again (`_memo_key`)."""
         key = self._memo_key(inp, effects, dt, steer)
-        memo = self._cache.setdefault("replays", {})
+        memo = self.replays()
         if key not in memo:
             memo[key] = self._replay(inp, effects, dt, steer)
         return dict(memo[key])
+
+    def replays(self) -> dict:
+        """The replays made for the benchmark in hand: digest (`_memo_key`) -> outputs. A worker process
+        hands the ones it made back to the workflow (tasks.map_tasks)."""
+        return self._cache.setdefault("replays", {})
 
     def _memo_key(self, inp: ReplayInputs, effects: list[Effect], dt: float, steer: np.ndarray | None) -> str:
         """What a replay depends on besides the model: the inputs on the grid, the start speed, the model
