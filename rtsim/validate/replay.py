@@ -122,8 +122,10 @@ _EMPTY = np.zeros(0)
 
 
 def _grid(x: np.ndarray | None) -> np.ndarray:
-    """An input for the compiled grid loop: float64 and contiguous, or empty when not driven."""
-    return _EMPTY if x is None else np.ascontiguousarray(x, dtype=np.float64)
+    """An input for the compiled grid loop: float64, contiguous and writable (a read-only array, as Ray's
+    object store hands them out, would make the kernel compile a variant of its own), or empty when not
+    driven."""
+    return _EMPTY if x is None else np.require(x, np.float64, ["C", "W"])
 
 
 def _delay(target: np.ndarray, y: np.ndarray, most: int) -> int:
