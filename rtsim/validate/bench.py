@@ -13,8 +13,8 @@ rate, the none-cases named and the "cannot be told apart" rate, as a table and a
 what it cost (generation, truth, workflow). Generated runs and truths are made first, `--workers`
 processes forked after the model is built, and cached on disk (fieldbench.generate.cache_root;
 RTSIM_FIELDBENCH_CACHE overrides; `--prepare-only` stops there). `--reduced`: the cases of
-REDUCED (the CI form, tests/test_validate_benchmark.py). `--workers`: the workflow's worker processes
-(cases run one after another in this process, the model built once).
+REDUCED (the CI form, tests/test_validate_benchmark.py). `--workers`: processes the cases run in side by
+side, one case per process (run_cases; forked after the model is built, once).
 
 The seed's straight line (`--straight-line`): seven repetitions of configs/scenarios/straight_line.toml
 (30 s, campus road) driven by the rtsim model with a hidden effect (default brake_friction=0.85), with
@@ -280,6 +280,34 @@ def prepare(bench: Bench, cases: list[dict], workers: int) -> tuple[float, float
     return sum(a for a, _ in done), sum(b for _, b in done)
 
 
+def _run_one(job: tuple[dict, Path]) -> dict:
+    return _BENCH.run(job[0], job[1], workers=1)
+
+
+def _expected_cost(case: dict) -> tuple:
+    """Sort key, the costliest cases first: the longitudinal manoeuvre's model effects take the most
+    simulations, and each hidden effect adds an iteration."""
+    return (case["sim"] != "pitch", -len(case.get("hidden", ())))
+
+
+def run_cases(bench: Bench, cases: list[dict], out: Path, workers: int):
+    """Every case's scored record, as they are done. With `workers` > 1 the cases run side by side, one
+    per forked process (the model built once, shared, never rebuilt), each workflow in its own process
+    (a workflow's own parallel parts, the candidates of one iteration, leave a worker idle between
+    them; a case's results do not depend on how many processes made them), the costliest first so
+    that no long case is left running alone at the end."""
+    global _BENCH
+    _BENCH = bench
+    if workers <= 1 or len(cases) <= 1:
+        for case in cases:
+            yield bench.run(case, out, workers)
+        return
+    import multiprocessing
+    jobs = [(c, out) for c in sorted(cases, key=_expected_cost)]
+    with multiprocessing.get_context("fork").Pool(min(workers, len(cases))) as pool:
+        yield from pool.imap_unordered(_run_one, jobs, chunksize=1)
+
+
 def field(args) -> int:
     import json
     import os
@@ -298,13 +326,14 @@ def field(args) -> int:
     if args.prepare_only:
         return 0
     records = []
-    for k, case in enumerate(cases):
-        rec = bench.run(case, out, args.workers)
+    for k, rec in enumerate(run_cases(bench, cases, out, args.workers)):
         records.append(rec)
         if not args.json:
-            print(f"[{k + 1}/{len(cases)}] {case['id']} {rec['label']}: {rec['status']} "
+            print(f"[{k + 1}/{len(cases)}] {rec['id']} {rec['label']}: {rec['status']} "
                   f"(named {[n['effect'] for n in rec['found']]}; {rec['seconds']['workflow']:.0f} s)", flush=True)
     total = time.perf_counter() - t0
+    order = {c["id"]: k for k, c in enumerate(cases)}
+    records.sort(key=lambda r: order[r["id"]])
     from .bench_score import rates
     summary = {"set": "reduced" if args.reduced else args.set, "cases": records, "rates": rates(records),
                "seconds": {"total": total, "setup": setup, "prepare": prep, "generate": gen, "truth": tru,
@@ -318,7 +347,7 @@ def field(args) -> int:
         show(records)
         sec = summary["seconds"]
         print(f"{len(records)} cases in {total:.0f} s (setup {setup:.0f} s, generation and truths {prep:.0f} s, "
-              f"workflow {sec['workflow']:.0f} s; {args.workers} workers); "
+              f"workflows {sec['workflow']:.0f} s summed over the cases; {args.workers} workers); "
               f"results: {out / 'bench.json'}")
     return 0
 
@@ -329,7 +358,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--limit", type=int, metavar="N", help="the first N cases of the set")
     p.add_argument("--reduced", action="store_true", help="the reduced form (a few held-out cases and the issue's)")
     p.add_argument("--cases", metavar="ID,...", help="comma-separated case ids")
-    p.add_argument("--workers", type=int, default=2, metavar="N", help="the workflow's worker processes")
+    p.add_argument("--workers", type=int, default=2, metavar="N", help="processes the cases run in, side by side")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.add_argument("--out", type=Path, metavar="DIR", help="reports and bench.json (default: a temporary folder)")
     p.add_argument("--prepare-only", action="store_true", help="only generate the runs and truths into the cache")

@@ -1,6 +1,8 @@
 """Replaying the benchmark's mean inputs into the vehicle model (the seed's third phase): the model is
 built once per workflow run, and every re-simulation starts a fresh VehicleSim on it (5 ms) with the
-effect set under test (`set_effects`), so no state can leak from one simulation into the next.
+effect set under test (`set_effects`), so no state can leak from one simulation into the next. A
+replay's grid loop is one compiled call (rtsim.validate.replay_kernel.replay_grid), and a replay is made
+once per inputs, model effects, step and frame for the benchmark in hand (`Replayer._run`).
 
 Inputs, as the seed drove its model: the measured rear-wheel torques (torque mode) and the brake line
 pressure; the steering-wheel angle when the manoeuvre steers; the throttle angle when the runs carry
@@ -48,6 +50,7 @@ side down, pitch positive nose down), a = Ry(pitch) Rx(roll) f, and accel_z = a_
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,7 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from rtsim.errors import ConfigError
-from rtsim.mbs.model import EARTH_GRAVITY
+from rtsim.mbs.model import EARTH_GRAVITY, OK
 from rtsim.road.config import load_road
 from rtsim.vehicle.kit.actuators import LAG_RATE, LAG_TAU
 from rtsim.vehicle.kit.brake import BP_ACT
@@ -72,6 +75,7 @@ from rtsim.vehicle.registry import open_vehicle
 from .benchmark import Benchmark
 from .data import ACCEL_FRAMES
 from .effectset import Effect, from_mapping, model_mapping
+from .replay_kernel import replay_grid
 from .signals import DERIVED, derive_wheel_speeds
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -112,6 +116,16 @@ def _start_rate(bench: Benchmark, run: int | None) -> float:
         return float(np.mean([np.polyfit(t[:k], row(c)[:k], 2)[1] for c in angles]))
     w = [row(c)[0] for c in ("wheel_speed_fl", "wheel_speed_fr") if c in bench.values]
     return float(np.mean(w)) if w else 0.0
+
+
+_EMPTY = np.zeros(0)
+
+
+def _grid(x: np.ndarray | None) -> np.ndarray:
+    """An input for the compiled grid loop: float64, contiguous and writable (a read-only array, as Ray's
+    object store hands them out, would make the kernel compile a variant of its own), or empty when not
+    driven."""
+    return _EMPTY if x is None else np.require(x, np.float64, ["C", "W"])
 
 
 def _delay(target: np.ndarray, y: np.ndarray, most: int) -> int:
@@ -315,7 +329,33 @@ class Replayer(InputCache):
         return self._run(inp, effects, dt, self.steering_command(inp, dt))
 
     def _run(self, inp: ReplayInputs, effects: list[Effect], dt: float, steer: np.ndarray | None) -> dict:
-        """One replay at step dt with `steer` as the steering-wheel command."""
+        """One replay at step dt with `steer` as the steering-wheel command; a replay already made with
+        the same inputs, model effects, step and frame is not made again (`_memo_key`)."""
+        key = self._memo_key(inp, effects, dt, steer)
+        memo = self.replays()
+        if key not in memo:
+            memo[key] = self._replay(inp, effects, dt, steer)
+        return dict(memo[key])
+
+    def replays(self) -> dict:
+        """The replays made for the benchmark in hand: digest (`_memo_key`) -> outputs. A worker process
+        hands the ones it made back to the workflow (tasks.map_tasks)."""
+        return self._cache.setdefault("replays", {})
+
+    def _memo_key(self, inp: ReplayInputs, effects: list[Effect], dt: float, steer: np.ndarray | None) -> str:
+        """What a replay depends on besides the model: the inputs on the grid, the start speed, the model
+        effects with their exact values (sensor effects act on the readings only), the step and the
+        accelerometer frame; as a digest. Replays are deterministic, so one made again would be the same
+        bit for bit (a sensor effect's iteration re-screens the model effects at the same trial values;
+        the last steering-matching pass is the replay the matched command then asks for)."""
+        h = hashlib.sha1(repr((float(dt), float(inp.speed0), self._accel_frame,
+                               model_mapping(effects))).encode())
+        for x in (inp.t, inp.brake, inp.torque_rl, inp.torque_rr, inp.throttle, steer):
+            h.update(b"-" if x is None else np.ascontiguousarray(x, dtype=np.float64).tobytes() + b"|")
+        return h.hexdigest()
+
+    def _replay(self, inp: ReplayInputs, effects: list[Effect], dt: float, steer: np.ndarray | None) -> dict:
+        """One replay, made (see _run)."""
         sim = self.new_sim(inp, effects, dt)
         t = inp.t
         n = t.size
@@ -324,11 +364,6 @@ class Replayer(InputCache):
         if abs(sub * dt - dtg) > 1e-9 * dtg or sub < 1:
             raise ConfigError(f"grid step {dtg} s is not a multiple of the model step {dt} s")
         out = np.zeros((n, NSENSOR))
-        row = np.zeros(NSENSOR)
-
-        def mid(x, k):
-            return 0.5 * (x[k] + x[k + 1])
-
         cmd, extra = sim.io.commands, sim.io.extra
         if inp.brake is not None:                  # the first inputs, held through the settling
             cmd[CMD_BRAKE] = max(0.0, float(inp.brake[0]))
@@ -341,21 +376,12 @@ class Replayer(InputCache):
             cmd[CMD_STEER] = float(steer[0])
         if inp.speed0 == 0.0:
             sim.step(int(round(SETTLE / dt)))
-        sim.physical_sensors(row)
-        out[0] = row
-        for k in range(n - 1):
-            if inp.brake is not None:
-                cmd[CMD_BRAKE] = max(0.0, mid(inp.brake, k))
-            if inp.torque_rl is not None:
-                extra[EX_TORQUE_LEFT] = mid(inp.torque_rl, k)
-                extra[EX_TORQUE_RIGHT] = mid(inp.torque_rr, k)
-            if inp.throttle is not None:
-                cmd[CMD_THROTTLE] = max(0.0, mid(inp.throttle, k))
-            if steer is not None:
-                cmd[CMD_STEER] = mid(steer, k)
-            sim.step(sub)
-            sim.physical_sensors(row)
-            out[k + 1] = row
+        sim.physical_sensors(out[0])
+        status, _ = replay_grid(sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, sim.io,
+                                sim.dt, sub, *(_grid(x) for x in (inp.brake, inp.torque_rl, inp.torque_rr,
+                                                                 inp.throttle, steer)), out)
+        if status != OK:
+            sim.sim._raise(status, int(sim.data.stats[0]) + 1)
         self.simulations += 1
         res = {name: out[:, i].copy() for i, name in enumerate(self.model.channels.sensor_names)}
         if self._accel_frame == "level":

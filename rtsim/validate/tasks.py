@@ -67,6 +67,22 @@ def _task(task: tuple):
     return run_task(_CTX, task)
 
 
+def _kept(ctx: Context | None):
+    """The replays a context's replayer keeps (its `replays` method), or None."""
+    return getattr(getattr(ctx, "replayer", None), "replays", None)
+
+
+def _forked_task(task: tuple) -> tuple:
+    """_task in a forked worker, with the replays it made (digest -> outputs, Replayer.replays) for the
+    workflow to keep: a later task that asks for the same replay, in this process or a later worker,
+    then costs no simulation."""
+    kept = _kept(_CTX)
+    memo = kept() if kept is not None else {}
+    known = set(memo)
+    res = run_task(_CTX, task)
+    return res, {k: memo[k] for k in memo.keys() - known}
+
+
 def _same(ctx: Context) -> Context:
     """A Ray worker's context: the one shipped (built once per worker by ray_map)."""
     return ctx
@@ -94,9 +110,12 @@ def map_tasks(ctx: Context, tasks: list[tuple], workers: int | RayWorkers, progr
     out = []
     try:
         if workers > 1 and len(tasks) > 1 and "fork" in mp.get_all_start_methods():
+            kept = _kept(ctx)
             with mp.get_context("fork").Pool(min(workers, len(tasks))) as pool:
-                for res in pool.imap(_task, tasks):
+                for res, made in pool.imap(_forked_task, tasks):
                     out.append(res)
+                    if kept is not None:
+                        kept().update(made)
                     progress.advance()
         else:
             for t in tasks:
