@@ -6,7 +6,8 @@ the ALI3-P stages of rtsim.mbs.integrator.step_with), with the processor's cycle
 stages. The car's force kernel is split the same way into its force stages (rtsim.vehicle.car.forces).
 The staged loop computes exactly what the plain step computes (tests/test_bench_stages.py compares the
 trajectories bit for bit); reading the counter adds a few nanoseconds per stage, so its total is a little
-above the plain step's. Counts per step come from the integrator's statistics (Newton iterations,
+above the plain step's. Each stage's time is the median over blocks of steps (a shared machine takes the
+processor away in bursts). Counts per step come from the integrator's statistics (Newton iterations,
 factorizations, projection iterations) and from the loop itself (force evaluations, with tangent)."""
 from __future__ import annotations
 
@@ -197,6 +198,19 @@ def two_wheeler_steps_staged(m, d, h, idx, par, tab, u, tp, slip, tyre, nsteps, 
     return OK, nsteps
 
 
+def _blocks(run, steps: int, blocks: int) -> np.ndarray:
+    """Cycle counts of `blocks` blocks of steps // blocks steps each (run(n, cyc) steps n); per slot the
+    median over the blocks, times the blocks (the machine is shared: a block the process lost its core in
+    is an outlier, not the step's cost); the counts (N_*) summed."""
+    per = np.zeros((blocks, NSLOTS), dtype=np.int64)
+    n = steps // blocks
+    for b in range(blocks):
+        run(n, per[b])
+    cyc = (np.median(per, axis=0) * blocks).astype(np.int64)
+    cyc[N_FORCE_EVALS:] = per[:, N_FORCE_EVALS:].sum(axis=0)
+    return cyc
+
+
 def stage_report(name: str, cyc: np.ndarray, stats0: np.ndarray, stats1: np.ndarray, steps: int,
                  car: bool) -> dict:
     """Microseconds per step of each stage (the force kernel's time taken off the stages it ran in) and
@@ -229,7 +243,7 @@ def stage_report(name: str, cyc: np.ndarray, stats0: np.ndarray, stats1: np.ndar
     }
 
 
-def profile_car(vehicle: str, speed: float, steer: float, steps: int = 3000) -> dict:
+def profile_car(vehicle: str, speed: float, steer: float, steps: int = 3000, blocks: int = 10) -> dict:
     """The car (configs/vehicles/<vehicle>.toml) on a plane at `speed` m/s with throttle 0.2 and the
     steering-wheel angle `steer` rad held, as in `rtsim bench --suite vehicle`, stage by stage."""
     from rtsim.benchmarks.vehicle import _vehicle
@@ -241,17 +255,19 @@ def profile_car(vehicle: str, speed: float, steer: float, steps: int = 3000) -> 
     sim.io.commands[CMD_THROTTLE] = 0.2
     sim.io.commands[CMD_STEER] = steer
     sim.step(200)                                   # compile/load, settle (as the benchmark)
-    cyc = np.zeros(NSLOTS, dtype=np.int64)
     args = (sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, sim.io, sim.dt)
     car_steps_staged(*args, 1, np.zeros(NSLOTS, dtype=np.int64))     # compile/load the staged loop
     s0 = sim.data.stats.copy()
-    status, _ = car_steps_staged(*args, steps, cyc)
-    if status != OK:
-        raise RuntimeError(f"{vehicle}: staged step failed with status {status}")
-    return stage_report(vehicle, cyc, s0, sim.data.stats, steps, car=True)
+
+    def run(n, cyc):
+        status, _ = car_steps_staged(*args, n, cyc)
+        if status != OK:
+            raise RuntimeError(f"{vehicle}: staged step failed with status {status}")
+    steps -= steps % blocks
+    return stage_report(vehicle, _blocks(run, steps, blocks), s0, sim.data.stats, steps, car=True)
 
 
-def profile_motorcycle(steps: int = 3000) -> dict:
+def profile_motorcycle(steps: int = 3000, blocks: int = 10) -> dict:
     """The motorcycle at 20 m/s with 2 N m of steering torque held, as in `rtsim bench --suite vehicle`."""
     from rtsim.benchmarks.vehicle import ROOT
     from rtsim.vehicle.motorcycle.build import build_motorcycle
@@ -267,12 +283,14 @@ def profile_motorcycle(steps: int = 3000) -> dict:
     p.u[U_STEER_TORQUE] = 2.0
     args = (sim.model, sim.data, 1e-3, p.idx, p.par, p.tab, p.u, p.tp, p.slip, p.tyre)
     two_wheeler_steps_staged(*args, 200, np.zeros(NSLOTS, dtype=np.int64))   # compile/load, settle
-    cyc = np.zeros(NSLOTS, dtype=np.int64)
     s0 = sim.data.stats.copy()
-    status, _ = two_wheeler_steps_staged(*args, steps, cyc)
-    if status != OK:
-        raise RuntimeError(f"motorcycle: staged step failed with status {status}")
-    return stage_report("motorcycle", cyc, s0, sim.data.stats, steps, car=False)
+
+    def run(n, cyc):
+        status, _ = two_wheeler_steps_staged(*args, n, cyc)
+        if status != OK:
+            raise RuntimeError(f"motorcycle: staged step failed with status {status}")
+    steps -= steps % blocks
+    return stage_report("motorcycle", _blocks(run, steps, blocks), s0, sim.data.stats, steps, car=False)
 
 
 def stages_suite() -> list[dict]:

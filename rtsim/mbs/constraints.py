@@ -354,6 +354,13 @@ def _crank_rod(cst, i, th, x):
 @kernel
 def eval_hqd(m, d, q, qd):
     """d.hqd = (d/dt Phi_q) qd, the velocity-quadratic part of Phi'' = Phi_q qdd + hqd + Phi_tt."""
+    hqd_rows(m, d, q, qd, True)
+
+
+@inline_kernel
+def hqd_rows(m, d, q, qd, fill_poly):
+    """eval_hqd; with fill_poly False the polynomial paths are read from d.poly_cache as the last
+    eval_constraints left them, which must have been at this q (the integrator's finishing stage)."""
     idx = m.con_idx
     cst = m.con_cst
     for i in range(m.nc):
@@ -404,7 +411,7 @@ def eval_hqd(m, d, q, qd):
             sd = qd[ks] if ks >= 0 else 0.0
             h = 0.0
             pc = d.poly_cache[kp]
-            if comp == 0:
+            if comp == 0 and fill_poly:
                 _fill_poly_cache(m, pc, kp, z, s)
             for e in range(3):
                 pz = pc[e, 1]

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
-from .constraints import eval_constraints, eval_drivers, eval_hqd, jac_matvec, jac_t_matvec_add
+from .constraints import eval_constraints, eval_drivers, hqd_rows, jac_matvec, jac_t_matvec_add
 from .envelope import matvec_add
 from .forces import eval_forces
 from .sparse import cholesky, solve
@@ -495,7 +495,7 @@ def finish_projections(m, d, h):
         st[ST_LAST_RESIDUAL] = gv
         d.flags[NEED_FACTOR] = 1
         return ERR_PROJECTION
-    eval_hqd(m, d, d.q, d.qd)
+    hqd_rows(m, d, d.q, d.qd, False)    # the polynomial paths are finish_prepare's, at this q
     for i in range(m.nc):
         d.phit[i] = d.hqd[i] + d.phitt[i]  # phit now holds the acceleration right-hand side c
     k2, ga = project(m, d, d.qdd, d.phit, bq, m.fset[FS_TOL_ACC], m.fset[FS_TOL_ACC_FAIL])

@@ -493,14 +493,17 @@ def _advance_deflections(p, state, i, fz, gamma, vx, vsy, omega, re, dt, extra):
     vsx = vx - omega * re
     u = _relax_step(state[i, S_U], -vsx, avx / sk, dt)
     v = _relax_step(state[i, S_V], vsy, avx / sa, dt)
-    kpk, apk = peak_slips(p, fz, gamma)
     den = avx if avx > p[P_VXLOW] else p[P_VXLOW]
     lim_k = abs(vsx) / den
-    if lim_k < kpk:
-        lim_k = kpk
     lim_a = abs(vsy) / den
-    if lim_a < apk:
-        lim_a = apk
+    # the limits are max(slip, peak slip): while both deflections are within sigma x slip the clip
+    # leaves them as they are whatever the peaks (an iterative solve each), so they are not needed
+    if abs(u) > sk * lim_k or abs(v) > sa * lim_a:
+        kpk, apk = peak_slips(p, fz, gamma)
+        if lim_k < kpk:
+            lim_k = kpk
+        if lim_a < apk:
+            lim_a = apk
     state[i, S_U], state[i, S_V] = wind_up_limit(u, v, sk * lim_k, sa * lim_a)
 
 
