@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rtsim.benchmarks import stages as S
-from rtsim.benchmarks.vehicle import ROOT, _vehicle
+from rtsim.benchmarks.vehicle import _vehicle
 from rtsim.vehicle.car.sim import VehicleSim
 from rtsim.vehicle.car.step import CMD_STEER, CMD_THROTTLE, vehicle_advance
 
@@ -54,15 +54,10 @@ def test_staged_car_step_is_the_car_step(vehicle):
 
 
 def test_staged_two_wheeler_step_is_the_two_wheeler_step():
-    from rtsim.vehicle.motorcycle.build import build_motorcycle
-    from rtsim.vehicle.motorcycle.config import load_motorcycle
-    from rtsim.vehicle.motorcycle.sim import TwoWheelerSim, static_pose
-    from rtsim.vehicle.motorcycle.step import U_STEER_TORQUE, two_wheeler_step
+    from rtsim.benchmarks.vehicle import motorcycle_turning
+    from rtsim.vehicle.motorcycle.step import two_wheeler_step
 
-    mm = build_motorcycle(*load_motorcycle(ROOT / "configs" / "vehicles" / "motorcycle.toml"))
-    q, _ = static_pose(mm)
-    sim = TwoWheelerSim(mm, speed=20.0, q=q)
-    sim.parts.u[U_STEER_TORQUE] = 2.0
+    sim = motorcycle_turning()
     p = sim.parts
     parts = (p.idx, p.par, p.tab, p.u, p.tp, p.slip, p.tyre)
     a = (_copy(sim.model), _copy(sim.data), _copy(parts))

@@ -95,11 +95,16 @@ def _car_forces_staged(m, d, a, tangent, bq, hc):
             bad = i
             break
     c = _lap(cyc, F_CHECK, c)
-    cyc[F_ALL] += c - c_all
+    _count_evaluation(cyc, c - c_all, tangent)
+    return bad
+
+
+@inline_kernel
+def _count_evaluation(cyc, cycles, tangent):
+    cyc[F_ALL] += cycles
     cyc[N_FORCE_EVALS] += 1
     if tangent:
         cyc[N_TANGENT_EVALS] += 1
-    return bad
 
 
 @inline_kernel
@@ -108,10 +113,7 @@ def _two_wheeler_forces_staged(m, d, a, tangent, bq, hc):
     cyc = a[7]
     c = read_cycles()
     bad = two_wheeler_forces_args(m, d, (a[0], a[1], a[2], a[3], a[4], a[5], a[6]), tangent, bq, hc)
-    cyc[F_ALL] += read_cycles() - c
-    cyc[N_FORCE_EVALS] += 1
-    if tangent:
-        cyc[N_TANGENT_EVALS] += 1
+    _count_evaluation(cyc, read_cycles() - c, tangent)
     return bad
 
 
@@ -269,18 +271,10 @@ def profile_car(vehicle: str, speed: float, steer: float, steps: int = 3000, blo
 
 def profile_motorcycle(steps: int = 3000, blocks: int = 10) -> dict:
     """The motorcycle at 20 m/s with 2 N m of steering torque held, as in `rtsim bench --suite vehicle`."""
-    from rtsim.benchmarks.vehicle import ROOT
-    from rtsim.vehicle.motorcycle.build import build_motorcycle
-    from rtsim.vehicle.motorcycle.config import load_motorcycle
-    from rtsim.vehicle.motorcycle.sim import TwoWheelerSim, static_pose
-    from rtsim.vehicle.motorcycle.step import U_STEER_TORQUE
+    from rtsim.benchmarks.vehicle import motorcycle_turning
 
-    cfg, base = load_motorcycle(ROOT / "configs" / "vehicles" / "motorcycle.toml")
-    mm = build_motorcycle(cfg, base)
-    q, _ = static_pose(mm)
-    sim = TwoWheelerSim(mm, speed=20.0, q=q)
+    sim = motorcycle_turning()
     p = sim.parts
-    p.u[U_STEER_TORQUE] = 2.0
     args = (sim.model, sim.data, 1e-3, p.idx, p.par, p.tab, p.u, p.tp, p.slip, p.tyre)
     two_wheeler_steps_staged(*args, 200, np.zeros(NSLOTS, dtype=np.int64))   # compile/load, settle
     s0 = sim.data.stats.copy()
