@@ -258,15 +258,21 @@ def profile_car(vehicle: str, speed: float, steer: float, steps: int = 3000, blo
     sim.io.commands[CMD_STEER] = steer
     sim.step(200)                                   # compile/load, settle (as the benchmark)
     args = (sim.m, sim.data, sim.vm.vehicle, sim.vd, sim.road, sim.parts, sim.states, sim.io, sim.dt)
-    car_steps_staged(*args, 1, np.zeros(NSLOTS, dtype=np.int64))     # compile/load the staged loop
-    s0 = sim.data.stats.copy()
+    return _profile(vehicle, car_steps_staged, args, sim.data.stats, steps, blocks, car=True)
+
+
+def _profile(name: str, loop, args, stats, steps: int, blocks: int, car: bool) -> dict:
+    """The stage report of `loop(*args, n, cycles)` (a staged loop) over `steps` steps in `blocks`
+    blocks, after one step that compiles or loads it; `stats`: the integrator's statistics array."""
+    loop(*args, 1, np.zeros(NSLOTS, dtype=np.int64))
+    s0 = stats.copy()
 
     def run(n, cyc):
-        status, _ = car_steps_staged(*args, n, cyc)
+        status, _ = loop(*args, n, cyc)
         if status != OK:
-            raise RuntimeError(f"{vehicle}: staged step failed with status {status}")
+            raise RuntimeError(f"{name}: staged step failed with status {status}")
     steps -= steps % blocks
-    return stage_report(vehicle, _blocks(run, steps, blocks), s0, sim.data.stats, steps, car=True)
+    return stage_report(name, _blocks(run, steps, blocks), s0, stats, steps, car=car)
 
 
 def profile_motorcycle(steps: int = 3000, blocks: int = 10) -> dict:
@@ -277,14 +283,7 @@ def profile_motorcycle(steps: int = 3000, blocks: int = 10) -> dict:
     p = sim.parts
     args = (sim.model, sim.data, 1e-3, p.idx, p.par, p.tab, p.u, p.tp, p.slip, p.tyre)
     two_wheeler_steps_staged(*args, 200, np.zeros(NSLOTS, dtype=np.int64))   # compile/load, settle
-    s0 = sim.data.stats.copy()
-
-    def run(n, cyc):
-        status, _ = two_wheeler_steps_staged(*args, n, cyc)
-        if status != OK:
-            raise RuntimeError(f"motorcycle: staged step failed with status {status}")
-    steps -= steps % blocks
-    return stage_report("motorcycle", _blocks(run, steps, blocks), s0, sim.data.stats, steps, car=False)
+    return _profile("motorcycle", two_wheeler_steps_staged, args, sim.data.stats, steps, blocks, car=False)
 
 
 def stages_suite() -> list[dict]:
