@@ -21,8 +21,12 @@ def _state(sim):
 
 
 def _copy(x):
+    """Deep copy of (named) tuples of arrays; readonly arrays stay readonly (numba types them apart: a
+    writable copy would compile a second specialization of the vehicle's kernels)."""
     if isinstance(x, np.ndarray):
-        return x.copy()
+        c = x.copy()
+        c.setflags(write=x.flags.writeable)
+        return c
     if isinstance(x, tuple):
         items = [_copy(v) for v in x]
         return type(x)(*items) if hasattr(type(x), "_fields") else tuple(items)
