@@ -89,6 +89,11 @@ def _bench(args) -> int:
         if args.json:
             print(json.dumps(res, indent=2))
         return 1 if any(r["failures"] for r in res) else 0
+    if args.suite == "vehicle" and args.stages:
+        from rtsim.benchmarks.stages import format_stages, stages_suite
+        res = stages_suite()
+        print(json.dumps(res, indent=2) if args.json else format_stages(res))
+        return 0
     if args.suite == "vehicle":
         from rtsim.benchmarks.vehicle import suite
         results = suite()
@@ -295,6 +300,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "dispatch: the cost of a call into a kernel, direct and bound (rtsim.boundcall); "
                         "fuzz: command sequences drawn in each vehicle's DBC ranges (rtsim.robustness); "
                         "fmu: the cost of one controller FMU call and of the car as an FMU (docs/fmu.md)")
+    b.add_argument("--stages", action="store_true",
+                   help="vehicle suite: each vehicle's step stage by stage instead (formulation and force stages, "
+                        "Newton iterations and factorizations per step; docs/benchmarks.md)")
     b.add_argument("--count", type=int, default=2000, metavar="N",
                    help="fuzz suite: rides drawn per vehicle (2000)")
     b.add_argument("--vehicle", action="append", metavar="FILE",

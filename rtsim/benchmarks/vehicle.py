@@ -158,15 +158,8 @@ def _rider_loop(r, view, out, n):
         rider_step(r, view, out)
 
 
-def run_motorcycle(steps: int = 3000) -> dict:
-    """The sport motorcycle at 20 m/s with a steering torque held (leaning into a turn), its step in a
-    compiled loop, and the rider's kernel on the figure-eight timed alone on a fixed view.
-
-    The step's cost is the median of the steps' own costs (each timed with the processor's cycle
-    counter inside the loop): the bar is a median, and on a shared machine the steps the process lost
-    its core in are outliers, not the step's cost. The mean over the run's wall time is given beside it."""
-    from rtsim.road.paths import figure_eight
-    from drivers.rider import NRO, NRV, RV_U, rider
+def motorcycle_turning():
+    """The sport motorcycle (configs/vehicles/motorcycle.toml) at 20 m/s with 2 N m of steering torque held."""
     from rtsim.vehicle.motorcycle.build import build_motorcycle
     from rtsim.vehicle.motorcycle.config import load_motorcycle
     from rtsim.vehicle.motorcycle.sim import TwoWheelerSim, static_pose
@@ -176,8 +169,22 @@ def run_motorcycle(steps: int = 3000) -> dict:
     mm = build_motorcycle(cfg, base)
     q, _ = static_pose(mm)
     sim = TwoWheelerSim(mm, speed=20.0, q=q)
+    sim.parts.u[U_STEER_TORQUE] = 2.0
+    return sim
+
+
+def run_motorcycle(steps: int = 3000) -> dict:
+    """The sport motorcycle at 20 m/s with a steering torque held (leaning into a turn), its step in a
+    compiled loop, and the rider's kernel on the figure-eight timed alone on a fixed view.
+
+    The step's cost is the median of the steps' own costs (each timed with the processor's cycle
+    counter inside the loop): the bar is a median, and on a shared machine the steps the process lost
+    its core in are outliers, not the step's cost. The mean over the run's wall time is given beside it."""
+    from rtsim.road.paths import figure_eight
+    from drivers.rider import NRO, NRV, RV_U, rider
+
+    sim = motorcycle_turning()
     p = sim.parts
-    p.u[U_STEER_TORQUE] = 2.0
     args = (p.idx, p.par, p.tab, p.u, p.tp, p.slip, p.tyre)
     _two_wheeler_loop_timed(sim.model, sim.data, 1e-3, *args, np.zeros(200, dtype=np.int64))   # compile/load, settle
     s0 = sim.data.stats.copy()

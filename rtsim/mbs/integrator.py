@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from rtsim.jit import inline_kernel, kernel
 
-from .constraints import eval_constraints, eval_drivers, eval_hqd, jac_matvec, jac_t_matvec_add
+from .constraints import eval_constraints, eval_drivers, hqd_rows, jac_matvec, jac_t_matvec_add
 from .envelope import matvec_add
 from .forces import eval_forces
 from .sparse import cholesky, solve
@@ -300,8 +300,16 @@ def newton_prepare(m, d, h):
 def newton_update(m, d, h):
     """Stage 3 (each iteration): the Newton increment and its convergence test. Returns CONVERGED,
     CONTINUE or an error status (negative codes are never used: errors are > 1)."""
+    newton_residual(m, d, h)
+    if newton_factor(m, d, h) != OK:
+        return ERR_FACTOR
+    return newton_increment(m, d, h)
+
+
+@inline_kernel
+def newton_residual(m, d, h):
+    """Stage 3a: the right-hand side -bq [M qdd + Phi_q^T lambda* - Q] into d.r."""
     nq = m.nq
-    nc = m.nc
     bq = 0.25 * h * h
     # Newton increment dq = -A^-1 f with f = bq [M qdd + Phi_q^T (alpha Phi + lambda*) - Q],
     # corrected by multipliers mu so that the linearised constraints Phi + Phi_q dq = 0 hold
@@ -314,10 +322,26 @@ def newton_update(m, d, h):
     jac_t_matvec_add(m, d, d.lam, r, 1.0)
     for i in range(nq):
         r[i] = -bq * (r[i] - d.force[i])
+
+
+@inline_kernel
+def newton_factor(m, d, h):
+    """Stage 3b: the tangent's factor when this iteration refactors (wants_tangent). Returns OK or ERR_FACTOR."""
     if wants_tangent(m, d):
-        if refresh_factor(m, d, bq) != OK:
+        if refresh_factor(m, d, 0.25 * h * h) != OK:
             return ERR_FACTOR
         d.newton[NW_AGE] = 0.0
+    return OK
+
+
+@inline_kernel
+def newton_increment(m, d, h):
+    """Stage 3c: the increment from d.r (stage 3a) and the factor (stage 3b), the step control and the
+    convergence test. Returns CONVERGED, CONTINUE or an error status."""
+    nq = m.nq
+    nc = m.nc
+    bq = 0.25 * h * h
+    r = d.r
     solve_constrained(m, d, r, d.phi, bq, d.y, 0.1 * m.fset[FS_TOL_PHI], np.inf)
     # step control: a fraction lam_s of the increment (1 unless the iteration stopped contracting)
     lam_s = d.newton[NW_STEP]
@@ -445,20 +469,33 @@ def finish_prepare(m, d, h):
 @kernel
 def finish_project(m, d, h):
     """Stage 5: refactor at the converged q, project velocities and accelerations, advance time."""
-    bq = 0.25 * h * h
-    st = d.stats
+    if finish_factor(m, d, h) != OK:
+        return ERR_FACTOR
+    return finish_projections(m, d, h)
+
+
+@inline_kernel
+def finish_factor(m, d, h):
+    """Stage 5a: the factor the projections use. Returns OK or ERR_FACTOR."""
     # The projections need the tangent at the converged q: the Newton factor was made at an earlier
     # iterate, and near singular positions the projection is sensitive to that difference. Models
     # without singular positions (a vehicle) may keep the Newton factor (IS_PROJECTION_FACTOR = 0).
     if m.iset[IS_PROJECTION_FACTOR] == 1 or d.flags[HAVE_FACTOR] == 0:
-        if refresh_factor(m, d, bq) != OK:
-            return ERR_FACTOR
+        return refresh_factor(m, d, 0.25 * h * h)
+    return OK
+
+
+@inline_kernel
+def finish_projections(m, d, h):
+    """Stage 5b: project velocities and accelerations with the factor of stage 5a, advance time."""
+    bq = 0.25 * h * h
+    st = d.stats
     k1, gv = project(m, d, d.qd, d.phit, bq, m.fset[FS_TOL_VEL], m.fset[FS_TOL_VEL_FAIL])
     if k1 < 0:
         st[ST_LAST_RESIDUAL] = gv
         d.flags[NEED_FACTOR] = 1
         return ERR_PROJECTION
-    eval_hqd(m, d, d.q, d.qd)
+    hqd_rows(m, d, d.q, d.qd, False)    # the polynomial paths are finish_prepare's, at this q
     for i in range(m.nc):
         d.phit[i] = d.hqd[i] + d.phitt[i]  # phit now holds the acceleration right-hand side c
     k2, ga = project(m, d, d.qdd, d.phit, bq, m.fset[FS_TOL_ACC], m.fset[FS_TOL_ACC_FAIL])

@@ -43,7 +43,7 @@ from math import atan, sqrt, tan
 import numpy as np
 
 from rtsim.jit import inline_kernel, kernel
-from rtsim.mbs.constraints import poly_eval, poly_value
+from rtsim.mbs.constraints import poly_eval
 from rtsim.mbs.envelope import add_entry
 from rtsim.road.query import CT_D, CT_EX, CT_GAMMA, CT_MU, CT_NX, CT_PX, CT_RR, wheel_contact
 
@@ -116,9 +116,44 @@ def _add_chassis_moment(veh, q, force, m0, m1, m2):
 
 
 @inline_kernel
-def _poly3(coef, exps, z, s):
-    """A body-frame 3-vector polynomial: (v0, v1, v2)."""
-    return poly_value(coef[0], exps, z, s), poly_value(coef[1], exps, z, s), poly_value(coef[2], exps, z, s)
+def _poly3x3(ca, cb, cc, exps, z, s):
+    """Three body-frame 3-vector polynomials of (z, s) at once: (a0, a1, a2, b0, b1, b2, c0, c1, c2).
+    Each is summed exactly as rtsim.mbs.constraints.poly_value sums it (same terms, same order, so the
+    same bits); the nine independent sums in one pass keep the processor's pipelines full, where one
+    polynomial at a time waits on each multiply-add."""
+    nterm = exps.shape[0]
+    nb = exps[nterm - 1, 1] + 1
+    na = nterm // nb
+    nbu = nb if s != 0.0 else 1
+    p0 = p1 = p2 = p3 = p4 = p5 = p6 = p7 = p8 = 0.0
+    za = 1.0
+    for a in range(na):
+        q0 = q1 = q2 = q3 = q4 = q5 = q6 = q7 = q8 = 0.0
+        sb = 1.0
+        base = a * nb
+        for b in range(nbu):
+            j = base + b
+            q0 += ca[0, j] * sb
+            q1 += ca[1, j] * sb
+            q2 += ca[2, j] * sb
+            q3 += cb[0, j] * sb
+            q4 += cb[1, j] * sb
+            q5 += cb[2, j] * sb
+            q6 += cc[0, j] * sb
+            q7 += cc[1, j] * sb
+            q8 += cc[2, j] * sb
+            sb *= s
+        p0 += za * q0
+        p1 += za * q1
+        p2 += za * q2
+        p3 += za * q3
+        p4 += za * q4
+        p5 += za * q5
+        p6 += za * q6
+        p7 += za * q7
+        p8 += za * q8
+        za *= z
+    return p0, p1, p2, p3, p4, p5, p6, p7, p8
 
 
 @inline_kernel
@@ -183,16 +218,14 @@ def corner_kinematics(m, d, veh, vd, i, om):
     q = d.q
     exps = m.poly_exp
     _kz, _ks, z, zd, s, sd = _corner_travel(veh, vd, q, d.qd, i)
-    ab = _poly3(veh.axis_coef[i], exps, z, s)
-    ax, ay, az = _body_to_world(veh, q, ab[0], ab[1], ab[2])
+    v = _poly3x3(veh.axis_coef[i], veh.rotz_coef[i], veh.rots_coef[i], exps, z, s)
+    ax, ay, az = _body_to_world(veh, q, v[0], v[1], v[2])
     na = sqrt(ax * ax + ay * ay + az * az)
     ax /= na
     ay /= na
     az /= na
-    tz = _poly3(veh.rotz_coef[i], exps, z, s)
-    tzx, tzy, tzz = _body_to_world(veh, q, tz[0], tz[1], tz[2])
-    ts = _poly3(veh.rots_coef[i], exps, z, s)
-    tsx, tsy, tsz = _body_to_world(veh, q, ts[0], ts[1], ts[2])
+    tzx, tzy, tzz = _body_to_world(veh, q, v[3], v[4], v[5])
+    tsx, tsy, tsz = _body_to_world(veh, q, v[6], v[7], v[8])
     okx = om[0] + tzx * zd + tsx * sd        # knuckle angular velocity
     oky = om[1] + tzy * zd + tsy * sd
     okz = om[2] + tzz * zd + tsz * sd

@@ -109,6 +109,17 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     3. between-step commits: brake stick/slide modes, tyre contact deflections; signals for sensors.
     Effects (parts.effects) act in 1 (brake torques, driveline speeds), 2 and 3 (driveline nodes,
     relaxation, sensor history)."""
+    vehicle_before_mbs(m, d, veh, vd, parts, states, io, h)
+    status = vehicle_mbs_step(m, d, veh, vd, road, parts, states, h)
+    if status != OK:
+        return status
+    vehicle_after_mbs(m, d, veh, vd, parts, states, io, h)
+    return OK
+
+
+@inline_kernel
+def vehicle_before_mbs(m, d, veh, vd, parts, states, io, h):
+    """Stage 1 of vehicle_step: the subsystems to t + h (brake, steering controller or EPS, powertrain)."""
     fx = parts.effects
     fs = states.effects
     fx_on = fx[FX_ON] > 0.5
@@ -136,9 +147,18 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     powertrain_step(parts.powertrain, states.powertrain, io.pt_in, h, io.pt_out)
     vd.drive[veh.driven[0]] = io.pt_out[PO_TORQUE_LEFT]
     vd.drive[veh.driven[1]] = io.pt_out[PO_TORQUE_RIGHT]
-    status = vehicle_mbs_step(m, d, veh, vd, road, parts, states, h)
-    if status != OK:
-        return status
+
+
+@inline_kernel
+def vehicle_after_mbs(m, d, veh, vd, parts, states, io, h):
+    """Stage 3 of vehicle_step: the commits between steps (brake modes, driveline, tyre deflections, EPS)
+    and the signals for the sensors."""
+    fx = parts.effects
+    fs = states.effects
+    fx_on = fx[FX_ON] > 0.5
+    ic = veh.steer_idx[STEER_COLUMN]
+    ir = veh.steer_idx[STEER_RACK]
+    eps = veh.steer_kind[0] == STEER_EPS
     for i in range(4):
         kp = veh.corner_idx[i, CI_PHI]
         vd.theta[i] = d.q[kp]
@@ -186,7 +206,6 @@ def vehicle_step(m, d, veh, vd, road, parts, states, io, h):
     io.signals[SG_TORQUE_RIGHT] = io.pt_out[PO_TORQUE_RIGHT]
     if states.sensors[SensorState.SLOTS] > 0.0:
         record_sensors(m, d, veh, io.signals, fx, parts.sensors, states.sensors)
-    return OK
 
 
 @inline_kernel

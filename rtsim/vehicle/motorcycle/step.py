@@ -284,11 +284,18 @@ def two_wheeler_step(m, d, h, idx, par, tab, u, tp, slip, tyre):
     """One ALI3-P step of h seconds with the two-wheeler's forces; then the tyres' relaxation states
     advance over the step at the converged state. Returns a status code (rtsim.mbs.model.OK)."""
     status = step_with(m, d, h, _forces_args, (idx, par, tab, u, tp, slip, tyre))
-    if status != 0 or par[MP_SLIP_TYRES] < 0.5:
-        return status
+    if status == 0:
+        two_wheeler_after_mbs(h, par, tp, slip, tyre)
+    return status
+
+
+@inline_kernel
+def two_wheeler_after_mbs(h, par, tp, slip, tyre):
+    """After the multibody step: the slip tyres' relaxation states advance over it at the converged state."""
+    if par[MP_SLIP_TYRES] < 0.5:
+        return
     for w in range(2):
         t = tyre[w]
         if t[TO_FZ] > 0.0:
             advance_two_wheel_slip(tp[w], slip, w, t[TO_FZ], t[TO_GAMMA], t[TO_VX], t[TO_VSY], t[TO_OMEGA],
                                    t[TO_RE], h)
-    return status
