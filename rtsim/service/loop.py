@@ -156,6 +156,9 @@ class HilLoop:
         self.run_state = "running"
         self.message = ""
         self.model_fault: ModelFault | None = None
+        # held while a reset or new scenario replaces the session and while the status is read, so a
+        # status never pairs the old run state with the new session's fault flags
+        self._session_lock = threading.RLock()
         self.on_model_fault = None        # called once per failure with the ModelFault (loop thread)
         self.test_fault_at = test_fault_at       # rtsim.model_fault's test-only hook: s, once per loop
         self._forced_step = None
@@ -496,10 +499,11 @@ class HilLoop:
             sim, name = args["_sim"], args.get("_name")
             if "_faults" in args:               # a new scenario's session faults (server.session_faults)
                 self.fault_specs, self.fault_where = (list(x) for x in args["_faults"])
-            self._install(sim, args.get("_driver"))
-            self.scenario_name = name or self.scenario_name
-            self.run_state = "running"
-            self.message = f"{op}: {self.scenario_name} at t = 0"
+            with self._session_lock:
+                self._install(sim, args.get("_driver"))
+                self.scenario_name = name or self.scenario_name
+                self.run_state = "running"
+                self.message = f"{op}: {self.scenario_name} at t = 0"
             return {"ok": True, "scenario": self.scenario_name, "sim_time": 0.0}
         if op == "inject_fault":
             return self._inject_fault(args)
@@ -676,7 +680,12 @@ class HilLoop:
 
     # -- status ----------------------------------------------------------------------------------------
     def status(self) -> dict:
-        """The status payload (bridge.payloads ``status``); called from the publisher thread."""
+        """The status payload (bridge.payloads ``status``); called from the publisher thread. Read under
+        the session lock: its run state, fault flags and times are those of one session."""
+        with self._session_lock:
+            return self._status()
+
+    def _status(self) -> dict:
         h = self.health
         rec = getattr(self.outbox, "recorder", None) if self.outbox is not None else None
         zen = getattr(self.outbox, "zenoh", None) if self.outbox is not None else None
