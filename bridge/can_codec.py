@@ -493,7 +493,7 @@ def _layout(frames, sigs) -> dict[str, np.ndarray]:
                                    for _, _, s_ in sigs], dtype=np.float64).reshape(-1, 5)}
 
 
-_NOT_REJECTIONS = ("accepted", "lockstep_rejected", "lockstep_ignored")
+_NOT_REJECTIONS = ("accepted", "lockstep_rejected", "lockstep_ignored", "lockstep_repeated")
 
 
 class CommandReceiver:

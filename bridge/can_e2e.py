@@ -57,9 +57,10 @@ FLAG_EXTENDED, FLAG_REMOTE, FLAG_FD = 1, 2, 4
 NOT_CLASSIC = FLAG_EXTENDED | FLAG_REMOTE | FLAG_FD
 # counters
 COUNTER_NAMES = ("unknown_id", "dlc", "crc", "counter", "range", "counter_repeated", "counter_jump", "clamped",
-                 "accepted", "lockstep_rejected", "lockstep_ignored", "sync", "format", "foreign_frames")
+                 "accepted", "lockstep_rejected", "lockstep_ignored", "sync", "format", "foreign_frames",
+                 "lockstep_repeated")
 (C_UNKNOWN, C_DLC, C_CRC, C_COUNTER, C_RANGE, C_REPEATED, C_JUMP, C_CLAMPED, C_ACCEPTED, C_STEP_REJECTED,
- C_STEP_IGNORED, C_SYNC, C_FORMAT, C_FOREIGN) = range(len(COUNTER_NAMES))
+ C_STEP_IGNORED, C_SYNC, C_FORMAT, C_FOREIGN, C_STEP_REPEATED) = range(len(COUNTER_NAMES))
 # globals
 G_T0, G_HOLD_PRESSURE, G_FOREIGN_T = range(3)
 NG = 3

@@ -4,7 +4,10 @@ drivers.eps_demo, drivers.rider_assist_demo). ``ctl`` has a ``decoder`` (bridge.
 (returning False when no commands are due after this sample), ``command_frames()`` (the frames to send
 after a sample), ``summary()``, ``t`` (the last sample's simulated time, s) and optionally ``done`` (True
 when its manoeuvre is over). In lockstep the controller also drives simulated time: a SIM_STEP_REQ of
-``steps`` steps after each acknowledgement."""
+``steps`` steps after each acknowledgement, sent again unchanged while its acknowledgement is overdue
+(``RESEND_FIRST`` s of wall time, doubling up to ``RESEND_MAX`` s): the service acknowledges a repeated
+request again without running it, so a request lost before the service joined the bus costs a wait, not
+the run."""
 from __future__ import annotations
 
 import argparse
@@ -15,6 +18,9 @@ import time
 
 from bridge.bus_wait import Waiting, add_client_arguments, bus_name, positive_seconds, wait_for_bus
 from rtsim.errors import RtsimError
+
+RESEND_FIRST = 0.5      # s of wall time before an unacknowledged SIM_STEP_REQ is sent again
+RESEND_MAX = 8.0        # s: the longest wait between two sends of it (a service compiling for minutes)
 
 
 def run(bus, ctl, duration: float | None = None, lockstep: bool = False,
@@ -41,10 +47,27 @@ def run(bus, ctl, duration: float | None = None, lockstep: bool = False,
             raise _lost(exc) from None
         sent += 1
 
+    resent = 0
+    ack_wait = None         # (frame, wall time of its last send, s to wait before sending it again)
+
     def request_step():
-        nonlocal step_counter
+        nonlocal step_counter, ack_wait
         step_counter = (step_counter + 1) & 0xF
-        send(*ctl.codec.encode_step_request(steps, step_counter))
+        frame = ctl.codec.encode_step_request(steps, step_counter)
+        send(*frame)
+        ack_wait = (frame, time.monotonic(), RESEND_FIRST)
+
+    def resend_if_unanswered():
+        """The outstanding SIM_STEP_REQ again, unchanged (same counter), when its acknowledgement is
+        overdue: a request the service never saw (sent before it joined the bus) would otherwise stall the
+        run; one it did see is acknowledged again and not run twice. The wait doubles up to RESEND_MAX."""
+        nonlocal ack_wait, resent
+        frame, at, wait = ack_wait
+        now = time.monotonic()
+        if now - at >= wait:
+            send(*frame)
+            resent += 1
+            ack_wait = (frame, now, min(2.0 * wait, RESEND_MAX))
 
     end = math.inf if duration is None else duration
     if silent_after is not None:
@@ -62,6 +85,8 @@ def run(bus, ctl, duration: float | None = None, lockstep: bool = False,
             msg = bus.recv(0.1)
         except Exception as exc:  # noqa: BLE001
             raise _lost(exc) from None
+        if lockstep:
+            resend_if_unanswered()
         if msg is None:
             if time.monotonic() - last_rx > (timeout if received else first_frame_timeout):
                 break
@@ -86,6 +111,7 @@ def run(bus, ctl, duration: float | None = None, lockstep: bool = False,
                 last_command_t = ctl.t
     out = ctl.summary()
     out.update({"frames_sent": sent, "frames_received": received, "commands_sent": commands,
+                "step_requests_resent": resent,
                 "last_command_sample_t": last_command_t})
     return out
 

@@ -357,3 +357,96 @@ def test_the_recording_keeps_a_received_frame_s_format():
     from rtsim.service.resim import _flags
 
     assert [_flags(f) for f in (classic, ext, remote, fd)] == [0, FLAG_EXTENDED, FLAG_REMOTE, FLAG_FD | FLAG_EXTENDED]
+
+
+def _acks(loop) -> list[tuple[float, int]]:
+    """(sim_time s, counter) of every SIM_STEP_ACK the loop sent (its log ring)."""
+    from rtsim.service.rings import H_LOG, LOG_TX
+
+    rg, codec = loop.rings, loop.codec
+    cap = rg.log_t.shape[0]
+    out = []
+    for n in range(int(rg.heads[H_LOG])):
+        j = n % cap
+        fid, dlc, direction = (int(v) for v in rg.log_meta[j, :3])
+        if direction == LOG_TX and fid == codec.step_ack.frame_id:
+            out.append(codec.decode_step_ack(bytes(rg.log_data[j, :dlc])))
+    return out
+
+
+def test_a_retransmitted_step_request_is_acknowledged_again_and_never_run_twice(car):
+    """Lockstep: SIM_STEP_REQ (5 steps, counter 3) runs 5 steps and is acknowledged at 5 ms; the same
+    frame again (a retransmission) is acknowledged again at 5 ms, counted as repeated, not rejected, and
+    time stays; counter 4 then runs its 5 steps. Outside lockstep a repeated counter is still rejected."""
+    from rtsim.service.loop import HilLoop
+
+    sim, sc = car()
+    loop = HilLoop(sim, Codec(sim.vm.dbc, sim.vm.channels), mode="lockstep", driver=sc.driver())
+    codec = loop.codec
+    for counter in (3, 3, 3, 4):
+        loop.rx_writer.put(*codec.encode_step_request(5, counter))
+        loop.take_frames()
+    assert loop.k == 10
+    acks = [(round(t / DT), c) for t, c in _acks(loop)]
+    assert acks == [(5, 3), (5, 3), (5, 3), (10, 4)]
+    assert (loop.lockstep_repeated, loop.lockstep_rejected, loop.lockstep_ignored) == (2, 0, 0)
+    assert loop.rx.counters["counter_repeated"] == 0            # not a command frame's rejection
+
+    fast = _loop(car)
+    for counter in (3, 3):
+        fast.rx_writer.put(*codec.encode_step_request(5, counter))
+        fast.take_frames()
+    assert (fast.lockstep_ignored, fast.lockstep_rejected, fast.lockstep_repeated) == (1, 1, 0)
+    assert fast.k == 0 and _acks(fast) == []
+
+
+def test_the_demo_controller_sends_an_unanswered_step_request_again(car):
+    """drivers.bus_controller in lockstep: the first SIM_STEP_REQ is lost (the service not yet on the
+    bus); the controller sends the same frame again (same counter) and, once it is acknowledged, asks
+    for the next step. Waits, without asserting how long, for the resend."""
+    import time
+
+    from drivers.bus_controller import run
+
+    sim, _ = car()
+    codec = Codec(sim.vm.dbc, sim.vm.channels)
+
+    class Ctl:
+        t, done = 0.0, False
+        decoder = type("D", (), {"receive": staticmethod(lambda fid, data: False)})()
+
+        def __init__(self):
+            self.codec = codec
+
+        def summary(self):
+            return {}
+
+    ctl = Ctl()
+
+    class LossyBus:
+        def __init__(self):
+            self.requests, self.replies = [], []
+
+        def send(self, msg):
+            steps, counter = codec.decode_step_request(bytes(msg.data))
+            self.requests.append((steps, counter))
+            if len(self.requests) == 1:
+                return                                  # lost: nobody else on the bus yet
+            if counter == 2:
+                ctl.done = True
+                return
+            self.replies.append(codec.encode_step_ack(0.001, counter))
+
+        def recv(self, timeout):
+            if self.replies:
+                import can
+
+                fid, data = self.replies.pop(0)
+                return can.Message(arbitration_id=fid, data=data, is_extended_id=False)
+            time.sleep(0.01)
+            return None
+
+    bus = LossyBus()
+    out = run(bus, ctl, lockstep=True, first_frame_timeout=120.0)
+    assert bus.requests == [(1, 1), (1, 1), (1, 2)]
+    assert out["step_requests_resent"] == 1

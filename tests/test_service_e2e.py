@@ -371,13 +371,17 @@ def test_fuzz_100k_frames_at_full_rate(segment):
         svc.close()
     assert rc == 0, svc.output
     summary = json.loads(svc.output[svc.output.index("\n{") + 1:])
+    dropped = summary["can"]["rx_dropped"]
     print(f"\nfuzz: sent {sum(expect.values())} bad + {valid} valid; service counted {summary['rejected']}, "
-          f"accepted {summary['accepted_frames']}; loop {summary['health']['step_cpu_p99_s']}")
-    for kind, n in expect.items():
-        assert summary["rejected"][kind] == n, (kind, summary["rejected"])
+          f"accepted {summary['accepted_frames']}, dropped (receive ring full) {dropped}; "
+          f"loop {summary['health']['step_cpu_p99_s']}")
+    # every frame accounted for: counted by kind, or, when the loop thread was starved long enough for
+    # the receive ring to fill (a loaded machine; the hub delivers far above a real bus's rate), counted
+    # as dropped; every valid command taken, but those a late delivery made the service re-synchronise on
+    short = {kind: n - summary["rejected"][kind] for kind, n in expect.items()}
+    short["valid"] = valid - summary["accepted_frames"] - summary["rejected"]["sync"]
+    assert all(v >= 0 for v in short.values()) and sum(short.values()) == dropped, (short, dropped)
     assert summary["rejected"]["counter"] == 0 and summary["rejected"]["range"] == 0
-    # every valid command taken, but those a late delivery made the service re-synchronise on
-    assert summary["accepted_frames"] + summary["rejected"]["sync"] == valid
     # no stall: the sensor stream stayed complete during the fuzz (every sample, stamps exactly 2 ms
     # apart; the capture spans the whole fuzz), and the valid throttle command acted (at the latest once
     # the backlog was through)

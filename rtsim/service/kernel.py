@@ -6,9 +6,10 @@
    ``t = k dt``: logged for the recording, then the E2E checks and counters of the command frames
    (``bridge.can_e2e``: format, DLC, CRC, alive counter and re-synchronisation, range), accepted values
    as command events; a frame with one of the simulator's own ids is another simulator's (counted, the
-   second-simulator fault); a SIM_STEP_REQ is checked (format, CRC, count, repeated counter) and, in
-   lockstep mode, stops the intake and is left in ``LI_PENDING_STEPS`` for the caller, otherwise counted
-   as ignored;
+   second-simulator fault); a SIM_STEP_REQ is checked (format, CRC, count) and, in lockstep mode,
+   stops the intake and is left for the caller (``LI_PENDING_ACK``, its steps in ``LI_PENDING_STEPS``;
+   a request with the counter of the one already run is its retransmission: acknowledged again with 0
+   steps, counted as ``lockstep_repeated``), otherwise counted as ignored (a repeated counter: rejected);
 2. ``nsteps`` times: the in-loop driver (a car whose DBC does not carry the driver's commands, such
    as the EPS car whose controller under test commands only the motor: the scenario's profiles and
    followers, ``drivers.driver.driver_step``; a two-wheeler's rider) writes its commands, the watchdog writes the CAN command
@@ -44,7 +45,7 @@ from typing import NamedTuple
 import numpy as np
 
 from bridge.can_e2e import (C_ACCEPTED, C_COUNTER, C_CRC, C_DLC, C_FOREIGN, C_FORMAT, C_JUMP, C_RANGE,
-                            C_REPEATED, C_STEP_IGNORED, C_STEP_REJECTED, C_SYNC, FLAG_EXTENDED, FLAG_REMOTE,
+                            C_REPEATED, C_STEP_IGNORED, C_STEP_REJECTED, C_STEP_REPEATED, C_SYNC, FLAG_EXTENDED, FLAG_REMOTE,
                             FV_VALUE, G_FOREIGN_T, IV_TIMED_OUT, NOT_CLASSIC, RP_SLOT, SECOND_SIM_HOLD,
                             TIME_EPS, RxPlan, RxState, pack_frames, rx_frame, rx_watchdog, step_request)
 from rtsim.faults.catalog import K_BABBLE, K_FRAME_DELAY
@@ -69,9 +70,11 @@ NPI = 10
 # LoopState.li
 # LI_MODEL_FAULT: the vehicle model's failure status (rtsim.mbs.model ERR_*, 0 = none); SIM_STATUS.fault_model
 # and SIM_DIAG.model_fault_reason report it
+# LI_PENDING_ACK: a lockstep SIM_STEP_REQ was taken and awaits its acknowledgement (LI_PENDING_STEPS steps
+# first: 0 for a retransmission of the request already run)
 (LI_K, LI_MASK, LI_PENDING_STEPS, LI_PENDING_COUNTER, LI_STEP_COUNTER, LI_OVERRUNS, LI_BUS_ERROR,
- LI_SENT, LI_MODEL_FAULT) = range(9)
-NLI = 9
+ LI_SENT, LI_MODEL_FAULT, LI_PENDING_ACK) = range(10)
+NLI = 10
 # the SIM_STATUS then SIM_DIAG values (Codec.status_layout: Codec.status_sources, then DIAG_SOURCES; a last
 # slot stays 0): mode, time, overruns, one time-out flag per command from ST_FAULT0 on, then (ST_*
 # offsets from the first value after the commands' flags) the simulator's flags, the status frame's
@@ -216,15 +219,22 @@ def take_frames(lp, ls, rg):
                 rx.counts[C_FORMAT] += 1
                 continue
             steps, counter = step_request(lp.rx, data, dlc)
-            if steps < 0 or counter == li[LI_STEP_COUNTER]:
+            repeated = counter == li[LI_STEP_COUNTER]
+            if steps < 0 or (repeated and not lp.ints[PI_LOCKSTEP]):
                 rx.counts[C_STEP_REJECTED] += 1        # bad DLC/CRC/count, or a repeated request
                 continue
-            li[LI_STEP_COUNTER] = counter
             if not lp.ints[PI_LOCKSTEP]:
+                li[LI_STEP_COUNTER] = counter
                 rx.counts[C_STEP_IGNORED] += 1
                 continue
-            li[LI_PENDING_STEPS] = steps
+            if repeated:                               # the request already run, sent again: acknowledged
+                rx.counts[C_STEP_REPEATED] += 1        # again, never run twice
+                li[LI_PENDING_STEPS] = 0
+            else:
+                li[LI_STEP_COUNTER] = counter
+                li[LI_PENDING_STEPS] = steps
             li[LI_PENDING_COUNTER] = counter
+            li[LI_PENDING_ACK] = 1
             break
         if lp.faults.n[0] > 0 and fault_in(lp.faults, ls.faults, li[LI_K], fid, (flags & NOT_CLASSIC) == 0, data,
                                            dlc, lp.rx.crc) != 0:

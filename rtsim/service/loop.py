@@ -36,8 +36,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bridge.can_codec import DIAG_SOURCES, Codec, CommandReceiver
-from bridge.can_e2e import (C_STEP_IGNORED, C_STEP_REJECTED, G_FOREIGN_T, IV_HAS_VALUE, IV_TIMED_OUT,
-                            SECOND_SIM_HOLD, TIME_EPS)
+from bridge.can_e2e import (C_STEP_IGNORED, C_STEP_REJECTED, C_STEP_REPEATED, G_FOREIGN_T, IV_HAS_VALUE,
+                            IV_TIMED_OUT, SECOND_SIM_HOLD, TIME_EPS)
 from bridge.payloads import CONTROL_OPS
 from drivers.base import INPUT_NAMES, INPUT_UNITS, LIMITS, NINPUT, NSTATE
 from drivers.driver import Driver
@@ -50,7 +50,7 @@ from rtsim.mbs.model import OK
 from rtsim.model_fault import ModelFault, describe, force_failure, test_fault_step
 from rtsim.realtime.health import LoopHealth
 
-from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_MODEL_FAULT, LI_OVERRUNS, LI_PENDING_COUNTER,
+from .kernel import (LI_BUS_ERROR, LI_K, LI_MASK, LI_MODEL_FAULT, LI_OVERRUNS, LI_PENDING_ACK, LI_PENDING_COUNTER,
                      LI_PENDING_STEPS, LI_STEP_COUNTER, NLI, NO_STEP_COUNTER, NPI, NST_AFTER_FAULTS, PI_ACK_ID,
                      PI_DIAG_ID, PI_DRIVER, PI_LOCKSTEP, PI_MODE_CODE, PI_SENSOR_EVERY, PI_STATE_EVERY,
                      PI_STATUS_EVERY, PI_STATUS_ID, PI_STEP_REQ_ID, ST_BUS_ERROR, ST_FAULT0, ST_RANGE, LoopParams,
@@ -238,7 +238,7 @@ class HilLoop:
         li = self.li
         li[LI_K] = 0
         li[LI_MASK] = -1
-        li[LI_PENDING_STEPS] = 0
+        li[LI_PENDING_STEPS] = li[LI_PENDING_ACK] = 0
         li[LI_MODEL_FAULT] = 0
         self.model_fault = None
         if self.test_fault_at is not None:
@@ -311,6 +311,11 @@ class HilLoop:
     @property
     def lockstep_ignored(self) -> int:
         return int(self.rx.state.counts[C_STEP_IGNORED])
+
+    @property
+    def lockstep_repeated(self) -> int:
+        """Retransmitted SIM_STEP_REQs (the counter of the request already run): acknowledged again."""
+        return int(self.rx.state.counts[C_STEP_REPEATED])
 
     # -- compiled calls --------------------------------------------------------------------------------
     def _call(self, frames: bool, nsteps: int, ack_counter: int = -1) -> bool:
@@ -399,11 +404,12 @@ class HilLoop:
         li = self.li
         while True:
             self._call(True, 0)
-            steps = int(li[LI_PENDING_STEPS])
-            if steps == 0:
+            if li[LI_PENDING_ACK] == 0:
                 return
-            li[LI_PENDING_STEPS] = 0
-            self.advance(steps)
+            steps = int(li[LI_PENDING_STEPS])
+            li[LI_PENDING_STEPS] = li[LI_PENDING_ACK] = 0
+            if steps:
+                self.advance(steps)
             self._call(False, 0, int(li[LI_PENDING_COUNTER]))
             if self.port is not None:
                 self.port.wake()
