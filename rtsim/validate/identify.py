@@ -136,6 +136,12 @@ def axle_partner(channel: str | None) -> str | None:
         side = {"l": "r", "r": "l"}.get(channel[-1])
         return channel[:-1] + side if side else None
     return None
+#: a car's yaw rate and lateral acceleration are tied kinematically (a_y = v r + dv_y/dt, v r in steady
+#: cornering): a car whose own yaw response is larger than the model's (its cornering stiffness, yaw
+#: inertia or load transfer; not in the catalogue) shows the same gain on both, where a sensor's scale shows
+#: on its own channel only. A scale of one is named only when it predicts left-out runs significantly
+#: better than that common gain (kinematic_gain_check)
+KINEMATIC_GAIN = {"gyro_z": "accel_y", "accel_y": "gyro_z"}
 #: a level-frame accelerometer senses a grade as it senses a resistance (a constant longitudinal force while
 #: the car moves: the resistance-offset nuisance), where a body-frame one senses no grade at all: in the level
 #: frame a grade is told from a resistance only where the car stands still
@@ -416,6 +422,8 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
                            f"two wheels' scales are known only relative to each other, and that ratio is named")
     if cand.kind == "sensor" and not cand.confounded:
         cand.confounded = model_free_check(ctx, cand)
+    if cand.kind == "sensor" and not cand.confounded:
+        cand.confounded = kinematic_gain_check(ctx, cand)
     if (cand.effect.name in LEVEL_CONFOUNDED and ctx.replayer.accel_frame == "level" and obj.nuisance is not None
             and _moves_throughout(ctx)):
         cand.confounded = ("in the level frame a grade reads as a constant resistance (the resistance-offset "
@@ -455,6 +463,44 @@ def model_free_check(ctx: Context, cand: Candidate) -> str:
     value = cand.coord.value(cand.theta)
     add_detail(cand, f"model-free check against {rel.says}: {ck.value:.4g} +- {ck.half_width:.2g}")
     return "" if ck.confirms(value) else ck.sentence(value)
+
+
+def kinematic_gain_check(ctx: Context, cand: Candidate) -> str:
+    """Why a scale of gyro_z or accel_y is the car's own yaw response and not the sensor: the alternative
+    that both channels of the kinematic pair (KINEMATIC_GAIN) carry one common gain k (the model's outputs
+    on both times k, k fitted like the candidate: least squares through the nuisance adjustments, re-fitted
+    in each fold; on top of the effects already named, a scale of the other channel included) is
+    cross-validated over the same folds against the same model, and the candidate must
+    predict the left-out runs better than it (crossval.p_better_than, one-sided at ALPHA). Both have one
+    value; where the runs cannot prefer the sensor's own channel, the gain is the car's as likely as the
+    sensor's, and it is not named. "" when it is, or when the check does not apply."""
+    obj = ctx.objective
+    ch = cand.effect.channel
+    other = KINEMATIC_GAIN.get(ch) if cand.effect.name == "sensor_scale" else None
+    if other is None or other not in obj.channels or cand.cv is None:
+        return ""
+    n = obj.mean[obj.channels[0]].size
+    d = np.zeros(n * len(obj.channels))
+    for c in (ch, other):
+        i = obj.channels.index(c)
+        d[i * n:(i + 1) * n] = ctx.outputs[c] / obj.scale[c]
+    J = obj.nuisance.project_direction(d) if obj.nuisance is not None else d
+    jj = float(J @ J)
+    if not jj > 0.0:
+        return ""
+    k = -float(J @ obj.residual(ctx.outputs)) / jj
+    m0 = normalised(obj, ctx.outputs)
+    alt = leave_one_run_out(obj, m0, m0 + k * d, J, ctx.deviations)
+    if alt is None:
+        return ""
+    p = p_better_than(cand.cv, alt)
+    add_detail(cand, f"common gain of {ch} and {other}: {1 + k:.4g}, removes {100 * alt.gain:.0f} % of the "
+                     f"left-out loss; the scale predicts better with p = {p:.2g}")
+    if p < ALPHA:
+        return ""
+    return (f"a common gain of {ch} and {other} ({1 + k:.4g}: the car's own yaw response differing from the "
+            f"model's, which the catalogue does not hold) predicts the left-out runs as well, so the runs cannot "
+            f"say the gain is the sensor's")
 
 
 def add_detail(cand: Candidate, text: str) -> None:
