@@ -136,12 +136,6 @@ def axle_partner(channel: str | None) -> str | None:
         side = {"l": "r", "r": "l"}.get(channel[-1])
         return channel[:-1] + side if side else None
     return None
-#: a car's yaw rate and lateral acceleration are tied kinematically (a_y = v r + dv_y/dt, v r in steady
-#: cornering): a car whose own yaw response is larger than the model's (its cornering stiffness, yaw
-#: inertia or load transfer; not in the catalogue) shows the same gain on both, where a sensor's scale shows
-#: on its own channel only. A scale of one is named only when it predicts left-out runs significantly
-#: better than that common gain (kinematic_gain_check)
-KINEMATIC_GAIN = {"gyro_z": "accel_y", "accel_y": "gyro_z"}
 #: a level-frame accelerometer senses a grade as it senses a resistance (a constant longitudinal force while
 #: the car moves: the resistance-offset nuisance), where a body-frame one senses no grade at all: in the level
 #: frame a grade is told from a resistance only where the car stands still
@@ -466,8 +460,11 @@ def model_free_check(ctx: Context, cand: Candidate) -> str:
 
 
 def kinematic_gain_check(ctx: Context, cand: Candidate) -> str:
-    """Why a scale of gyro_z or accel_y is the car's own yaw response and not the sensor: the alternative
-    that both channels of the kinematic pair (KINEMATIC_GAIN) carry one common gain k (the model's outputs
+    """Why a scale of a channel the vehicle's profile ties kinematically to another (`gain_pairs`; the
+    car's gyro_z and accel_y, a_y = v r in steady cornering) is the vehicle's own response and not the
+    sensor: a car whose yaw response is larger than the model's (its cornering stiffness, yaw inertia or
+    load transfer; not in the catalogue) shows the same gain on both, a sensor's scale on its own channel
+    only. The alternative that both channels of the pair carry one common gain k (the model's outputs
     on both times k, k fitted like the candidate: least squares through the nuisance adjustments, re-fitted
     in each fold; on top of the effects already named, a scale of the other channel included) is
     cross-validated over the same folds against the same model, and the candidate must
@@ -476,7 +473,9 @@ def kinematic_gain_check(ctx: Context, cand: Candidate) -> str:
     sensor's, and it is not named. "" when it is, or when the check does not apply."""
     obj = ctx.objective
     ch = cand.effect.channel
-    other = KINEMATIC_GAIN.get(ch) if cand.effect.name == "sensor_scale" else None
+    pairs = getattr(ctx.replayer.profile, "gain_pairs", ())
+    other = next((b if a == ch else a for a, b in pairs if ch in (a, b)), None) \
+        if cand.effect.name == "sensor_scale" else None
     if other is None or other not in obj.channels or cand.cv is None:
         return ""
     n = obj.mean[obj.channels[0]].size
