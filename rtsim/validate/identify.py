@@ -136,6 +136,8 @@ def axle_partner(channel: str | None) -> str | None:
         side = {"l": "r", "r": "l"}.get(channel[-1])
         return channel[:-1] + side if side else None
     return None
+
+
 #: a level-frame accelerometer senses a grade as it senses a resistance (a constant longitudinal force while
 #: the car moves: the resistance-offset nuisance), where a body-frame one senses no grade at all: in the level
 #: frame a grade is told from a resistance only where the car stands still
