@@ -123,9 +123,11 @@ def straight_line(args) -> int:
 # ------------------------------------------------------------------------------------ field benchmark
 VEHICLE = ROOT / "configs" / "vehicles" / "xbw.toml"
 #: the reduced form run by the test suite: a few seed-30 cases (none, a sensor effect, a model effect,
-#: two at once, one outside the catalogue; drawn from the retired first held-out set, tuning cases now,
-#: so that the tests never run the held-out set) beside the six issue cases
-REDUCED = ("c004", "c005", "c012", "c016", "c019")
+#: two at once, one outside the catalogue, and a none case on the roll simulator with the tanh tyre, whose
+#: own yaw and lateral gains exceed the model's: no gyro_z or accel_y scale may be named; drawn from the
+#: retired first held-out set, tuning cases now, so that the tests never run the held-out set) beside the
+#: six issue cases
+REDUCED = ("c004", "c005", "c012", "c016", "c019", "c043")
 
 
 def select(name: str, limit: int | None = None, ids: list[str] | None = None, reduced: bool = False) -> list[dict]:
