@@ -3,17 +3,16 @@ their physics against analytic references, the seeded split, and a reduced bench
 with truth from the generator only."""
 from __future__ import annotations
 
-import math
-
 import pytest
 
 from rtsim.validate.fieldbench import cases
 
-#: the sets' digests, fixed when the split was drawn (before the method was changed): a change of the
-#: drawing code or of a case shows here
+#: the sets' digests, fixed when each was drawn (the held-out set before the method was changed again): a
+#: change of the drawing code or of a case shows here. The first held-out set (73 of the seed-30 cases,
+#: digest bb2143d3...) was retired after it had been read while diagnosing; it is part of "tuning" now.
 DIGESTS = {
-    "tuning": "f075450ce89f7a0ef76694fd2c61f0af3cf2416f5fd71e2163a065cebb5e02c4",
-    "heldout": "bb2143d30ebf911a1195c318a207183e5c149f28d868872247c80f2e8bf6f5c9",
+    "tuning": "29ddf6634cefc110b197b3f24237cc88ec99da7a345c00da1a1e358be057913a",
+    "heldout": "ad102f6994430f3ac156e8d9b0fdfae70071539d9bd70f246e888b3f30ac2689",
     "issue": "31c1a086c1bdc272a33010ac06bc0f902c902d57a6e5738c34527f53c38c26ad",
 }
 
@@ -23,18 +22,16 @@ def test_split_is_fixed_and_disjoint():
     assert {k: cases.digest(v) for k, v in s.items()} == DIGESTS
     assert cases.sets() == s                                   # deterministic
     tuning, held = {c["id"] for c in s["tuning"]}, {c["id"] for c in s["heldout"]}
-    assert not tuning & held and len(tuning | held) == cases.N_CASES
-    assert len(held) >= 60
-    # stratified: every kind in both sets, the held-out share per kind as declared
-    for kind, _ in cases.KINDS:
-        n_t = sum(c["kind"] == kind for c in s["tuning"])
-        n_h = sum(c["kind"] == kind for c in s["heldout"])
-        assert n_t > 0 and n_h == math.ceil(cases.HELDOUT_SHARE * (n_t + n_h))
+    assert not tuning & held and len(tuning) == cases.N_CASES and len(held) == cases.N_HELDOUT >= 60
+    # the held-out draw is new data, not a relabelling: no case's data seed or hidden set is shared
+    assert not {c["seed"] for c in s["tuning"]} & {c["seed"] for c in s["heldout"]}
+    for kind, _ in cases.KINDS:                                # every kind in both sets
+        assert any(c["kind"] == kind for c in s["tuning"]) and any(c["kind"] == kind for c in s["heldout"])
 
 
 def test_cases_are_well_formed():
     from rtsim.vehicle.car.effects import EFFECTS
-    for c in [*cases.draw(), *cases.ISSUE]:
+    for c in [*cases.draw(), *cases.draw(cases.HELDOUT_SEED, cases.N_HELDOUT, "h"), *cases.ISSUE]:
         fam = cases.family(c["sim"])
         assert c["tyre"] in cases.TYRES
         n = {"none": 0, "one": 1, "two": 2, "outside": 0}[c["kind"]]
@@ -285,16 +282,17 @@ def test_scoring():
 #: the bar check said). A case here is a strict expected failure: when the method is changed and it
 #: passes, the test fails until it is taken off this list.
 EXPECTED_FAILURES: dict[str, str] = {
-    "c016": "a 2.1 % scale of one wheel angle (fl 0.979) beside a gyro_z scale: gyro_z named right (0.8995, "
-            "0.8949 in the model's terms), the wheel's scale split between the axle's two wheels (fl 0.9941 and "
-            "fr 1.018 named): sensor_scale[wheel_angle_fr] named, not hidden",
+    "c016": "a 2.1 % scale of one wheel angle (fl 0.979) beside a gyro_z scale: gyro_z named right (0.8996, "
+            "0.8949 in the model's terms), then the axle's one relative scale taken on the other wheel (fr 1.018: "
+            "with the axle's rolling radius adjusted the two wheels differ only by that radius's prior): "
+            "sensor_scale[wheel_angle_fr] named, not hidden",
 }
 
 
 def _reduced():
     from rtsim.validate.bench import select
     out = []
-    for c in select("heldout", reduced=True):
+    for c in select("tuning", reduced=True):
         marks = [pytest.mark.xfail(strict=True, raises=BarMissed, reason=EXPECTED_FAILURES[c["id"]])] \
             if c["id"] in EXPECTED_FAILURES else []
         out.append(pytest.param(c, id=c["id"], marks=marks))
@@ -313,7 +311,7 @@ def bench():
 
 @pytest.mark.parametrize("case", _reduced())
 def test_reduced_benchmark(bench, tmp_path_factory, case):
-    """The workflow on a benchmark case (a few held-out cases and the issue's six), judged against the
+    """The workflow on a benchmark case (a few tuning cases and the issue's six), judged against the
     generator's truth with fixed tolerances (sensor effects 10 %, model effects 20 % of the value in the
     model's terms; bench_truth, bench_score): nothing named that was not hidden, every effect larger than
     the structural mismatch named."""

@@ -122,9 +122,12 @@ def straight_line(args) -> int:
 
 # ------------------------------------------------------------------------------------ field benchmark
 VEHICLE = ROOT / "configs" / "vehicles" / "xbw.toml"
-#: the reduced form run by the test suite: a few held-out cases (none, a sensor effect, a model effect,
-#: two at once, one outside the catalogue) beside the six issue cases
-REDUCED = ("c004", "c005", "c012", "c016", "c019")
+#: the reduced form run by the test suite: a few seed-30 cases (none, a sensor effect, a model effect,
+#: two at once, one outside the catalogue, and a none case on the roll simulator with the tanh tyre, whose
+#: own yaw and lateral gains exceed the model's: no gyro_z or accel_y scale may be named; drawn from the
+#: retired first held-out set, tuning cases now, so that the tests never run the held-out set) beside the
+#: six issue cases
+REDUCED = ("c004", "c005", "c012", "c016", "c019", "c043")
 
 
 def select(name: str, limit: int | None = None, ids: list[str] | None = None, reduced: bool = False) -> list[dict]:
@@ -356,7 +359,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--set", choices=("heldout", "tuning", "issue"), default="heldout")
     p.add_argument("--limit", type=int, metavar="N", help="the first N cases of the set")
-    p.add_argument("--reduced", action="store_true", help="the reduced form (a few held-out cases and the issue's)")
+    p.add_argument("--reduced", action="store_true", help="the reduced form (a few tuning cases and the issue's)")
     p.add_argument("--cases", metavar="ID,...", help="comma-separated case ids")
     p.add_argument("--workers", type=int, default=2, metavar="N", help="processes the cases run in, side by side")
     p.add_argument("--json", action="store_true", help="print the results as JSON")

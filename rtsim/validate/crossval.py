@@ -89,6 +89,12 @@ def corrected_t(diff: np.ndarray) -> tuple[float, float]:
     return float(student_t.cdf(t, n - 1)), float(student_t.sf(t, n - 1))
 
 
+def p_better_than(a: CrossValidation, b: CrossValidation) -> float:
+    """One-sided p-value of "candidate a predicts the left-out runs no better than candidate b": the same
+    corrected resampled t-test, paired over the same folds (both judged against the same model)."""
+    return corrected_t(a.cand.sum(axis=1) - b.cand.sum(axis=1))[0]
+
+
 def _normalised_runs(obj) -> list[np.ndarray]:
     """Each run's channels normalised like the objective's residuals, concatenated (the mean where a run
     lacks a channel)."""

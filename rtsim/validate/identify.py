@@ -93,7 +93,7 @@ from rtsim.errors import RtsimError
 from rtsim.vehicle.kit.sensor_model import delayed
 
 from .effectset import Effect
-from .crossval import leave_one_run_out, normalised
+from .crossval import ALPHA, leave_one_run_out, normalised, p_better_than
 from .objective import MOVING, Objective, _tau
 from .redundancy import check
 from .stats import parabolic_minimum, t_critical
@@ -125,6 +125,19 @@ TILT_CONFOUNDED = ("sensor_scale", "sensor_delay")
 #: a gain or a lag of the measured roll angle has the signature of the model's roll stiffness and roll
 #: damping, which are not in the catalogue: an inclinometer's scale or delay cannot be told from them
 ROLL_CONFOUNDED = {"roll": ("sensor_scale", "sensor_delay")}
+
+
+def axle_partner(channel: str | None) -> str | None:
+    """The other wheel angle of a wheel angle's axle (wheel_angle_fl -> wheel_angle_fr), else None. With
+    the axle's rolling radius a nuisance adjustment, the scales of an axle's two wheel angles are
+    identified only up to a common factor (the radius): one relative scale per axle, so a second scale
+    on an axle whose other wheel carries one is not identifiable (channel_evidence)."""
+    if channel and channel.startswith("wheel_angle_") and len(channel) == len("wheel_angle_fl"):
+        side = {"l": "r", "r": "l"}.get(channel[-1])
+        return channel[:-1] + side if side else None
+    return None
+
+
 #: a level-frame accelerometer senses a grade as it senses a resistance (a constant longitudinal force while
 #: the car moves: the resistance-offset nuisance), where a body-frame one senses no grade at all: in the level
 #: frame a grade is told from a resistance only where the car stands still
@@ -399,8 +412,14 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         what = cand.effect.name.split("_")[1]
         cand.confounded = (f"a {what} of the {ch} angle cannot be told from the model's roll stiffness and damping, "
                            "which the catalogue does not hold")
+    partner = axle_partner(ch) if cand.effect.name == "sensor_scale" else None
+    if partner and not cand.confounded and any(e.name == "sensor_scale" and e.channel == partner for e in ctx.effects):
+        cand.confounded = (f"{partner} already carries a scale: with the axle's rolling radius adjusted, the "
+                           f"two wheels' scales are known only relative to each other, and that ratio is named")
     if cand.kind == "sensor" and not cand.confounded:
         cand.confounded = model_free_check(ctx, cand)
+    if cand.kind == "sensor" and not cand.confounded:
+        cand.confounded = kinematic_gain_check(ctx, cand)
     if (cand.effect.name in LEVEL_CONFOUNDED and ctx.replayer.accel_frame == "level" and obj.nuisance is not None
             and _moves_throughout(ctx)):
         cand.confounded = ("in the level frame a grade reads as a constant resistance (the resistance-offset "
@@ -440,6 +459,49 @@ def model_free_check(ctx: Context, cand: Candidate) -> str:
     value = cand.coord.value(cand.theta)
     add_detail(cand, f"model-free check against {rel.says}: {ck.value:.4g} +- {ck.half_width:.2g}")
     return "" if ck.confirms(value) else ck.sentence(value)
+
+
+def kinematic_gain_check(ctx: Context, cand: Candidate) -> str:
+    """Why a scale of a channel the vehicle's profile ties kinematically to another (`gain_pairs`; the
+    car's gyro_z and accel_y, a_y = v r in steady cornering) is the vehicle's own response and not the
+    sensor: a car whose yaw response is larger than the model's (its cornering stiffness, yaw inertia or
+    load transfer; not in the catalogue) shows the same gain on both, a sensor's scale on its own channel
+    only. The alternative that both channels of the pair carry one common gain k (the model's outputs
+    on both times k, k fitted like the candidate: least squares through the nuisance adjustments, re-fitted
+    in each fold; on top of the effects already named, a scale of the other channel included) is
+    cross-validated over the same folds against the same model, and the candidate must
+    predict the left-out runs better than it (crossval.p_better_than, one-sided at ALPHA). Both have one
+    value; where the runs cannot prefer the sensor's own channel, the gain is the car's as likely as the
+    sensor's, and it is not named. "" when it is, or when the check does not apply."""
+    obj = ctx.objective
+    ch = cand.effect.channel
+    pairs = getattr(ctx.replayer.profile, "gain_pairs", ())
+    other = next((b if a == ch else a for a, b in pairs if ch in (a, b)), None) \
+        if cand.effect.name == "sensor_scale" else None
+    if other is None or other not in obj.channels or cand.cv is None:
+        return ""
+    n = obj.mean[obj.channels[0]].size
+    d = np.zeros(n * len(obj.channels))
+    for c in (ch, other):
+        i = obj.channels.index(c)
+        d[i * n:(i + 1) * n] = ctx.outputs[c] / obj.scale[c]
+    J = obj.nuisance.project_direction(d) if obj.nuisance is not None else d
+    jj = float(J @ J)
+    if not jj > 0.0:
+        return ""
+    k = -float(J @ obj.residual(ctx.outputs)) / jj
+    m0 = normalised(obj, ctx.outputs)
+    alt = leave_one_run_out(obj, m0, m0 + k * d, J, ctx.deviations)
+    if alt is None:
+        return ""
+    p = p_better_than(cand.cv, alt)
+    add_detail(cand, f"common gain of {ch} and {other}: {1 + k:.4g}, removes {100 * alt.gain:.0f} % of the "
+                     f"left-out loss; the scale predicts better with p = {p:.2g}")
+    if p < ALPHA:
+        return ""
+    return (f"a common gain of {ch} and {other} ({1 + k:.4g}: the car's own yaw response differing from the "
+            f"model's, which the catalogue does not hold) predicts the left-out runs as well, so the runs cannot "
+            f"say the gain is the sensor's")
 
 
 def add_detail(cand: Candidate, text: str) -> None:
@@ -749,6 +811,38 @@ def equivalents(obj: Objective, winner: Candidate, cands: list[Candidate]) -> li
         dist = distance(obj, winner.outputs, c.outputs)
         if dist < TIE_DISTANCE:
             out.append((c, dist))
+    return out
+
+
+def told_apart(ctx: Context, winner: Candidate, cands: list[Candidate], confounded: float) -> list[Candidate]:
+    """The eligible candidates of the winner's kind the data cannot tell from it: substitutes for it (the
+    changes the two make to the outputs, beyond what the nuisance adjustments absorb, correlate by at
+    least `confounded`, the workflow's confounding level) that the cross-validation does not separate
+    from it (the paired fold test, crossval.p_better_than, over the same folds against the same model,
+    does not find the winner's left-out-run predictions better at ALPHA). A rolling resistance and a
+    bearing drag on a straight stop differ only by their dependence on the wheel load; a scale of one
+    wheel angle and the inverse scale of the other wheel on its axle differ only by the axle's rolling
+    radius, which the nuisance adjustment re-fits: the runs then cannot say which one it is."""
+    if winner.cv is None or not winner.outputs:
+        return []
+    obj = ctx.objective
+    m0 = normalised(obj, ctx.outputs)
+
+    def change(c):
+        d = normalised(obj, c.outputs) - m0
+        return obj.nuisance.project_direction(d) if obj.nuisance is not None else d
+
+    dw = change(winner)
+    nw = float(np.linalg.norm(dw))
+    out = []
+    for c in cands:
+        if c is winner or c.kind != winner.kind or not c.eligible or c.cv is None or not c.outputs or nw <= 0.0:
+            continue
+        dc = change(c)
+        nc = float(np.linalg.norm(dc))
+        if nc > 0.0 and abs(float(dw @ dc)) / (nw * nc) >= confounded \
+                and p_better_than(winner.cv, c.cv) >= ALPHA:
+            out.append(c)
     return out
 
 

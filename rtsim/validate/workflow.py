@@ -70,7 +70,7 @@ from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import MIN_RUNS, accel_frame, announce, load_runs, require_runs
 from .effectset import Effect, from_mapping
 from .identify import (CLEAR, DISCREPANCY_Z, LITTLE, MAX_SIMS, Candidate, Context, add_detail, combine_runs, equivalents,
-                       fit_sensor_effects, rank, rebase, run_estimate)
+                       fit_sensor_effects, rank, rebase, run_estimate, told_apart)
 from .crossval import normalised
 from .joint import joint_model
 from .objective import Objective
@@ -430,6 +430,22 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
                 break
             cand.note = ("Its 95 % interval from the runs one by one includes the off value: the runs do not "
                          "agree that it is there.")
+        apart = told_apart(ctx, win, ranked, CONFOUNDED) if win is not None else []
+        if apart:
+            others = " or ".join(c.effect.label() for c in apart)
+            apart_text = (f"{win.effect.label()} and {others} change the outputs alike (beyond the nuisance "
+                          f"adjustments) and neither predicts the left-out runs significantly better: the data "
+                          f"cannot tell which it is, so neither is named")
+            for c in (win, *apart):
+                c.note = "The data cannot tell it from " + (others if c is win else win.effect.label()) + \
+                    ": the two change the outputs alike and predict the left-out runs equally well."
+            win = None
+        if win is None and apart:
+            verdict = (f"after adding {' and '.join(label)}, " if effects else "") + "cannot be told apart: " + apart_text
+            runner = next((c for c in ranked if c.plausible), None)
+            iterations.append(Iteration(k, label, cost, metrics, where, ranked, None, runner, verdict,
+                                        time.perf_counter() - ti))
+            break
         if win is None:
             best = ranked[0] if ranked else None
             why = (f"; the best candidate, {best.effect.label()}, was turned down: "

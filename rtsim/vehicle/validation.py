@@ -48,3 +48,7 @@ class ValidationProfile:
     manoeuvre: str = ""
     #: model-free relations that check a sensor's gain and lag (rtsim.validate.redundancy)
     relations: tuple[Relation, ...] = ()
+    #: pairs of channels tied kinematically, so that a gain of the vehicle's own response (not in the
+    #: catalogue) shows on both alike: a scale of one is named only when it predicts left-out runs better
+    #: than a common gain of the pair (rtsim.validate.identify.kinematic_gain_check)
+    gain_pairs: tuple[tuple[str, str], ...] = ()

@@ -1,5 +1,5 @@
-"""The benchmark's cases: what each simulator drives, what is hidden in it, and the seeded split into a
-tuning set and a held-out set, drawn once (seed `SEED`) before the validation method was changed.
+"""The benchmark's cases: what each simulator drives, what is hidden in it, and the two seeded draws: the
+tuning set (seed `SEED`, 120 cases) and the held-out set (seed `HELDOUT_SEED`, `N_HELDOUT` cases, ids "h000"...).
 
 A case is plain data (JSON-able): the simulator (`sim`: "planar" two-track without roll, "roll" two-track
 with a roll degree of freedom, "pitch" pitch-plane longitudinal), the tyre law (`tyre`: "tanh" friction
@@ -12,9 +12,16 @@ effects outside the catalogue (`outside`: {"name", "value"}; the workflow must t
 Kinds drawn (per case): none 15 %, one catalogue effect 50 %, two at once 20 %, one effect outside the
 catalogue 15 %. Each simulator has the effects its manoeuvre can show (`APPLICABLE`). Values are drawn
 uniformly in the ranges of `RANGES` (either side of neutral where two ranges are given) and rounded to
-3 significant digits. The split is stratified by kind: `HELDOUT_SHARE` of each kind's cases, in a seeded
-permutation, are held out. The method may be tuned on the tuning set only; the held-out set's digest
-(`digest`) is fixed in the tests, so a change of the drawing shows.
+3 significant digits. The method may be tuned on the tuning set only; the sets' digests (`digest`) are fixed
+in the tests, so a change of the drawing shows.
+
+Why two draws. The first draw (seed 30) was split per kind into 47 tuning and 73 held-out cases. The
+held-out part was then read case by case while diagnosing the selection rule's failures (a gyro_z or
+accel_y scale named where the roll simulator's own yaw or lateral gain differs from the model's, a wheel
+angle's scale named on both wheels of its axle, a rolling resistance named as a bearing drag), so it can
+no longer judge a method change aimed at them: it was retired and joined the tuning set (all 120 cases of
+seed 30). The held-out set is a fresh draw of the same generator with its own seed, made and fixed
+before the method was changed again; its kinds are drawn with the same probabilities (`KINDS`).
 
 The fixed set `ISSUE` holds the six cases that failed in issue 30, in the same description.
 """
@@ -22,13 +29,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 
 import numpy as np
 
-SEED = 30                    # the issue's number
+SEED = 30                    # the issue's number: the tuning set
 N_CASES = 120
-HELDOUT_SHARE = 0.6          # of each kind, rounded up: 73 held-out, 47 tuning
+HELDOUT_SEED = 3030          # the held-out set, drawn after the first held-out set was retired
+N_HELDOUT = 64
 KINDS = (("none", 0.15), ("one", 0.50), ("two", 0.20), ("outside", 0.15))
 SIMS = ("planar", "roll", "pitch")
 TYRES = ("tanh", "brush")
@@ -100,8 +107,8 @@ def _manoeuvre(rng: np.random.Generator, sim: str) -> dict:
     return {"torque": _round(rng.uniform(200.0, 300.0)), "brake": _round(rng.uniform(1500.0, 2500.0))}
 
 
-def draw(seed: int = SEED, n: int = N_CASES) -> list[dict]:
-    """All `n` cases, in drawing order, ids "c000"..."""
+def draw(seed: int = SEED, n: int = N_CASES, prefix: str = "c") -> list[dict]:
+    """All `n` cases, in drawing order, ids prefix + "000"... (the prefix only names them)"""
     rng = np.random.default_rng(seed)
     kinds = [k for k, _ in KINDS]
     p = np.array([w for _, w in KINDS])
@@ -110,7 +117,7 @@ def draw(seed: int = SEED, n: int = N_CASES) -> list[dict]:
         kind = kinds[int(rng.choice(len(kinds), p=p))]
         sim = SIMS[int(rng.integers(len(SIMS)))]
         fam = family(sim)
-        case = {"id": f"c{i:03d}", "kind": kind, "sim": sim, "tyre": TYRES[int(rng.integers(len(TYRES)))],
+        case = {"id": f"{prefix}{i:03d}", "kind": kind, "sim": sim, "tyre": TYRES[int(rng.integers(len(TYRES)))],
                 **_manoeuvre(rng, sim), "seed": int(rng.integers(0, 2 ** 31)), "hidden": [], "outside": []}
         if kind in ("one", "two"):
             pool = list(APPLICABLE[fam])
@@ -125,17 +132,6 @@ def draw(seed: int = SEED, n: int = N_CASES) -> list[dict]:
             case["outside"].append({"name": name, "value": _value(rng, OUTSIDE[fam][name])})
         cases.append(case)
     return cases
-
-
-def split(cases: list[dict], seed: int = SEED) -> tuple[list[dict], list[dict]]:
-    """(tuning, held-out): per kind, a seeded permutation; its first ceil(HELDOUT_SHARE k) are held out."""
-    rng = np.random.default_rng(seed + 1)
-    held: set[str] = set()
-    for kind, _ in KINDS:
-        ids = [c["id"] for c in cases if c["kind"] == kind]
-        order = rng.permutation(len(ids))
-        held.update(ids[j] for j in order[:math.ceil(HELDOUT_SHARE * len(ids))])
-    return [c for c in cases if c["id"] not in held], [c for c in cases if c["id"] in held]
 
 
 def _issue() -> list[dict]:
@@ -156,9 +152,8 @@ ISSUE = _issue()
 
 
 def sets() -> dict[str, list[dict]]:
-    """The named case sets: "tuning", "heldout", "issue"."""
-    tuning, heldout = split(draw())
-    return {"tuning": tuning, "heldout": heldout, "issue": ISSUE}
+    """The named case sets: "tuning" (seed 30, all 120), "heldout" (the fresh draw), "issue"."""
+    return {"tuning": draw(), "heldout": draw(HELDOUT_SEED, N_HELDOUT, "h"), "issue": ISSUE}
 
 
 def digest(cases: list[dict]) -> str:

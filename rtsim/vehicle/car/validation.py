@@ -40,7 +40,9 @@ PROFILE = ValidationProfile(
                "steering_wheel_angle": 0.005},
     effects=EFFECTS,
     replayer="rtsim.validate.replay:Replayer",
-    relations=RELATIONS)
+    relations=RELATIONS,
+    # a_y = v r + dv_y/dt (v r in steady cornering): a car that yaws more than the model reads higher on both
+    gain_pairs=(("gyro_z", "accel_y"),))
 
 
 def profile(config) -> ValidationProfile:
