@@ -15,9 +15,6 @@ upos[uptr[j]:uptr[j+1]] lists the positions of those L[j, k], and since rows asc
 the update by column k runs from that position to the column's end. Where those rows are consecutive
 (the dense trailing block a vehicle's tangent ends in), the updates and substitutions index directly
 instead of through rowidx: the same operations in the same order, which the compiler can vectorise.
-The numeric kernel reads each update's position, end and direct offset from one precomputed list (upd,
-three entries per update) instead of deriving them through pcol and colptr: a chain of dependent loads
-per update, about 12 % of a vehicle's factorization.
 """
 from __future__ import annotations
 
@@ -80,23 +77,7 @@ def symbolic(n: int, pairs: np.ndarray, perm: np.ndarray) -> dict:
         uptr[j + 1] = uptr[j] + len(upd[j])
     upos = np.array([p for j in range(n) for p in upd[j]], dtype=np.int64)
     macs = int(sum(colptr[pcol[p] + 1] - p for p in upos))
-    return dict(perm=perm, pinv=pinv, colptr=colptr, rowidx=rowidx, uptr=uptr, upos=upos, pcol=pcol, macs=macs,
-                upd=update_list(colptr, rowidx, upos, pcol))
-
-
-NOT_DIRECT = -(1 << 62)     # upd's offset of an update whose rows are not consecutive
-
-
-def update_list(colptr: np.ndarray, rowidx: np.ndarray, upos: np.ndarray, pcol: np.ndarray) -> np.ndarray:
-    """The numeric kernel's update list: for update u (by the column holding position upos[u]),
-    upd[3u] = that position, upd[3u + 1] = the end of its column, upd[3u + 2] = the offset from a
-    position to its row where the rows from there to the column's end are consecutive, else NOT_DIRECT."""
-    upd = np.empty(3 * upos.size, dtype=np.int64)
-    for u, p0 in enumerate(upos):
-        p1 = colptr[pcol[p0] + 1]
-        off = rowidx[p0] - p0
-        upd[3 * u:3 * u + 3] = p0, p1, off if rowidx[p1 - 1] - p1 + 1 == off else NOT_DIRECT
-    return upd
+    return dict(perm=perm, pinv=pinv, colptr=colptr, rowidx=rowidx, uptr=uptr, upos=upos, pcol=pcol, macs=macs)
 
 
 def position(s: dict, i: int, j: int) -> int:
