@@ -93,14 +93,26 @@ def position(s: dict, i: int, j: int) -> int:
 @kernel
 def cholesky(a, colptr, rowidx, uptr, upos, pcol, out, work):
     """out = L with L L^T = A, both in the factor's pattern (a may alias out), the diagonal stored as
-    1 / L[j, j]; work: length-n scratch. Returns the permuted index of the first non-positive pivot, or -1."""
+    1 / L[j, j]; work: length-n scratch. Returns the permuted index of the first non-positive pivot, or -1.
+
+    Columns before the dense trailing block (the last columns, each full below its diagonal: a car's
+    tangent ends in an 18 x 18 one) are factored left-looking through `work`. The block's columns receive
+    their updates from the sparse columns the same way and are stored unscaled; the block is then factored
+    right-looking in place (after column k is scaled, it updates every later column of the block). Every
+    entry still receives its updates in ascending k, so the result is the same bit for bit; the block's
+    rank-one updates are independent of each other, where the left-looking updates of one column chain
+    through `work`."""
     n = colptr.shape[0] - 1
+    jd = n                      # first column of the dense trailing block
+    while jd > 0 and colptr[jd] - colptr[jd - 1] == n - jd + 1:
+        jd -= 1
     for j in range(n):
         c0 = colptr[j]
         c1 = colptr[j + 1]
         for p in range(c0, c1):
             work[rowidx[p]] = a[p]
-        for u in range(uptr[j], uptr[j + 1]):
+        nd = j - jd if j > jd else 0        # the last nd updates come from the block: done below
+        for u in range(uptr[j], uptr[j + 1] - nd):
             p0 = upos[u]
             ljk = out[p0]
             p1 = colptr[pcol[p0] + 1]
@@ -111,13 +123,33 @@ def cholesky(a, colptr, rowidx, uptr, upos, pcol, out, work):
             else:
                 for p in range(p0, p1):
                     work[rowidx[p]] -= out[p] * ljk
-        s = work[j]
+        if j < jd:
+            s = work[j]
+            if not (s > 0.0):
+                return j
+            inv = 1.0 / np.sqrt(s)
+            out[c0] = inv           # the updates of later columns read only off-diagonal entries
+            for p in range(c0 + 1, c1):
+                out[p] = work[rowidx[p]] * inv
+        else:
+            for p in range(c0, c1):
+                out[p] = work[rowidx[p]]
+    for k in range(jd, n):      # the dense block, right-looking; L[r, k] is at colptr[k] + r - k
+        c0 = colptr[k]
+        c1 = colptr[k + 1]
+        s = out[c0]
         if not (s > 0.0):
-            return j
+            return k
         inv = 1.0 / np.sqrt(s)
-        out[c0] = inv           # the updates of later columns read only off-diagonal entries
+        out[c0] = inv
         for p in range(c0 + 1, c1):
-            out[p] = work[rowidx[p]] * inv
+            out[p] = out[p] * inv
+        bk = c0 - k
+        for j in range(k + 1, n):
+            ljk = out[bk + j]
+            bj = colptr[j] - j
+            for r in range(j, n):
+                out[bj + r] -= out[bk + r] * ljk
     return -1
 
 
