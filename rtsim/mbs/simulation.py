@@ -19,7 +19,7 @@ from .constraints import eval_constraints, eval_drivers, eval_hqd
 from .forces import eval_forces, potential_energy
 from .integrator import advance
 from .model import (
-    ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION, NSLOT, OK,
+    ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION, OK,
     ST_FAIL_INDEX, ST_LAST_RESIDUAL, VELOCITY_KINDS, Data, make_data,
 )
 
