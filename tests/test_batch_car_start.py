@@ -110,3 +110,22 @@ def test_the_kept_linkage_check_answers_as_a_fresh_one():
         assert lc.short_link(cfg.front.suspension, hp) == lc._short_link(cfg.front.suspension, hp)
     assert lc.short_link(cfg.front.suspension, points) is None
     assert lc.short_link(cfg.front.suspension, bad)[0] == "tie_inner"
+
+
+@pytest.mark.parametrize("vehicle", ["xbw.toml", "eps_car.toml", "motorcycle.toml"])
+def test_the_envelope_of_a_mass_matrix_holds_each_entry_of_its_profile(vehicle):
+    """rtsim.mbs.envelope.to_envelope (a build's mass matrix in envelope form, vectorised) against its
+    definition entry by entry: row r of the permuted matrix from its first stored column to the diagonal."""
+    from rtsim.mbs import envelope
+
+    mech = open_vehicle(ROOT / "configs" / "vehicles" / vehicle).model.mech
+    m = mech.model
+    rng = np.random.default_rng(7)
+    for dense in (mech.mass_dense, (lambda a: a + a.T)(rng.standard_normal(mech.mass_dense.shape))):
+        want = np.zeros(m.ptr[-1])
+        for r in range(m.first.size):
+            for c in range(m.first[r], r + 1):
+                want[m.ptr[r] + c - m.first[r]] = dense[m.perm[r], m.perm[c]]
+        got = envelope.to_envelope(dense, m.first, m.ptr, m.perm)
+        assert got.tobytes() == want.tobytes()
+    assert envelope.to_envelope(mech.mass_dense, m.first, m.ptr, m.perm).tobytes() == m.m_env.tobytes()
