@@ -129,3 +129,15 @@ def test_the_envelope_of_a_mass_matrix_holds_each_entry_of_its_profile(vehicle):
         got = envelope.to_envelope(dense, m.first, m.ptr, m.perm)
         assert got.tobytes() == want.tobytes()
     assert envelope.to_envelope(mech.mass_dense, m.first, m.ptr, m.perm).tobytes() == m.m_env.tobytes()
+
+
+def test_two_models_started_in_turn_keep_their_own_starts(model):
+    """A batch pool runs the cars of a plan in any order: each model's start stays kept beside the other's."""
+    other = open_vehicle(ROOT / "configs" / "vehicles" / "xbw.toml").model
+    road = make_plane()
+    car_sim._STARTS.clear()
+    cars = [car_sim.VehicleSim(m, road, 1e-3, **START) for m in (model, other, model, other)]
+    assert len(car_sim._STARTS) == 2
+    _same_bits(cars[0], cars[2])
+    _same_bits(cars[1], cars[3])
+    assert cars[2].vm is model and cars[3].vm is other

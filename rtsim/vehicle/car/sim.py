@@ -58,8 +58,9 @@ FAULT_ARRAYS = ("commands", "brake", "steering", "steering_state")
 A_COMMANDS, A_BRAKE, A_STEERING, A_STEERING_STATE = range(4)
 
 
-#: started cars by the bytes of (dt, brake pressure, position, yaw, speed): (model, road, the car's
-#: attributes just after its start). A batch starts many runs of one model from the same place: made once.
+#: started cars by (model, road, the bytes of dt, brake pressure, position, yaw, speed): (model, road, the
+#: car's attributes just after its start). A batch starts many runs of one model from the same place: made
+#: once (the entry holds its model and road, so their ids in the key stay theirs).
 _STARTS: dict = {}
 
 
@@ -93,14 +94,14 @@ class VehicleSim:
         [effects]; None keeps the config's. The start of the same model on the same road from the same
         place with the config's effects is kept per process and copied (``_STARTS``): every array
         equal bit for bit, none shared but the tyre's parameters (shared as the tyre file's)."""
-        key = np.array([dt, brake_pressure, *position, yaw, speed], dtype=float).tobytes()    # bit for bit
+        key = (id(model), id(road), np.array([dt, brake_pressure, *position, yaw, speed], dtype=float).tobytes())
         kept = _STARTS.get(key) if effects is None else None
         if kept is not None and kept[0] is model and kept[1] is road:
             self.__dict__.update(_copied(kept[2]))
             return
         self._start(model, road, dt, brake_pressure, position, yaw, speed, effects)
         if effects is None:
-            if len(_STARTS) >= 8:
+            if len(_STARTS) >= 16:
                 _STARTS.clear()
             _STARTS[key] = (model, road, _copied(self.__dict__))
 
