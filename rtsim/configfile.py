@@ -194,10 +194,11 @@ class Strict(BaseModel):
     @classmethod
     def _known_keys(cls, data: Any) -> Any:
         if isinstance(data, dict):
+            fields = cls.model_fields        # pydantic builds this mapping at each access: once per table
             for k, v in data.items():
-                if k not in cls.model_fields:
+                if k not in fields:
                     raise PydanticCustomError("unknown_key", "unknown key",
-                                              {"key": k, "value": v, "allowed": ", ".join(cls.model_fields)})
+                                              {"key": k, "value": v, "allowed": ", ".join(fields)})
         return data
 
 
