@@ -141,3 +141,14 @@ def test_two_models_started_in_turn_keep_their_own_starts(model):
     _same_bits(cars[0], cars[2])
     _same_bits(cars[1], cars[3])
     assert cars[2].vm is model and cars[3].vm is other
+
+
+@pytest.mark.parametrize("vehicle, driven, eps", [("xbw.toml", ("rl", "rr"), False), ("eps_car.toml", None, True),
+                                                  ("xbw_fwd.toml", ("fl", "fr"), False)])
+def test_a_kept_channel_dictionary_is_the_cars_own(vehicle, driven, eps):
+    from rtsim.channels import car_channels
+    from rtsim.vehicle.car.build import vehicle_channels
+
+    cfg = open_vehicle(ROOT / "configs" / "vehicles" / vehicle).config
+    driven = driven or (("fl", "fr") if cfg.driven_axle == "front" else ("rl", "rr"))
+    assert vehicle_channels(cfg) == car_channels(driven, eps=eps) and vehicle_channels(cfg) is vehicle_channels(cfg)
