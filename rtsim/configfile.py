@@ -194,10 +194,11 @@ class Strict(BaseModel):
     @classmethod
     def _known_keys(cls, data: Any) -> Any:
         if isinstance(data, dict):
+            fields = cls.model_fields        # pydantic builds this mapping at each access: once per table
             for k, v in data.items():
-                if k not in cls.model_fields:
+                if k not in fields:
                     raise PydanticCustomError("unknown_key", "unknown key",
-                                              {"key": k, "value": v, "allowed": ", ".join(cls.model_fields)})
+                                              {"key": k, "value": v, "allowed": ", ".join(fields)})
         return data
 
 
@@ -452,19 +453,29 @@ def load_toml(path: str | Path) -> dict:
     path = Path(path)
     note_read(path)
     kept = _TABLES.get()
+    resolved = path.resolve()
     if kept is None:
         data = _read_toml(path)
     else:
-        key = path.resolve()
-        if key not in kept:
-            kept[key] = _read_toml(path)
-        data = copy.deepcopy(kept[key])
-    for key, value in _OVERRIDES.get().get(path.resolve(), {}).items():
+        if resolved not in kept:
+            kept[resolved] = _read_toml(path)
+        data = _table_copy(kept[resolved])
+    for key, value in _OVERRIDES.get().get(resolved, {}).items():
         try:
             set_dotted(data, key, value)
         except KeyError as exc:
             raise ConfigError(f"{path}: {exc.args[0]}") from None
     return data
+
+
+def _table_copy(value):
+    """A parsed TOML value copied as deep as it is mutable: its tables and arrays (the rest -- strings,
+    numbers, booleans, dates and times -- is immutable and shared)."""
+    if type(value) is dict:
+        return {k: _table_copy(v) for k, v in value.items()}
+    if type(value) is list:
+        return [_table_copy(v) for v in value]
+    return value
 
 
 def _read_toml(path: Path) -> dict:

@@ -39,15 +39,24 @@ class OpenedVehicles:
         self.reused = 0
         self.roads: dict = {}        # the roads built in this worker (rtsim.road.config.keeping_roads)
         self.tables: dict = {}       # the TOML files parsed in this worker (rtsim.configfile.keeping_tables)
+        self._paths: dict = {}       # vehicle file as given -> its resolved path
+        self._overrides: dict = {}   # a kept vehicle's overrides as keyed (JSON) -> read back (built_like)
 
     def open_run(self, scenario: str | Path, vehicle: str | Path | None, overrides: dict):
         """(scenario, opened vehicle) of a run, as rtsim.batch.inputs.open_run opens them (same loaders,
         same order, same errors), the vehicle a kept one when this worker opened it before."""
         return open_run(scenario, vehicle, overrides, kept=self)
 
-    @staticmethod
-    def _key(vpath: Path, veh_over: dict) -> tuple[str, str]:
-        return str(Path(vpath).resolve()), json.dumps(veh_over, sort_keys=True, default=repr)
+    def _key(self, vpath: Path, veh_over: dict) -> tuple[str, str]:
+        return self._resolved(vpath), json.dumps(veh_over, sort_keys=True, default=repr)
+
+    def _resolved(self, vpath: Path) -> str:
+        """The vehicle file's resolved path, resolved once per worker (a few file-system calls each time;
+        the input files do not move during a batch)."""
+        found = self._paths.get(vpath)
+        if found is None:
+            found = self._paths[vpath] = str(Path(vpath).resolve())
+        return found
 
     def get(self, vpath: Path, veh_over: dict):
         """The kept vehicle of this file and overrides (None: not opened yet, or no longer kept)."""
@@ -62,12 +71,12 @@ class OpenedVehicles:
         """The most recently used kept vehicle of this file whose overrides differ from ``veh_over`` in its
         kind's plain parameters only (a key set in one and not the other counts as differing); None when
         there is none. Counted in ``rebuilt``."""
-        file = str(Path(vpath).resolve())
+        file = self._resolved(vpath)
+        new = json.loads(json.dumps(veh_over, sort_keys=True, default=repr))
         for (kfile, kover), opened in reversed(self.kept.items()):
             if kfile != file:
                 continue
-            over = json.loads(kover)
-            new = json.loads(json.dumps(veh_over, sort_keys=True, default=repr))
+            over = self._overrides[kover]
             changed = {k for k in over.keys() | new.keys() if over.get(k, _MISSING) != new.get(k, _MISSING)}
             if all(opened.kind.plain(k) for k in changed):
                 self.rebuilt += 1
@@ -76,10 +85,15 @@ class OpenedVehicles:
 
     def put(self, vpath: Path, veh_over: dict, opened) -> None:
         """Keep a vehicle just opened and built (the least recently used out beyond ``keep``)."""
-        self.kept[self._key(vpath, veh_over)] = opened
+        key = self._key(vpath, veh_over)
+        self.kept[key] = opened
+        if key[1] not in self._overrides:
+            self._overrides[key[1]] = json.loads(key[1])
         self.built += 1
         while len(self.kept) > self.keep:
-            self.kept.popitem(last=False)
+            (_, gone), _ = self.kept.popitem(last=False)
+            if all(k[1] != gone for k in self.kept):
+                self._overrides.pop(gone, None)
 
 
 _MISSING = object()

@@ -136,9 +136,10 @@ def to_envelope(dense: np.ndarray, first, ptr, perm) -> np.ndarray:
     """Envelope values of a dense symmetric matrix (build time only)."""
     n = first.shape[0]
     env = np.zeros(ptr[n])
-    for r in range(n):
-        for c in range(first[r], r + 1):
-            env[ptr[r] + c - first[r]] = dense[perm[r], perm[c]]
+    width = np.arange(n) - first + 1                       # entries of each row: columns first[r]..r
+    rows = np.repeat(np.arange(n), width)
+    k = np.arange(rows.size) - np.repeat(np.cumsum(width) - width, width)   # position in its row
+    env[ptr[rows] + k] = dense[perm[rows], perm[first[rows] + k]]
     return env
 
 

@@ -19,19 +19,20 @@ from .constraints import eval_constraints, eval_drivers, eval_hqd
 from .forces import eval_forces, potential_energy
 from .integrator import advance
 from .model import (
-    ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION, NSLOT, OK,
+    ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION, OK,
     ST_FAIL_INDEX, ST_LAST_RESIDUAL, VELOCITY_KINDS, Data, make_data,
 )
 
 
 def dense_jacobian(m, d) -> np.ndarray:
     """The constraint Jacobian last evaluated into d.jac, as a dense (nc, nq) array."""
-    jac = np.zeros((m.nc, m.nq))
-    for s in range(NSLOT):
-        cols = m.con_idx[:, s]
-        ok = cols >= 0
-        np.add.at(jac, (np.nonzero(ok)[0], cols[ok]), d.jac[ok, s])
-    return jac
+    # each (row, column) cell is the sum of its slots' coefficients in slot order, from 0.0: bincount adds
+    # its weights in input order, and the input is slot-major (slot 0's rows, then slot 1's, ...)
+    cols = m.con_idx.T
+    ok = cols >= 0
+    rows = np.broadcast_to(np.arange(m.nc)[None, :], cols.shape)[ok]
+    flat = rows * m.nq + cols[ok]
+    return np.bincount(flat, weights=d.jac.T[ok], minlength=m.nc * m.nq).reshape(m.nc, m.nq)
 
 
 @dataclass
@@ -96,8 +97,13 @@ class Simulation:
 
     @property
     def velocity_rows(self) -> np.ndarray:
-        """Mask of the constraint rows stated on velocities (rolling without slip)."""
-        return np.isin(self.model.con_kind, VELOCITY_KINDS)
+        """Mask of the constraint rows stated on velocities (rolling without slip); computed once per
+        simulation (the model's constraint kinds do not change), read-only."""
+        rows = self.__dict__.get("_velocity_rows")
+        if rows is None:
+            rows = self._velocity_rows = np.isin(self.model.con_kind, VELOCITY_KINDS)
+            rows.flags.writeable = False
+        return rows
 
     def _position_rows(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         phi, jac = self.constraint_jacobian(q)

@@ -305,9 +305,17 @@ def _spring_damper_tables(sp, length0: float, f_static: float) -> tuple[np.ndarr
 
 def vehicle_channels(cfg: VehicleConfig) -> ChannelDictionary:
     """The car's channel dictionary: its drive-torque sensors on the driven axle's wheels; a car with
-    electric power steering has the EPS's sensors and its controller's command."""
-    return car_channels(tuple(WHEELS[i] for i in (FRONT_AXLE if cfg.driven_axle == "front" else REAR_AXLE)),
-                        eps=cfg.eps is not None)
+    electric power steering has the EPS's sensors and its controller's command. One (immutable) dictionary
+    per driven axle and steering kind in a process."""
+    key = (cfg.driven_axle == "front", cfg.eps is not None)
+    found = _CHANNELS.get(key)
+    if found is None:
+        found = _CHANNELS[key] = car_channels(tuple(WHEELS[i] for i in (FRONT_AXLE if key[0] else REAR_AXLE)),
+                                              eps=key[1])
+    return found
+
+
+_CHANNELS: dict = {}
 
 
 def _basis(exps: np.ndarray, z: float, s: float) -> np.ndarray:

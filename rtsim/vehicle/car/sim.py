@@ -58,6 +58,30 @@ FAULT_ARRAYS = ("commands", "brake", "steering", "steering_state")
 A_COMMANDS, A_BRAKE, A_STEERING, A_STEERING_STATE = range(4)
 
 
+#: started cars by (model, road, the bytes of dt, brake pressure, position, yaw, speed): (model, road, the
+#: car's attributes just after its start). A batch starts many runs of one model from the same place: made
+#: once (the entry holds its model and road, so their ids in the key stay theirs).
+_STARTS: dict = {}
+
+
+def _copied(attrs: dict) -> dict:
+    """A car's attributes with its state copied: every array of its named tuples (the tyre's parameters
+    excepted: the tyre file's, read only) and of its simulation's data; configs, model and road shared."""
+    out = dict(attrs)
+    parts = attrs["parts"]
+    out["parts"] = parts._replace(**{f: getattr(parts, f).copy() for f in parts._fields if f != "tyre"})
+    for name in ("states", "vd", "io"):
+        t = attrs[name]
+        out[name] = type(t)(*(a.copy() for a in t))
+    out["_effects"] = {k: ([dict(r) for r in v] if isinstance(v, list) else dict(v)) for k, v in attrs["_effects"].items()}
+    sim = object.__new__(type(attrs["sim"]))
+    sim.__dict__.update(attrs["sim"].__dict__)
+    sim.data = type(sim.data)(*(a.copy() for a in sim.data))
+    out["sim"] = sim
+    out["data"] = sim.data
+    return out
+
+
 class VehicleSim:
     """The vehicle model, its multibody state and the subsystem states, at fixed step dt (s)."""
 
@@ -67,7 +91,22 @@ class VehicleSim:
         powertrain in steady motion with it (D, closed throttle: the schedule's gear, the engine where the
         converter holds it; rtsim.vehicle.kit.powertrain.powertrain_state_rolling), so a start at speed has
         no transient. effects: a mapping of rtsim.vehicle.car.effects (validated) that replaces the config's
-        [effects]; None keeps the config's."""
+        [effects]; None keeps the config's. The start of the same model on the same road from the same
+        place with the config's effects is kept per process and copied (``_STARTS``): every array
+        equal bit for bit, none shared but the tyre's parameters (shared as the tyre file's)."""
+        key = (id(model), id(road), np.array([dt, brake_pressure, *position, yaw, speed], dtype=float).tobytes())
+        kept = _STARTS.get(key) if effects is None else None
+        if kept is not None and kept[0] is model and kept[1] is road:
+            self.__dict__.update(_copied(kept[2]))
+            return
+        self._start(model, road, dt, brake_pressure, position, yaw, speed, effects)
+        if effects is None:
+            if len(_STARTS) >= 16:
+                _STARTS.clear()
+            _STARTS[key] = (model, road, _copied(self.__dict__))
+
+    def _start(self, model: VehicleModel, road: Road, dt: float, brake_pressure: float, position, yaw: float,
+               speed: float, effects) -> None:
         self.vm = model
         self.road = road
         self.dt = float(dt)

@@ -62,9 +62,22 @@ def _distance(p: np.ndarray, ref: list[np.ndarray]) -> float:
     return float(np.linalg.norm(np.cross(p - ref[0], axis / n)))
 
 
+_SHORT: dict = {}            # short_link's results by suspension and hardpoints (this process's)
+
+
 def short_link(suspension: str, hardpoints: dict) -> tuple[str, tuple, str] | None:
     """(key, value, reason) of the first link shorter than MIN_LINK_M among `hardpoints` (name -> (x, y, z)
-    or None), else None."""
+    or None), else None. Kept per process for the same suspension and points (validating a vehicle file
+    asks it at every load: a batch's plain overrides load one linkage many times)."""
+    key = (suspension, *((k, None if v is None else tuple(float(x) for x in v)) for k, v in sorted(hardpoints.items())))
+    if key not in _SHORT:
+        if len(_SHORT) >= 256:
+            _SHORT.clear()
+        _SHORT[key] = _short_link(suspension, hardpoints)
+    return _SHORT[key]
+
+
+def _short_link(suspension: str, hardpoints: dict) -> tuple[str, tuple, str] | None:
     for key, refs, what in _LINKS[suspension]:
         if hardpoints.get(key) is None or any(hardpoints.get(r) is None for r in refs):
             continue
