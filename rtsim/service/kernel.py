@@ -45,8 +45,8 @@ from typing import NamedTuple
 import numpy as np
 
 from bridge.can_e2e import (C_ACCEPTED, C_COUNTER, C_CRC, C_DLC, C_FOREIGN, C_FORMAT, C_JUMP, C_RANGE,
-                            C_REPEATED, C_STEP_IGNORED, C_STEP_REJECTED, C_STEP_REPEATED, C_SYNC, FLAG_EXTENDED, FLAG_REMOTE,
-                            FV_VALUE, G_FOREIGN_T, IV_TIMED_OUT, NOT_CLASSIC, RP_SLOT, SECOND_SIM_HOLD,
+                            C_REPEATED, C_STEP_IGNORED, C_STEP_REJECTED, C_STEP_REPEATED, C_SYNC, FLAG_EXTENDED,
+                            FLAG_REMOTE, FV_VALUE, G_FOREIGN_T, IV_TIMED_OUT, NOT_CLASSIC, RP_SLOT, SECOND_SIM_HOLD,
                             TIME_EPS, RxPlan, RxState, pack_frames, rx_frame, rx_watchdog, step_request)
 from rtsim.faults.catalog import K_BABBLE, K_FRAME_DELAY
 from rtsim.faults.kernels import (DIR_IN, DIR_OUT, FI_DIR, FI_KIND, FI_PAYLOAD, FI_TARGET, G_BUS_OFF, SRC_SENSOR,

@@ -441,7 +441,8 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
                     ": the two change the outputs alike and predict the left-out runs equally well."
             win = None
         if win is None and apart:
-            verdict = (f"after adding {' and '.join(label)}, " if effects else "") + "cannot be told apart: " + apart_text
+            verdict = ((f"after adding {' and '.join(label)}, " if effects else "")
+                       + "cannot be told apart: " + apart_text)
             runner = next((c for c in ranked if c.plausible), None)
             iterations.append(Iteration(k, label, cost, metrics, where, ranked, None, runner, verdict,
                                         time.perf_counter() - ti))

@@ -73,7 +73,8 @@ def _copied(attrs: dict) -> dict:
     for name in ("states", "vd", "io"):
         t = attrs[name]
         out[name] = type(t)(*(a.copy() for a in t))
-    out["_effects"] = {k: ([dict(r) for r in v] if isinstance(v, list) else dict(v)) for k, v in attrs["_effects"].items()}
+    out["_effects"] = {k: ([dict(r) for r in v] if isinstance(v, list) else dict(v))
+                       for k, v in attrs["_effects"].items()}
     sim = object.__new__(type(attrs["sim"]))
     sim.__dict__.update(attrs["sim"].__dict__)
     sim.data = type(sim.data)(*(a.copy() for a in sim.data))
