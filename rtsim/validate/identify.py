@@ -127,15 +127,13 @@ TILT_CONFOUNDED = ("sensor_scale", "sensor_delay")
 ROLL_CONFOUNDED = {"roll": ("sensor_scale", "sensor_delay")}
 
 
-def axle_partner(channel: str | None) -> str | None:
-    """The other wheel angle of a wheel angle's axle (wheel_angle_fl -> wheel_angle_fr), else None. With
-    the axle's rolling radius a nuisance adjustment, the scales of an axle's two wheel angles are
-    identified only up to a common factor (the radius): one relative scale per axle, so a second scale
-    on an axle whose other wheel carries one is not identifiable (channel_evidence)."""
-    if channel and channel.startswith("wheel_angle_") and len(channel) == len("wheel_angle_fl"):
-        side = {"l": "r", "r": "l"}.get(channel[-1])
-        return channel[:-1] + side if side else None
-    return None
+def ratio_partner(profile, channel: str | None) -> str | None:
+    """The channel whose scale the vehicle's profile declares identified only relative to ``channel``'s
+    (``ratio_pairs``: a car's other wheel angle on the same axle, the axle's rolling radius a nuisance
+    adjustment), else None: one relative scale per pair, so a second scale on a pair whose other channel
+    carries one is not identifiable (channel_evidence)."""
+    pairs = getattr(profile, "ratio_pairs", ())
+    return next((b if a == channel else a for a, b in pairs if channel in (a, b)), None)
 
 
 #: a level-frame accelerometer senses a grade as it senses a resistance (a constant longitudinal force while
@@ -412,8 +410,9 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         what = cand.effect.name.split("_")[1]
         cand.confounded = (f"a {what} of the {ch} angle cannot be told from the model's roll stiffness and damping, "
                            "which the catalogue does not hold")
-    partner = axle_partner(ch) if cand.effect.name == "sensor_scale" else None
-    if partner and not cand.confounded and any(e.name == "sensor_scale" and e.channel == partner for e in ctx.effects):
+    partner = ratio_partner(ctx.replayer.profile, ch) if cand.effect.name == "sensor_scale" else None
+    if partner and not cand.confounded and any(e.name == "sensor_scale" and e.channel == partner
+                                               for e in ctx.effects):
         cand.confounded = (f"{partner} already carries a scale: with the axle's rolling radius adjusted, the "
                            f"two wheels' scales are known only relative to each other, and that ratio is named")
     if cand.kind == "sensor" and not cand.confounded:

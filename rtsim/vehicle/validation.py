@@ -52,3 +52,7 @@ class ValidationProfile:
     #: catalogue) shows on both alike: a scale of one is named only when it predicts left-out runs better
     #: than a common gain of the pair (rtsim.validate.identify.kinematic_gain_check)
     gain_pairs: tuple[tuple[str, str], ...] = ()
+    #: pairs of channels whose scales are identified only relative to each other (a car's two wheel angles
+    #: on an axle, whose rolling radius the nuisance adjustments re-fit): a scale of one is not a candidate
+    #: once the other carries one (rtsim.validate.identify.ratio_partner)
+    ratio_pairs: tuple[tuple[str, str], ...] = ()

@@ -42,7 +42,9 @@ PROFILE = ValidationProfile(
     replayer="rtsim.validate.replay:Replayer",
     relations=RELATIONS,
     # a_y = v r + dv_y/dt (v r in steady cornering): a car that yaws more than the model reads higher on both
-    gain_pairs=(("gyro_z", "accel_y"),))
+    gain_pairs=(("gyro_z", "accel_y"),),
+    # an axle's two wheel angles: the axle's rolling radius (a nuisance adjustment) scales both alike
+    ratio_pairs=(("wheel_angle_fl", "wheel_angle_fr"), ("wheel_angle_rl", "wheel_angle_rr")))
 
 
 def profile(config) -> ValidationProfile:
