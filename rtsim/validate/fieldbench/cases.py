@@ -1,5 +1,6 @@
-"""The benchmark's cases: what each simulator drives, what is hidden in it, and the two seeded draws: the
-tuning set (seed `SEED`, 120 cases) and the held-out set (seed `HELDOUT_SEED`, `N_HELDOUT` cases, ids "h000"...).
+"""The benchmark's cases: what each simulator drives, what is hidden in it, and the seeded draws: the
+tuning set (seed `SEED`, 120 cases "c000"..., and the retired held-out draw of seed `RETIRED_SEEDS`, 64 cases
+"h000"...) and the held-out set (seed `HELDOUT_SEED`, `N_HELDOUT` cases, ids `HELDOUT_PREFIX` + "000"...).
 
 A case is plain data (JSON-able): the simulator (`sim`: "planar" two-track without roll, "roll" two-track
 with a roll degree of freedom, "pitch" pitch-plane longitudinal), the tyre law (`tyre`: "tanh" friction
@@ -21,7 +22,9 @@ accel_y scale named where the roll simulator's own yaw or lateral gain differs f
 angle's scale named on both wheels of its axle, a rolling resistance named as a bearing drag), so it can
 no longer judge a method change aimed at them: it was retired and joined the tuning set (all 120 cases of
 seed 30). The held-out set is a fresh draw of the same generator with its own seed, made and fixed
-before the method was changed again; its kinds are drawn with the same probabilities (`KINDS`).
+before the method was changed again; its kinds are drawn with the same probabilities (`KINDS`). The second
+draw (seed 3030, "h000"...) judged one method change, once; its misses were then read, so it was retired
+into the tuning set in turn, and the third draw (seed 3031, "k000"...) was fixed before the next change.
 
 The fixed set `ISSUE` holds the six cases that failed in issue 30, in the same description.
 """
@@ -34,8 +37,11 @@ import numpy as np
 
 SEED = 30                    # the issue's number: the tuning set
 N_CASES = 120
-HELDOUT_SEED = 3030          # the held-out set, drawn after the first held-out set was retired
+#: retired held-out draws, now tuning cases: seed -> (number of cases, id prefix)
+RETIRED_SEEDS = {3030: (64, "h")}
+HELDOUT_SEED = 3031          # the held-out set, drawn after the second held-out set was retired
 N_HELDOUT = 64
+HELDOUT_PREFIX = "k"
 KINDS = (("none", 0.15), ("one", 0.50), ("two", 0.20), ("outside", 0.15))
 SIMS = ("planar", "roll", "pitch")
 TYRES = ("tanh", "brush")
@@ -152,8 +158,9 @@ ISSUE = _issue()
 
 
 def sets() -> dict[str, list[dict]]:
-    """The named case sets: "tuning" (seed 30, all 120), "heldout" (the fresh draw), "issue"."""
-    return {"tuning": draw(), "heldout": draw(HELDOUT_SEED, N_HELDOUT, "h"), "issue": ISSUE}
+    """The named case sets: "tuning" (seed 30 and the retired draws), "heldout" (the fresh draw), "issue"."""
+    tuning = draw() + [c for seed, (n, prefix) in RETIRED_SEEDS.items() for c in draw(seed, n, prefix)]
+    return {"tuning": tuning, "heldout": draw(HELDOUT_SEED, N_HELDOUT, HELDOUT_PREFIX), "issue": ISSUE}
 
 
 def digest(cases: list[dict]) -> str:
