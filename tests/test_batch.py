@@ -23,7 +23,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PLAN = ROOT / "configs" / "batch" / "smoke.toml"
-VOLATILE = ("wall_s", "step_s", "outside_s", "outside_pct", "worker")
+VOLATILE = ("wall_s", "step_s", "outside_s", "outside_pct", "between_s", "worker")
 # token authentication on, the token in the environment of this cluster's processes only (nothing
 # written to ~/.ray)
 ENV = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", "PYTHONPATH": str(ROOT), "RAY_AUTH_MODE": "token",

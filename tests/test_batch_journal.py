@@ -136,8 +136,8 @@ def test_runs_that_differ_only_by_a_seed_they_do_not_draw_are_simulated_once(tmp
     (tmp_path / "runs" / "a0.csv").write_text("time\n0\n")
     copy = copy_row(row, specs[1], {"per_run": "csv", "out_dir": str(tmp_path)})
     assert math.isnan(copy.pop("outside_pct"))           # no wall time of its own: no share
-    assert copy == {**row, "run_id": "a1", "seed": 1, "wall_s": 0.0, "step_s": 0.0, "outside_s": 0.0, "worker": "",
-                    "copy_of": "a0"}
+    assert copy == {**row, "run_id": "a1", "seed": 1, "wall_s": 0.0, "step_s": 0.0, "outside_s": 0.0,
+                    "between_s": 0.0, "worker": "", "copy_of": "a0"}
     assert (tmp_path / "runs" / "a1.csv").read_text() == "time\n0\n"
 
 

@@ -85,6 +85,86 @@ def test_a_plain_parameter_builds_on_the_kept_model_bit_for_bit(worker, vehicle,
         assert getattr(new.model.mech.model, f) is getattr(kept.model.mech.model, f)
 
 
+#: keys the car applies in place (rtsim.vehicle.car.plain, IN_PLACE), a value of each for each car (the
+#: EPS car's springs and dampers are tables; compliance steer needs the EPS car's pivots)
+_BOTH = {"chassis.mass_kg": 1250.0, "chassis.inertia_kgm2": [330.0, 1000.0, 1300.0], "chassis.ixz_kgm2": 60.0,
+         "front.anti_roll_bar_n_per_m": 9000.0, "rear.travel_stop_stiffness_n_per_m": 3e5,
+         "front.travel_stop_margin_m": 0.01, "rear.anti_pitch_arm_m": 2.5, "front.anti_roll_arm_m": 3.0,
+         "aero.drag_area_m2": 0.6, "aero.air_density_kg_m3": 1.1, "brakes.proportioning_knee": 2000.0,
+         "powertrain.gearbox.final_drive": 4.1, "sensors.channels.gyro_z.noise_std": 0.01}
+IN_PLACE_CASES = [
+    *[("xbw.toml", k, v) for k, v in {
+        **_BOTH, "front.spring.stiffness_n_per_m": 30000.0, "rear.spring.free_length_m": 0.45,
+        "front.spring.bump_stop_clearance_m": 0.04, "rear.spring.bump_stop_stiffness_n_per_m": 3e5,
+        "rear.spring.damping_rebound_ns_per_m": 3300.0, "front.spring.damping_bump_ns_per_m": 2000.0}.items()],
+    *[("eps_car.toml", k, v) for k, v in {
+        **_BOTH, "front.compliance_steer_rad_per_n": 2e-6, "front.compliance_steer_rad_per_nm": 1e-5,
+        "front.spring.spring_table": {"x": [-0.1, 0.0, 0.05, 0.1], "force_n": [-5000.0, 0.0, 1500.0, 9000.0]},
+        "rear.spring.damper_table": {"x": [-1.0, 0.0, 1.0], "force_n": [-1200.0, 0.0, 700.0]}}.items()],
+]
+
+
+def test_every_key_applied_in_place_is_tested():
+    from fnmatch import fnmatchcase
+
+    from rtsim.vehicle.car.plain import IN_PLACE, PLAIN, in_place
+
+    declared = [p for p, (how, _) in PLAIN.items() if how == IN_PLACE]
+    keys = [k for _, k, _ in IN_PLACE_CASES]
+    assert declared and all(any(fnmatchcase(k, p) for k in keys) for p in declared)
+    assert in_place(keys) and not in_place(["front.unsprung_mass_kg"]) and not in_place(["eps.driver_input"])
+    assert not in_place(["chassis.mass_kg", "steering.rack_travel"])
+
+
+def _snapshot(model) -> dict:
+    """Every array of a car's model (the mechanism's, the vehicle's, the loads), as bytes."""
+    out = {f"mech.{f}": getattr(model.mech.model, f).tobytes() for f in model.mech.model._fields
+           if isinstance(getattr(model.mech.model, f), np.ndarray)}
+    out.update({f"vehicle.{f}": getattr(model.vehicle, f).tobytes() for f in model.vehicle._fields})
+    out.update(mass_dense=model.mech.mass_dense.tobytes(), static_loads=model.static_loads.tobytes(),
+               q0=model.mech.q0.tobytes())
+    return out
+
+
+@pytest.mark.parametrize("vehicle, key, value", IN_PLACE_CASES)
+def test_a_key_applied_in_place_gives_the_fresh_build_bit_for_bit(worker, vehicle, key, value):
+    """The kept model with copies of the arrays the key reaches: every array equal to a fresh build's
+    with the override, bit for bit; the kept model's arrays untouched; the rest shared with it."""
+    from rtsim.configfile import overrides as with_overrides
+    from rtsim.vehicle.registry import open_vehicle
+
+    path = ROOT / "configs" / "vehicles" / vehicle
+    _, kept = worker.open_run(SCENARIO, path, SHORT)
+    before = _snapshot(kept.model)
+    _, new = worker.open_run(SCENARIO, path, {**SHORT, f"vehicle.{key}": value})
+    assert worker.built == 2 and worker.rebuilt == 1
+    with with_overrides({path.resolve(): {key: value}}):
+        alone = open_vehicle(path).model                          # built from scratch
+    assert _snapshot(new.model) == _snapshot(alone)
+    assert new.model.config == alone.config
+    assert _snapshot(kept.model) == before                       # applying copied, never wrote the kept arrays
+    # applied in place: the corner fits, the constraints and the symbolic analysis are the kept model's
+    assert new.model.corners is kept.model.corners
+    assert new.model.vehicle.corner_idx is kept.model.vehicle.corner_idx
+    for f in (*SYMBOLIC, "con_idx", "con_par", "poly_coef"):
+        assert getattr(new.model.mech.model, f) is getattr(kept.model.mech.model, f)
+    if key.startswith("chassis."):                               # the mass matrix is the key's, the kept one's not
+        assert new.model.mech.mass_dense.tobytes() != before["mass_dense"]
+
+
+def test_a_mass_applied_in_place_runs_as_the_fresh_build(worker):
+    """A run on the model with the chassis mass applied in place: the fresh build's row, bit for bit (its
+    start on the road, the static equilibrium of the new mass, made for that model)."""
+    spec = _spec("xbw.toml", {"chassis.mass_kg": 1100.0})
+    run.run_one(_spec("xbw.toml", {}), JOB)
+    patched = run.run_one(spec, JOB)
+    again = run.run_one(spec, JOB)                                # the kept start of that model
+    assert worker.rebuilt == 1 and worker.reused == 1
+    fresh = run.run_one(spec, {**JOB, "build_once": False})
+    assert patched["status"] == "ok", patched["error"]
+    assert _bits(patched) == _bits(fresh) == _bits(again)
+
+
 def test_a_topology_change_builds_from_scratch(worker):
     _, a = worker.open_run(SCENARIO, ROOT / "configs" / "vehicles" / "eps_car.toml", SHORT)
     # the driver's torque instead of the steering-wheel angle: no driver constraint row (not plain)

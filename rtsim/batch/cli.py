@@ -83,13 +83,15 @@ def copy_row(row: dict, spec: dict, job: dict) -> dict:
         if src.is_file():
             shutil.copyfile(src, folder / f"{spec['run_id']}.{job['per_run']}")
     return {**row, "run_id": spec["run_id"], "seed": spec["seed"], "wall_s": 0.0, "step_s": 0.0, "outside_s": 0.0,
-            "outside_pct": float("nan"), "worker": "",
+            "outside_pct": float("nan"), "between_s": 0.0, "worker": "",
             "copy_of": row["run_id"]}
 
 
 def timing_summary(rows: list[dict]) -> str:
     """Where the simulated runs' wall time went (rows of runs simulated now, copies left out): the time
-    in the model's steps and outside them in all, and the median and largest share outside per run."""
+    in the model's steps and outside them in all, the median and largest share outside per run; then the
+    time the workers spent between runs (``between_s``: in no run's wall time), in all and per run, and
+    the per-run share outside the steps with each run's time before it counted in (median, max)."""
     import math
     import statistics
 
@@ -100,9 +102,17 @@ def timing_summary(rows: list[dict]) -> str:
     wall = sum(r["wall_s"] for r in runs)
     step = sum(r["step_s"] for r in runs)
     pct = [r["outside_pct"] for r in runs]
-    return (f"; time in the model's steps {step:.2f} s, outside them {wall - step:.2f} s "
-            f"({100.0 * (wall - step) / wall:.1f} % of {wall:.2f} s; per run median {statistics.median(pct):.1f} %, "
-            f"max {max(pct):.1f} %)")
+    out = (f"; time in the model's steps {step:.2f} s, outside them {wall - step:.2f} s "
+           f"({100.0 * (wall - step) / wall:.1f} % of {wall:.2f} s; per run median {statistics.median(pct):.1f} %, "
+           f"max {max(pct):.1f} %)")
+    gaps = [r for r in runs if math.isfinite(r.get("between_s", math.nan))]
+    if not gaps:
+        return out
+    between = [r["between_s"] for r in gaps]
+    with_gap = [100.0 * (r["outside_s"] + r["between_s"]) / (r["wall_s"] + r["between_s"]) for r in gaps]
+    return (out + f"; between runs {sum(between):.2f} s (per run median {1e3 * statistics.median(between):.1f} ms, "
+            f"max {1e3 * max(between):.1f} ms; outside the steps with it: per run median "
+            f"{statistics.median(with_gap):.1f} %, max {max(with_gap):.1f} %)")
 
 
 def main(args) -> int:

@@ -24,7 +24,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Callable
 
-from .run import lost_row, run_one, warm
+from .run import lost_row, mark_ready, run_one, warm
 
 def die_with_parent(parent: int) -> None:
     """End this process when its parent (pid `parent`) ends, however it ends (SIGKILL included): on
@@ -71,6 +71,7 @@ def _init(warm_specs: list[dict], job: dict, turn=None, lock_dir: str | None = N
     # (about 0.1 s measured: a run's share outside its steps jumped to 60-70 %)
     gc.collect()
     gc.freeze()
+    mark_ready()
 
 
 def _warm_all(warm_specs: list[dict], job: dict, turn, lock_dir: str | None) -> None:

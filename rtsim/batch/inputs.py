@@ -59,9 +59,9 @@ def open_run(scenario: str | Path, vehicle: str | Path | None, overrides: dict, 
         opened.refuse("batch")
         opened.check_scenario(sc)
         if build:
-            built = None if kept is None else kept.built_like(vpath, veh_over)
-            if built is not None:
-                opened.build_on(built)
+            like = None if kept is None else kept.built_like(vpath, veh_over)
+            if like is not None:
+                opened.build_on(*like)
             opened.model
         if kept is not None:
             kept.put(vpath, veh_over, opened)

@@ -8,8 +8,9 @@ A run whose vehicle overrides differ from every kept one's is another vehicle: r
 values are read on load, so a bad one is that run's config error as before). When they differ from a kept
 vehicle of the same file in the kind's plain parameters only (``VehicleKind.plain``: a mass, a
 stiffness, a damper, a gain; the car's list is rtsim.vehicle.car.plain) its model is built on that one
-(``VehicleKind.rebuild``: the kept one's corner fits and symbolic analysis taken, every value computed
-again, bit for bit a fresh build's); any other difference (a tyre model, a hardpoint: the topology or
+(``VehicleKind.rebuild``: the car's keys declared in place reach copies of the kept model's affected
+arrays, the others build on its corner fits and symbolic analysis; bit for bit a fresh build's); any
+other difference (a tyre model, a hardpoint: the topology or
 the fits) builds it from scratch. The input files are taken not to change during a batch (a run id
 hashes them at the start: rtsim.batch.inputs).
 
@@ -68,9 +69,9 @@ class OpenedVehicles:
         return opened
 
     def built_like(self, vpath: Path, veh_over: dict):
-        """The most recently used kept vehicle of this file whose overrides differ from ``veh_over`` in its
-        kind's plain parameters only (a key set in one and not the other counts as differing); None when
-        there is none. Counted in ``rebuilt``."""
+        """(the most recently used kept vehicle of this file whose overrides differ from ``veh_over`` in its
+        kind's plain parameters only, the dotted keys that differ; a key set in one and not the other counts
+        as differing); None when there is none. Counted in ``rebuilt``."""
         file = self._resolved(vpath)
         new = json.loads(json.dumps(veh_over, sort_keys=True, default=repr))
         for (kfile, kover), opened in reversed(self.kept.items()):
@@ -80,7 +81,7 @@ class OpenedVehicles:
             changed = {k for k in over.keys() | new.keys() if over.get(k, _MISSING) != new.get(k, _MISSING)}
             if all(opened.kind.plain(k) for k in changed):
                 self.rebuilt += 1
-                return opened
+                return opened, changed
         return None
 
     def put(self, vpath: Path, veh_over: dict, opened) -> None:

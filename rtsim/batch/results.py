@@ -20,7 +20,7 @@ from rtsim.errors import ConfigError
 TEXT = ("run_id", "scenario", "vehicle", "status", "verdict", "failed", "error", "worker", "copy_of")
 INTS = ("case", "seed")
 #: columns that depend on where and when a run ran, not on what it computed
-VOLATILE = ("wall_s", "step_s", "outside_s", "outside_pct", "worker")
+VOLATILE = ("wall_s", "step_s", "outside_s", "outside_pct", "between_s", "worker")
 
 
 def _cell(v) -> str:

@@ -10,7 +10,10 @@ the file (file, key, value, allowed range). A worker opens and builds each disti
 Where a run's wall time goes: ``step_s`` is the time inside the model's steps (NaN for a kind that does
 not measure it), ``outside_s`` the rest of the run's wall time (reading and validating its files,
 building or reusing the model, the start on the road, the driver and the logged rows between the steps,
-the metrics) and ``outside_pct`` that rest in per cent of the wall time: step_s + outside_s = wall_s."""
+the metrics) and ``outside_pct`` that rest in per cent of the wall time: step_s + outside_s = wall_s.
+``between_s`` is the time the worker spent before the run, since its previous row was made (or since it
+was ready, ``mark_ready``): returning that row and receiving this run (the executor's pickling and
+pipes), in no run's wall time."""
 from __future__ import annotations
 
 import math
@@ -26,8 +29,16 @@ from .inputs import open_run
 from .metrics import compute
 from .models import WORKER
 
-#: the timing columns of a row, after wall_s (s, s, %)
-TIMING = ("step_s", "outside_s", "outside_pct")
+#: the timing columns of a row, after wall_s (s, s, %, s)
+TIMING = ("step_s", "outside_s", "outside_pct", "between_s")
+
+#: perf_counter when this worker process made its last row (or was ready for its first run)
+_LAST = [math.nan]
+
+
+def mark_ready() -> None:
+    """This worker is ready for its first run: the next row's ``between_s`` counts from now."""
+    _LAST[0] = time.perf_counter()
 
 def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object, float]:
     """(status, message, columns, data, writer, step time in s) of the spec's run, on the vehicle the
@@ -49,12 +60,14 @@ def _simulate(spec: dict, job: dict) -> tuple[str, str, tuple, object, object, f
     return res.status, res.message, res.columns, res.data, write, res.step_s
 
 
-def timing(wall: float, step: float) -> dict:
-    """The timing columns of a run of `wall` s of which `step` s were in the model's steps."""
+def timing(wall: float, step: float, between: float = math.nan) -> dict:
+    """The timing columns of a run of `wall` s of which `step` s were in the model's steps, `between` s
+    spent by its worker before it since its previous row."""
     if not math.isfinite(step):
-        return {"step_s": math.nan, "outside_s": math.nan, "outside_pct": math.nan}
+        return {"step_s": math.nan, "outside_s": math.nan, "outside_pct": math.nan, "between_s": between}
     outside = wall - step
-    return {"step_s": step, "outside_s": outside, "outside_pct": 100.0 * outside / wall if wall > 0 else math.nan}
+    return {"step_s": step, "outside_s": outside, "outside_pct": 100.0 * outside / wall if wall > 0 else math.nan,
+            "between_s": between}
 
 
 def verdict(status: str, metrics: dict, criteria: list) -> tuple[str, str]:
@@ -74,6 +87,7 @@ def run_one(spec: dict, job: dict) -> dict:
     (ok, fall, failed, config_error, error), verdict, failed criteria, error text, simulated time (s),
     the metrics, wall time (s), the timing columns (TIMING) and the worker (host:pid)."""
     t0 = time.perf_counter()
+    between = t0 - _LAST[0]
     status, error, columns, data, step = "ok", "", (), None, 0.0
     try:
         status, error, columns, data, write, step = _simulate(spec, job)
@@ -92,12 +106,14 @@ def run_one(spec: dict, job: dict) -> dict:
         {m: math.nan for m in job["metrics"]}
     ver, failed = verdict(status, metrics, job.get("criteria", []))
     simulated = float(data[-1, 0]) if data is not None and len(data) else math.nan
-    wall = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    wall = t1 - t0
+    _LAST[0] = t1
     return {"run_id": spec["run_id"], "case": spec["case"], "scenario": Path(spec["scenario"]).stem,
             "vehicle": Path(spec["vehicle"]).stem if spec["vehicle"] else "", "seed": spec["seed"],
             **{k: spec["params"].get(k) for k in job["param_keys"]},
             "status": status, "verdict": ver, "failed": failed, "error": error, "simulated_s": simulated,
-            **metrics, "wall_s": wall, **timing(wall, step), "worker": f"{socket.gethostname()}:{os.getpid()}"}
+            **metrics, "wall_s": wall, **timing(wall, step, between), "worker": f"{socket.gethostname()}:{os.getpid()}"}
 
 
 def lost_row(spec: dict, job: dict, reason: str) -> dict:

@@ -17,7 +17,7 @@ forms a 3D revolute joint. Ground points and fixed directions are constants, not
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -179,6 +179,58 @@ class Settings:
     #                                   Taylor predictor's O(h^3 d3q/dt3)): fewer iterations where bodies spin fast
 
 
+
+@dataclass(frozen=True)
+class BodyFrame:
+    """A body's share of the mass matrix apart from its mass and inertia (MechanismBuilder._body_frame):
+    x the basis of its directions and r0 its origin at the initial configuration (m), cg its centre of
+    mass (m), maps the coordinate maps of its origin and each direction (read only)."""
+    name: str
+    dim: int
+    x: np.ndarray
+    r0: np.ndarray
+    cg: np.ndarray
+    maps: tuple
+
+
+@dataclass(frozen=True)
+class MassParts:
+    """The mass matrix and gravity vector of a compile before its bodies were added (every point mass,
+    scalar inertia and rod summed, read only), the gravity (m/s^2) and its bodies' frames in the order the
+    compile added them: Mechanism.with_bodies adds the bodies again with other masses and inertias, the
+    same sums in the same order, so its matrix equals a compile's with those values bit for bit."""
+    mass: np.ndarray
+    qg: np.ndarray
+    g: np.ndarray
+    bodies: tuple
+    values: tuple       # each body's (mass in kg, inertia in kg m^2) in this mechanism
+
+
+def _add_body(mass: np.ndarray, qg: np.ndarray, g: np.ndarray, frame: BodyFrame, m: float, inertia: np.ndarray) -> None:
+    """Add a rigid body of mass `m` (kg) and `inertia` (kg m^2, about its centre of mass in global axes;
+    2D: the polar moment) with `frame` to the mass matrix and gravity vector, in place."""
+    dim, x, r0 = frame.dim, frame.x, frame.r0
+    cbar = np.linalg.solve(x, frame.cg[:dim] - r0)
+    rel = frame.cg[:dim] - r0
+    if dim == 3:
+        i_g = inertia.reshape(3, 3)
+        j_g = 0.5 * np.trace(i_g) * np.eye(3) - i_g
+    else:
+        j_g = 0.5 * float(inertia.ravel()[0]) * np.eye(2)
+    j0 = j_g + m * np.outer(rel, rel)
+    xi = np.linalg.inv(x)
+    jc = xi @ j0 @ xi.T
+    mbar = np.zeros((dim + 1, dim + 1))
+    mbar[0, 0] = m
+    mbar[0, 1:] = mbar[1:, 0] = m * cbar
+    mbar[1:, 1:] = jc
+    maps = frame.maps
+    for a in range(dim + 1):
+        qg += mbar[0, a] * maps[a].T @ g
+        for c in range(dim + 1):
+            mass += mbar[a, c] * maps[a].T @ maps[c]
+
+
 @dataclass
 class Mechanism:
     """A compiled mechanism: the model arrays plus the names and initial guesses that go with them."""
@@ -194,6 +246,30 @@ class Mechanism:
     settings: Settings
     conservative: bool
     structure: str = ""           # digest of the topology the symbolic analysis depends on (compile's reuse)
+    mass_parts: MassParts | None = None   # the compile's sums before its bodies (with_bodies)
+
+    def with_bodies(self, values: dict[str, tuple[float, np.ndarray]]) -> "Mechanism":
+        """This mechanism with other masses (kg) and inertias (kg m^2, as MechanismBuilder.body takes them)
+        of the named bodies: a new Mechanism whose mass matrix, its envelope and the gravity vector are new
+        arrays, summed as a compile sums them (so equal to a compile's with those values bit for bit),
+        every other array shared with this one (the model's arrays are read only)."""
+        parts = self.mass_parts
+        if parts is None:
+            raise ModelError(f"{self.name}: compiled without its mass parts")
+        unknown = set(values) - {f.name for f in parts.bodies}
+        if unknown:
+            raise ModelError(f"{self.name}: no body named {sorted(unknown)[0]!r}")
+        mass, qg = parts.mass.copy(), parts.qg.copy()
+        new = []
+        for frame, kept in zip(parts.bodies, parts.values):
+            m, inertia = values.get(frame.name, kept)
+            m, inertia = float(m), np.atleast_2d(np.asarray(inertia, dtype=float))
+            _add_body(mass, qg, parts.g, frame, m, inertia)
+            new.append((m, inertia))
+        mass = 0.5 * (mass + mass.T)
+        md = self.model
+        model = md._replace(q_grav=qg, m_env=envelope.to_envelope(mass, md.first, md.ptr, md.perm))
+        return replace(self, model=model, mass_dense=mass, mass_parts=replace(parts, values=tuple(new)))
 
     def coordinate(self, name: str) -> int:
         try:
@@ -570,36 +646,29 @@ class MechanismBuilder:
             dif = pb - pa
             mass += mr * (mid.T @ mid + k * dif.T @ dif)
             qg += mr * mid.T @ g
-        for b in self._bodies:
-            x = self._basis_values(b.origin, b.directions)
-            r0 = self._value(b.origin)[: self.dim]
-            cbar = np.linalg.solve(x, b.cg[: self.dim] - r0)
-            rel = b.cg[: self.dim] - r0
-            if self.dim == 3:
-                i_g = b.inertia.reshape(3, 3)
-                j_g = 0.5 * np.trace(i_g) * np.eye(3) - i_g
-            else:
-                j_g = 0.5 * float(b.inertia.ravel()[0]) * np.eye(2)
-            j0 = j_g + b.mass * np.outer(rel, rel)
-            xi = np.linalg.inv(x)
-            jc = xi @ j0 @ xi.T
-            mbar = np.zeros((self.dim + 1, self.dim + 1))
-            mbar[0, 0] = b.mass
-            mbar[0, 1:] = mbar[1:, 0] = b.mass * cbar
-            mbar[1:, 1:] = jc
-            maps = [self._affine(b.origin, nq)[0]]
-            for k in range(self.dim):
-                if self.dim == 2 and k == 1:
-                    d1 = maps[1]
-                    maps.append(np.vstack([-d1[1], d1[0]]))
-                else:
-                    h, t = self._dir_refs(b.directions[k])
-                    maps.append(self._affine(h, nq)[0] - self._affine(t, nq)[0])
-            for a in range(self.dim + 1):
-                qg += mbar[0, a] * maps[a].T @ g
-                for c in range(self.dim + 1):
-                    mass += mbar[a, c] * maps[a].T @ maps[c]
+        parts = MassParts(mass.copy(), qg.copy(), g.copy(), tuple(self._body_frame(b, nq) for b in self._bodies),
+                          tuple((b.mass, b.inertia) for b in self._bodies))
+        for frame, b in zip(parts.bodies, self._bodies):
+            _add_body(mass, qg, g, frame, b.mass, b.inertia)
+        self._mass_parts = parts
         return 0.5 * (mass + mass.T), qg
+
+    def _body_frame(self, b: _Body, nq: int) -> "BodyFrame":
+        """What a body's share of the mass matrix and gravity vector depends on besides its mass and
+        inertia: its name, the basis of its directions and its origin at the initial configuration, its
+        centre of mass, the coordinate maps of its origin and directions (functions of the topology and
+        the initial values alone)."""
+        x = self._basis_values(b.origin, b.directions)
+        r0 = self._value(b.origin)[: self.dim]
+        maps = [self._affine(b.origin, nq)[0]]
+        for k in range(self.dim):
+            if self.dim == 2 and k == 1:
+                d1 = maps[1]
+                maps.append(np.vstack([-d1[1], d1[0]]))
+            else:
+                h, t = self._dir_refs(b.directions[k])
+                maps.append(self._affine(h, nq)[0] - self._affine(t, nq)[0])
+        return BodyFrame(b.name, self.dim, x, r0, b.cg, tuple(maps))
 
     def _row_slots(self, refs, scalar, terms=None):
         """Slot indices and constants of a row: from linear `terms`, or from vector refs + scalar."""
@@ -731,4 +800,5 @@ class MechanismBuilder:
             qd_given=np.array(self._qd_given), coordinate_names=list(self._names),
             constraint_names=[c["name"] for c in self._cons], force_names=[f["name"] for f in self._forces],
             mass_dense=mass, settings=s, conservative=self._conservative, structure=structure,
+            mass_parts=self._mass_parts,
         )

@@ -140,10 +140,10 @@ class VehicleKind:
 
         return key not in self.not_plain and any(fnmatchcase(key, p) for p in self.plain_parameters)
 
-    def rebuild(self, opened: "OpenedVehicle", built: "OpenedVehicle") -> Any:
+    def rebuild(self, opened: "OpenedVehicle", built: "OpenedVehicle", changed=None) -> Any:
         """The model of ``opened``, whose config differs from the built vehicle ``built``'s in plain
-        parameters only: equal to ``build(opened)`` bit for bit, taking what ``built`` computed that they
-        do not change (the default builds afresh)."""
+        parameters only (``changed``: those dotted keys, when known): equal to ``build(opened)`` bit for
+        bit, taking what ``built`` computed that they do not change (the default builds afresh)."""
         return self.build(opened)
 
     def scenario_problem(self, opened: "OpenedVehicle", sc) -> str | None:
@@ -216,11 +216,12 @@ class OpenedVehicle:
             self._model = self.kind.build(self)
         return self._model
 
-    def build_on(self, built: "OpenedVehicle") -> None:
+    def build_on(self, built: "OpenedVehicle", changed=None) -> None:
         """Build the model on the built vehicle ``built``, whose config differs from this one's in plain
-        parameters only (``VehicleKind.rebuild``: the fresh build's model, bit for bit)."""
+        parameters only (``changed``: those dotted keys, when known; ``VehicleKind.rebuild``: the fresh
+        build's model, bit for bit)."""
         if self._model is None:
-            self._model = self.kind.rebuild(self, built)
+            self._model = self.kind.rebuild(self, built, changed)
 
     def describe(self) -> dict:
         info = self.kind.describe(self)

@@ -15,6 +15,7 @@ depend on z only; all corners share one exponent table (rtsim.mbs poly_point).
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -185,9 +186,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     u = b.unit_vector("chassis.u", (1, 0, 0))
     v = b.unit_vector("chassis.v", (0, 1, 0))
     w = b.unit_vector("chassis.w", (0, 0, 1))
-    ixx, iyy, izz = cfg.chassis.inertia_kgm2
-    ixz = cfg.chassis.ixz_kgm2
-    b.body("chassis", r, [u, v, w], cfg.chassis.mass_kg, cg, np.array([[ixx, 0, -ixz], [0, iyy, 0], [-ixz, 0, izz]]))
+    b.body("chassis", r, [u, v, w], cfg.chassis.mass_kg, cg, chassis_inertia(cfg))
     rack = b.length("rack", 0.0, velocity=0.0)
     driver_row = -1
     if cfg.eps is None:
@@ -203,7 +202,6 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     rotz_coef = np.zeros_like(axis_coef)
     rots_coef = np.zeros_like(axis_coef)
     spring_coef = np.zeros((4, full_exps.shape[0]))
-    susp = np.zeros((4, NSP))
     design_w = np.zeros((4, 3))
     zs = []
     for i, (name, kin) in enumerate(zip(WHEELS, corners)):
@@ -239,7 +237,64 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
     b.gravity((0.0, 0.0, -G))
     mech = b.compile(reuse=None if reuse is None else reuse.mech)
     mech.model.iset[IS_TANGENT_FORCES] = 1
-    # static loads from the weight split (sprung + unsprung), N
+    loads, susp, spring_tab, damper_tab = suspension_arrays(cfg, cg, design_w, spring_at_design)
+    driven = list(FRONT_AXLE if cfg.driven_axle == "front" else REAR_AXLE)
+    veh = Vehicle(
+        chassis_idx=np.array([*r.idx, *u.idx, *v.idx, *w.idx], dtype=np.int64),
+        corner_idx=corner_idx, axis_coef=axis_coef, rotz_coef=rotz_coef, rots_coef=rots_coef,
+        spring_coef=spring_coef, susp=susp, spring_tab=spring_tab, damper_tab=damper_tab,
+        steer_idx=np.array([column.index, rack.index], dtype=np.int64),
+        steer_kind=np.array([STEER_BY_WIRE if cfg.eps is None else STEER_EPS], dtype=np.int64),
+        driver_row=np.array([driver_row], dtype=np.int64),
+        imu_local=np.array(cfg.sensors.imu_position_m, dtype=float) - cg,
+        aero=aero_array(cfg),
+        tyre_model=np.array([TYRE_LINEAR if cfg.tyres.model == "linear" else TYRE_MAGIC_FORMULA], dtype=np.int64),
+        driven=np.array(driven, dtype=np.int64),
+        drive_slot=np.array([driven.index(i) if i in driven else -1 for i in range(len(WHEELS))], dtype=np.int64),
+        side=np.array([1.0 if i in (FRONT_AXLE[0], REAR_AXLE[0]) else -1.0 for i in range(len(WHEELS))]),
+    )
+    return VehicleModel(cfg, base, mech, veh, corners, loads, design_w, vehicle_channels(cfg),
+                        (Path(base) / cfg.interface.dbc).resolve())
+
+
+def apply_in_place(cfg: VehicleConfig, kept: VehicleModel) -> VehicleModel:
+    """The model of ``cfg``, a config that differs from the built model ``kept``'s in keys applied in place
+    only (rtsim.vehicle.car.plain, IN_PLACE): ``kept`` with copies of the arrays those keys reach, computed
+    by the functions the build computes them with -- the chassis body's share of the mass matrix and the
+    gravity vector (rtsim.mbs Mechanism.with_bodies, when its mass or inertia differ), the static wheel
+    loads, the suspension's parameters and tables, the aero parameters -- and the config; every other
+    array (corner fits, constraints, symbolic analysis) shared, read only. Equal to a fresh build of
+    ``cfg`` bit for bit."""
+    mech = kept.mech
+    was = kept.config.chassis
+    now = cfg.chassis
+    if (now.mass_kg, tuple(now.inertia_kgm2), now.ixz_kgm2) != (was.mass_kg, tuple(was.inertia_kgm2), was.ixz_kgm2):
+        mech = mech.with_bodies({"chassis": (now.mass_kg, chassis_inertia(cfg))})
+    spring_at_design = _padded(kept.corners)[3]
+    cg = np.array(cfg.chassis.cg_m, dtype=float)
+    loads, susp, spring_tab, damper_tab = suspension_arrays(cfg, cg, kept.design_wheel_centre, spring_at_design)
+    veh = kept.vehicle._replace(susp=susp, spring_tab=spring_tab, damper_tab=damper_tab, aero=aero_array(cfg))
+    return dataclasses.replace(kept, config=cfg, mech=mech, vehicle=veh, static_loads=loads)
+
+
+def chassis_inertia(cfg: VehicleConfig) -> np.ndarray:
+    """The chassis' inertia tensor about its centre of mass in the car's axes (kg m^2)."""
+    ixx, iyy, izz = cfg.chassis.inertia_kgm2
+    ixz = cfg.chassis.ixz_kgm2
+    return np.array([[ixx, 0, -ixz], [0, iyy, 0], [-ixz, 0, izz]])
+
+
+def aero_array(cfg: VehicleConfig) -> np.ndarray:
+    """The aero parameters of the step (rtsim.vehicle.car.forces): drag area (m^2), air density (kg/m^3)."""
+    return np.array([cfg.aero.drag_area_m2, cfg.aero.air_density_kg_m3])
+
+
+def suspension_arrays(cfg: VehicleConfig, cg: np.ndarray, design_w: np.ndarray,
+                      spring_at_design: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(static wheel loads from the weight split, sprung + unsprung, N; the suspension parameters
+    (Susp); the spring and damper tables) of the config, on the corners' design wheel centres
+    (`design_w`, m) and each spring's (dL/dz, length) at design height (rtsim.vehicle.car.build._padded)."""
+    susp = np.zeros((4, NSP))
     xf, xr = design_w[0, 0], design_w[2, 0]
     m_s = cfg.chassis.mass_kg
     front_share = (cg[0] - xr) / (xf - xr)
@@ -267,23 +322,7 @@ def build_vehicle(cfg: VehicleConfig, base: Path, corners: list[CornerKinematics
         susp[i, Susp.Z_HI] = axle.travel_m[1] - axle.travel_stop_margin_m
         susp[i, Susp.STOP_K] = axle.travel_stop_stiffness_n_per_m
         susp[i, Susp.STOP_C] = axle.travel_stop_damping_ns_per_m
-    driven = list(FRONT_AXLE if cfg.driven_axle == "front" else REAR_AXLE)
-    veh = Vehicle(
-        chassis_idx=np.array([*r.idx, *u.idx, *v.idx, *w.idx], dtype=np.int64),
-        corner_idx=corner_idx, axis_coef=axis_coef, rotz_coef=rotz_coef, rots_coef=rots_coef,
-        spring_coef=spring_coef, susp=susp, spring_tab=spring_tab, damper_tab=damper_tab,
-        steer_idx=np.array([column.index, rack.index], dtype=np.int64),
-        steer_kind=np.array([STEER_BY_WIRE if cfg.eps is None else STEER_EPS], dtype=np.int64),
-        driver_row=np.array([driver_row], dtype=np.int64),
-        imu_local=np.array(cfg.sensors.imu_position_m, dtype=float) - cg,
-        aero=np.array([cfg.aero.drag_area_m2, cfg.aero.air_density_kg_m3]),
-        tyre_model=np.array([TYRE_LINEAR if cfg.tyres.model == "linear" else TYRE_MAGIC_FORMULA], dtype=np.int64),
-        driven=np.array(driven, dtype=np.int64),
-        drive_slot=np.array([driven.index(i) if i in driven else -1 for i in range(len(WHEELS))], dtype=np.int64),
-        side=np.array([1.0 if i in (FRONT_AXLE[0], REAR_AXLE[0]) else -1.0 for i in range(len(WHEELS))]),
-    )
-    return VehicleModel(cfg, base, mech, veh, corners, sprung + unsprung, design_w, vehicle_channels(cfg),
-                        (Path(base) / cfg.interface.dbc).resolve())
+    return sprung + unsprung, susp, spring_tab, damper_tab
 
 
 def _spring_damper_tables(sp, length0: float, f_static: float) -> tuple[np.ndarray, np.ndarray]:

@@ -256,8 +256,11 @@ class Interface(Strict):
     dbc: str = Field(default="../can/xbw.dbc", description="DBC file, relative to the vehicle file")
 
 
-#: the validated part configs (brakes, powertrain, steering) by (field, repr of the table), this process's
+#: the validated sections (chassis, axles, tyres, ..., the part configs brakes, powertrain, steering) by
+#: (field, repr of the table), this process's
 _PARTS: dict = {}
+#: the parts whose partial table overrides their defaults key by key
+_PART_KINDS = {"brakes": BrakeConfig, "powertrain": PowertrainConfig, "steering": SteeringConfig}
 
 
 class VehicleConfig(Strict):
@@ -282,19 +285,22 @@ class VehicleConfig(Strict):
     effects: dict = Field(default_factory=dict, description="switchable effects, validated by "
                           "rtsim.vehicle.car.effects (canonical form after loading)")
 
-    @field_validator("brakes", "powertrain", "steering", mode="wrap")
+    @field_validator("chassis", "front", "rear", "tyres", "interface", "aero", "sensors", "brakes", "powertrain",
+                     "steering", "eps", mode="wrap")
     @classmethod
     def _part_tables(cls, v, handler, info):
-        """A partial table of a part overrides its defaults key by key (nested sections too). A part's
-        config is immutable and a function of its table alone: one validated before in this process
-        from the same table (the same repr: keys, order, types and values) is taken again (_PARTS)."""
+        """A partial table of a part (brakes, powertrain, steering) overrides its defaults key by key
+        (nested sections too). A section's config is immutable and a function of its table alone: one
+        validated before in this process from the same table (the same repr: keys, order, types and
+        values) is taken again (_PARTS; a batch's run that overrides the chassis mass validates its
+        [chassis] and the checks across sections, not the rest again). Only successes are kept."""
         if not isinstance(v, Mapping):
             return handler(v)
         key = (info.field_name, repr(v))
         part = _PARTS.get(key)
         if part is None:
-            kind = {"brakes": BrakeConfig, "powertrain": PowertrainConfig, "steering": SteeringConfig}[info.field_name]
-            part = handler(over_defaults(kind, v))
+            kind = _PART_KINDS.get(info.field_name)
+            part = handler(v if kind is None else over_defaults(kind, v))
             if len(_PARTS) >= 256:
                 _PARTS.clear()
             _PARTS[key] = part

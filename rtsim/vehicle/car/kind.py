@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..registry import Demo, OfflineRun, VehicleKind
-from .plain import NOT_PLAIN, PLAIN
+from .plain import NOT_PLAIN, PLAIN, in_place
 
 EPS_DEMO_SCENARIO = "step_steer_80kph"      # the EPS ECU's manoeuvre
 
@@ -35,9 +35,12 @@ class CarKind(VehicleKind):
     plain_parameters = tuple(PLAIN)
     not_plain = NOT_PLAIN
 
-    def rebuild(self, opened, built):
-        """The car on the built one's corner fits and symbolic analysis (rtsim.vehicle.car.plain)."""
-        from .build import build_vehicle
+    def rebuild(self, opened, built, changed=None):
+        """The car made on the built one (rtsim.vehicle.car.plain): its arrays applied in place when every
+        changed key is declared so, else built again on its corner fits and symbolic analysis."""
+        from .build import apply_in_place, build_vehicle
+        if changed is not None and in_place(changed) and opened.base == built.base:
+            return apply_in_place(opened.config, built.model)
         return build_vehicle(opened.config, opened.base, reuse=built.model)
 
     def describe(self, opened) -> dict:

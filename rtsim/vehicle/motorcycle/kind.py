@@ -31,7 +31,7 @@ class TwoWheelerKind(VehicleKind):
     #: body: computed afresh)
     plain_parameters = ("*",)
 
-    def rebuild(self, opened, built):
+    def rebuild(self, opened, built, changed=None):
         from .build import build_motorcycle
         return build_motorcycle(opened.config, opened.base, reuse=built.model)
 
