@@ -108,6 +108,10 @@ class Demo:
     silent_after: bool = False
 
 
+#: VehicleKind.plain's answers by (kind's class, key), this process's
+_PLAIN: dict = {}
+
+
 class VehicleKind:
     """A kind of vehicle: everything the commands need that differs between vehicles. Subclasses (one per
     assembly) set the attributes and implement the methods; ``opened`` is the ``OpenedVehicle``."""
@@ -135,10 +139,15 @@ class VehicleKind:
     not_plain: tuple[str, ...] = ()
 
     def plain(self, key: str) -> bool:
-        """Whether the dotted key of the vehicle file is a plain parameter of this kind."""
+        """Whether the dotted key of the vehicle file is a plain parameter of this kind (the answer kept
+        per kind and key: a batch asks it for each key of each run)."""
         from fnmatch import fnmatchcase
 
-        return key not in self.not_plain and any(fnmatchcase(key, p) for p in self.plain_parameters)
+        found = _PLAIN.get((type(self), key))
+        if found is None:
+            found = _PLAIN[type(self), key] = key not in self.not_plain and any(
+                fnmatchcase(key, p) for p in self.plain_parameters)
+        return found
 
     def rebuild(self, opened: "OpenedVehicle", built: "OpenedVehicle", changed=None) -> Any:
         """The model of ``opened``, whose config differs from the built vehicle ``built``'s in plain

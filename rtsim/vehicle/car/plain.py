@@ -21,6 +21,7 @@ or its driver_input, interface, effects -- rebuilds the vehicle from scratch."""
 from __future__ import annotations
 
 from fnmatch import fnmatchcase
+from functools import lru_cache
 
 IN_PLACE = "in place"       # the built model's affected arrays computed anew, the rest shared
 ON_KEPT = "on the kept analysis"    # built again on the built model's corner fits and symbolic analysis
@@ -62,6 +63,7 @@ def in_place(keys) -> bool:
     return all(key not in NOT_PLAIN and _how(key) == IN_PLACE for key in keys)
 
 
+@lru_cache(maxsize=1024)
 def _how(key: str) -> str | None:
     for pattern, (how, _) in PLAIN.items():
         if fnmatchcase(key, pattern):
