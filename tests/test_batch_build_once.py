@@ -108,9 +108,28 @@ def test_timing_columns_add_up_to_the_wall_time(worker):
     line = timing_summary(rows + [copy])          # the copy is no simulated run: left out
     wall, step = sum(r["wall_s"] for r in rows), sum(r["step_s"] for r in rows)
     assert f"outside them {wall - step:.2f} s ({100.0 * (wall - step) / wall:.1f} % of {wall:.2f} s" in line
+    between = sum(r["between_s"] for r in rows if math.isfinite(r["between_s"]))   # a first row: NaN
+    assert f"; between runs {between:.2f} s (per run median" in line
     bad = run.run_one({**specs[0], "overrides": {**specs[0]["overrides"], "scenario.duration": -1.0}}, job)
     assert bad["status"] == "config_error"
     assert bad["step_s"] == 0.0 and bad["outside_s"] == bad["wall_s"] and bad["outside_pct"] == pytest.approx(100.0)
+
+
+def test_the_time_between_runs_is_counted_from_the_previous_row(worker):
+    """``between_s``: the worker's time from its previous row (or from being ready) to the run's start; a
+    pause there is in it and in no run's wall time."""
+    import time
+
+    specs, job = _reduced()
+    run.mark_ready()
+    time.sleep(0.05)
+    first = run.run_one(specs[0], job)
+    assert first["between_s"] >= 0.05
+    time.sleep(0.02)
+    second = run.run_one(specs[1], job)
+    assert second["between_s"] >= 0.02
+    copy = copy_row(second, {**specs[1], "run_id": "copy", "seed": 1}, job)
+    assert copy["between_s"] == 0.0
 
 
 @pytest.mark.parametrize("scenario, vehicle, extra", [
