@@ -179,7 +179,6 @@ class Settings:
     #                                   Taylor predictor's O(h^3 d3q/dt3)): fewer iterations where bodies spin fast
 
 
-
 @dataclass(frozen=True)
 class BodyFrame:
     """A body's share of the mass matrix apart from its mass and inertia (MechanismBuilder._body_frame):
