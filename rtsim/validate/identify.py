@@ -50,7 +50,9 @@ value. A candidate is eligible when it is plausible and
   by the model re-fitted on the other runs, the corrected resampled t-test over the folds at
   crossval.ALPHA; with fewer than 3 runs: the information criterion falls by MIN_DELTA_IC);
 - it predicts no channel significantly worse (the same test per channel; for a sensor effect, its own
-  channels: elsewhere only the nuisance adjustments' re-fit moves, which the test over all channels weighs);
+  channels: elsewhere only the nuisance adjustments' re-fit moves, which the test over all channels weighs)
+  by a change that stands out of the mismatch the model had on that channel (made_worse: the fold test is
+  blind to a structural mismatch in every run alike, which a true effect may move against a little);
 - it moves its signature channels (a sensor effect: its own; a model effect: those whose left-out
   prediction it improves) by more than DISCREPANCY_Z (1.96) times the disagreement it leaves there
   (`left`, RMS in standard errors, at least 1: the structural mismatch and the noise left in the mean), the 95 %
@@ -394,7 +396,13 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
     # a sensor effect changes its own channels only: what moves elsewhere is the nuisance adjustments'
     # re-fit (an axle's rolling radius shared by its two wheels), which the test over all channels weighs
     judged = sig if cand.kind == "sensor" else obj.channels
-    cand.worse = [c for c in judged if cand.cv is not None and cand.cv.worsens(c)]
+    cand.worse = made_worse(cand.cv, by, judged)
+    inside = [c for c in judged if cand.cv is not None and cand.cv.worsens(c) and c not in cand.worse]
+    if inside:
+        add_detail(cand, "predicts " + ", ".join(inside) + " worse in left-out runs by a change inside the mismatch "
+                         "the model had there (" + ", ".join(f"{by[c][2]:.2g} < {DISCREPANCY_Z:.2f} x "
+                                                             f"{max(math.sqrt(by[c][0]), 1.0):.2g}" for c in inside)
+                         + "): not counted as a trade")
     ntot = sum(obj.n_eff.values())
     local = sum(obj.n_eff[c] * (lr if c in sig else min(lr, 0.0)) for c in obj.channels
                 for lr in [math.log(max(by[c][1], 1e-300) / max(by[c][0], 1e-300))])
@@ -437,6 +445,22 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
                                f"{100 * share:.0f} % of what it changes, and the rest does not improve the "
                                f"prediction of left-out runs")
     explain_rejection(cand)
+
+
+def made_worse(cv, by: dict, channels: list[str]) -> list[str]:
+    """The channels a candidate trades away: its left-out-run prediction there is significantly worse
+    (crossval: the paired fold test at ALPHA) and its change there stands out of the mismatch the model
+    had on that channel, moving it (RMS, standard errors) by at least DISCREPANCY_Z times the channel's
+    RMS residual before it (at least 1, the noise left in the mean). `by`: channel -> (cost before, cost
+    with it, moved by), as channel_evidence keeps them. The fold test sees the runs' scatter, not what
+    every run shares: a channel with a structural mismatch (a different tyre law, a missing roll) that
+    the effect moves a little against it is predicted worse in every left-out run alike, however small
+    the move. As in Candidate.outweighs_structure, a change inside DISCREPANCY_Z times that mismatch
+    cannot be told from a discrepancy of unknown shape lying along it, at the 95 % level; a change that
+    stands out of it makes a mismatch of its own (the effect trades one mismatch for another)."""
+    if cv is None:
+        return []
+    return [c for c in channels if cv.worsens(c) and by[c][2] >= DISCREPANCY_Z * max(math.sqrt(by[c][0]), 1.0)]
 
 
 def model_free_check(ctx: Context, cand: Candidate) -> str:
