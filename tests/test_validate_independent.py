@@ -339,11 +339,6 @@ KNOWN_FAILURES = {
                       "on that channel, which reads as a delay of -0.025 s in the same runs without the hidden "
                       "one: in the model's terms the delay is 0.075, what is found (gyro_z's 9.5 ms make its "
                       "0.1 s delay 0.0903, inside the 10 %)"),
-    # issue 30's selection rule (cross-validation across the runs, each run predicted from its own inputs):
-    # these cases passed with issue 15's thresholds and fail with it
-    "stiffness_0.6": (AssertionError, "a delay (0.094 s) and a scale (0.955) of accel_y are named instead of the "
-                      "tyre stiffness: the accel_y delay's cross-validation evidence outranks the tyre's on this "
-                      "seed (on the issue's stiffness 0.5 case the tyre wins)"),
 }
 #: the longitudinal (pitch-plane peer) cases that fail with issue 30's selection rule (strict, with reasons)
 LONGITUDINAL_FAILURES = {

@@ -144,9 +144,6 @@ def test_no_missing_effect_on_lateral_data_adds_nothing(replayer, runs_dir, gene
     assert err <= inp.steer_tol and err_plain >= 5.0 * err, (err, err_plain, inp.steer_tol)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="issue 30's selection rule: on the recordings started "
-                   "at speed, delays and scales of accel_y and gyro_z (0.091 s, 0.887, 0.051 s, 0.947) are named "
-                   "instead of the hidden tyre stiffness 0.6")
 def test_logger_triggered_at_speed(replayer, runs_dir, generated):
     """The same recordings started 5.8 s in (about 11.5 m/s, just before the lane change)."""
     hidden, (name, param, true, channel), _ = CASES["tyre_slip_stiffness"]
