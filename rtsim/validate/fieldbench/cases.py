@@ -1,6 +1,7 @@
 """The benchmark's cases: what each simulator drives, what is hidden in it, and the seeded draws: the
-tuning set (seed `SEED`, 120 cases "c000"..., and the retired held-out draw of seed `RETIRED_SEEDS`, 64 cases
-"h000"...) and the held-out set (seed `HELDOUT_SEED`, `N_HELDOUT` cases, ids `HELDOUT_PREFIX` + "000"...).
+tuning set (seed `SEED`, 120 cases "c000"..., and the retired held-out draws of `RETIRED_SEEDS`, 64 cases
+"h000"... and 64 cases "k000"...) and the held-out set (seed `HELDOUT_SEED`, `N_HELDOUT` cases, ids
+`HELDOUT_PREFIX` + "000"...).
 
 A case is plain data (JSON-able): the simulator (`sim`: "planar" two-track without roll, "roll" two-track
 with a roll degree of freedom, "pitch" pitch-plane longitudinal), the tyre law (`tyre`: "tanh" friction
@@ -24,7 +25,9 @@ no longer judge a method change aimed at them: it was retired and joined the tun
 seed 30). The held-out set is a fresh draw of the same generator with its own seed, made and fixed
 before the method was changed again; its kinds are drawn with the same probabilities (`KINDS`). The second
 draw (seed 3030, "h000"...) judged one method change, once; its misses were then read, so it was retired
-into the tuning set in turn, and the third draw (seed 3031, "k000"...) was fixed before the next change.
+into the tuning set in turn, and the third draw (seed 3031, "k000"...) was fixed before the next change. It
+judged that change once and was read in turn; the fourth draw (seed 3032, "m000"...) was fixed before the
+change after it.
 
 The fixed set `ISSUE` holds the six cases that failed in issue 30, in the same description.
 """
@@ -38,10 +41,10 @@ import numpy as np
 SEED = 30                    # the issue's number: the tuning set
 N_CASES = 120
 #: retired held-out draws, now tuning cases: seed -> (number of cases, id prefix)
-RETIRED_SEEDS = {3030: (64, "h")}
-HELDOUT_SEED = 3031          # the held-out set, drawn after the second held-out set was retired
+RETIRED_SEEDS = {3030: (64, "h"), 3031: (64, "k")}
+HELDOUT_SEED = 3032          # the held-out set, drawn after the third held-out set was retired
 N_HELDOUT = 64
-HELDOUT_PREFIX = "k"
+HELDOUT_PREFIX = "m"
 KINDS = (("none", 0.15), ("one", 0.50), ("two", 0.20), ("outside", 0.15))
 SIMS = ("planar", "roll", "pitch")
 TYRES = ("tanh", "brush")
