@@ -239,18 +239,26 @@ def _inside(metrics: dict, share: float = None) -> bool:
     return all(v is not None and v >= (INSIDE_ENOUGH if share is None else share) for v in vals)
 
 
-def _with_named_sensors(ctx: Context, named: list[Effect], workers: int, cache: dict) -> tuple[Objective, list]:
+def _with_named_sensors(ctx: Context, named: list[Effect], workers: int, cache: dict,
+                        fitted_on: dict) -> tuple[Objective, list]:
     """The iteration's objective, in which the sensor effects named so far are re-fitted beside the
     nuisance adjustments at every residual (identify.sensor_refits: a model effect judged later is not
-    fought by a sensor value fitted without it), after re-fitting their values on the model as it
-    stands (identify.refit_named_sensors, on the per-run replays averaged where there are any, as the
-    sensor effects are fitted): (objective, (label before, label after) of the values that moved)."""
+    fought by a sensor value fitted without it), after re-fitting the values of those fitted on another
+    model than the one that now stands (identify.refit_named_sensors, on the per-run replays averaged
+    where there are any, as the sensor effects are fitted; `fitted_on`: id of the effect -> the model
+    effects it was fitted with, _model_key, kept up to date here; an effect not in it was named in the
+    previous iteration, on this model): (objective, (label before, label after) of the values that
+    moved)."""
     sensors = [e for e in named if e.kind == "sensor"]
     if not sensors:
         return ctx.objective, []
+    key = _model_key(ctx.effects)
+    stale = [e for e in sensors if fitted_on.setdefault(id(e), key) != key]
     raws = _run_raws(ctx, ctx.effects, workers, cache)
     raw = {c: np.mean([r[c] for r in raws], axis=0) for c in raws[0]} if raws else ctx.raw
-    moved = refit_named_sensors(ctx, raw, ctx.effects, sensors)
+    moved = refit_named_sensors(ctx, raw, ctx.effects, stale) if stale else []
+    for e in stale:
+        fitted_on[id(e)] = key
     return ctx.objective.refitting(*sensor_refits(ctx, raw, ctx.effects, sensors)), moved
 
 
@@ -421,12 +429,13 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     iterations: list[Iteration] = []
     verdict = ""
     replays: dict = {}                  # model effects -> every run's replay (_run_raws)
+    sensed: dict = {}                   # named sensor effect (id) -> the model effects its value was fitted with
     workers = opts.ray or max(1, min(opts.workers, os.cpu_count() or 1))
     for k in range(1, opts.max_iterations + 1):
         ti = time.perf_counter()
         current = [*base, *effects]
         iobj, resensed = _with_named_sensors(Context(bench, obj, rp, inp, current, out, raw, 0.0, bench.n), effects,
-                                             workers, replays)
+                                             workers, replays, sensed)
         if resensed:
             out = rp.reported(raw, bench.t, current)
         metrics = _metrics(bench, out)
@@ -584,7 +593,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     else:
         verdict = f"stopped after {opts.max_iterations} iterations: " + iterations[-1].verdict
         _with_named_sensors(Context(bench, obj, rp, inp, [*base, *effects], out, raw, 0.0, bench.n), effects, workers,
-                            replays)
+                            replays, sensed)
     t3 = time.perf_counter()
     replayed = MeanInputReplays(rp, inp, base, effects)
     if bench.n >= 2:
