@@ -77,3 +77,45 @@ def test_a_candidate_that_makes_a_mismatch_of_its_own_is_a_trade():
     cv, by = _judge(obj, model, wrong, wrong)
     assert cv.better
     assert made_worse(cv, by, obj.channels) == ["b"]
+
+
+def _gain_case():
+    """A hidden scale of 1.15 on channel `g` and a model effect (true value 1) that moves `a` and `g`; the
+    model as it stands read the scale without the model effect (1.25: it took part of the effect's change
+    on `g`, which lies partly along the signal itself)."""
+    y_g = 10.0 * _unit(np.sin(0.8 * T) + 0.3)                     # the model's g before the effect
+    d_a = 2.0 * _unit(np.sin(1.3 * T) + 0.5 * T / T[-1])          # the effect's change per unit value
+    d_g = 3.0 * _unit(np.sin(0.8 * T) + 0.2 * np.cos(2.1 * T))
+    truth = {"a": d_a, "g": 1.15 * (y_g + d_g)}
+    obj = _objective(truth)
+    return obj, y_g, d_a, d_g
+
+
+def _outputs(scale: float, value: float, y_g, d_a, d_g) -> dict:
+    return {"a": value * d_a, "g": scale * (y_g + value * d_g)}
+
+
+def test_a_named_sensor_scale_refitted_lets_the_model_effect_take_its_value():
+    obj, y_g, d_a, d_g = _gain_case()
+    named = 1.25
+    base = _outputs(named, 0.0, y_g, d_a, d_g)
+
+    def fitted(o: Objective) -> float:
+        """The model effect's least-squares value (one Gauss-Newton step from 0, exact here to first order)
+        seen through the objective's adjustments."""
+        r0 = o.residual(base)
+        Jp = o.residual(_outputs(named, 1.0, y_g, d_a, d_g)) - r0
+        return -float(Jp @ r0) / float(Jp @ Jp)
+
+    held = fitted(obj)
+    col = normalised(obj, _outputs(named + 0.01, 0.0, y_g, d_a, d_g)) - normalised(obj, base)
+    refit = obj.refitting(["sensor_scale[g]"], [col / 0.01], [0.5 - named], [2.0 - named])
+    free = fitted(refit)
+    assert abs(held - 1.0) > 0.15                   # the scale held at its value fights the effect on g
+    assert abs(free - 1.0) < 0.05                   # re-fitted beside it, the effect takes its true value
+    # the model effect added, the scale re-fitted on the model as it now stands comes back to the hidden one
+    at = _outputs(named, free, y_g, d_a, d_g)
+    col = normalised(obj, _outputs(named + 0.01, free, y_g, d_a, d_g)) - normalised(obj, at)
+    again = obj.refitting(["sensor_scale[g]"], [col / 0.01], [0.5 - named], [2.0 - named])
+    assert abs(named + again.nuisance.refit_values(again.raw_residual(at))[0] - 1.15) < 0.01
+    assert again.nuisance_values(at) == {}          # a named effect re-fitted is no nuisance adjustment

@@ -441,7 +441,8 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
         beyond = leave_one_run_out(obj, m0, m1 - nu.D @ p, None, ctx.deviations)
         if beyond is not None and not beyond.better:
             share, _ = nu.mimic(m1 - m0)
-            cand.confounded = (f"the nuisance adjustments (rolling radii, resistance offset) reproduce "
+            who = " and the named sensor effects re-fitted" if nu.refits else ""
+            cand.confounded = (f"the nuisance adjustments (rolling radii, resistance offset){who} reproduce "
                                f"{100 * share:.0f} % of what it changes, and the rest does not improve the "
                                f"prediction of left-out runs")
     explain_rejection(cand)
@@ -747,6 +748,65 @@ def fit_sensor_effects(ctx: Context) -> list[Candidate]:
             cands.append(_finish(ctx, eff, "sensor", 2, out, J, th, coord, 0, requested,
                                  "fitted on the model outputs (no re-simulation)"))
     return cands
+
+
+REFIT_STEP = 0.01            # finite-difference step of a named sensor effect's re-fit, share of its range
+
+
+def sensor_refits(ctx: Context, raw: dict, effects: list[Effect],
+                  named: list[Effect]) -> tuple[list[str], list, list, list]:
+    """The named sensor effects (`named`, which are in `effects`, the model as it stands) as adjustments
+    re-fitted beside every later candidate (Objective.refitting): their labels, the change of the
+    normalised residual per unit of each value on the physical outputs `raw` (a bias and a scale act
+    linearly; a delay's change is linearised), and the change of value (lo, hi) its plausible range
+    allows. A sensor effect named before a model effect was fitted without it: where the model effect
+    also moves that channel, the sensor's value has taken part of it, and held fixed it would fight the
+    model effect's change there."""
+    obj = ctx.objective
+    t = ctx.inputs.t
+    rp = ctx.replayer
+    base = normalised(obj, rp.reported(raw, t, effects))
+    names, cols, lo, hi = [], [], [], []
+    for e in named:
+        if e.kind != "sensor":
+            continue
+        spec = ctx.catalogue[e.name]
+        pspec = _numeric_params(spec)[0]
+        bounds = spec.bounds(pspec.name, e.channel) if hasattr(spec, "bounds") else (None, None)
+        coord = Coord(pspec, *bounds)
+        v = float(e.params[pspec.name])
+        h = REFIT_STEP * (coord.hi - coord.lo)
+        if v + h > coord.hi:
+            h = -h
+        moved = Effect(e.name, {**e.params, pspec.name: v + h})
+        out = rp.reported(raw, t, [moved if x is e else x for x in effects])
+        names.append(e.label())
+        cols.append((normalised(obj, out) - base) / h)
+        lo.append(coord.lo - v)
+        hi.append(coord.hi - v)
+    return names, cols, lo, hi
+
+
+def refit_named_sensors(ctx: Context, raw: dict, effects: list[Effect],
+                        named: list[Effect]) -> list[tuple[str, str]]:
+    """Re-fit the named sensor effects (`named`, in `effects`) in place on the model as it now stands (its
+    physical outputs `raw`), jointly with the nuisance adjustments (sensor_refits; a delay's linearised
+    step taken twice); their intervals keep their width. (label before, label after) of those whose
+    value moved."""
+    sensors = [e for e in named if e.kind == "sensor"]
+    before = [e.label() for e in sensors]
+    for _ in range(2):
+        names, cols, lo, hi = sensor_refits(ctx, raw, effects, sensors)
+        if not cols:
+            return []
+        obj = ctx.objective.refitting(names, cols, lo, hi)
+        out = ctx.replayer.reported(raw, ctx.inputs.t, effects)
+        for e, d in zip(sensors, obj.nuisance.refit_values(obj.raw_residual(out))):
+            pname = _numeric_params(ctx.catalogue[e.name])[0].name
+            e.params[pname] = float(e.params[pname]) + float(d)
+        if not any(e.name == "sensor_delay" for e in sensors):
+            break
+    return [(b, e.label()) for b, e in zip(before, sensors) if e.label() != b]
 
 
 def rebase(cands: list[Candidate], ctx: Context) -> None:

@@ -15,7 +15,7 @@ make few independent samples; white sensor noise makes many).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -39,6 +39,8 @@ class Nuisance:
     solve: np.ndarray          # (k, n_total): unconstrained least-squares values = solve @ r
     lo: np.ndarray
     hi: np.ndarray
+    ridge: np.ndarray | None = None     # (k,): the prior's weight per adjustment (0: free)
+    refits: int = 0            # the last `refits` columns: named sensor effects re-fitted (with_refits)
 
     def values(self, r: np.ndarray) -> np.ndarray:
         return np.clip(self.solve @ r, self.lo, self.hi)
@@ -64,6 +66,28 @@ class Nuisance:
         fit = self.D @ p
         share = [float(np.linalg.norm(self.D[:, j] * p[j])) for j in range(p.size)]
         return 1.0 - float(np.sum((d - fit) ** 2)) / dd, self.names[int(np.argmax(share))]
+
+    def with_refits(self, names: list[str], cols: list[np.ndarray], lo: list[float], hi: list[float]) -> "Nuisance":
+        """These adjustments and the named sensor effects re-fitted beside them: `cols` the change of the
+        residual per unit of each effect's value (normalised, concatenated), `lo`..`hi` the change of the
+        value its plausible range allows; no prior on them (a named effect is fitted, not pulled to its
+        value). The adjustments keep their prior."""
+        ridge = np.concatenate([self.ridge if self.ridge is not None else np.zeros(len(self.names)),
+                                np.zeros(len(cols))])
+        D = np.column_stack([self.D, *cols])
+        return Nuisance([*self.names, *names], [*self.units, *([""] * len(cols))], D, _solve(D, ridge),
+                        np.concatenate([self.lo, lo]), np.concatenate([self.hi, hi]), ridge, self.refits + len(cols))
+
+    @classmethod
+    def refits_only(cls, names: list[str], cols: list[np.ndarray], lo: list[float], hi: list[float]) -> "Nuisance":
+        """The named sensor effects re-fitted where no adjustment applies (with_refits)."""
+        empty = cls([], [], np.zeros((cols[0].size, 0)), np.zeros((0, cols[0].size)), np.zeros(0), np.zeros(0),
+                    np.zeros(0))
+        return empty.with_refits(names, cols, lo, hi)
+
+    def refit_values(self, r: np.ndarray) -> np.ndarray:
+        """The re-fitted named sensor effects' changes of value at the residual `r` (with_refits)."""
+        return self.values(r)[len(self.names) - self.refits:]
 
     @classmethod
     def build(cls, channels: list[str], scale: dict, mean: dict, t: np.ndarray, wheel_radius: float):
@@ -106,9 +130,16 @@ class Nuisance:
         # `PRIOR` standard errors off everywhere, small against a real structural gap (the wheel speeds
         # drifting apart by tens of standard errors), but where an effect and an adjustment would explain
         # the same thing (a hidden mass against the rolling radii) the effect takes it
-        ridge = np.diag(PRIOR ** 2 * n / np.array(hi) ** 2)
-        solve = -np.linalg.solve(D.T @ D + ridge, D.T)
-        return cls(names, units, D, solve, np.array(lo), np.array(hi))
+        ridge = PRIOR ** 2 * n / np.array(hi) ** 2
+        return cls(names, units, D, _solve(D, ridge), np.array(lo), np.array(hi), ridge)
+
+
+def _solve(D: np.ndarray, ridge: np.ndarray) -> np.ndarray:
+    """-(D'D + diag(ridge))^-1 D': the adjustments' values at a residual r are solve @ r (a tiny floor on
+    the diagonal keeps a column without effect, a scale of a channel at zero, from making it singular)."""
+    A = D.T @ D + np.diag(ridge)
+    A += np.eye(A.shape[0]) * 1e-12 * max(float(np.trace(A)), 1.0)
+    return -np.linalg.solve(A, D.T)
 
 
 @dataclass
@@ -153,11 +184,23 @@ class Objective:
         return self.nuisance.project(r) if self.nuisance is not None else r
 
     def nuisance_values(self, out: dict[str, np.ndarray]) -> dict[str, tuple[float, str]]:
-        """The nuisance adjustments fitted to `out`: name -> (value, unit)."""
+        """The nuisance adjustments fitted to `out`: name -> (value, unit) (named sensor effects re-fitted
+        beside them not included)."""
         if self.nuisance is None:
             return {}
-        p = self.nuisance.values(self.raw_residual(out))
-        return {n: (float(v), u) for n, v, u in zip(self.nuisance.names, p, self.nuisance.units)}
+        nu = self.nuisance
+        p = nu.values(self.raw_residual(out))
+        k = len(nu.names) - nu.refits
+        return {n: (float(v), u) for n, v, u in zip(nu.names[:k], p[:k], nu.units[:k])}
+
+    def refitting(self, names: list[str], cols: list[np.ndarray], lo: list[float], hi: list[float]) -> "Objective":
+        """This objective with the named sensor effects `names` re-fitted beside the nuisance adjustments at
+        every residual (Nuisance.with_refits); itself when there are none."""
+        if not cols:
+            return self
+        nu = (self.nuisance.with_refits(names, cols, lo, hi) if self.nuisance is not None
+              else Nuisance.refits_only(names, cols, lo, hi))
+        return replace(self, nuisance=nu)
 
     def adjusted(self, out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """`out` with the nuisance adjustments applied (what the residual measures)."""

@@ -22,7 +22,9 @@ is not named either); candidates are judged per channel (identify.channel_eviden
 the model error (identify.joint_uncertainty); when nothing is eligible alone, the sensor effects are
 fitted again on top of the best model candidate (_joint_sensor); a model winner is fitted jointly with the model
 candidates that promise to explain what it leaves, and with the model effects added in earlier
-iterations (joint.joint_model: a first effect that absorbed part of a second is re-fitted with it); at the end
+iterations (joint.joint_model: a first effect that absorbed part of a second is re-fitted with it); the
+sensor effects named in earlier iterations are re-fitted at the start of each iteration and beside every
+candidate of it (_with_named_sensors: a sensor value fitted before a model effect does not fight it); at the end
 every channel is reported as explained, inside the band or structural with its shape
 (structural.channel_report), the identified effects' sensitivities are correlated (|r| >= CONFOUNDED:
 confounded), and the verdict says "no catalogue effect" or "cannot be told apart" when no effect stands
@@ -71,7 +73,7 @@ from .benchmark import DEFAULT_RATE, Benchmark, build_benchmark
 from .data import MIN_RUNS, accel_frame, announce, load_runs, require_runs
 from .effectset import Effect, from_mapping
 from .identify import (CLEAR, DISCREPANCY_Z, LITTLE, MAX_SIMS, Candidate, Context, add_detail, combine_runs, equivalents,
-                       fit_sensor_effects, rank, rebase, run_estimate, told_apart)
+                       fit_sensor_effects, rank, rebase, refit_named_sensors, run_estimate, sensor_refits, told_apart)
 from .crossval import normalised
 from .joint import joint_model
 from .objective import Objective
@@ -235,6 +237,29 @@ def _metrics(bench: Benchmark, outputs: dict) -> dict:
 def _inside(metrics: dict, share: float = None) -> bool:
     vals = [m["inside_band"] for m in metrics.values()]
     return all(v is not None and v >= (INSIDE_ENOUGH if share is None else share) for v in vals)
+
+
+def _with_named_sensors(ctx: Context, named: list[Effect], workers: int, cache: dict,
+                        fitted_on: dict) -> tuple[Objective, list]:
+    """The iteration's objective, in which the sensor effects named so far are re-fitted beside the
+    nuisance adjustments at every residual (identify.sensor_refits: a model effect judged later is not
+    fought by a sensor value fitted without it), after re-fitting the values of those fitted on another
+    model than the one that now stands (identify.refit_named_sensors, on the per-run replays averaged
+    where there are any, as the sensor effects are fitted; `fitted_on`: id of the effect -> the model
+    effects it was fitted with, _model_key, kept up to date here; an effect not in it was named in the
+    previous iteration, on this model): (objective, (label before, label after) of the values that
+    moved)."""
+    sensors = [e for e in named if e.kind == "sensor"]
+    if not sensors:
+        return ctx.objective, []
+    key = _model_key(ctx.effects)
+    stale = [e for e in sensors if fitted_on.setdefault(id(e), key) != key]
+    raws = _run_raws(ctx, ctx.effects, workers, cache)
+    raw = {c: np.mean([r[c] for r in raws], axis=0) for c in raws[0]} if raws else ctx.raw
+    moved = refit_named_sensors(ctx, raw, ctx.effects, stale) if stale else []
+    for e in stale:
+        fitted_on[id(e)] = key
+    return ctx.objective.refitting(*sensor_refits(ctx, raw, ctx.effects, sensors)), moved
 
 
 def _prepare_runs(ctx: Context, workers: int) -> None:
@@ -404,15 +429,20 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
     iterations: list[Iteration] = []
     verdict = ""
     replays: dict = {}                  # model effects -> every run's replay (_run_raws)
+    sensed: dict = {}                   # named sensor effect (id) -> the model effects its value was fitted with
     workers = opts.ray or max(1, min(opts.workers, os.cpu_count() or 1))
     for k in range(1, opts.max_iterations + 1):
         ti = time.perf_counter()
         current = [*base, *effects]
+        iobj, resensed = _with_named_sensors(Context(bench, obj, rp, inp, current, out, raw, 0.0, bench.n), effects,
+                                             workers, replays, sensed)
+        if resensed:
+            out = rp.reported(raw, bench.t, current)
         metrics = _metrics(bench, out)
-        cost = obj.cost(out)
+        cost = iobj.cost(out)
         where = describe(locate(bench, out, reg))
         label = [e.label() for e in effects]
-        within = max(obj.channel_cost(out).values()) <= 1.0
+        within = max(iobj.channel_cost(out).values()) <= 1.0
         if _inside(metrics) or within:
             how = (f"inside the 95 % band on every compared channel (>= {100 * INSIDE_ENOUGH:.0f} % of samples)"
                    if _inside(metrics) else "within the data's own uncertainty on every compared channel (mean "
@@ -422,7 +452,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
             iterations.append(Iteration(k, label, cost, metrics, where, [], None, None, verdict,
                                         time.perf_counter() - ti))
             break
-        ctx = Context(bench, obj, rp, inp, current, out, raw, cost, bench.n)
+        ctx = Context(bench, iobj, rp, inp, current, out, raw, cost, bench.n)
         taken = {e.name for e in current}
         names = [n for n, s in cat.items() if s.kind == "model" and n not in taken]
         prog.stage(f"iteration {k}: fitting effects", len(names) + REFINE_TOP + 1 + bench.n)
@@ -514,7 +544,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
         if win.kind == "model" and win.raw is not None and win.J is not None and win.coord is not None:
             earlier = [latest[e.key] for e in effects if e.kind == "model" and e.key in latest]
             joint = joint_model(ctx, win, ranked, earlier, workers, prog, tried)
-        refitted = []
+        refitted = list(resensed)
         if joint is not None:
             for old, new in zip(joint.refitted, joint.members):
                 effects[effects.index(old.effect)] = new.effect
@@ -562,6 +592,8 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
         iterations.append(it)
     else:
         verdict = f"stopped after {opts.max_iterations} iterations: " + iterations[-1].verdict
+        _with_named_sensors(Context(bench, obj, rp, inp, [*base, *effects], out, raw, 0.0, bench.n), effects, workers,
+                            replays, sensed)
     t3 = time.perf_counter()
     replayed = MeanInputReplays(rp, inp, base, effects)
     if bench.n >= 2:
