@@ -23,8 +23,9 @@ the model error (identify.joint_uncertainty); when nothing is eligible alone, th
 fitted again on top of the best model candidate (_joint_sensor); a model winner is fitted jointly with the model
 candidates that promise to explain what it leaves, and with the model effects added in earlier
 iterations (joint.joint_model: a first effect that absorbed part of a second is re-fitted with it); the
-sensor effects named in earlier iterations are re-fitted at the start of each iteration and beside every
-candidate of it (_with_named_sensors: a sensor value fitted before a model effect does not fight it); at the end
+sensor effects named in earlier iterations are re-fitted beside every later candidate, and their values
+again once a model effect has joined after them (_with_named_sensors: a sensor value fitted before a model
+effect does not fight it); at the end
 every channel is reported as explained, inside the band or structural with its shape
 (structural.channel_report), the identified effects' sensitivities are correlated (|r| >= CONFOUNDED:
 confounded), and the verdict says "no catalogue effect" or "cannot be told apart" when no effect stands
@@ -450,7 +451,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
             verdict = f"the model is {how}" + (" after adding " + " and ".join(label) if effects else
                                                " as given: no missing effect")
             iterations.append(Iteration(k, label, cost, metrics, where, [], None, None, verdict,
-                                        time.perf_counter() - ti))
+                                        time.perf_counter() - ti, refitted=list(resensed)))
             break
         ctx = Context(bench, iobj, rp, inp, current, out, raw, cost, bench.n)
         taken = {e.name for e in current}
@@ -504,7 +505,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
                        + "cannot be told apart: " + apart_text)
             runner = next((c for c in ranked if c.plausible), None)
             iterations.append(Iteration(k, label, cost, metrics, where, ranked, None, runner, verdict,
-                                        time.perf_counter() - ti))
+                                        time.perf_counter() - ti, refitted=list(resensed)))
             break
         if win is None:
             best = ranked[0] if ranked else None
@@ -531,7 +532,7 @@ def _run(opts: Options, replayer: Replayer | None) -> Result:
                 verdict = (f"after adding {' and '.join(label)}, no further candidate helps{why}")
             runner = next((c for c in ranked if c.plausible), None)
             iterations.append(Iteration(k, label, cost, metrics, where, ranked, None, runner, verdict,
-                                        time.perf_counter() - ti))
+                                        time.perf_counter() - ti, refitted=list(resensed)))
             break
         if bench.n >= 2:                     # outputs at the per-run value
             eff = win.effect
