@@ -143,6 +143,8 @@ def _status_props() -> dict:
                      "takeover": {"type": "boolean", "description": "the user has taken over from the bus ECU"},
                      "seq": {"type": ["integer", "null"], "description": "sequence number of the last request"},
                      "requests": _count("drive requests taken"),
+                     "lapses": _count("times the user's channels were handed back because no request came "
+                                      "within the hold (rtsim.service.user_input.USER_HOLD s of wall time)"),
                      "accepted": {"type": "boolean", "description": "the service accepts user commands"}},
                  "required": ["channels", "takeover", "seq", "requests", "accepted"],
                  "additionalProperties": False},

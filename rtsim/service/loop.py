@@ -136,6 +136,7 @@ class HilLoop:
         self.user_clock = time.monotonic   # the wall clock (s) a user command's hold runs on; a test may set its own
         self._usr_seq = None
         self._usr_requests = 0
+        self._usr_lapses = 0               # hand-backs because the user's requests stopped coming
         # (topic, event) for the recording and re-simulation, each with the step it acted at: every change
         # of the user source (values, takeover; topic ``user``) and every control op of CONTROL_OPS
         # (topic ``control``; bridge.payloads has both schemas); the publisher thread takes them
@@ -420,6 +421,7 @@ class HilLoop:
         self.li[LI_BUS_ERROR] = self._bus_error()
         if self._usr_deadline is not None and self.user_clock() > self._usr_deadline:
             self._user_release()
+            self._usr_lapses += 1
             self._user_changed("lapse")
         self._bus_errors_at_status = self.port.errors if self.port is not None else 0
 
@@ -622,12 +624,12 @@ class HilLoop:
 
     def user_status(self) -> dict:
         """The user source: the channels it drives now (SI values), whether it took over, the last request's
-        sequence number and how many requests came."""
+        sequence number, how many requests came and how many times the channels lapsed for want of one."""
         usr = self.ls.usr
         return {"channels": {n: float(usr[u]) for u, n in enumerate(self.sim.user_inputs.names)
                              if not np.isnan(usr[u])},
                 "takeover": bool(self.ls.usr_mode[0]), "seq": self._usr_seq, "requests": self._usr_requests,
-                "accepted": self.user_input}
+                "lapses": self._usr_lapses, "accepted": self.user_input}
 
     def drivers(self) -> dict[str, str]:
         """Who drives each of the vehicle's driving inputs now: "user" (rtsim view), "ecu" (a valid bus

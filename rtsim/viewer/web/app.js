@@ -237,6 +237,7 @@ function drive(inp, now) {
   if (key === lastSent && now - lastSentAt < 100) return;          // unchanged: every 100 ms (the service holds 1 s)
   lastSent = key; lastSentAt = now;
   ws.send(JSON.stringify({ type: 'drive', seq: ++driveSeq, t_page: performance.now(), takeover: $('takeover').checked, ...ch }));
+  view.drive.seq = driveSeq;     // (tests: the service's reply with this seq says when these values were applied)
 }
 
 function ack(m) {
@@ -333,7 +334,9 @@ function panel(inp) {
   const who = s.drivers || {}, cmd = commands || {};
   $('drivers').innerHTML = '<tr><td><b>input</b></td><td><b>driven by</b></td></tr>' + Object.entries(who).map(([n, w]) =>
     `<tr><td>${n}</td><td class="${w.startsWith('user') ? 'user' : ''}">${w}</td></tr>`).join('') +
-    (cmd.source ? `<tr><td>bus commands</td><td>${cmd.source} at ${fmt(cmd.time, 2)} s</td></tr>` : '');
+    (cmd.source ? `<tr><td>bus commands</td><td>${cmd.source} at ${fmt(cmd.time, 2)} s</td></tr>` : '') +
+    (s.user && s.user.lapses ? `<tr><td colspan="2" class="warn">your input lapsed ${s.user.lapses} times: no request ` +
+      'reached the service for 1 s (a slow page or network), and the channels went back</td></tr>' : '');
   const us = (x) => x == null ? '–' : `${(x * 1e6).toFixed(0)} us`, ms = (x) => x == null ? '–' : `${(x * 1e3).toFixed(2)} ms`;
   $('health').innerHTML = `<tr><td><b>loop</b></td><td>p50</td><td>p99</td><td>max</td></tr>
     <tr><td>lateness</td><td class="v">${ms(s.lateness_p50)}</td><td class="v">${ms(s.lateness_p99)}</td><td class="v">${ms(s.lateness_max)}</td></tr>
