@@ -18,8 +18,8 @@ import playwright.sync_api  # noqa: F401  (the test extra: a hard dependency of 
 import pytest
 
 from service_harness import ServiceProcess, free_port
-from viewer_harness import NO_CHROMIUM, chromium_path, require_page_libraries, served_page, sim_time, wait_sim
-from waits import EVENT
+from viewer_harness import (NO_CHROMIUM, STARVED, chromium_path, drive_reply, lapses, press_full,
+                            require_page_libraries, served_page, sim_time, wait_sim)
 
 LEAN = math.radians(30.0)            # the lean demand at full key (rtsim.vehicle.motorcycle.inputs)
 THROTTLE = 0.4                       # the throttle at full key
@@ -44,39 +44,22 @@ def moto(tmp_path_factory):
 
 
 
-def _reply(pg) -> dict:
-    """The service's reply to a drive request the page sent from now on (its ``sim_time``: when the values
-    it carried were applied; ``user.lapses``: hand-backs so far for want of a request)."""
-    seq = pg.evaluate("rtsimView.drive.seq")
-    pg.wait_for_function(f"rtsimView.drive.last && rtsimView.drive.last.seq >= {seq}", timeout=EVENT * 1000)
-    return pg.evaluate("rtsimView.drive.last")
-
-
-STARVED = ("the page was starved on this loaded machine: its drive requests came more than the service's "
-           "hold (1 s of wall time) apart {n} times, and each time the channels went back to the rider (the "
-           "lapses are in the recording); the key-by-key criteria need an unbroken hold")
-
-
 def _hold(pg, key: str, seconds: float) -> tuple[float, float]:
     """Hold ``key`` until ``seconds`` of simulated time have passed, without a lapse, since the service
-    applied the page's full key (the simulated time of its reply: under load the page's view of the clock and
-    its requests both lag the service); returns the page's simulated times at key down and key up. A lapse
-    starts the hold again (twice at most, then the test skips: STARVED)."""
+    applied the page's full key (press_full); returns the page's simulated times at key down and key up. A
+    lapse starts the hold again (twice at most, then the test skips: STARVED)."""
     t0 = sim_time(pg)
-    pg.keyboard.down(key)
-    control = {"ArrowUp": "throttle >= 1", "ArrowDown": "brake >= 1", "ArrowLeft": "steer <= -1",
-               "ArrowRight": "steer >= 1"}[key]
-    pg.wait_for_function(f"rtsimView.input.{control}", timeout=EVENT * 1000)
+    applied = press_full(pg, key)
     for _attempt in range(3):
-        applied = _reply(pg)                     # the request sent in the frame the ramp went full, or later
         wait_sim(pg, max(applied["sim_time"], sim_time(pg)) + seconds)
         t1 = sim_time(pg)
-        now = _reply(pg)
-        if now["user"].get("lapses", 0) == applied["user"].get("lapses", 0):
+        now = drive_reply(pg)
+        if lapses(now) == lapses(applied):
             pg.keyboard.up(key)
             return t0, t1
+        applied = now
     pg.keyboard.up(key)
-    pytest.skip(STARVED.format(n=now["user"]["lapses"]))
+    pytest.skip(STARVED.format(n=lapses(now)))
 
 
 def _recorded(rec):
@@ -123,7 +106,7 @@ def test_the_keyboard_rides_the_motorcycle_for_20_s_without_a_fall(moto):
     brakes act only while their keys drive them."""
     pg, _logs, rec = moto
     start = sim_time(pg)
-    lapsed = _reply(pg)["user"].get("lapses", 0)
+    lapsed = lapses(drive_reply(pg))
     keys = {}
     keys["right"] = _hold(pg, "ArrowRight", 2.0)
     keys["left"] = _hold(pg, "ArrowLeft", 2.0)
@@ -133,9 +116,9 @@ def test_the_keyboard_rides_the_motorcycle_for_20_s_without_a_fall(moto):
     keys["brake"] = _hold(pg, "ArrowDown", 1.0)
     wait_sim(pg, max(start + 20.0, sim_time(pg) + 2.0))
     end = sim_time(pg)
-    lapses = _reply(pg)["user"]["lapses"] - lapsed   # each one a step in the lean demand, back to the rider's
-    if lapses:
-        pytest.skip(STARVED.format(n=lapses))
+    lapsed = lapses(drive_reply(pg)) - lapsed     # each one a step in the lean demand, back to the rider's
+    if lapsed:
+        pytest.skip(STARVED.format(n=lapsed))
     wait_sim(pg, end + 1.5)                                  # the recorder closes a chunk every second
     assert end - start >= 20.0
     msgs, col = _recorded(rec)

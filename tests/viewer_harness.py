@@ -91,6 +91,36 @@ def wait_sim(pg, t: float) -> None:
     pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {t}", timeout=EVENT * 1000, polling=50)
 
 
+#: what the page's input reads once a key's ramp is full
+FULL_KEY = {"ArrowUp": "throttle >= 1", "ArrowDown": "brake >= 1", "ArrowLeft": "steer <= -1",
+            "ArrowRight": "steer >= 1"}
+
+STARVED = ("the page was starved on this loaded machine: its drive requests came more than the service's "
+           "hold (1 s of wall time) apart {n} times, and each time the channels went back (the lapses are in "
+           "the recording); the key-by-key criteria need an unbroken hold")
+
+
+def drive_reply(pg) -> dict:
+    """The service's reply to a drive request the page sent from now on (its ``sim_time``: when the values
+    it carried were applied; ``user.lapses``: hand-backs so far for want of a request)."""
+    seq = pg.evaluate("rtsimView.drive.seq")
+    pg.wait_for_function(f"rtsimView.drive.last && rtsimView.drive.last.seq >= {seq}", timeout=EVENT * 1000)
+    return pg.evaluate("rtsimView.drive.last")
+
+
+def press_full(pg, key: str) -> dict:
+    """Press ``key`` and wait until the page's ramp of it is full and the service has applied it: the reply to
+    the request that carried the full key, or a later one (drive_reply). Under load the page's view of the
+    simulated clock and its requests both lag the service: spans are measured from the reply's sim_time."""
+    pg.keyboard.down(key)
+    pg.wait_for_function(f"rtsimView.input.{FULL_KEY[key]}", timeout=EVENT * 1000)
+    return drive_reply(pg)
+
+
+def lapses(reply: dict) -> int:
+    return int(reply["user"].get("lapses", 0))
+
+
 @contextmanager
 def served_page(vehicle_id: str, endpoint: str):
     """A browser page of `rtsim view` (a ViewThread) of the service at ``endpoint``, once it has drawn its first
