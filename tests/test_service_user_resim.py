@@ -82,12 +82,14 @@ def test_a_session_driven_by_the_user_resimulates_bit_for_bit(tmp_path, monkeypa
         for _ in range(30):
             ecu.cycle(ecu_cmd)
         assert svc.loop.user_status()["channels"] == {} and set(svc.loop.drivers().values()) == {"ecu"}
+        assert svc.loop.user_status()["lapses"] == 1           # counted once, however many steps pass after
         for _ in range(20):                                  # the ECU stops: its commands time out
             ecu.cycle()
         drive(brake_pressure_cmd=500.0, steering_wheel_angle_cmd=-2.0, seq=300)
         for _ in range(20):
             ecu.cycle()
-        drive(release=True, seq=301)
+        r = drive(release=True, seq=301)
+        assert r["user"]["lapses"] == 1                        # a release is no lapse
         for _ in range(10):
             ecu.cycle()
         bus.shutdown()
