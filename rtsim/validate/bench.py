@@ -199,6 +199,12 @@ def _evidence(it) -> dict:
     return {"winner": one(it.winner) if it.winner else None, "top": [one(c) for c in it.candidates[:4]]}
 
 
+def _rival(truth: dict) -> str:
+    """The rival that reproduces a hidden effect of an inseparable case (bench_truth.rivals), short."""
+    r = next(e["rival"] for e in truth["effects"] if e["larger"] and not e["separable"])
+    return _short(f"{r['effect']}[{r['channel']}]" if r["channel"] else r["effect"]) + f" {r['value']:.3g}"
+
+
 def _fmt(r: dict) -> str:
     return f"{100 * r['share']:.0f} % ({r['count']}/{r['of']})" if r["of"] else "-"
 
@@ -230,7 +236,8 @@ def show(records: list[dict], console=None) -> None:
     for r in records:
         named = ", ".join(f"{n['effect']}[{n['channel']}]" if n["channel"] else n["effect"] for n in r["found"])
         errs = ", ".join(f"{100 * e:.1f} %" for e in r["errors"].values())
-        t.add_row(r["id"], f"{r['sim']}/{r['tyre']}", escape(r["label"]), "yes" if r["larger"] else "no",
+        larger = ("yes" if r["separable"] else f"yes, like {_rival(r['truth'])}") if r["larger"] else "no"
+        t.add_row(r["id"], f"{r['sim']}/{r['tyre']}", escape(r["label"]), escape(larger),
                   escape(named) or ("error" if r["error"] else "-"),
                   r["status"] + (" (told apart)" if r["told_apart"] else ""),
                   errs, f"{r['seconds']['workflow']:.0f}")
@@ -239,7 +246,9 @@ def show(records: list[dict], console=None) -> None:
     s = Table(title="rates")
     s.add_column("measure")
     s.add_column("value")
-    s.add_row("named right (effect larger than the structural mismatch)", _fmt(rt["named_right"]))
+    s.add_row("named right (effect larger than the structural mismatch, separable)", _fmt(rt["named_right"]))
+    s.add_row("named right (effect larger than the structural mismatch)", _fmt(rt["named_right_larger"]))
+    s.add_row("inseparable cases left unnamed as \"cannot be told apart\"", _fmt(rt["inseparable_told_apart"]))
     s.add_row("value within 10 % (sensor) / 20 % (model)", _fmt(rt["value_within_tolerance"]))
     s.add_row("value error, median", f"{100 * rt['value_error_median']:.1f} %")
     s.add_row("false naming (named when nothing or something else was hidden)", _fmt(rt["false_naming"]))

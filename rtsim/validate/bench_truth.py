@@ -27,6 +27,23 @@ validation must allow for anyway (wheel speeds, per axle: one scale of both whee
 that offset while moving; bounded least squares), and the floor F_c = the channel's noise left in the mean of
 the seven runs (sd / sqrt(7)). An effect is larger iff max over c of E_c / max(S_c, F_c) >= `RATIO`; a case is
 larger iff every hidden effect is.
+
+"Separable" (decided before the seed-3033 draw was run). A larger effect may still change the runs as some other
+catalogue effect would (a rolling resistance and a bearing drag both retard a straight run by a constant total
+force); then no method can tell which of the two it is, and "cannot be told apart" is the right verdict. For
+each larger hidden effect, every other effect of the vehicle's catalogue (each model effect; each sensor effect
+on each compared channel and wheel angle) is fitted to the hidden effect's change on the same inputs, with the
+model itself: the rival's change of the model's readings (the model replaying the run with the hidden effect
+at the replayer's fit step, the rival switched on, minus the same without it) scaled to match the hidden
+effect's change E (weighted least squares, channels in units of max(S_c, F_c), within the rival's
+plausible range; the change taken linear in the value, through neutral and the first trial, then through the
+last two replays), replayed at the value found, up to `RIVAL_REPLAYS` replays; the lowest ratio is kept
+(an upper bound of the best a rival can do: never calls a separable effect inseparable). The rival's
+ratio is max over c of the left-over of E minus its change, over max(S_c, F_c); the effect is separable iff
+every rival's ratio is at least `RATIO` (the same level as "larger"); a case is separable iff every hidden
+effect is. A rival whose neutral value is at an infinite parameter (driveline_compliance: an infinitely stiff
+driveline) is not tried: its change is not a slope through neutral; the benchmark's manoeuvres drive smooth
+torques, which its signature says it leaves almost unchanged.
 """
 from __future__ import annotations
 
@@ -40,6 +57,7 @@ import numpy as np
 from .fieldbench import generate, scatter
 
 RATIO = 2.0
+RIVAL_REPLAYS = 3            # replays per model rival, at most (module docstring)
 RADIUS_RANGE = 0.015         # an axle's rolling radius, relative
 OFFSET_RANGE = 0.03          # m/s^2, a resistance offset
 WHEEL_SPEED_FLOOR = 0.05     # rad/s: a wheel speed's noise left in the mean (quantised angles derived)
@@ -99,6 +117,72 @@ def _best_shift(t, model, data) -> float:
     return float(ds[np.argmin([np.mean((np.interp(t - d, t, model) - data) ** 2) for d in ds])])
 
 
+def _first_trial(pspec, hi: float) -> float:
+    """A rival parameter's first trial value: its typical value, or a tenth of the way to its upper bound
+    where the typical value is the neutral one (a sensor bias)."""
+    n = pspec.neutral
+    return pspec.default if pspec.default != n else n + 0.1 * (hi - n)
+
+
+def rivals(change: dict, replayer, bench1, hidden: tuple, scale: dict, data0: dict, t: np.ndarray,
+           moving: np.ndarray) -> dict | None:
+    """The catalogue effect other than `hidden` ((effect, channel)) that reproduces `change` (channel -> the
+    hidden effect's change on the grid) best, as {"effect", "channel", "value", "ratio"}: the module
+    docstring's separability fit, on the inputs of `bench1` (the runs with the hidden effect); `scale`:
+    channel -> max(S_c, F_c). None when the catalogue has no rival to try."""
+
+    from .effectset import Effect
+    channels = [c for c in change if c in scale]
+    inp = replayer.inputs(bench1)
+    raw = replayer.simulate(inp, [], fit=True)
+    base = replayer.reported(raw, bench1.t, [])
+    radius = replayer.wheel_radius
+    sensors = [c for c in raw if c in replayer.model.channels.sensor_names
+               and (c in channels or c.startswith("wheel_angle_"))]
+
+    def delta(eff: Effect) -> dict:
+        out = replayer.reported(replayer.simulate(inp, [eff], fit=True) if eff.kind == "model" else raw,
+                                bench1.t, [eff])
+        return {c: out[c] - base[c] for c in channels}
+
+    def left(d: dict) -> np.ndarray:
+        rest = _left_over({c: change[c] - d[c] for c in channels}, data0, t, moving, radius)
+        return np.array([rest[c] / scale[c] for c in channels])
+
+    best = None
+    for name, spec in replayer.profile.effects.items():
+        pspec = spec.params[0]
+        n = pspec.neutral
+        if n is None:
+            continue
+        for channel in ([None] if spec.kind == "model" else sensors):
+            if (name, channel) == hidden:
+                continue
+            lo, hi = spec.bounds(pspec.name, channel)
+
+            def effect(v: float) -> Effect:
+                return Effect(name, {pspec.name: v} if channel is None else {"channel": channel, pspec.name: v})
+            v, ratio, at = _first_trial(pspec, hi), math.inf, math.nan
+            v_prev, d_prev = n, {c: 0.0 for c in channels}
+            for k in range(RIVAL_REPLAYS):
+                d = delta(effect(v))
+                r = float(left(d).max())
+                if r < ratio:
+                    ratio, at = r, v
+                if ratio < RATIO or k == RIVAL_REPLAYS - 1:
+                    break
+                slope = {c: (d[c] - d_prev[c]) / (v - v_prev) for c in channels}   # secant through the last two
+                num = sum(float(np.dot(slope[c], change[c] - d[c])) / scale[c] ** 2 for c in channels)
+                den = sum(float(np.dot(slope[c], slope[c])) / scale[c] ** 2 for c in channels)
+                v_next = float(np.clip(v + num / den, lo, hi)) if den > 0.0 else v
+                if v_next == v:
+                    break
+                v_prev, d_prev, v = v, d, v_next
+            if best is None or ratio < best["ratio"]:
+                best = {"effect": name, "channel": channel, "value": at, "ratio": ratio}
+    return best
+
+
 def tyre_equivalent(tyre_params, fz, tan_alpha, fy, speed: float) -> float:
     """The MF scale s reproducing the simulator's lateral forces (module docstring)."""
     from scipy.optimize import minimize_scalar
@@ -114,7 +198,8 @@ def tyre_equivalent(tyre_params, fz, tan_alpha, fy, speed: float) -> float:
 
 def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
     """The case's ground truth (module docstring): per hidden effect its hidden value, its value in the
-    model's terms and its size ratio; per channel the structural mismatch; `larger` for the case."""
+    model's terms, its size ratio and, when larger, the rival that reproduces it best (`rivals`) and whether
+    it is separable; per channel the structural mismatch; `larger` and `separable` for the case."""
     from .effectset import kind
     frame = generate.accel_frame(case)
     old = replayer.accel_frame
@@ -165,9 +250,15 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
                     elif h["effect"] == "sensor_delay":
                         terms = value + _best_shift(tg, m, d)
                 best = max(ratio, key=ratio.get)
+                larger = ratio[best] >= RATIO
+                rival = None
+                if larger:
+                    scale = {c: max(structural[c], _floor(c)) for c in change}
+                    rival = rivals(change, replayer, b1, (h["effect"], channel), scale, data0, tg, moving)
                 effects.append({"effect": h["effect"], "channel": channel, "param": param, "hidden": value,
                                 "model_terms": terms, "kind": kind(h["effect"]), "ratio": ratio[best],
-                                "ratio_channel": best, "larger": ratio[best] >= RATIO})
+                                "ratio_channel": best, "larger": larger, "rival": rival,
+                                "separable": larger and (rival is None or rival["ratio"] >= RATIO)})
             nominal = None
             if case["sim"] != "pitch":
                 nominal = tyre_equivalent(tyre_params, ch0["_fz"][::25], ch0["_tan_alpha"][::25], ch0["_fy"][::25],
@@ -175,13 +266,14 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
     finally:
         replayer.accel_frame = old
     return {"id": case["id"], "effects": effects, "structural": structural,
-            "larger": bool(effects) and all(e["larger"] for e in effects), "tyre_nominal_in_model_terms": nominal}
+            "larger": bool(effects) and all(e["larger"] for e in effects),
+            "separable": bool(effects) and all(e["separable"] for e in effects), "tyre_nominal_in_model_terms": nominal}
 
 
 def cached_truth(case: dict, car: dict, replayer, tyre_params, root: Path | None = None) -> dict:
     """`truth`, cached on disk beside the generated runs (keyed by the case and the car)."""
     root = Path(root or generate.cache_root())
-    path = root / f"{case['id']}_{generate.key(case, car, 'truth-v3')}.json"
+    path = root / f"{case['id']}_{generate.key(case, car, 'truth-v4')}.json"
     if path.exists():
         return json.loads(path.read_text())
     out = truth(case, car, replayer, tyre_params)
