@@ -8,7 +8,8 @@ laws, realistic run-to-run scatter and logger noise), scored against the generat
     python -m rtsim.validate.bench --straight-line [--effect NAME=VALUE]   (the seed's straight line)
 
 Default: the held-out set (never used to tune the method). Reports the share of the cases named right
-(among those whose effect is larger than the structural mismatch), the value error, the false-naming
+(among those whose effect is larger than the structural mismatch and separable from the other catalogue
+effects; and among all larger ones), the value error, the false-naming
 rate, the none-cases named and the "cannot be told apart" rate, as a table and a confusion matrix, and
 what it cost (generation, truth, workflow). Generated runs and truths are made first, `--workers`
 processes forked after the model is built, and cached on disk (fieldbench.generate.cache_root;
