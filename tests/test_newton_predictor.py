@@ -50,7 +50,7 @@ def test_extrapolated_start_converges_to_the_same_steps_in_fewer_iterations(bike
     q_ext, qd_ext, it_ext, _ = _run(mm, q, 300, 1)
     q_tay, qd_tay, it_tay, _ = _run(mm, q, 300, 0)
     q_ref, qd_ref, _, _ = _run(mm, q, 300, 0, tol_dq=1e-13)     # Newton to round-off: the trapezoidal solution
-    assert it_ext == pytest.approx(2.0) and it_tay >= 2.5
+    assert it_ext < 1.1 and it_tay >= 2.5      # the first increment mostly within tolerance: one iteration
     err_ext = np.max(np.abs(q_ext - q_ref)), np.max(np.abs(qd_ext - qd_ref))
     err_tay = np.max(np.abs(q_tay - q_ref)), np.max(np.abs(qd_tay - qd_ref))
     # after 0.35 s, with the same stopping test: the extrapolated start ends closer to the solution

@@ -176,7 +176,9 @@ class Settings:
     min_step: float = 1.0 / 16.0
     extrapolate: bool = False         # Newton starts from the trapezoidal rule with the end-of-step qdd
     #                                   extrapolated from the last two steps (error O(h^4 d4q/dt4) instead of the
-    #                                   Taylor predictor's O(h^3 d3q/dt3)): fewer iterations where bodies spin fast
+    #                                   Taylor predictor's O(h^3 d3q/dt3)) plus Newton's corrections of the last
+    #                                   four steps extrapolated by a cubic (rtsim.mbs.integrator.step_begin):
+    #                                   fewer iterations where bodies spin fast
 
 
 @dataclass(frozen=True)

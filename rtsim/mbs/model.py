@@ -143,11 +143,13 @@ Data = namedtuple("Data", [
     "phi", "jac", "phit", "phitt", "hqd",   # constraint values, Jacobian values, time derivatives, (Phi_q)' qd
     "force", "w_env",  # forces, W = M + dt/2 C + dt^2/4 K (= M without K, C) in envelope storage
     "a_env", "l_env",  # the tangent A = W + bq Phi_q^T alpha Phi_q and its factor, in the factor's pattern
-    "pred",           # (3 nq,) predictor history (IS_PREDICTOR): qdd at the start and at the end of the last
-    #                   step, and its predictor base (during a step) or Newton's correction to it (after)
+    "pred",           # (6 nq,) predictor history (IS_PREDICTOR): qdd at the start and at the end of the last
+    #                   step, its predictor base (during a step) or Newton's correction to it (after), and the
+    #                   corrections of the three steps before
     "qhd", "qhdd", "r", "x", "y", "z", "work", "sig", "g", "sp", "mu",
     "flags",          # int64 [have_factor, need_factor]
-    "newton",         # float64 (7,) Newton bookkeeping between the stages of a step
+    "newton",         # float64 (8,) Newton bookkeeping between the stages of a step (and the predictor's
+    #                   count of corrections, kept across steps)
     "poly_cache",     # float64 (npoly, 3, 6) polynomial paths and derivatives shared by a poly point's rows
     "stats",          # float64 (NSTATS,)
 ])
@@ -172,9 +174,10 @@ def make_data(model: Model, q0: np.ndarray, qd0: np.ndarray | None = None, t0: f
         drv_ext=np.zeros((nd, 3)), drv=np.zeros((nd, 3)),
         phi=z(nc), jac=np.zeros((nc, NSLOT)), phit=z(nc), phitt=z(nc), hqd=z(nc),
         force=z(nq), w_env=model.m_env.copy(), a_env=z(nfac), l_env=z(nfac),
-        pred=np.full(3 * nq, np.nan), qhd=z(nq), qhdd=z(nq), r=z(nq), x=z(nq), y=z(nq), z=z(max(nq, nc)), work=z(nq), sig=z(nc), g=z(nc), sp=z(nc), mu=z(nc),
+        pred=np.full(6 * nq, np.nan), qhd=z(nq), qhdd=z(nq), r=z(nq), x=z(nq), y=z(nq), z=z(max(nq, nc)),
+        work=z(nq), sig=z(nc), g=z(nc), sp=z(nc), mu=z(nc),
         flags=np.zeros(2, dtype=np.int64),
-        newton=np.zeros(7),
+        newton=np.zeros(8),
         poly_cache=np.zeros((model.poly_coef.shape[0], 3, 6)),
         stats=np.zeros(NSTATS),
     )
