@@ -146,6 +146,9 @@ def test_an_ecu_that_dies_while_the_service_starts_ends_the_demo(tmp_path):
                      r"its last stderr line: fake ecu: cannot go on",
                      errors[0]), errors[0]
     assert "Traceback" not in demo.errtext()
+    # the ECU waits as long as the demo supervises the start (a first compile on a busy machine took over
+    # the ECU's own default of 600 s), not its default bound
+    assert re.search(r"demo ECU process \(pid \d+\): .* --connect-timeout 86400\b", demo.text()), demo.text()
 
 
 def test_an_ecu_without_a_service_gives_one_clear_error_at_its_bound():

@@ -10,8 +10,9 @@ summary reports the lateral acceleration and yaw rate reached, the commands acce
 (``motorcycle_hil``, 20 s by default, lockstep) and runs the demo rider-assist ECU
 (``drivers.rider_assist_demo``: steering damper, ride-by-wire, traction control and anti-lock); the
 summary reports the distance, peak roll, the rider's path offset and the assist. The ECU starts first and waits,
-bounded and saying so, for the service's bus and first frames (a first run compiles the kernels for a
-minute or more; the service shows that progress). When the ECU finishes its manoeuvre (or
+saying so, for the service's bus and first frames as long as the service is starting (a first run compiles
+the kernels for minutes; the service shows that progress; `SUPERVISED_CONNECT_TIMEOUT`). When the ECU
+finishes its manoeuvre (or
 ``--duration`` of simulated time) the service stops, the recording is finalised and a summary is
 printed: commands accepted, distance and peak speed (from the recorded state), whether the lane change
 was reached, loop health and the file written; exit 0.
@@ -54,6 +55,10 @@ ROOT = Path(__file__).resolve().parents[2]
 ECU_COMMAND_ENV = "RTSIM_DEMO_ECU"
 EPS_SCENARIO = "step_steer_80kph"     # the EPS car's demo manoeuvre (its kind's Demo.scenario)
 DEFAULT_ZENOH_PORT = 7447
+#: s: how long the demo's ECU waits for the service. The demo supervises the start both ways (the ECU is
+#: stopped when the service fails to start), so the ECU's own bound is not what ends a failed start; a
+#: first start on a busy machine compiled for more than the ECU's default 600 s and the demo failed then.
+SUPERVISED_CONNECT_TIMEOUT = 86400.0
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -182,7 +187,8 @@ def main(args) -> int:
     # bus and first frames (bounded, saying so); the service ends when the ECU does
     ecu_module = demo.ecu
     cmd = shlex.split(os.environ.get(ECU_COMMAND_ENV, "")) or [sys.executable, "-m", ecu_module]
-    cmd = cmd + ["--can-interface", iface, "--can-channel", chan, "--manoeuvre", args.manoeuvre]
+    cmd = cmd + ["--can-interface", iface, "--can-channel", chan, "--manoeuvre", args.manoeuvre,
+                 "--connect-timeout", f"{SUPERVISED_CONNECT_TIMEOUT:g}"]
     if args.silent_after is not None:
         cmd += ["--silent-after", str(args.silent_after)]
     if args.duration is not None:
