@@ -14,9 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from rtsim.jit import cycles_per_second, inline_kernel, kernel, read_cycles
-from rtsim.mbs.integrator import (CONTINUE, CONVERGED, finish_factor, finish_prepare, finish_projections,
-                                  newton_factor, newton_failed, newton_increment, newton_prepare, newton_residual,
-                                  step_begin, wants_tangent)
+from rtsim.mbs.integrator import (CONTINUE, CONVERGED, finish_evaluates, finish_factor, finish_prepare,
+                                  finish_projections, finish_refactors, newton_factor, newton_failed, newton_increment,
+                                  newton_prepare, newton_residual, step_begin, wants_tangent)
 from rtsim.mbs.model import ERR_FACTOR, ERR_NONFINITE_FORCE, IS_MAX_ITER, OK, ST_FAIL_INDEX
 from rtsim.vehicle.car.effect_kernels import FX_ON
 from rtsim.vehicle.car.forces import (aero_stage, brake_stage, chassis_omega, corner_kinematics, drive_stage,
@@ -155,11 +155,12 @@ def _mbs_step_staged(m, d, h, add_forces, args, cyc):
     if status != OK:
         return status
     c = _lap(cyc, S_FINISH, c)
-    bad = add_forces(m, d, args, True, bq, hc)
-    c = read_cycles()
-    if bad >= 0:
-        d.stats[ST_FAIL_INDEX] = bad
-        return ERR_NONFINITE_FORCE
+    if finish_evaluates(m, d):
+        bad = add_forces(m, d, args, finish_refactors(m, d), bq, hc)
+        c = read_cycles()
+        if bad >= 0:
+            d.stats[ST_FAIL_INDEX] = bad
+            return ERR_NONFINITE_FORCE
     if finish_factor(m, d, h) != OK:
         return ERR_FACTOR
     c = _lap(cyc, S_PROJ_FACTOR, c)

@@ -27,7 +27,7 @@ from . import envelope, sparse
 from .model import (
     CON_ANGLE2D, CON_ANGLE3D, CON_CRANK_ROD, CON_DISC_CONTACT, CON_DISC_ROLL, CON_DOT, CON_LINEAR, CON_POLY_POINT, SCALAR2, DRV_EXTERNAL, DRV_POLY, DRV_SINE, FRC_COORD,
     FRC_SPRING, FS_REUSE_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL,
-    FS_TOL_VEL_FAIL, FS_STALL_RATE, FS_MIN_STEP, FS_GRAVITY, NFSET, IS_ERROR_TEST, IS_MAX_ITER, IS_PREDICTOR, IS_ABSOLUTE_DQ, NISET, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
+    FS_TOL_VEL_FAIL, FS_STALL_RATE, FS_MIN_STEP, FS_GRAVITY, NFSET, IS_ERROR_TEST, IS_MAX_ITER, IS_PREDICTOR, IS_ABSOLUTE_DQ, IS_FINISH_FORCES, NISET, IS_MAX_PROJ, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, NSLOT, SCALAR, Model,
 )
 
 
@@ -162,6 +162,10 @@ class Settings:
     #                                   rate) and its constraints, not on the last increment and the
     #                                   constraints it started from (which costs an iteration that only
     #                                   confirms; the default keeps it for problems through singular positions)
+    finish_forces: bool = True        # evaluate the forces again at the converged q for what reads them after
+    #                                   the step; False keeps the last Newton evaluation's (made one increment,
+    #                                   within tol_dq, before the converged q). A model whose projections
+    #                                   refactor (projection_factor) always evaluates them: its W needs them
     projection_factor: bool = True    # refactor at the converged q for the projections (needed at
     #                                   singular positions; a model without them may save it)
     absolute_tol_dq: bool = False     # tol_dq in coordinate units, not relative to max(1, max|q|): where some
@@ -775,6 +779,7 @@ class MechanismBuilder:
         iset[IS_ERROR_TEST] = int(s.error_test)
         iset[IS_PREDICTOR] = int(s.extrapolate)
         iset[IS_ABSOLUTE_DQ] = int(s.absolute_tol_dq)
+        iset[IS_FINISH_FORCES] = int(s.finish_forces)
         fset = np.zeros(NFSET)
         fset[FS_TOL_DQ], fset[FS_TOL_PHI], fset[FS_TOL_VEL], fset[FS_TOL_ACC] = s.tol_dq, s.tol_phi, s.tol_vel, s.tol_acc
         fset[FS_TOL_VEL_FAIL], fset[FS_TOL_ACC_FAIL] = s.tol_vel_fail, s.tol_acc_fail

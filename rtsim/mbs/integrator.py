@@ -33,7 +33,7 @@ from .sparse import cholesky, solve
 from .model import (
     ERR_FACTOR, ERR_NEWTON, ERR_NONFINITE_FORCE, ERR_NONFINITE_STATE, ERR_PROJECTION,
     FS_MIN_STEP, FS_REUSE_RATE, FS_STALL_RATE, FS_TOL_ACC, FS_TOL_ACC_FAIL, FS_TOL_DQ, FS_TOL_PHI, FS_TOL_VEL, FS_TOL_VEL_FAIL, IS_MAX_ITER, IS_MAX_PROJ,
-    IS_ABSOLUTE_DQ, IS_ERROR_TEST, IS_PREDICTOR, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
+    IS_ABSOLUTE_DQ, IS_ERROR_TEST, IS_FINISH_FORCES, IS_PREDICTOR, IS_PROJECTION_FACTOR, IS_REUSE_STEPS, IS_TANGENT_FORCES, OK, ST_FACTORIZATIONS, ST_FAIL_INDEX, ST_ITER_TOTAL, ST_LAST_ITER,
     ST_LAST_RESIDUAL, ST_MAX_PHI, ST_MAX_PHID, ST_MAX_PHIDD, ST_PROJ_ITER, ST_STEPS,
 )
 
@@ -473,8 +473,8 @@ def newton_failed(m, d):
 @kernel
 def finish_prepare(m, d, h):
     """Stage 4: the converged step's velocities, accelerations, constraints, multipliers, and the
-    model's forces with their tangent (W for the projections). A caller adds its own forces' tangent
-    to d.w_env after this stage."""
+    model's forces, with their tangent when the projections refactor (finish_refactors: W for their
+    factor). A caller adds its own forces (and then their tangent to d.w_env) after this stage."""
     c1 = 2.0 / h
     c2 = 4.0 / (h * h)
     for i in range(m.nq):
@@ -491,12 +491,26 @@ def finish_prepare(m, d, h):
             phimax = a
     if phimax > d.stats[ST_MAX_PHI]:
         d.stats[ST_MAX_PHI] = phimax
-    if m.iset[IS_TANGENT_FORCES] == 1:
-        bad = eval_forces(m, d, d.q, d.qd, True, 0.25 * h * h, 0.5 * h)
+    if m.iset[IS_TANGENT_FORCES] == 1 and finish_evaluates(m, d):
+        bad = eval_forces(m, d, d.q, d.qd, finish_refactors(m, d), 0.25 * h * h, 0.5 * h)
         if bad >= 0:
             d.stats[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE
     return OK
+
+
+@kernel
+def finish_evaluates(m, d):
+    """True when stage 4 evaluates the forces at the converged q."""
+    return m.iset[IS_FINISH_FORCES] == 1 or finish_refactors(m, d)
+
+
+@kernel
+def finish_refactors(m, d):
+    """True when stage 5a makes a factor of its own at the converged q, so the finishing force evaluation
+    must add its K and C to W; a model that keeps Newton's factor for the projections skips the tangent
+    there (nothing reads that W: every refactorisation re-evaluates it first)."""
+    return m.iset[IS_PROJECTION_FACTOR] == 1 or d.flags[HAVE_FACTOR] == 0
 
 
 @kernel
@@ -513,7 +527,7 @@ def finish_factor(m, d, h):
     # The projections need the tangent at the converged q: the Newton factor was made at an earlier
     # iterate, and near singular positions the projection is sensitive to that difference. Models
     # without singular positions (a vehicle) may keep the Newton factor (IS_PROJECTION_FACTOR = 0).
-    if m.iset[IS_PROJECTION_FACTOR] == 1 or d.flags[HAVE_FACTOR] == 0:
+    if finish_refactors(m, d):
         return refresh_factor(m, d, 0.25 * h * h)
     return OK
 
@@ -589,10 +603,11 @@ def step_with(m, d, h, add_forces, args):
     status = finish_prepare(m, d, h)
     if status != OK:
         return status
-    bad = add_forces(m, d, args, True, bq, hc)
-    if bad >= 0:
-        d.stats[ST_FAIL_INDEX] = bad
-        return ERR_NONFINITE_FORCE
+    if finish_evaluates(m, d):
+        bad = add_forces(m, d, args, finish_refactors(m, d), bq, hc)
+        if bad >= 0:
+            d.stats[ST_FAIL_INDEX] = bad
+            return ERR_NONFINITE_FORCE
     return finish_project(m, d, h)
 
 

@@ -69,7 +69,9 @@ IS_ERROR_TEST = 5      # Newton stops on 0: the last increment and the constrain
 IS_PREDICTOR = 6       # Newton's first iterate: 0 the Taylor predictor q + h qd + h^2/2 qdd; 1 the trapezoidal
 #                        rule with qdd at the step's end extrapolated linearly from the last two steps
 IS_ABSOLUTE_DQ = 7     # 1: Newton's increment tolerance FS_TOL_DQ is absolute (m, rad), not relative to max(1, max|q|)
-NISET = 8
+IS_FINISH_FORCES = 8   # 1: the forces are evaluated again at the converged q; 0: the last Newton evaluation's
+#                        stand (Settings.finish_forces)
+NISET = 9
 FS_TOL_DQ = 0          # Newton increment tolerance (coordinate units)
 FS_TOL_PHI = 1         # position constraint tolerance
 FS_TOL_VEL = 2         # velocity constraint tolerance
