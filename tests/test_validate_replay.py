@@ -86,3 +86,15 @@ def test_a_replay_is_made_once(rp):
     n = rp.simulations
     rp._run(inp, mass, 2e-3, steer)
     assert rp.simulations == n + 1
+
+
+def test_fit_step_divides_the_grid():
+    """The candidate fits' step: the largest step not above fit_dt that divides the comparison grid's
+    interval (a replay holds its inputs over whole grid intervals), never below the model's step."""
+    from types import SimpleNamespace
+    rp = SimpleNamespace(dt=1e-3, fit_dt=5e-3)
+    for grid, step in ((0.01, 5e-3), (5e-3, 5e-3), (4e-3, 4e-3), (8e-3, 4e-3), (0.02, 5e-3), (6e-3, 3e-3),
+                       (1e-3, 1e-3)):
+        got = Replayer.fit_step(rp, grid)
+        assert got == pytest.approx(step, rel=1e-12), grid
+        assert abs(grid / got - round(grid / got)) < 1e-9 and got <= rp.fit_dt * (1 + 1e-12)

@@ -34,7 +34,7 @@ force); then no method can tell which of the two it is, and "cannot be told apar
 each larger hidden effect, every other effect of the vehicle's catalogue (each model effect; each sensor effect
 on each compared channel and wheel angle) is fitted to the hidden effect's change on the same inputs, with the
 model itself: the rival's change of the model's readings (the model replaying the run with the hidden effect
-at the replayer's fit step, the rival switched on, minus the same without it) scaled to match the hidden
+at `RIVAL_DT`, 2 ms, the rival switched on, minus the same without it) scaled to match the hidden
 effect's change E (weighted least squares, channels in units of max(S_c, F_c), within the rival's
 plausible range; the change taken linear in the value, through neutral and the first trial, then through the
 last two replays), replayed at the value found, up to `RIVAL_REPLAYS` replays; the lowest ratio is kept
@@ -58,6 +58,7 @@ from .fieldbench import generate, scatter
 
 RATIO = 2.0
 RIVAL_REPLAYS = 3            # replays per model rival, at most (module docstring)
+RIVAL_DT = 2e-3              # s, the rivals' replay step: fixed here, apart from the workflow's fit step
 RADIUS_RANGE = 0.015         # an axle's rolling radius, relative
 OFFSET_RANGE = 0.03          # m/s^2, a resistance offset
 WHEEL_SPEED_FLOOR = 0.05     # rad/s: a wheel speed's noise left in the mean (quantised angles derived)
@@ -134,14 +135,14 @@ def rivals(change: dict, replayer, bench1, hidden: tuple, scale: dict, data0: di
     from .effectset import Effect
     channels = [c for c in change if c in scale]
     inp = replayer.inputs(bench1)
-    raw = replayer.simulate(inp, [], fit=True)
+    raw = replayer.simulate(inp, [], dt=RIVAL_DT)
     base = replayer.reported(raw, bench1.t, [])
     radius = replayer.wheel_radius
     sensors = [c for c in raw if c in replayer.model.channels.sensor_names
                and (c in channels or c.startswith("wheel_angle_"))]
 
     def delta(eff: Effect) -> dict:
-        out = replayer.reported(replayer.simulate(inp, [eff], fit=True) if eff.kind == "model" else raw,
+        out = replayer.reported(replayer.simulate(inp, [eff], dt=RIVAL_DT) if eff.kind == "model" else raw,
                                 bench1.t, [eff])
         return {c: out[c] - base[c] for c in channels}
 

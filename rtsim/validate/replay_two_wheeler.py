@@ -187,7 +187,7 @@ class TwoWheelerReplayer(InputCache):
     """The two-wheeler's model, rebuilt per effect set where the effect needs it (module docstring)."""
 
     def __init__(self, vehicle: str | Path, road: str | Path | None = None, dt: float = 1e-3,
-                 fit_dt: float = 2e-3):
+                 fit_dt: float = 5e-3):
         self.vehicle_path = Path(vehicle)
         self.profile = open_vehicle(self.vehicle_path).validation     # the vehicle's validation profile
         self.config, self.base = load_motorcycle(self.vehicle_path)
@@ -284,10 +284,17 @@ class TwoWheelerReplayer(InputCache):
                                 reference=None if run is None else self.inputs(bench))
 
     # ---- simulation ---------------------------------------------------------------------------------
-    def simulate(self, inp: TwoWheelerInputs, effects: list[Effect], fit: bool = False) -> dict[str, np.ndarray]:
-        """The physical values of the sensor channels on the grid with the model effects of `effects`."""
-        dt = self.fit_dt if fit else self.dt
+    def simulate(self, inp: TwoWheelerInputs, effects: list[Effect], fit: bool = False,
+                 dt: float | None = None) -> dict[str, np.ndarray]:
+        """The physical values of the sensor channels on the grid with the model effects of `effects`, at
+        the step `dt` if given, else at the model's own (fits too: module docstring)."""
+        if dt is None:
+            dt = self.fit_step(float(inp.t[1] - inp.t[0])) if fit else self.dt
         return self._run(inp, effects, dt, *self.steering_command(inp, dt))
+
+    def fit_step(self, grid: float) -> float:
+        """The step of the candidate fits: the model's own (module docstring)."""
+        return self.fit_dt
 
     def _run(self, inp: TwoWheelerInputs, effects: list[Effect], dt: float, roll: np.ndarray,
              roll_rate: np.ndarray) -> dict[str, np.ndarray]:

@@ -402,8 +402,8 @@ def write(res: Result, folder: Path) -> dict:
                  f"{err:.2g} rad RMS (loop delay {lead * 1e3:.0f} ms)")
     parts.append(f"<h2>Model and replay</h2><p>manoeuvre: {e(kind)}; vehicle {e(str(res.options.vehicle))}, road "
                  f"{e(str(res.replayer.road_path))}, step {res.replayer.dt * 1e3:g} ms (fits at "
-                 f"{res.replayer.fit_dt * 1e3:g} ms); inputs replayed: {e(res.inputs.mode)}; start speed "
-                 f"{res.inputs.speed0:.3g} m/s{e(steer)}; {e(base)}.</p>")
+                 f"{res.replayer.fit_step(bench.dt) * 1e3:g} ms); inputs replayed: {e(res.inputs.mode)}; "
+                 f"start speed {res.inputs.speed0:.3g} m/s{e(steer)}; {e(base)}.</p>")
     parts.append(f"<p>Accelerometer frame: {e(FRAME_TEXT[res.accel_frame])}.</p>")
     timing = ", ".join(f"{k} {v:.1f} s" if isinstance(v, float) else f"{k} {v}" for k, v in res.timings.items())
     parts.append(f"<p>Timing: {e(timing)}</p>")

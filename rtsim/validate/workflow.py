@@ -101,7 +101,7 @@ class Options:
     rate: float = DEFAULT_RATE
     align: str = "xcorr"
     dt: float = 1e-3
-    fit_dt: float = 2e-3
+    fit_dt: float = 5e-3               # s, the candidate fits' step (replay.Replayer.fit_step)
     max_iterations: int = 4
     workers: int = 2
     ray: RayWorkers | None = None     # re-simulations on Ray (its address and executor, given by the command)
