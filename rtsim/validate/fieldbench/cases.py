@@ -1,6 +1,6 @@
 """The benchmark's cases: what each simulator drives, what is hidden in it, and the seeded draws: the
 tuning set (seed `SEED`, 120 cases "c000"..., and the retired held-out draws of `RETIRED_SEEDS`, 64 cases
-each, "h000"..., "k000"..., "m000"... and "n000"...) and the held-out set (seed `HELDOUT_SEED`,
+each, "h000"..., "k000"..., "m000"..., "n000"... and "p000"...) and the held-out set (seed `HELDOUT_SEED`,
 `N_HELDOUT` cases, ids `HELDOUT_PREFIX` + "000"...).
 
 A case is plain data (JSON-able): the simulator (`sim`: "planar" two-track without roll, "roll" two-track
@@ -42,10 +42,10 @@ import numpy as np
 SEED = 30                    # the issue's number: the tuning set
 N_CASES = 120
 #: retired held-out draws, now tuning cases: seed -> (number of cases, id prefix)
-RETIRED_SEEDS = {3030: (64, "h"), 3031: (64, "k"), 3032: (64, "m"), 3033: (64, "n")}
-HELDOUT_SEED = 3034          # the held-out set, drawn after the fifth held-out set was retired
+RETIRED_SEEDS = {3030: (64, "h"), 3031: (64, "k"), 3032: (64, "m"), 3033: (64, "n"), 3034: (64, "p")}
+HELDOUT_SEED = 3035          # the held-out set, drawn after the sixth held-out set was retired
 N_HELDOUT = 64
-HELDOUT_PREFIX = "p"
+HELDOUT_PREFIX = "q"
 KINDS = (("none", 0.15), ("one", 0.50), ("two", 0.20), ("outside", 0.15))
 SIMS = ("planar", "roll", "pitch")
 TYRES = ("tanh", "brush")
