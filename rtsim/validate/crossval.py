@@ -112,29 +112,34 @@ def normalised(obj, out: dict) -> np.ndarray:
 
 
 def leave_one_run_out(obj, m0: np.ndarray, m1: np.ndarray, J: np.ndarray | None,
-                      deviations: list | None = None) -> CrossValidation | None:
+                      deviations: list | None = None, cand_deviations: list | None = None) -> CrossValidation | None:
     """The cross-validation of the model `m1` (normalised outputs at the candidate's fit, `normalised`; J
     its sensitivity, d residual / d theta, None: nothing re-fitted per fold) against `m0`; None with fewer
     than 3 runs. `deviations`: per run, the model's own response to that run's inputs minus its mean over
     the runs (normalised; the current model's per-run replays): a run is then predicted from its own
-    inputs, the candidate's change taken as the same in every run, and the scatter the inputs explain
-    (a driver steering 2 % more in one run) leaves the comparison."""
+    inputs, and the scatter the inputs explain (a driver steering 2 % more in one run) leaves the
+    comparison. `cand_deviations`: the same with the candidate (a sensor effect on each run's readings,
+    identify.sensor_deviations); without them the candidate's change is taken as the same in every run."""
     runs = _normalised_runs(obj)
     n = len(runs)
     if n < 3:
         return None
+    runs1 = runs
     if deviations is not None and len(deviations) == n:
         runs = [y - d for y, d in zip(runs, deviations)]
+        runs1 = runs
+        if cand_deviations is not None and len(cand_deviations) == n:
+            runs1 = [y - d for y, d in zip(_normalised_runs(obj), cand_deviations)]
     nch = len(obj.channels)
-    total = np.sum(runs, axis=0)
+    total, total1 = np.sum(runs, axis=0), np.sum(runs1, axis=0)
     nu = obj.nuisance
     jj = float(J @ J) if J is not None else 0.0
     L0 = np.zeros((n, nch))
     L1 = np.zeros((n, nch))
     for f in range(n):
-        train = (total - runs[f]) / (n - 1)
-        r0, r1 = m0 - train, m1 - train
-        e0, e1 = m0 - runs[f], m1 - runs[f]
+        r0 = m0 - (total - runs[f]) / (n - 1)
+        r1 = m1 - (total1 - runs1[f]) / (n - 1)
+        e0, e1 = m0 - runs[f], m1 - runs1[f]
         if nu is not None:
             e0 = e0 + nu.D @ nu.values(r0)
             e1 = e1 + nu.D @ nu.values(r1)

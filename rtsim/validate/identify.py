@@ -245,6 +245,7 @@ class Context:
     cost: float
     n_runs: int
     deviations: list | None = None      # per run: its replay's normalised outputs minus their mean (crossval)
+    run_raws: list | None = None        # per run: its replay's physical outputs (the ensemble's; sensor_deviations)
 
     @property
     def catalogue(self) -> dict:
@@ -358,6 +359,23 @@ def _own(obj: Objective, sensor: str) -> list[str]:
     return [c for c in obj.channels if c == sensor or SENSOR_FOR.get(c) == sensor]
 
 
+def sensor_deviations(ctx: Context, effect: Effect) -> list | None:
+    """Per run: its own replay (ctx.run_raws) as the sensors report it with the sensor effect `effect` on top
+    of the model's effects, normalised, minus the mean over the runs; None without the runs' replays. The
+    cross-validation predicts each run from these when it judges a sensor effect (crossval, `cand_deviations`):
+    the effect acts on each run's own readings, so a delay moves each run's own transitions (a run that
+    brakes 30 ms early keeps its early stop, delayed), where the model's deviations with the effect's change
+    on the mean added would put the delayed stop at the mean's time in every run. No simulation: a sensor
+    effect changes the readings, not the motion."""
+    if ctx.run_raws is None or ctx.deviations is None or len(ctx.run_raws) != len(ctx.deviations):
+        return None
+    obj, rp = ctx.objective, ctx.replayer
+    effects = [*ctx.effects, effect]
+    per_run = [normalised(obj, rp.reported(r, ctx.bench.t, effects)) for r in ctx.run_raws]
+    mean = np.mean(per_run, axis=0)
+    return [x - mean for x in per_run]
+
+
 def channel_evidence(ctx: Context, cand: Candidate) -> None:
     """What decides a candidate (module docstring, "Selection"): its leave-one-run-out cross-validation
     against the model as it stands (crossval), its signature channels (a sensor effect: its own channel;
@@ -377,7 +395,8 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
     cand.by_channel = by
     m0, m1 = normalised(obj, ctx.outputs), normalised(obj, cand.outputs)
     J = cand.J if cand.J is not None and float(cand.J @ cand.J) > 0 else None
-    cand.cv = leave_one_run_out(obj, m0, m1, J, ctx.deviations)
+    own = sensor_deviations(ctx, cand.effect) if cand.kind == "sensor" else None
+    cand.cv = leave_one_run_out(obj, m0, m1, J, ctx.deviations, own)
     if cand.kind == "sensor":
         sig = _own(obj, cand.effect.channel)
     elif cand.cv is not None:
@@ -515,7 +534,10 @@ def kinematic_gain_check(ctx: Context, cand: Candidate) -> str:
         return ""
     k = -float(J @ obj.residual(ctx.outputs)) / jj
     m0 = normalised(obj, ctx.outputs)
-    alt = leave_one_run_out(obj, m0, m0 + k * d, J, ctx.deviations)
+    mask = (d != 0.0).astype(float)
+    # each run's readings carry the common gain too, like the candidate's own (sensor_deviations)
+    gained = None if ctx.deviations is None else [x + k * mask * x for x in ctx.deviations]
+    alt = leave_one_run_out(obj, m0, m0 + k * d, J, ctx.deviations, gained)
     if alt is None:
         return ""
     p = p_better_than(cand.cv, alt)

@@ -332,7 +332,7 @@ def _ensemble(ctx: Context, workers: int, cache: dict) -> tuple[Context | None, 
     mean = np.mean(per_run, axis=0)
     ctx.deviations = [x - mean for x in per_run]
     return Context(bench, obj, rp, ctx.inputs, ctx.effects, out, raw, obj.cost(out), ctx.n_runs,
-                   ctx.deviations), raws
+                   ctx.deviations, raws), raws
 
 
 class MeanInputReplays(Mapping):
