@@ -47,7 +47,8 @@ Selection (channel_evidence, Candidate.eligible; issue 30). Residuals are the ob
 each channel's standard error, the nuisance adjustments (objective.Nuisance) fitted at every candidate
 value. A candidate is eligible when it is plausible and
 - it predicts left-out runs better (crossval.leave_one_run_out: each run predicted from its own inputs
-  by the model re-fitted on the other runs, the corrected resampled t-test over the folds at
+  by the model re-fitted on the other runs, a sensor effect applied to each run's own replay
+  (sensor_deviations), the corrected resampled t-test over the folds at
   crossval.ALPHA; with fewer than 3 runs: the information criterion falls by MIN_DELTA_IC);
 - it predicts no channel significantly worse (the same test per channel; for a sensor effect, its own
   channels: elsewhere only the nuisance adjustments' re-fit moves, which the test over all channels weighs)
