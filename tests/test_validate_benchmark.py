@@ -321,7 +321,7 @@ def test_rival_fit_finds_a_mimic_and_respects_its_range():
         def inputs(self, bench):
             return None
 
-        def simulate(self, inp, effects, fit=False):
+        def simulate(self, inp, effects, fit=False, dt=None):
             out = {"a": np.zeros_like(t), "b": np.zeros_like(t)}
             for e in effects:
                 for c, x in shapes[e.name](e.params["p"]).items():

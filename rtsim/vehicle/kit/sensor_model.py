@@ -234,6 +234,8 @@ def apply_to_series(params: np.ndarray, x: np.ndarray, seed: int = 0) -> np.ndar
     """The model on a sampled series x (n samples, nch channels; the parameters' delays in samples, i.e.
     built with the series' sample interval as `step`), its noise from `seed`; returns a new array."""
     x = np.ascontiguousarray(x, dtype=float)
+    if not x.flags.writeable:       # read-only (a replay a Ray task returned): numba would type it apart and
+        x = x.copy()                # compile the kernels again for it
     out = np.empty_like(x)
     if x.shape[0]:
         _apply_rows(params, sensor_state(params, seed), x, out)
