@@ -526,18 +526,19 @@ def kinematic_gain_check(ctx: Context, cand: Candidate) -> str:
         return ""
     n = obj.mean[obj.channels[0]].size
     d = np.zeros(n * len(obj.channels))
+    pair = np.zeros_like(d)                 # 1 on the pair's samples
     for c in (ch, other):
         i = obj.channels.index(c)
         d[i * n:(i + 1) * n] = ctx.outputs[c] / obj.scale[c]
+        pair[i * n:(i + 1) * n] = 1.0
     J = obj.nuisance.project_direction(d) if obj.nuisance is not None else d
     jj = float(J @ J)
     if not jj > 0.0:
         return ""
     k = -float(J @ obj.residual(ctx.outputs)) / jj
     m0 = normalised(obj, ctx.outputs)
-    mask = (d != 0.0).astype(float)
     # each run's readings carry the common gain too, like the candidate's own (sensor_deviations)
-    gained = None if ctx.deviations is None else [x + k * mask * x for x in ctx.deviations]
+    gained = None if ctx.deviations is None else [x + k * pair * x for x in ctx.deviations]
     alt = leave_one_run_out(obj, m0, m0 + k * d, J, ctx.deviations, gained)
     if alt is None:
         return ""
