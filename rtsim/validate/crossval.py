@@ -6,7 +6,9 @@ the mean of the other n - 1 runs and both models, the nuisance adjustments re-fi
 predict run f; the fold's loss is the mean squared normalised error of that prediction per channel. No
 fold costs a simulation: the candidate's response is linearised at its fit on all runs, theta_f =
 theta* - (J . r_f) / (J . J), r_f the candidate's residual against the training mean (the sensitivity J
-and the residuals are the objective's: normalised, nuisance adjustments applied).
+and the residuals are the objective's: normalised, nuisance adjustments applied), and theta_f is held in
+the candidate's plausible range as the fit on all runs was (a delay fitted at 0 s is not judged with a
+negative delay in the folds).
 
 What a held-out run adds beyond the training mean is its own run-to-run scatter, whatever its correlation
 in time (a smooth amplitude variation of the driver makes a whole run deviate together; the folds see it
@@ -112,14 +114,16 @@ def normalised(obj, out: dict) -> np.ndarray:
 
 
 def leave_one_run_out(obj, m0: np.ndarray, m1: np.ndarray, J: np.ndarray | None,
-                      deviations: list | None = None, cand_deviations: list | None = None) -> CrossValidation | None:
+                      deviations: list | None = None, cand_deviations: list | None = None,
+                      span: tuple[float, float] = (-math.inf, math.inf)) -> CrossValidation | None:
     """The cross-validation of the model `m1` (normalised outputs at the candidate's fit, `normalised`; J
     its sensitivity, d residual / d theta, None: nothing re-fitted per fold) against `m0`; None with fewer
     than 3 runs. `deviations`: per run, the model's own response to that run's inputs minus its mean over
     the runs (normalised; the current model's per-run replays): a run is then predicted from its own
     inputs, and the scatter the inputs explain (a driver steering 2 % more in one run) leaves the
     comparison. `cand_deviations`: the same with the candidate (a sensor effect on each run's readings,
-    identify.sensor_deviations); without them the candidate's change is taken as the same in every run."""
+    identify.sensor_deviations); without them the candidate's change is taken as the same in every run.
+    `span`: the change of theta a fold may make, (lo - theta*, hi - theta*) of the plausible range."""
     runs = _normalised_runs(obj)
     n = len(runs)
     if n < 3:
@@ -145,7 +149,7 @@ def leave_one_run_out(obj, m0: np.ndarray, m1: np.ndarray, J: np.ndarray | None,
             e1 = e1 + nu.D @ nu.values(r1)
             r1 = nu.project(r1)
         if jj > 0.0:
-            e1 = e1 - J * (float(J @ r1) / jj)
+            e1 = e1 + J * min(max(-float(J @ r1) / jj, span[0]), span[1])
         L0[f] = (e0 * e0).reshape(nch, -1).mean(axis=1)
         L1[f] = (e1 * e1).reshape(nch, -1).mean(axis=1)
     cv = CrossValidation(list(obj.channels), L0, L1)

@@ -397,7 +397,9 @@ def channel_evidence(ctx: Context, cand: Candidate) -> None:
     m0, m1 = normalised(obj, ctx.outputs), normalised(obj, cand.outputs)
     J = cand.J if cand.J is not None and float(cand.J @ cand.J) > 0 else None
     own = sensor_deviations(ctx, cand.effect) if cand.kind == "sensor" else None
-    cand.cv = leave_one_run_out(obj, m0, m1, J, ctx.deviations, own)
+    co = cand.coord
+    span = (-math.inf, math.inf) if co is None else (co.tlo - cand.theta, co.thi - cand.theta)
+    cand.cv = leave_one_run_out(obj, m0, m1, J, ctx.deviations, own, span)
     if cand.kind == "sensor":
         sig = _own(obj, cand.effect.channel)
     elif cand.cv is not None:
