@@ -240,12 +240,13 @@ def test_runs_are_quantised_and_readable(car, tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------ scoring
-def _truth(*effects, separable: bool = True):
+def _truth(*effects, separable: bool = True, reproducible: bool = True):
     out = [dict(zip(("effect", "channel", "param", "model_terms", "kind", "larger", "ratio"), e)) for e in effects]
     for e in out:
         e["separable"] = e["larger"] and separable
+        e["reproducible"] = reproducible or e["kind"] == "sensor"
     return {"effects": out, "larger": all(e[5] for e in effects),
-            "separable": all(e["separable"] for e in out)}
+            "separable": all(e["separable"] for e in out), "reproducible": all(e["reproducible"] for e in out)}
 
 
 def test_scoring():
@@ -282,12 +283,19 @@ def test_scoring():
     assert r9["status"] == "missed" and not r9["separable"] and acceptable(r9, alike)[0]
     r10 = outcome(one, alike, named(("bearing_drag", None, "torque", 6.6)), "")
     assert r10["status"] == "false" and not acceptable(r10, alike)[0]
-    rt = rates([r1, r2, r3, r4, r5, r6, r7, r9])
+    heavy = ("mass", None, "added_mass", 216.0, "model", True, 3.7)
+    foreign = _truth(heavy, reproducible=False)    # the model's own 216 kg changes the runs otherwise
+    r11 = outcome(one, foreign, [], "... cannot be told apart ...")
+    assert r11["status"] == "missed" and not r11["reproducible"] and acceptable(r11, foreign)[0]
+    r12 = outcome(one, foreign, named(("mass", None, "added_mass", 30.0)), "")
+    assert r12["status"] == "value off" and not acceptable(r12, foreign)[0]
+    rt = rates([r1, r2, r3, r4, r5, r6, r7, r9, r11])
     assert rt["named_right"]["count"] == 1 and rt["named_right"]["of"] == 4       # r1 of r1 r2 r3 r5
-    assert rt["named_right_larger"]["count"] == 1 and rt["named_right_larger"]["of"] == 5      # and r9
+    assert rt["named_right_separable"]["count"] == 1 and rt["named_right_separable"]["of"] == 5      # and r11
+    assert rt["named_right_larger"]["count"] == 1 and rt["named_right_larger"]["of"] == 6      # and r9
     assert rt["inseparable_told_apart"] == {"share": 1.0, "count": 1, "of": 1}
     assert rt["false_naming"]["count"] == 2 and rt["none_cases_named"] == {"share": 0.5, "count": 1, "of": 2}
-    assert rt["cannot_be_told_apart"]["count"] == 2
+    assert rt["cannot_be_told_apart"]["count"] == 3
     conf = confusion([r1, r3, r6, r7])
     assert conf["sensor_bias[gyro_z]"]["sensor_bias[gyro_z]"] == 1 and conf["tyre_slip_stiffness"]["mass"] == 1
     assert conf["none"] == {"road_grade": 1, "nothing": 1}
@@ -338,6 +346,15 @@ def test_rival_fit_finds_a_mimic_and_respects_its_range():
     assert best["effect"] == "alike" and best["value"] == pytest.approx(3.0, rel=1e-6) and best["ratio"] < 1e-6
     best = bench_truth.rivals(change, Fake({"other": spec("other", 5.0)}), *args)
     assert best["effect"] == "other" and best["ratio"] >= bench_truth.RATIO
+    # the model's own version of the hidden effect: at 3 it gives the hidden change (reproducible), at 1 it
+    # leaves two thirds of it (20 times the scale on "a"), and an effect of another shape leaves it all
+    from rtsim.validate.effectset import Effect
+    own = (SimpleNamespace(t=t), scale, {}, t, np.zeros(t.size, bool))
+    fake = Fake({})
+    assert bench_truth.reproduced(change, fake, own[0], Effect("alike", {"p": 3.0}), *own[1:]) < 1e-6
+    assert bench_truth.reproduced(change, fake, own[0], Effect("alike", {"p": 1.0}), *own[1:]) == pytest.approx(
+        20.0 * np.sqrt(np.mean(f * f)), rel=1e-3)
+    assert bench_truth.reproduced(change, fake, own[0], Effect("other", {"p": 1.0}), *own[1:]) >= bench_truth.RATIO
     best = bench_truth.rivals(change, Fake({"alike": spec("alike", 2.0)}), *args)    # needs 3, may reach 2
     assert best["value"] == 2.0 and best["ratio"] >= bench_truth.RATIO
 
