@@ -13,11 +13,12 @@ from rtsim.validate.fieldbench import cases
 #: digest ad102f69...) after it had judged one change and its misses were read, and so were the third (seed 3031,
 #: digest 79a5a754...), the fourth (seed 3032, digest 2cb90061...), the fifth (seed 3033, digest
 #: c68aa770..., after it had judged the separability rule), the sixth (seed 3034, digest a0e85267..., after
-#: it had judged the 5 ms fit step) and the seventh (seed 3035, digest 38581287..., after it had judged the
-#: sensor candidates' own-readings folds); all are part of "tuning".
+#: it had judged the 5 ms fit step), the seventh (seed 3035, digest 38581287..., after it had judged the
+#: sensor candidates' own-readings folds) and the eighth (seed 3036, digest c1e77af6..., after it had judged
+#: the folds' plausible range); all are part of "tuning".
 DIGESTS = {
-    "tuning": "6e06e078f027c1c8b6aee4e9f99a611d08f04a04559721f3c34902a3adf66c5b",
-    "heldout": "c1e77af60705594f67a01b8c419165ac2ae6ccb3c2dc8e3a7726e487afb3793f",
+    "tuning": "766ea36770345e4c57b87d31de8a2bf9826f5c66c9af8d6b21186d4b8e9aaa15",
+    "heldout": "93f34bbb1c8131ca0de10c57cd229ef284afbcc0d79f7dcad964add248e8a4fe",
     "issue": "31c1a086c1bdc272a33010ac06bc0f902c902d57a6e5738c34527f53c38c26ad",
 }
 
