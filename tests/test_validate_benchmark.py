@@ -397,12 +397,16 @@ def test_reduced_benchmark(bench, tmp_path_factory, case):
     """The workflow on a benchmark case (a few tuning cases and the issue's six), judged against the
     generator's truth with fixed tolerances (sensor effects 10 %, model effects 20 % of the value in the
     model's terms; bench_truth, bench_score): nothing named that was not hidden, every effect larger than
-    the structural mismatch named."""
+    the structural mismatch, separable and reproducible named; on the issue's six, every larger effect."""
     from rtsim.validate.bench_score import acceptable
     rec = bench.run(case, tmp_path_factory.mktemp("bench"), workers=2)
     print(f"\n[{case['id']}] {rec['label']}: named {rec['found']}; truth {rec['truth']['effects']}; "
           f"{rec['seconds']}\n  verdict: {rec['verdict'][:400]}")
     assert rec["error"] is None, rec["error"]
-    ok, why = acceptable(rec, rec["truth"])
+    truth = rec["truth"]
+    if case["id"].startswith("issue_"):
+        # the issue's six must be named whatever the model's own version of each does (bench_truth, "Reproducible")
+        truth = {**truth, "effects": [{**e, "reproducible": True} for e in truth["effects"]]}
+    ok, why = acceptable(rec, truth)
     if not ok:
         raise BarMissed(why)
