@@ -47,17 +47,17 @@ torques, which its signature says it leaves almost unchanged.
 
 "Reproducible" (decided after the seed-3036 draw had been read, before the seed-3037 draw was made). A model
 effect's value in the model's terms is the hidden value (above) on the premise that the model's version of the
-effect changes the runs as the simulator's does. Where the change passes through a part the two do not share,
-it need not: an added mass loads the tyres, and the brush tyre's cornering stiffness grows as load^0.7 where the
+effect changes the runs as the simulator's does. Where the change passes through a part the two do not share, it
+need not: an added mass loads the tyres, and the brush tyre's cornering stiffness grows as load^0.7 where the
 model's Magic Formula tyre has its own load sensitivity: in case r039 (planar simulator, brush tyres) 216 kg
-changes the yaw rate by 3.7 times the structural mismatch and the model's 216 kg by 9.5 times, nearly the
-other way (their difference: 11.8 times). Such an effect has no value in the model's terms: what the runs
-show is the effect plus a structural difference it brings out. For each larger hidden model effect the model replays
-the run's inputs with the effect at its value in the model's terms (at `RIVAL_DT`), and the left-over of the
-simulator's change minus the model's (as for a rival) is taken, max over the channels, in units of
-max(S_c, F_c) (`own_ratio`); the effect is reproducible iff it is below `RATIO`. A sensor effect is
-reproducible (it changes the readings alone, the same way in both). The bar's denominator is the larger,
-separable and reproducible cases; the rates before this rule are reported beside it.
+changes the yaw rate by 3.7 times the structural mismatch and the model's 216 kg by 9.5 times, nearly the other
+way (their difference: 11.8 times). Such an effect has no value in the model's terms: what the runs show is the
+effect plus a structural difference it brings out. For each larger hidden model effect the model replays the
+run's inputs with the effect at its value in the model's terms (at `RIVAL_DT`), and the left-over of the
+simulator's change minus the model's (as for a rival) is taken, max over the channels, in units of max(S_c, F_c)
+(`own_ratio`); the effect is reproducible iff it is below `RATIO`. A sensor effect is reproducible (it changes
+the readings alone, the same way in both). The bar's denominator is the larger, separable and reproducible
+cases; the rates before this rule are reported beside it.
 """
 from __future__ import annotations
 
@@ -240,8 +240,9 @@ def tyre_equivalent(tyre_params, fz, tan_alpha, fy, speed: float) -> float:
 
 def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
     """The case's ground truth (module docstring): per hidden effect its hidden value, its value in the
-    model's terms, its size ratio and, when larger, the rival that reproduces it best (`rivals`) and whether
-    it is separable; per channel the structural mismatch; `larger` and `separable` for the case."""
+    model's terms, its size ratio and, when larger, the rival that reproduces it best (`rivals`), whether
+    it is separable and (a model effect) how far the model's own version falls short (`reproduced`); per
+    channel the structural mismatch; `larger`, `separable` and `reproducible` for the case."""
     from .effectset import Effect, kind
     frame = generate.accel_frame(case)
     old = replayer.accel_frame

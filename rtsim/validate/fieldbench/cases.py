@@ -1,7 +1,7 @@
 """The benchmark's cases: what each simulator drives, what is hidden in it, and the seeded draws: the
 tuning set (seed `SEED`, 120 cases "c000"..., and the retired held-out draws of `RETIRED_SEEDS`, 64 cases
-each, "h000"..., "k000"..., "m000"..., "n000"..., "p000"..., "q000"... and "r000"...) and the held-out set (seed `HELDOUT_SEED`,
-`N_HELDOUT` cases, ids `HELDOUT_PREFIX` + "000"...).
+each, "h000"..., "k000"..., "m000"..., "n000"..., "p000"..., "q000"... and "r000"...) and the held-out set
+(seed `HELDOUT_SEED`, `N_HELDOUT` cases, ids `HELDOUT_PREFIX` + "000"...).
 
 A case is plain data (JSON-able): the simulator (`sim`: "planar" two-track without roll, "roll" two-track
 with a roll degree of freedom, "pitch" pitch-plane longitudinal), the tyre law (`tyre`: "tanh" friction
