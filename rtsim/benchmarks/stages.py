@@ -60,9 +60,17 @@ def _lap(cyc, slot, c0):
 
 @inline_kernel
 def _car_forces_staged(m, d, a, tangent, bq, hc):
+    """The staged car's force kernel as the Newton step calls it; a = (veh, vd, road, parts, states,
+    cycles)."""
+    return car_forces_staged(m, d, a[0], a[1], a[2], a[3], a[4], a[5], tangent, bq, hc)
+
+
+@kernel
+def car_forces_staged(m, d, veh, vd, road, parts, states, cyc, tangent, bq, hc):
     """rtsim.vehicle.car.forces.vehicle_forces stage by stage, with the cycles of each stage added to
-    a[5]; a = (veh, vd, road, parts, states, cycles)."""
-    veh, vd, road, parts, states, cyc = a
+    cyc. A compiled function of its own, called from the Newton iteration and the finish, as the plain
+    step calls vehicle_forces (rtsim.vehicle.car.step._car_forces): inlined, its body was compiled into
+    the staged loop twice, and the loop's first compile took more than twice as long."""
     c = read_cycles()
     c_all = c
     fx = parts.effects
