@@ -125,6 +125,34 @@ def _two_wheeler_forces_staged(m, d, a, tangent, bq, hc):
     return bad
 
 
+# The split stages of rtsim.mbs.integrator's newton_update and finish_project (inline kernels there) as
+# compiled functions of their own, as newton_update and finish_project are in the plain step: inlined,
+# they were compiled again into each vehicle's staged loop; so they are compiled once, for every vehicle.
+@kernel
+def _newton_residual(m, d, h):
+    newton_residual(m, d, h)
+
+
+@kernel
+def _newton_factor(m, d, h):
+    return newton_factor(m, d, h)
+
+
+@kernel
+def _newton_increment(m, d, h):
+    return newton_increment(m, d, h)
+
+
+@kernel
+def _finish_factor(m, d, h):
+    return finish_factor(m, d, h)
+
+
+@kernel
+def _finish_projections(m, d, h):
+    return finish_projections(m, d, h)
+
+
 @inline_kernel
 def _mbs_step_staged(m, d, h, add_forces, args, cyc):
     """rtsim.mbs.integrator.step_with stage by stage, the cycles of each stage added to cyc (the force
@@ -145,12 +173,12 @@ def _mbs_step_staged(m, d, h, add_forces, args, cyc):
         if bad >= 0:
             d.stats[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE
-        newton_residual(m, d, h)
+        _newton_residual(m, d, h)
         c = _lap(cyc, S_RESIDUAL, c)
-        if newton_factor(m, d, h) != OK:
+        if _newton_factor(m, d, h) != OK:
             return ERR_FACTOR
         c = _lap(cyc, S_FACTOR, c)
-        status = newton_increment(m, d, h)
+        status = _newton_increment(m, d, h)
         c = _lap(cyc, S_SOLVE, c)
         if status == CONVERGED:
             converged = True
@@ -169,10 +197,10 @@ def _mbs_step_staged(m, d, h, add_forces, args, cyc):
         if bad >= 0:
             d.stats[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE
-    if finish_factor(m, d, h) != OK:
+    if _finish_factor(m, d, h) != OK:
         return ERR_FACTOR
     c = _lap(cyc, S_PROJ_FACTOR, c)
-    status = finish_projections(m, d, h)
+    status = _finish_projections(m, d, h)
     _lap(cyc, S_PROJECT, c)
     return status
 
