@@ -144,21 +144,23 @@ def _run(args) -> int:
     from pathlib import Path
 
     from drivers.scenario import load_scenario
+    from rtsim.compile_status import configs_first
     from rtsim.vehicle.registry import open_vehicle, resolve_scenario
 
     out = args.out
     if Path(out).suffix.lower() not in (".csv", ".mcap"):
         raise RtsimError(f"{out}: output must end in .csv or .mcap")
-    sc = load_scenario(resolve_scenario(args.scenario), check_files=True)
-    # refused before the vehicle is built: on a first start that build compiles for minutes
-    if sc.spec.faults and not args.no_faults:
-        raise RtsimError(f"{sc.name}: the scenario arms {len(sc.spec.faults)} fault(s) "
-                         f"({', '.join(f.id for f in sc.spec.faults)}); "
-                         "an offline run does not inject faults: serve it (rtsim serve --scenario), run it as an ECU "
-                         "test case (rtsim test), or pass --no-faults to run it without them")
-    vehicle = open_vehicle(args.vehicle if args.vehicle is not None else sc.vehicle_path)
-    vehicle.refuse("run")
-    vehicle.check_scenario(sc)
+    with configs_first():       # both files validated before a compile notice (the scenario's check compiles)
+        sc = load_scenario(resolve_scenario(args.scenario), check_files=True)
+        # refused before the vehicle is built: on a first start that build compiles for minutes
+        if sc.spec.faults and not args.no_faults:
+            raise RtsimError(f"{sc.name}: the scenario arms {len(sc.spec.faults)} fault(s) "
+                             f"({', '.join(f.id for f in sc.spec.faults)}); "
+                             "an offline run does not inject faults: serve it (rtsim serve --scenario), run it as "
+                             "an ECU test case (rtsim test), or pass --no-faults to run it without them")
+        vehicle = open_vehicle(args.vehicle if args.vehicle is not None else sc.vehicle_path)
+        vehicle.refuse("run")
+        vehicle.check_scenario(sc)
     shown = [-1]
 
     def progress(frac):

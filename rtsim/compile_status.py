@@ -19,7 +19,8 @@ import importlib
 import os
 import threading
 import time
-from typing import Callable, Iterable
+from contextlib import contextmanager
+from typing import Callable, Iterable, Iterator
 
 #: s; the service's first build and compile on a fresh clone (2-core machine, the demo ECU compiling
 #: its own kernels beside it): what `rtsim demo` took with empty caches (time `./tools/run` in a new clone)
@@ -99,6 +100,8 @@ class CompileProgress:
         self.expect_s, self.every, self.predict = expect_s, every, tuple(predict)
         self.compiled = 0                   # project kernels compiled so far (cache misses)
         self.announced = False
+        self._held = 0                      # inside configs_first(): a compile start is announced later
+        self._pending = False               # a compile started while held
         self._stack: list[str] = []         # project kernels being compiled, outermost first
         self._lock = threading.Lock()
         self._done = threading.Event()
@@ -113,6 +116,7 @@ class CompileProgress:
         self._t0 = time.monotonic()
         self._listener = _listener_class()(self)
         event.register("numba:compile", self._listener)
+        _ACTIVE.append(self)
         if self.predict and not kernels_cached(self.predict):
             self._announce()
         return self
@@ -121,6 +125,8 @@ class CompileProgress:
         from numba.core import event
 
         event.unregister("numba:compile", self._listener)
+        if self in _ACTIVE:
+            _ACTIVE.remove(self)
         self._done.set()
         if self._ticker is not None:
             self._ticker.join(1.0)
@@ -139,6 +145,9 @@ class CompileProgress:
             return
         with self._lock:
             self._stack.append(dispatcher.py_func.__name__)
+            if self._held:
+                self._pending = True
+                return
         if not self.announced:
             self._announce()
 
@@ -174,6 +183,33 @@ class CompileProgress:
     def _tick(self) -> None:
         while not self._done.wait(self.every):
             self.out(self.status())
+
+
+#: the CompileProgress contexts entered in this process, innermost last
+_ACTIVE: list[CompileProgress] = []
+
+
+@contextmanager
+def configs_first() -> Iterator[None]:
+    """Around the reading and validation of a command's configuration files (scenario, vehicle): a
+    kernel compiled in there (a scenario's profiles are range-checked by sampling them with a kernel) is
+    announced only once every file has loaded, so that a bad value's error is the only line a command
+    prints, on a cold kernel cache too. Nothing is held when no CompileProgress is active."""
+    progress = _ACTIVE[-1] if _ACTIVE else None
+    if progress is None:
+        yield
+        return
+    with progress._lock:
+        progress._held += 1
+    try:
+        yield
+    finally:
+        with progress._lock:
+            progress._held -= 1
+            release = progress._held == 0 and progress._pending
+            progress._pending = progress._pending and progress._held > 0
+    if release and not progress.announced:      # reached only when the files loaded (no exception)
+        progress._announce()
 
 
 #: the commands that may compile kernels and show `command_progress` lines (serve and demo show their

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import sys
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,52 @@ import pytest
 TESTS_DIR = Path(__file__).resolve().parent
 if str(TESTS_DIR) not in sys.path:
     sys.path.insert(0, str(TESTS_DIR))
+
+
+# --------------------------------------------------------------------------------------------------
+# The order of the test files: the longest first
+
+#: The files that take longest on a fresh clone (tools/test's --durations log: a numba compile in their first
+#: test, a VM, many re-simulations), collected first, in this order. tools/test runs the files on two processes
+#: (pytest-xdist, ``--dist loadfile --no-loadscope-reorder``: each process takes the next file in the collected
+#: order when it runs short of tests), so a long file collected late would leave one process working alone at
+#: the end; pytest-xdist's own order (most tests first) put the VM's file, three tests, among the last. The
+#: first two start together: the VM's (its kernels are compiled for the VM, none for this host) beside the one
+#: that compiles the car's kernels, so the files after it load them from the cache rather than both processes
+#: compiling them at once.
+SLOW_FILES = (
+    "test_vcan.py",                 # a qemu VM under software emulation: one process for 7-9 minutes
+    "test_bench_stages.py",         # the car's step and the staged steps: compiled here only
+    "test_validate_independent_longitudinal.py",    # (the VM's process takes it with the VM's file)
+    "test_fuzz_commands.py",
+    "test_batch_plain.py",
+    "test_every_vehicle.py",
+    "test_faults_inject.py",
+    "test_validate_independent.py",
+    "test_validate_effects.py",
+    "test_validate_lateral.py",
+    "test_validate_peer.py",
+    "test_validate_two_wheeler.py",
+    "test_validate_cli.py",
+    "test_viewer.py",
+    "test_service_e2e.py",
+    "test_viewer_ride.py",
+    "test_batch.py",
+    "test_fmu_bench.py",            # compiles the car FMU's step, before test_fmu_export.py loads it
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    """The files in SLOW_FILES' order, then the others, most tests first (pytest-xdist's own order); a
+    file's tests stay together and in their order."""
+    rank = {name: i for i, name in enumerate(SLOW_FILES)}
+    count = Counter(item.path.name for item in items)
+    first: dict[str, int] = {}
+    for i, item in enumerate(items):
+        first.setdefault(item.path.name, i)
+    where = {id(item): i for i, item in enumerate(items)}
+    items.sort(key=lambda item: (rank.get(item.path.name, len(rank)), -count[item.path.name],
+                                 first[item.path.name], where[id(item)]))
 
 
 # --------------------------------------------------------------------------------------------------

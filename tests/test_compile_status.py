@@ -4,6 +4,7 @@ its kernels are cached. Each case runs a tiny kernel module of its own, in a fre
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -102,3 +103,37 @@ def test_a_worker_process_reports_its_own_compiles_on_stderr(tmp_path):
     lines = out.stderr.splitlines()
     assert f"rtsim batch (worker {pid}): compiling kernels (first run only)..." in lines, lines
     assert any(l.startswith(f"rtsim batch (worker {pid}): kernels compiled in ") for l in lines), lines
+
+
+HOLD_SCRIPT = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    from rtsim.compile_status import CompileProgress, configs_first
+    import tinykernel
+    with CompileProgress("test", print, what="tiny kernels", expect_s=None, every=None, predict=()):
+        try:
+            with configs_first():
+                tinykernel.twice(2.0)                   # compiles while the files load
+                print("loaded")
+                if sys.argv[2] == "bad":
+                    raise ValueError("a bad value")
+        except ValueError as exc:
+            print("error:", exc)
+""")
+
+
+def test_a_compile_while_the_configs_load_is_announced_after_them(tmp_path):
+    """configs_first(): a kernel compiled while a command's files load is announced once they have all
+    loaded; when one of them is refused, its error is the only line (no compile notice before it)."""
+    (tmp_path / "tinykernel.py").write_text(KERNEL_MODULE)
+    for case in ("good", "bad"):
+        shutil.rmtree(tmp_path / "__pycache__", ignore_errors=True)      # a cold cache each time
+        out = subprocess.run([sys.executable, "-c", HOLD_SCRIPT, str(tmp_path), case], cwd=ROOT,
+                             capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
+        lines = out.stdout.splitlines()
+        if case == "good":
+            assert lines[:2] == ["loaded", "test: compiling tiny kernels (first run only)..."], lines
+            assert lines[2].startswith("test: tiny kernels compiled in ") and "(1 compiled;" in lines[2], lines
+        else:
+            assert lines == ["loaded", "error: a bad value"], lines

@@ -186,6 +186,7 @@ def main(args) -> int:
     from drivers.replay import parse_column, read_csv_table
     from rtsim.vehicle.motorcycle.rider import rider as make_rider
     from drivers.scenario import load_scenario
+    from rtsim.compile_status import configs_first
     from rtsim.errors import ConfigError
 
     from rtsim.vehicle.motorcycle.build import build_motorcycle
@@ -194,16 +195,18 @@ def main(args) -> int:
     from rtsim.vehicle.motorcycle.sim import static_pose
 
     sc = None
-    if args.scenario:
-        sc = load_scenario(args.scenario, check_files=True)
-        if sc.spec.rider is None:
-            raise ConfigError(f"{args.scenario}: the inverse problem needs a [rider] section (path and speed)")
-    elif not args.path or args.speed is None:
-        raise ConfigError("give --scenario, or --path CSV and --speed")
-    vpath = args.vehicle or (sc.vehicle_path if sc is not None else None)
-    if vpath is None:
-        raise ConfigError("give --vehicle (or a scenario that names its vehicle)")
-    mm = build_motorcycle(*load_motorcycle(vpath))
+    with configs_first():       # both files validated before a compile notice (the scenario's check compiles)
+        if args.scenario:
+            sc = load_scenario(args.scenario, check_files=True)
+            if sc.spec.rider is None:
+                raise ConfigError(f"{args.scenario}: the inverse problem needs a [rider] section (path and speed)")
+        elif not args.path or args.speed is None:
+            raise ConfigError("give --scenario, or --path CSV and --speed")
+        vpath = args.vehicle or (sc.vehicle_path if sc is not None else None)
+        if vpath is None:
+            raise ConfigError("give --vehicle (or a scenario that names its vehicle)")
+        loaded = load_motorcycle(vpath)
+    mm = build_motorcycle(*loaded)
     k = tyre_lean_ratio(mm)
     if sc is not None:
         spec = sc.spec.rider

@@ -60,9 +60,17 @@ def _lap(cyc, slot, c0):
 
 @inline_kernel
 def _car_forces_staged(m, d, a, tangent, bq, hc):
+    """The staged car's force kernel as the Newton step calls it; a = (veh, vd, road, parts, states,
+    cycles)."""
+    return car_forces_staged(m, d, a[0], a[1], a[2], a[3], a[4], a[5], tangent, bq, hc)
+
+
+@kernel
+def car_forces_staged(m, d, veh, vd, road, parts, states, cyc, tangent, bq, hc):
     """rtsim.vehicle.car.forces.vehicle_forces stage by stage, with the cycles of each stage added to
-    a[5]; a = (veh, vd, road, parts, states, cycles)."""
-    veh, vd, road, parts, states, cyc = a
+    cyc. A compiled function of its own, called from the Newton iteration and the finish, as the plain
+    step calls vehicle_forces (rtsim.vehicle.car.step._car_forces): inlined, its body was compiled into
+    the staged loop twice, and the loop's first compile took more than twice as long."""
     c = read_cycles()
     c_all = c
     fx = parts.effects
@@ -117,6 +125,34 @@ def _two_wheeler_forces_staged(m, d, a, tangent, bq, hc):
     return bad
 
 
+# The split stages of rtsim.mbs.integrator's newton_update and finish_project (inline kernels there) as
+# compiled functions of their own, as newton_update and finish_project are in the plain step: inlined,
+# they were compiled again into each vehicle's staged loop; so they are compiled once, for every vehicle.
+@kernel
+def _newton_residual(m, d, h):
+    newton_residual(m, d, h)
+
+
+@kernel
+def _newton_factor(m, d, h):
+    return newton_factor(m, d, h)
+
+
+@kernel
+def _newton_increment(m, d, h):
+    return newton_increment(m, d, h)
+
+
+@kernel
+def _finish_factor(m, d, h):
+    return finish_factor(m, d, h)
+
+
+@kernel
+def _finish_projections(m, d, h):
+    return finish_projections(m, d, h)
+
+
 @inline_kernel
 def _mbs_step_staged(m, d, h, add_forces, args, cyc):
     """rtsim.mbs.integrator.step_with stage by stage, the cycles of each stage added to cyc (the force
@@ -137,12 +173,12 @@ def _mbs_step_staged(m, d, h, add_forces, args, cyc):
         if bad >= 0:
             d.stats[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE
-        newton_residual(m, d, h)
+        _newton_residual(m, d, h)
         c = _lap(cyc, S_RESIDUAL, c)
-        if newton_factor(m, d, h) != OK:
+        if _newton_factor(m, d, h) != OK:
             return ERR_FACTOR
         c = _lap(cyc, S_FACTOR, c)
-        status = newton_increment(m, d, h)
+        status = _newton_increment(m, d, h)
         c = _lap(cyc, S_SOLVE, c)
         if status == CONVERGED:
             converged = True
@@ -161,10 +197,10 @@ def _mbs_step_staged(m, d, h, add_forces, args, cyc):
         if bad >= 0:
             d.stats[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE
-    if finish_factor(m, d, h) != OK:
+    if _finish_factor(m, d, h) != OK:
         return ERR_FACTOR
     c = _lap(cyc, S_PROJ_FACTOR, c)
-    status = finish_projections(m, d, h)
+    status = _finish_projections(m, d, h)
     _lap(cyc, S_PROJECT, c)
     return status
 
