@@ -86,9 +86,16 @@ def sim_time(pg) -> float:
     return float(pg.evaluate("rtsimView.pose.t"))
 
 
+#: a loaded machine may run the service this many times slower than real time (a bound on a wait only)
+SLOWDOWN = 10.0
+
+
 def wait_sim(pg, t: float) -> None:
-    """Until the page has drawn a state sample of simulation time >= t (bounded by EVENT s of wall time)."""
-    pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {t}", timeout=EVENT * 1000, polling=50)
+    """Until the page has drawn a state sample of simulation time >= t, bounded by EVENT s of wall time plus
+    SLOWDOWN times the simulated time still to go (a 20 s ride on a busy machine takes longer than EVENT)."""
+    ahead = max(0.0, t - sim_time(pg))
+    pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {t}", timeout=(EVENT + SLOWDOWN * ahead) * 1000,
+                         polling=50)
 
 
 #: what the page's input reads once a key's ramp is full
