@@ -253,8 +253,9 @@ def _truth(*effects, separable: bool = True, reproducible: bool = True):
 def test_scoring():
     """Outcomes against a truth: the exact set within tolerance is right (10 % sensor, 20 % model, of the
     value in the model's terms), an extra effect is a false naming, a value outside its tolerance is off,
-    a smaller-than-structural or inseparable effect may go unnamed, a workflow error is never right; the
-    rates count them (named right among the larger separable cases, and among all larger ones)."""
+    a smaller-than-structural, inseparable or irreproducible effect may go unnamed, a workflow error is never
+    right; the rates count them (named right among the larger separable reproducible cases, among the larger
+    separable ones, and among all larger ones)."""
     from rtsim.validate.bench_score import acceptable, confusion, outcome, rates
     bias = ("sensor_bias", "gyro_z", "bias", 0.03, "sensor", True, 5.0)
     tyre = ("tyre_slip_stiffness", None, "scale", 0.55, "model", True, 9.0)
