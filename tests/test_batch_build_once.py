@@ -166,3 +166,37 @@ def test_the_compiled_offline_loop_fails_where_the_python_loop_does(monkeypatch)
     python = run_offline(sim_for(opened.model, sc), sc, progress=lambda f: None)
     assert compiled.fault is not None and compiled.fault == python.fault and compiled.fault.step == 200
     assert compiled.steps == python.steps and compiled.data.tobytes() == python.data.tobytes()
+
+
+def test_a_worker_builds_the_plans_vehicles_before_its_first_run(worker):
+    """warm_specs: one spec per scenario and vehicle file loads the kernels, then one per further vehicle
+    (a swept mass is another vehicle), in plan order and bounded; after warming with them every run of
+    the reduced sweep finds its vehicle kept: none is built or rebuilt in a run."""
+    from rtsim.batch.executors import KERNEL_SPECS, WARM_VEHICLES, warm_specs
+
+    plan, base = load_plan(SWEEP)
+    specs = expand(plan, base)
+    chosen = warm_specs(specs)
+    masses = plan.grid["vehicle.chassis.mass_kg"]
+    assert len(chosen) == min(WARM_VEHICLES, 2 * len(masses)) and KERNEL_SPECS >= 2
+    assert [s["case"] for s in chosen[:2]] == [0, 1]              # each car's kernels first
+    keys = [(s["vehicle"], s["params"]["vehicle.chassis.mass_kg"]) for s in chosen]
+    assert len(set(keys)) == len(keys)                            # each vehicle once
+    reduced, job = _reduced()
+    for s in warm_specs(reduced):
+        run.warm(s, job)
+    built = worker.built
+    assert built == 4                                             # two cars, two masses each
+    rows = [run.run_one(s, job) for s in reduced]
+    assert worker.built == built and all(r["status"] == "ok" for r in rows)
+
+
+def test_the_workers_readiness_is_what_their_first_rows_leave():
+    """ready_after: a worker's first row arriving at 5 s after 1 s of run and 0.5 s before it was ready
+    at 3.5 s; the summary gives the last worker's; Ray's rows (no readiness) leave it out."""
+    from rtsim.batch.cli import ready_after, ready_summary
+
+    assert ready_after({"wall_s": 1.0, "between_s": 0.5}, 5.0) == pytest.approx(3.5)
+    assert math.isnan(ready_after({"wall_s": 1.0, "between_s": math.nan}, 5.0))
+    assert ready_summary({"a:1": 3.5, "a:2": 2.0}).startswith("; workers ready after 3.50 s")
+    assert ready_summary({"ray:1": math.nan}) == ""

@@ -8,6 +8,7 @@ noise) are simulated once, and the others get a copy of its row with `copy_of` n
 the start says so."""
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -92,7 +93,6 @@ def timing_summary(rows: list[dict]) -> str:
     in the model's steps and outside them in all, the median and largest share outside per run; then the
     time the workers spent between runs (``between_s``: in no run's wall time), in all and per run, and
     the per-run share outside the steps with each run's time before it counted in (median, max)."""
-    import math
     import statistics
 
     runs = [r for r in rows if r.get("worker") and math.isfinite(r.get("step_s", math.nan))
@@ -113,6 +113,28 @@ def timing_summary(rows: list[dict]) -> str:
     return (out + f"; between runs {sum(between):.2f} s (per run median {1e3 * statistics.median(between):.1f} ms, "
             f"max {1e3 * max(between):.1f} ms; outside the steps with it: per run median "
             f"{statistics.median(with_gap):.1f} %, max {max(with_gap):.1f} %)")
+
+
+def ready_after(row: dict, arrived: float) -> float:
+    """When the worker of its first `row` was ready for it (s since the batch started): the row's arrival
+    `arrived` less its wall time and the worker's time before it (``between_s``, counted from when it was
+    ready: rtsim.batch.run.mark_ready). NaN where the worker does not say when it was ready (Ray's)."""
+    between = row.get("between_s", math.nan)
+    wall = row.get("wall_s", math.nan)
+    if not (math.isfinite(between) and math.isfinite(wall)):
+        return math.nan
+    return arrived - wall - between
+
+
+def ready_summary(ready: dict[str, float]) -> str:
+    """The workers' start-up, in no run's time: process start, imports, kernels loaded or compiled and the
+    plan's vehicles built (rtsim.batch.executors.warm_specs), from the batch's start to the last worker's
+    readiness (empty when none says)."""
+    known = [v for v in ready.values() if math.isfinite(v)]
+    if not known:
+        return ""
+    return (f"; workers ready after {max(known):.2f} s (start, kernels, the plan's vehicles built; "
+            f"in no run's time)")
 
 
 def main(args) -> int:
@@ -160,10 +182,13 @@ def main(args) -> int:
     n = [0]
     times: list[tuple[str, float]] = []
     ran: list[dict] = []
+    ready: dict[str, float] = {}
 
     def on_row(row: dict) -> None:
         journal.append(row)
         ran.append(row)
+        if row["worker"] and row["worker"] not in ready:
+            ready[row["worker"]] = ready_after(row, time.perf_counter() - t0)
         for s in waiting.pop(row["run_id"], ()):
             journal.append(copy_row(row, s, job))
         n[0] += 1
@@ -192,6 +217,7 @@ def main(args) -> int:
     count = {v: sum(r["verdict"] == v for r in rows) for v in ("pass", "fail", "error")}
     rate = f", {n[0] / wall:.2f} runs/s" if n[0] and wall > 0 else ""
     print(f"{plan.name}: {len(rows)}/{len(specs)} runs in the table ({n[0]} run now in {wall:.1f} s{rate}): "
-          f"{count['pass']} pass, {count['fail']} fail, {count['error']} error{timing_summary(ran)} -> {csv_path}, {pq}"
+          f"{count['pass']} pass, {count['fail']} fail, {count['error']} error{timing_summary(ran)}{ready_summary(ready)}"
+          f" -> {csv_path}, {pq}"
           + ("" if args.no_report else f", {out / 'report.html'}"))
     return 0 if count["pass"] == len(specs) else 1

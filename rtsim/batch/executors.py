@@ -54,7 +54,7 @@ def die_with_parent(parent: int) -> None:
 
 def _init(warm_specs: list[dict], job: dict, turn=None, lock_dir: str | None = None, parent: int | None = None) -> None:
     """Die with the batch process (`parent`, first thing), then load (or compile) the kernels of every
-    kind of vehicle in the plan. Worker k starts with warm
+    kind of vehicle in the plan, and build the plan's other vehicles (``warm_specs``). Worker k starts with warm
     spec k (``turn``: a shared counter) and warms each spec holding that spec's file lock in
     ``lock_dir``: on an empty numba cache the workers compile different vehicles side by side instead
     of the same ones twice, and a worker that reaches a spec another one is compiling waits for it
@@ -65,7 +65,9 @@ def _init(warm_specs: list[dict], job: dict, turn=None, lock_dir: str | None = N
     from rtsim.compile_status import worker_progress
 
     with worker_progress("batch"):
-        _warm_all(warm_specs, job, turn, lock_dir)
+        _warm_all(warm_specs[:KERNEL_SPECS], job, turn, lock_dir)
+        for spec in warm_specs[KERNEL_SPECS:]:           # the kernels are loaded: builds only, no locks
+            warm(spec, job)
     # what the warm-up made (the kernels, the config schemas, the kept vehicles and roads) lives as long
     # as the worker: out of the collector's full passes, which otherwise traverse it all in one run
     # (about 0.1 s measured: a run's share outside its steps jumped to 60-70 %)
@@ -91,17 +93,42 @@ def _warm_all(warm_specs: list[dict], job: dict, turn, lock_dir: str | None) -> 
             warm(warm_specs[j], job)
 
 
+#: warm specs that load the kernels (one per scenario and vehicle file), at most
+KERNEL_SPECS = 4
+#: vehicles a worker builds before its first run, at most (fewer than the vehicles it keeps,
+#: rtsim.batch.models.KEEP, and than the started cars a vehicle's simulation keeps, 16)
+WARM_VEHICLES = 12
+
+
 def warm_specs(specs: list[dict]) -> list[dict]:
-    """One spec per scenario and vehicle file (at most 4) to load the kernels with: each kind of vehicle's
-    kernels are loaded, and each of those vehicles is built once (and kept, rtsim.batch.models) before
-    the worker's first run, like its kernels."""
-    seen, out = set(), []
+    """The specs a worker runs for 20 ms before its first run: first one per scenario and vehicle file (at
+    most KERNEL_SPECS) to load each kind of vehicle's kernels with; then, up to WARM_VEHICLES in all, one
+    per further vehicle of the plan (its file and vehicle overrides: a swept mass is another vehicle), in
+    plan order. Each of those vehicles is built, started on its scenario's road and kept
+    (rtsim.batch.models) like the kernels, so the runs that find it spend their time in their steps; a
+    plan with more distinct vehicles builds the rest in their first runs."""
+    from .inputs import split_overrides
+
+    seen, kernels, vehicles = set(), [], []
     for s in specs:
         key = (s["scenario"], s["vehicle"])
-        if key not in seen:
+        if key not in seen and len(kernels) < KERNEL_SPECS:
             seen.add(key)
-            out.append(s)
-    return out[:4]
+            kernels.append(s)
+    built = {(s["scenario"], s["vehicle"], _vehicle_key(split_overrides(s["overrides"])[0])) for s in kernels}
+    for s in specs:
+        key = (s["scenario"], s["vehicle"], _vehicle_key(split_overrides(s["overrides"])[0]))
+        if len(kernels) + len(vehicles) >= WARM_VEHICLES:
+            break
+        if key not in built:
+            built.add(key)
+            vehicles.append(s)
+    return kernels + vehicles
+
+
+def _vehicle_key(overrides: dict) -> str:
+    import json
+    return json.dumps(overrides, sort_keys=True, default=repr)
 
 
 def local_pool(specs: list[dict], job: dict, on_row: Callable[[dict], None], workers: int | None = None,
