@@ -142,3 +142,16 @@ def test_cli_bad_input_is_one_line(tmp_path, capsys):
                         str(tmp_path / "r"), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("rtsim validate: error:") and "nope.csv: no such file" in err and "\n" not in err
+
+
+def test_cli_bad_vehicle_with_progress_is_one_line(tmp_path, capsys):
+    """The progress display starts at its first stage: a vehicle file refused before it (here a chassis
+    mass of -1 kg) is the only output, no line of the display before it."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text(VEHICLE.read_text().replace("mass_kg = ", "mass_kg = -1.0 # ", 1))
+    runs = tmp_path / "runs.csv"
+    runs.write_text("t\n0.0\n")
+    assert _standalone(["--vehicle", str(bad), "--runs", str(runs), "--report", str(tmp_path / "r")]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.startswith("rtsim validate: error:") and captured.err.count("\n") == 1
+    assert "mass_kg" in captured.err and captured.out == ""

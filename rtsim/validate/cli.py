@@ -43,7 +43,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 class RichProgress:
-    """Stage-by-stage progress on stderr (rich)."""
+    """Stage-by-stage progress on stderr (rich), shown from the first stage on: an error before it (a bad
+    vehicle file, a missing run) is the only output."""
 
     def __init__(self):
         from rich.console import Console
@@ -51,18 +52,22 @@ class RichProgress:
         self.p = Progress(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                           TimeElapsedColumn(), console=Console(stderr=True), transient=False)
         self.task = None
+        self.started = False
 
     def __enter__(self):
-        self.p.start()
         return self
 
     def __exit__(self, *exc):
         self.stage("", None)
-        self.p.stop()
+        if self.started:
+            self.p.stop()
 
     def stage(self, text: str, total: int | None = None) -> None:
         if self.task is not None:
             self.p.update(self.task, completed=self.p.tasks[-1].total)
+        if text and not self.started:
+            self.p.start()
+            self.started = True
         self.task = self.p.add_task(text, total=total or 1) if text else None
 
     def advance(self, n: int = 1) -> None:
