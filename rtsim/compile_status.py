@@ -109,6 +109,22 @@ class CompileProgress:
         self._listener = None
         self._t0 = 0.0
 
+    # -- holding the announcement (configs_first) ----------------------------------------------------
+    def hold(self) -> None:
+        """Announce no compile start until the matching ``release``: it is remembered instead."""
+        with self._lock:
+            self._held += 1
+
+    def release(self, announce: bool = True) -> None:
+        """End one ``hold``; after the last one a compile start remembered in between is announced now
+        (with ``announce``; without it, dropped)."""
+        with self._lock:
+            self._held -= 1
+            due = self._held == 0 and self._pending
+            self._pending = self._pending and self._held > 0
+        if due and announce and not self.announced:
+            self._announce()
+
     # -- context -------------------------------------------------------------------------------------
     def __enter__(self) -> "CompileProgress":
         from numba.core import event
@@ -199,17 +215,13 @@ def configs_first() -> Iterator[None]:
     if progress is None:
         yield
         return
-    with progress._lock:
-        progress._held += 1
+    progress.hold()
+    loaded = False
     try:
         yield
+        loaded = True
     finally:
-        with progress._lock:
-            progress._held -= 1
-            release = progress._held == 0 and progress._pending
-            progress._pending = progress._pending and progress._held > 0
-    if release and not progress.announced:      # reached only when the files loaded (no exception)
-        progress._announce()
+        progress.release(announce=loaded)     # announced only when the files loaded (no exception)
 
 
 #: the commands that may compile kernels and show `command_progress` lines (serve and demo show their
