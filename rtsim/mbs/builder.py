@@ -762,7 +762,7 @@ class MechanismBuilder:
             m0 = reuse.model                 # the same topology: its symbolic analysis, shared (immutable)
             perm, pinv, first, ptr = m0.perm, m0.pinv, m0.first, m0.ptr
             fac = {"perm": m0.fperm, "pinv": m0.fpinv, "colptr": m0.fcolptr, "rowidx": m0.frowidx,
-                   "uptr": m0.fuptr, "upos": m0.fupos, "pcol": m0.fpcol, "w_map": m0.fw_map}
+                   "uptr": m0.fuptr, "upos": m0.fupos, "uend": m0.fuend, "w_map": m0.fw_map}
             asm = {k: getattr(m0, k) for k in _ASM_FIELDS}
         else:
             perm, pinv, first, ptr = envelope.symbolic(nq, allpairs)
@@ -798,7 +798,7 @@ class MechanismBuilder:
             perm=perm, pinv=pinv, first=first, ptr=ptr,
             m_env=envelope.to_envelope(mass, first, ptr, perm),
             fperm=fac["perm"], fpinv=fac["pinv"], fcolptr=fac["colptr"], frowidx=fac["rowidx"], fuptr=fac["uptr"],
-            fupos=fac["upos"], fpcol=fac["pcol"], fw_map=fac["w_map"], **asm,
+            fupos=fac["upos"], fuend=fac["uend"], fw_map=fac["w_map"], **asm,
             iset=iset, fset=fset,
         )
         return Mechanism(

@@ -11,7 +11,7 @@ velocity rows (the contact point's material velocity is zero: no slip); see `_di
 from __future__ import annotations
 
 import numpy as np
-from rtsim.jit import inline_kernel, kernel
+from rtsim.jit import inline_kernel, kernel, uidx
 
 from .model import (CON_ANGLE2D, CON_CRANK_ROD, CON_DISC_CONTACT, CON_DISC_ROLL, CON_DOT, CON_LINEAR, CON_POLY_POINT,
                     DRV_POLY, DRV_SINE, NSLOT, SCALAR, SCALAR2)
@@ -23,7 +23,7 @@ def ref(idx, cst, v, row, slot, comp):
     k = idx[row, 3 * slot + comp]
     x = cst[row, 3 * slot + comp]
     if k >= 0:
-        x += v[k]
+        x += v[uidx(k)]
     return x
 
 
@@ -32,7 +32,7 @@ def refd(idx, v, row, slot, comp):
     """Rate of a vector reference (constants have zero rate)."""
     k = idx[row, 3 * slot + comp]
     if k >= 0:
-        return v[k]
+        return v[uidx(k)]
     return 0.0
 
 
@@ -216,7 +216,7 @@ def eval_constraints(m, d, q):
             for s in range(NSLOT):
                 k = idx[i, s]
                 if k >= 0:
-                    val += cst[i, s] * q[k]
+                    val += cst[i, s] * q[uidx(k)]
                     jac[s] = cst[i, s]
                 else:
                     jac[s] = 0.0
@@ -267,9 +267,9 @@ def eval_constraints(m, d, q):
         elif kind == CON_POLY_POINT:
             k = int(par[0])
             comp = int(par[1])
-            z = q[idx[i, SCALAR]]
+            z = q[uidx(idx[i, SCALAR])]
             ks = idx[i, SCALAR2]
-            s = q[ks] if ks >= 0 else 0.0
+            s = q[uidx(ks)] if ks >= 0 else 0.0
             val = ref(idx, cst, q, i, 0, comp) - ref(idx, cst, q, i, 1, comp)
             dz = 0.0
             ds = 0.0
@@ -535,8 +535,8 @@ def jac_matvec(m, d, x, out):
     for i in range(m.nc):
         s = 0.0
         for a in range(m.con_nact[i]):
-            k = m.con_act[i, a]
-            s += d.jac[i, k] * x[idx[i, k]]
+            k = uidx(m.con_act[i, a])
+            s += d.jac[i, k] * x[uidx(idx[i, k])]
         out[i] = s
 
 
@@ -548,5 +548,5 @@ def jac_t_matvec_add(m, d, v, out, scale):
         vi = scale * v[i]
         if vi != 0.0:
             for a in range(m.con_nact[i]):
-                k = m.con_act[i, a]
-                out[idx[i, k]] += d.jac[i, k] * vi
+                k = uidx(m.con_act[i, a])
+                out[uidx(idx[i, k])] += d.jac[i, k] * vi

@@ -15,7 +15,7 @@ All kernels work in *permuted* indices: entry (i, j) of the original matrix live
 from __future__ import annotations
 
 import numpy as np
-from rtsim.jit import inline_kernel, kernel
+from rtsim.jit import inline_kernel, kernel, uidx
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
@@ -55,12 +55,13 @@ def add_entry(env, first, ptr, pinv, i, j, value):
     an off-diagonal pair (i, j) ~ (j, i) is stored once, so callers add each unordered pair once.
     A pair outside the envelope is dropped (it would land on another row's storage): declare every
     coupling a force's tangent needs in the pattern (MechanismBuilder.couple)."""
-    r = pinv[i]
-    c = pinv[j]
+    r = pinv[uidx(i)]
+    c = pinv[uidx(j)]
     if c > r:
         r, c = c, r
-    if c >= first[r]:   # outside the profile there is no storage: the pattern must include the pair
-        env[ptr[r] + c - first[r]] += value
+    fr = first[uidx(r)]
+    if c >= fr:         # outside the profile there is no storage: the pattern must include the pair
+        env[uidx(ptr[uidx(r)]) + uidx(c - fr)] += value
 
 
 @kernel
@@ -119,14 +120,14 @@ def matvec_add(a, first, ptr, perm, pinv, x, y, scale):
     n = first.shape[0]
     for r in range(n):
         fr = first[r]
-        base = ptr[r] - fr
-        i = perm[r]
+        base = uidx(ptr[r])             # entry (r, c) at base + c - fr
+        i = uidx(perm[r])
         xi = x[i]
-        acc = a[base + r] * xi
+        acc = a[base + uidx(r - fr)] * xi
         for c in range(fr, r):
-            arc = a[base + c]
+            arc = a[base + uidx(c - fr)]
             if arc != 0.0:
-                j = perm[c]
+                j = uidx(perm[c])
                 acc += arc * x[j]
                 y[j] += scale * arc * xi
         y[i] += scale * acc

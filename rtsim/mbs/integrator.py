@@ -24,7 +24,7 @@ rtsim.mbs.simulation.penalty_factors). Kernels return a status code; they never 
 from __future__ import annotations
 
 import numpy as np
-from rtsim.jit import inline_kernel, kernel
+from rtsim.jit import inline_kernel, kernel, uidx
 
 from .constraints import eval_constraints, eval_drivers, hqd_rows, jac_matvec, jac_t_matvec_add
 from .envelope import matvec_add
@@ -48,11 +48,12 @@ def factorize(m, d, bq):
     a = d.a_env
     for p in range(a.shape[0]):
         k = m.fw_map[p]
-        a[p] = d.w_env[k] if k >= 0 else 0.0
+        a[p] = d.w_env[uidx(k)] if k >= 0 else 0.0
     for e in range(m.asm_row.shape[0]):
-        i = m.asm_row[e]
-        a[m.asm_pos[e]] += bq * d.alpha[i] * m.asm_mult[e] * d.jac[i, m.asm_s[e]] * d.jac[i, m.asm_u[e]]
-    return cholesky(a, m.fcolptr, m.frowidx, m.fuptr, m.fupos, m.fpcol, d.l_env, d.work)
+        i = uidx(m.asm_row[e])
+        a[uidx(m.asm_pos[e])] += (bq * d.alpha[i] * m.asm_mult[e] * d.jac[i, uidx(m.asm_s[e])]
+                                  * d.jac[i, uidx(m.asm_u[e])])
+    return cholesky(a, m.fcolptr, m.frowidx, m.fuptr, m.fupos, m.fuend, d.l_env, d.work)
 
 
 @kernel

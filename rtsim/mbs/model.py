@@ -124,7 +124,7 @@ Model = namedtuple("Model", [
     # the tangent's Cholesky factor (rtsim.mbs.sparse): ordering, pattern and update lists, the envelope
     # slot of W for each of its positions (-1: none), and the constraint rows' contributions
     # bq alpha_i Phi_q[i, s] Phi_q[i, u] mult (row, slots s and u, position in the factor's pattern, mult)
-    "fperm", "fpinv", "fcolptr", "frowidx", "fuptr", "fupos", "fpcol", "fw_map",
+    "fperm", "fpinv", "fcolptr", "frowidx", "fuptr", "fupos", "fuend", "fw_map",
     "asm_row", "asm_s", "asm_u", "asm_pos", "asm_mult",
     # settings
     "iset", "fset",
