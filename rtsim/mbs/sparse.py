@@ -105,10 +105,10 @@ def cholesky(a, colptr, rowidx, uptr, upos, uend, out, work):
     Columns before the dense trailing block (the last columns, each full below its diagonal: a car's
     tangent ends in an 18 x 18 one) are factored left-looking through `work`. The block's columns receive
     their updates from the sparse columns the same way and are stored unscaled; the block is then factored
-    right-looking in place (after column k is scaled, it updates every later column of the block). Every
-    entry still receives its updates in ascending k, so the result is the same bit for bit; the block's
-    rank-one updates are independent of each other, where the left-looking updates of one column chain
-    through `work`.
+    in place, column by column, each column taking the updates of the block's earlier columns two at a
+    time (one load and store of its entries per two updates). Every entry receives its updates in
+    ascending k, each rounded in its turn, so the factor is the same bit for bit as one made by rank-one
+    updates.
 
     Positions and rows are indexed as unsigned integers (rtsim.jit.uidx), and each update reads where its
     rows end from `uend` (symbolic) instead of through the column of its position: with signed indices
@@ -146,22 +146,30 @@ def cholesky(a, colptr, rowidx, uptr, upos, uend, out, work):
         else:
             for p in range(c0, c1):
                 out[p] = work[uidx(rowidx[p])]
-    for k in range(jd, n):      # the dense block, right-looking; L[r, k] is at colptr[k] + r - k
-        c0 = uidx(colptr[k])
-        c1 = uidx(colptr[k + 1])
-        s = out[c0]
+    for j in range(jd, n):      # the dense block, left-looking; L[r, k] is at colptr[k] + r - k
+        bj = uidx(colptr[j])
+        m = uidx(n - j)
+        k = jd
+        while k + 1 < j:        # the updates of two earlier block columns a pass, each in its turn
+            bk0 = uidx(colptr[k]) + uidx(j - k)             # L[j, k], then the rows below it
+            bk1 = uidx(colptr[k + 1]) + uidx(j - k - 1)
+            l0 = out[bk0]
+            l1 = out[bk1]
+            for i in range(m):
+                out[bj + i] = (out[bj + i] - out[bk0 + i] * l0) - out[bk1 + i] * l1
+            k += 2
+        if k < j:
+            bk0 = uidx(colptr[k]) + uidx(j - k)
+            l0 = out[bk0]
+            for i in range(m):
+                out[bj + i] -= out[bk0 + i] * l0
+        s = out[bj]
         if not (s > 0.0):
-            return k
+            return j
         inv = 1.0 / np.sqrt(s)
-        out[c0] = inv
-        for p in range(c0 + one, c1):
-            out[p] = out[p] * inv
-        for j in range(k + 1, n):
-            bk = c0 + uidx(j - k)             # L[j, k], then the rows below it
-            ljk = out[bk]
-            bj = uidx(colptr[j])
-            for i in range(uidx(n - j)):
-                out[bj + i] -= out[bk + i] * ljk
+        out[bj] = inv
+        for i in range(one, m):
+            out[bj + i] = out[bj + i] * inv
     return -1
 
 
