@@ -145,13 +145,13 @@ def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
         rz = rz_new
         for i in range(nc):
             p[i] = d.alpha[i] * r[i] + beta * p[i]
-    # the true residual, not the recursively updated one
-    jac_matvec(m, d, x, r)
-    gmax = 0.0
-    for i in range(nc):
-        a = abs(r[i] + c[i])
-        if a > gmax:
-            gmax = a
+    if k > 0:       # the true residual, not the recursively updated one (without CG: gmax is that)
+        jac_matvec(m, d, x, r)
+        gmax = 0.0
+        for i in range(nc):
+            a = abs(r[i] + c[i])
+            if a > gmax:
+                gmax = a
     if gmax <= tol_fail:
         return k, gmax
     return -1, gmax
