@@ -16,7 +16,7 @@ from math import asin, atan2
 
 from rtsim.channels import EPS_SENSORS, SENSOR_NAMES
 from rtsim.jit import kernel
-from rtsim.mbs.constraints import poly_eval
+from rtsim.mbs.constraints import poly_value
 
 from ..kit.imu import imu_reading, model_gravity
 from .layout import CI_PHI, CI_S, CI_Z
@@ -81,8 +81,8 @@ def true_sensors(m, d, veh, signals, out):
     for i in range(2):
         z = q[veh.corner_idx[i, CI_Z]]
         s = q[veh.corner_idx[i, CI_S]]
-        a0 = poly_eval(veh.axis_coef[i, 0], m.poly_exp, z, s)[0]
-        a1 = poly_eval(veh.axis_coef[i, 1], m.poly_exp, z, s)[0]
+        a0 = poly_value(veh.axis_coef[i, 0], m.poly_exp, z, s)
+        a1 = poly_value(veh.axis_coef[i, 1], m.poly_exp, z, s)
         out[S_STEER_FL + i] = atan2(-a0, a1)
     out[S_BRAKE_PRESSURE] = signals[SG_BRAKE_PRESSURE]
     out[S_SW_ANGLE] = signals[SG_SW_ANGLE]
