@@ -108,6 +108,7 @@ def warm_specs(specs: list[dict]) -> list[dict]:
     (rtsim.batch.models) like the kernels, so the runs that find it spend their time in their steps; a
     plan with more distinct vehicles builds the rest in their first runs."""
     from .inputs import split_overrides
+    from .models import overrides_key
 
     seen, kernels, vehicles = set(), [], []
     for s in specs:
@@ -115,20 +116,19 @@ def warm_specs(specs: list[dict]) -> list[dict]:
         if key not in seen and len(kernels) < KERNEL_SPECS:
             seen.add(key)
             kernels.append(s)
-    built = {(s["scenario"], s["vehicle"], _vehicle_key(split_overrides(s["overrides"])[0])) for s in kernels}
+
+    def vehicle(spec: dict) -> tuple:
+        return spec["scenario"], spec["vehicle"], overrides_key(split_overrides(spec["overrides"])[0])
+
+    built = {vehicle(s) for s in kernels}
     for s in specs:
-        key = (s["scenario"], s["vehicle"], _vehicle_key(split_overrides(s["overrides"])[0]))
         if len(kernels) + len(vehicles) >= WARM_VEHICLES:
             break
+        key = vehicle(s)
         if key not in built:
             built.add(key)
             vehicles.append(s)
     return kernels + vehicles
-
-
-def _vehicle_key(overrides: dict) -> str:
-    import json
-    return json.dumps(overrides, sort_keys=True, default=repr)
 
 
 def local_pool(specs: list[dict], job: dict, on_row: Callable[[dict], None], workers: int | None = None,

@@ -49,7 +49,7 @@ class OpenedVehicles:
         return open_run(scenario, vehicle, overrides, kept=self)
 
     def _key(self, vpath: Path, veh_over: dict) -> tuple[str, str]:
-        return self._resolved(vpath), json.dumps(veh_over, sort_keys=True, default=repr)
+        return self._resolved(vpath), overrides_key(veh_over)
 
     def _resolved(self, vpath: Path) -> str:
         """The vehicle file's resolved path, resolved once per worker (a few file-system calls each time;
@@ -98,6 +98,11 @@ class OpenedVehicles:
 
 
 _MISSING = object()
+
+
+def overrides_key(veh_over: dict) -> str:
+    """A run's vehicle overrides as one string (JSON, keys sorted): equal for the same vehicle."""
+    return json.dumps(veh_over, sort_keys=True, default=repr)
 
 #: this worker process's vehicles (one batch runs per process at a time)
 WORKER = OpenedVehicles()
