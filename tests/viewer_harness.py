@@ -93,7 +93,8 @@ SLOWDOWN = 10.0
 def wait_sim(pg, t: float) -> None:
     """Until the page has drawn a state sample of simulation time >= t, bounded by EVENT s of wall time plus
     SLOWDOWN times the simulated time still to go (a 20 s ride on a busy machine takes longer than EVENT)."""
-    ahead = max(0.0, t - sim_time(pg))
+    now = float(pg.evaluate("rtsimView.pose ? rtsimView.pose.t : 0"))     # no sample drawn yet: 0
+    ahead = max(0.0, t - now)
     pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {t}", timeout=(EVENT + SLOWDOWN * ahead) * 1000,
                          polling=50)
 
