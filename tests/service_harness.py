@@ -5,6 +5,7 @@ simulation time the sensor frames carry. Every process started here is stopped b
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -13,10 +14,11 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from waits import EVENT
+from waits import EVENT, PROCESS
 
 ROOT = Path(__file__).resolve().parent.parent
 READY = "stop with Ctrl-C"
+_ELAPSED = re.compile(r"\b\d+ s\b")        # "compiling kernels: 35 s, ..." -> its state
 
 
 def segment_from_env() -> tuple[str, str] | None:
@@ -46,28 +48,43 @@ def can_segment():
 
 
 class ServiceProcess:
-    """`rtsim serve` in a child process; ``lines`` collects its stdout. ``ready_timeout`` (wall s) only calls a
-    start hung: a first compile inside the loaded SocketCAN VM has taken minutes."""
+    """`rtsim serve` in a child process; ``lines`` collects its stdout. The start is waited for while it
+    makes progress: a start is called hung (and the process killed) only when ``stall`` s of wall time
+    (default waits.PROCESS) pass without a new line of output other than a compile progress line that
+    repeats the previous one's count and kernel (a first compile of every kernel on a loaded machine takes
+    many minutes, but it names a new kernel or count at least every kernel it finishes)."""
 
-    def __init__(self, iface: str, channel: str, *args: str, ready_timeout: float = 900.0):
+    def __init__(self, iface: str, channel: str, *args: str, stall: float = PROCESS):
         cmd = [sys.executable, "-m", "rtsim.cli", "serve", "--can-interface", iface, "--can-channel", channel,
                "--no-hub", *args]
         self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                      env={**os.environ, "PYTHONUNBUFFERED": "1"})
         self.lines: list[str] = []
         self._ready = threading.Event()
+        self._progress = threading.Event()
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
-        if not self._ready.wait(ready_timeout) or self.proc.poll() is not None:
-            out = "\n".join(self.lines)
+        last = time.monotonic()
+        while not self._ready.is_set() and self._reader.is_alive() and time.monotonic() - last < stall:
+            if self._progress.wait(1.0):
+                self._progress.clear()
+                last = time.monotonic()
+        if not self._ready.is_set() or self.proc.poll() is not None:
+            why = "its output ended" if not self._reader.is_alive() else f"no progress for {stall:g} s"
             self.close()
-            raise RuntimeError(f"rtsim serve did not start:\n{out}")
+            out = "\n".join(self.lines)
+            raise RuntimeError(f"rtsim serve did not start ({why}):\n{out}")
 
     def _read(self) -> None:
+        last = None
         for line in self.proc.stdout:
             self.lines.append(line.rstrip("\n"))
             if READY in line:
                 self._ready.set()
+            state = _ELAPSED.sub("", line)          # a compile progress line's count and kernel
+            if state != last:
+                last = state
+                self._progress.set()
 
     def stop(self, sig=signal.SIGTERM, timeout: float = EVENT) -> tuple[int | None, float]:
         """Send ``sig``; returns (exit code or None if it did not end within ``timeout`` s, seconds

@@ -19,7 +19,9 @@ space-separated test files/node ids it names.
 Before booting, the same tests run once on the host with the guest's numba settings
 (``vcan_vm.numba_env``: generic x86-64 code, shared cache folder) so the guest loads compiled kernels
 instead of compiling them under emulation (and rtsim's other caches, e.g. the suspension fits, are
-filled); ``RTSIM_VCAN_WARMUP=0`` skips that. Inside the guest ``RTSIM_IN_VM=1`` is set.
+filled); they must pass there (over the loopback hub), or the test fails with that run's output before
+booting. ``RTSIM_VCAN_WARMUP=0`` skips that. Inside the guest ``RTSIM_IN_VM=1`` is set (waits.py: every
+wait's bound 5 times longer).
 
 Knobs: ``RTSIM_VCAN_ALL=1`` and ``RTSIM_VCAN_TESTS`` (above), ``RTSIM_VCAN_TIMEOUT`` (s, whole VM run,
 default 1200), ``RTSIM_VCAN_SMP`` (guest CPUs, default 1), ``RTSIM_VCAN_VM=0`` (never boot). Deselect
@@ -159,9 +161,13 @@ def test_can_e2e_over_socketcan_vcan0():
 
     if os.environ.get("RTSIM_VCAN_WARMUP", "1") != "0":
         t0 = time.monotonic()
-        rc = vm.warm_numba_cache([sys.executable, *inner], cwd=ROOT, timeout=timeout)
+        rc, out = vm.warm_numba_cache([sys.executable, *inner], cwd=ROOT, timeout=1.5 * timeout)
         print(f"[vcan VM] numba warm-up on the host (generic x86-64 code, shared cache): exit {rc}, "
               f"{time.monotonic() - t0:.1f} s", flush=True)
+        # the same tests on the host's loopback bus: what fails there fails in the guest too, much slower
+        if rc != 0:
+            print(out)
+        _check_inner(rc, out, "the warm-up on the host (loopback bus, generic code)", targets)
 
     res = vm.run([sys.executable, *inner], cwd=ROOT, env=GUEST_ENV, timeout=timeout,
                  smp=int(os.environ.get("RTSIM_VCAN_SMP", "1")), stream=lambda line: print(line, flush=True))

@@ -178,8 +178,11 @@ def test_a_recording_replays_with_the_recorded_poses(page, service):
         n = pg2.evaluate("rtsimView.replay.recs[0].state.length")
         msgs, _ = read_recording(rec)
         state = [m.data for m in msgs["rtsim/xbw/state"]][:n]     # what the server read (the file grows)
-        k = int(0.8 * n)
-        assert state[k]["speed"] > 1.0                           # the car is moving there
+        # a sample where the car moves (the keyboard's drive, before the watchdog's brakes stop it again;
+        # where in the recording depends on how fast this machine ran the tests before this one)
+        moving = [i for i in range(n - 1) if state[i]["speed"] > 1.0]
+        assert moving, "the car never moved faster than 1 m/s in the recording"
+        k = moving[len(moving) // 2]
         t = 0.5 * (state[k]["time"] + state[k + 1]["time"])       # between two samples
         pg2.evaluate(f"rtsimView.seek({t!r})")
         pg2.wait_for_function(f"rtsimView.poses.length === 2 && rtsimView.poses.every(p => p.t === {state[k]['time']!r})",

@@ -10,6 +10,7 @@ import shutil
 import threading
 from contextlib import contextmanager
 
+import playwright.sync_api as playwright_api      # the test extra (a hard dependency of the suite)
 import pytest
 
 from rtsim.viewer.browser import CHROMIUM_ARGS, NO_CHROMIUM, chromium_path
@@ -86,17 +87,29 @@ def sim_time(pg) -> float:
     return float(pg.evaluate("rtsimView.pose.t"))
 
 
-#: a loaded machine may run the service this many times slower than real time (a bound on a wait only)
-SLOWDOWN = 10.0
+#: s of simulated time the page must advance by within EVENT s of wall time while a wait lasts: a loaded
+#: machine may run the service many times slower than real time, a stopped clock does not advance at all
+PROGRESS_S = 0.5
+
+
+class SimStalled(AssertionError):
+    """The page's simulated time stopped: no PROGRESS_S of it within EVENT s of wall time."""
 
 
 def wait_sim(pg, t: float) -> None:
-    """Until the page has drawn a state sample of simulation time >= t, bounded by EVENT s of wall time plus
-    SLOWDOWN times the simulated time still to go (a 20 s ride on a busy machine takes longer than EVENT)."""
-    now = float(pg.evaluate("rtsimView.pose ? rtsimView.pose.t : 0"))     # no sample drawn yet: 0
-    ahead = max(0.0, t - now)
-    pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {t}", timeout=(EVENT + SLOWDOWN * ahead) * 1000,
-                         polling=50)
+    """Until the page has drawn a state sample of simulation time >= t, however slowly the machine runs the
+    service, as long as the page's time keeps advancing: SimStalled when it does not advance by PROGRESS_S
+    (or reach t) within EVENT s of wall time (a service that stopped, a motorcycle that fell: its clock
+    stops; a page that stopped drawing)."""
+    now = float(pg.evaluate("rtsimView.pose ? rtsimView.pose.t : -1"))     # no sample drawn yet: -1
+    while now < t:
+        goal = min(t, now + PROGRESS_S)
+        try:
+            pg.wait_for_function(f"rtsimView.pose && rtsimView.pose.t >= {goal}", timeout=EVENT * 1000, polling=50)
+        except playwright_api.TimeoutError:
+            raise SimStalled(f"the page's simulated time stayed below {goal:.3f} s (from {now:.3f} s) for "
+                             f"{EVENT:g} s of wall time, waiting for {t:.3f} s") from None
+        now = float(pg.evaluate("rtsimView.pose.t"))
 
 
 #: what the page's input reads once a key's ramp is full

@@ -511,15 +511,17 @@ def numba_env(cache: Path | None = None) -> dict[str, str]:
 
 
 def warm_numba_cache(cmd: Sequence[str], *, cwd: str | Path | None = None, env: Mapping[str, str] | None = None,
-                     timeout: float = 600.0, cache: Path | None = None) -> int:
+                     timeout: float = 600.0, cache: Path | None = None) -> tuple[int, str]:
     """Run ``cmd`` on the host with :func:`numba_env` so every kernel it compiles lands in the shared
-    cache for the guest; returns its exit code (its output is discarded: only the compiles matter)."""
+    cache for the guest; returns its exit code and its output (stdout and stderr together): a command
+    that fails on the host would fail in the guest as well, many times slower, so the caller can stop here."""
     full = dict(os.environ, **(env or {}), **numba_env(cache))
     try:
-        return subprocess.run(list(cmd), cwd=cwd, env=full, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL, timeout=timeout).returncode
+        r = subprocess.run(list(cmd), cwd=cwd, env=full, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         raise VMError(f"vcan VM: numba warm-up `{shlex.join(cmd)[:80]}` took more than {timeout:g} s") from None
+    return r.returncode, r.stdout
 
 
 # --------------------------------------------------------------------------------------------------
