@@ -37,18 +37,23 @@ def open_run(scenario: str | Path, vehicle: str | Path | None, overrides: dict, 
     file, else the scenario's, else the default car), both read under the run's overrides; with
     ``build`` the model is built under them too (their values are read on load). ConfigError (or the
     vehicle's RtsimError refusing a batch) when they cannot be. ``kept``: a worker's opened vehicles
-    (rtsim.batch.models.OpenedVehicles), asked for the vehicle first, else for a built one of the same file
-    whose overrides differ in plain parameters only (the model is then built on it), and given the one
-    opened."""
+    (rtsim.batch.models.OpenedVehicles), asked for the scenario and the vehicle first, else for a built
+    vehicle of the same file whose overrides differ in plain parameters only (the model is then built on
+    it), and given the ones opened."""
     from drivers.scenario import load_scenario
     from rtsim.configfile import overrides as with_overrides
     from rtsim.vehicle.registry import DEFAULT_VEHICLE, open_vehicle
 
     scen = Path(scenario)
     veh_over, scen_over = split_overrides(overrides)
-    files = {scen.resolve(): scen_over}
+    files = {}                                  # read at each load: filled before the file it names is read
     with with_overrides(files):
-        sc = load_scenario(scen, check_files=True)
+        sc = None if kept is None else kept.scenario(scen, scen_over)
+        if sc is None:
+            files[scen.resolve()] = scen_over
+            sc = load_scenario(scen, check_files=True)
+            if kept is not None:
+                kept.keep_scenario(scen, scen_over, sc)
         vpath = Path(vehicle) if vehicle else (sc.vehicle_path or DEFAULT_VEHICLE)
         opened = None if kept is None else kept.get(vpath, veh_over)
         if opened is not None:

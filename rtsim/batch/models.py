@@ -1,8 +1,9 @@
 """A worker's opened vehicles, kept across its runs: each distinct vehicle (its file and the run's vehicle
 overrides) is read, validated and built once per worker process, and every later run of it gets the same
 opened vehicle, whose compiled model is immutable arrays (each run makes its own state: rtsim.vehicle's
-``run_offline`` builds a fresh simulation on it). A run's scenario is read per run (its overrides differ
-from run to run; reading it takes a few ms).
+``run_offline`` builds a fresh simulation on it). Likewise each distinct scenario (its file and the run's
+scenario overrides) is read and validated once per worker (0.7 ms a run otherwise); a loaded scenario is
+not changed by the runs on it (each run builds its own driver from it).
 
 A run whose vehicle overrides differ from every kept one's is another vehicle: read and validated (its
 values are read on load, so a bad one is that run's config error as before). When they differ from a kept
@@ -25,6 +26,8 @@ from pathlib import Path
 from .inputs import open_run
 
 KEEP = 32
+#: scenarios kept per worker (a few tens of kB each)
+KEEP_SCENARIOS = 256
 
 
 class OpenedVehicles:
@@ -32,8 +35,8 @@ class OpenedVehicles:
     vehicles opened and built (``rebuilt`` of them on a kept one), ``reused`` the runs that got a kept
     one."""
 
-    def __init__(self, keep: int = KEEP):
-        self.keep = keep
+    def __init__(self, keep: int = KEEP, keep_scenarios: int = KEEP_SCENARIOS):
+        self.keep, self.keep_scenarios = keep, keep_scenarios
         self.kept: OrderedDict = OrderedDict()
         self.built = 0
         self.rebuilt = 0
@@ -42,11 +45,26 @@ class OpenedVehicles:
         self.tables: dict = {}       # the TOML files parsed in this worker (rtsim.configfile.keeping_tables)
         self._paths: dict = {}       # vehicle file as given -> its resolved path
         self._overrides: dict = {}   # a kept vehicle's overrides as keyed (JSON) -> read back (built_like)
+        self.scenarios: OrderedDict = OrderedDict()    # (scenario file as given, overrides key) -> Scenario
 
     def open_run(self, scenario: str | Path, vehicle: str | Path | None, overrides: dict):
         """(scenario, opened vehicle) of a run, as rtsim.batch.inputs.open_run opens them (same loaders,
         same order, same errors), the vehicle a kept one when this worker opened it before."""
         return open_run(scenario, vehicle, overrides, kept=self)
+
+    def scenario(self, path: Path, scen_over: dict):
+        """The kept scenario of this file and overrides (None: not read yet, or no longer kept)."""
+        key = (path, overrides_key(scen_over))
+        sc = self.scenarios.get(key)
+        if sc is not None:
+            self.scenarios.move_to_end(key)
+        return sc
+
+    def keep_scenario(self, path: Path, scen_over: dict, sc) -> None:
+        """Keep a scenario just read (the least recently used out beyond ``keep_scenarios``)."""
+        self.scenarios[(path, overrides_key(scen_over))] = sc
+        while len(self.scenarios) > self.keep_scenarios:
+            self.scenarios.popitem(last=False)
 
     def _key(self, vpath: Path, veh_over: dict) -> tuple[str, str]:
         return self._resolved(vpath), overrides_key(veh_over)
