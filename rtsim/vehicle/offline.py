@@ -72,12 +72,16 @@ def prepare(vehicle: str | Path | None, sc) -> tuple[VehicleSim, object]:
     return sim_for(build_vehicle(cfg, base), sc), sc
 
 
-def sim_for(model, sc) -> VehicleSim:
-    """The built car `model` at the scenario's start on its road, the brake at the driver's first command."""
+def sim_for(model, sc, driver=None) -> VehicleSim:
+    """The built car `model` at the scenario's start on its road, the brake at the driver's first command
+    (of `driver`, reset afterwards, else of a driver of its own)."""
     road = load_road(sc.road_path)
     ini = sc.spec.initial
-    driver = sc.driver()
+    own = driver is None
+    driver = sc.driver() if own else driver
     first = driver.step(0.0, sc.initial_state())
+    if not own:
+        driver.reset()
     sim = VehicleSim(model, road, sc.dt, brake_pressure=float(first[I_BRAKE]), position=(ini.x, ini.y),
                      yaw=ini.yaw, speed=ini.speed)
     sim.road_path = sc.road_path          # what the 3D scene draws besides the mesh (OpenDRIVE road marks)
@@ -92,13 +96,14 @@ def vehicle_state(sim: VehicleSim, out: np.ndarray) -> None:
 
 
 def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
-        seed: int = 0, controller=None) -> RunResult:
+        seed: int = 0, controller=None, driver=None) -> RunResult:
     """Run the scenario to its duration; rows at the scenario's output rate. Sensor channels are what the
     sensors report (the vehicle's sensor model: the config's [sensors.channels] and sensor effects);
     `seed` seeds its noise. A model failure ends the run: the rows up to the failure, and ``fault``
     (its step, time, reason and coordinate; rtsim.model_fault, whose test-only hook can force one).
     `controller`: a command source (rtsim.fmu.controller) driving some commands; by default the scenario's
-    controller FMU (its `controller` mapping file), if it names one."""
+    controller FMU (its `controller` mapping file), if it names one. `driver`: the scenario's driver
+    (sc.driver()) in its reset state, else one of its own."""
     dt = sc.dt
     forced = test_fault_step(test_fault_time(), dt)
     nsteps = int(round(sc.duration / dt))
@@ -106,7 +111,7 @@ def run(sim: VehicleSim, sc, progress: Callable[[float], None] | None = None,
     columns = columns_of(sim.vm.channels)
     rows = np.zeros((nsteps // every + 1, len(columns)))
     sim.start_energy_audit()            # the power audit's cumulative flows (rtsim.vehicle.car.energy)
-    driver = sc.driver()
+    driver = sc.driver() if driver is None else driver
     state = np.zeros(NSTATE)
     sens = np.zeros(sim.nsensor)
     observed = np.zeros(len(sim.vm.channels.state))

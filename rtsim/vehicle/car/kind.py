@@ -79,8 +79,9 @@ class CarKind(VehicleKind):
     def run_offline(self, opened, sc, progress=None, seed=0) -> OfflineRun:
         from ..offline import run, sim_for
 
-        sim = sim_for(opened.model, sc)
-        res = run(sim, sc, progress, seed=seed)
+        driver = sc.driver()                # one for the start's brake command and the run (reset between)
+        sim = sim_for(opened.model, sc, driver)
+        res = run(sim, sc, progress, seed=seed, driver=driver)
         out = OfflineRun(res.columns, res.data, res.wall_s, res.steps, status="ok" if res.fault is None else "failed",
                          message="" if res.fault is None else res.fault.line(), fault=res.fault,
                          vehicle_id=sim.vm.config.id, channels=sim.vm.channels, scene=sim, step_s=res.step_s)
