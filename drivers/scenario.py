@@ -536,6 +536,7 @@ class Scenario:
     path_xy: tuple[np.ndarray, np.ndarray] | None = None
     two_wheeler_profiles: dict[str, Profile] = field(default_factory=dict)
     mapping: Mapping | None = None        # the controller FMU's mapping (rtsim.fmu.mapping), if any
+    _params: dict = field(default_factory=dict, init=False, repr=False, compare=False)   # driver()'s
 
     @property
     def two_wheeler(self) -> bool:
@@ -586,14 +587,22 @@ class Scenario:
             spec = inp.speed_follower
             by = "time" if spec.time is not None else "distance"
             sf = speed_follower(spec.time if spec.time is not None else spec.distance, spec.speed, by=by,
-                                params=spec.params())
+                                params=self._follower_params("speed", spec))
         if inp.path_follower is not None:
             spec = inp.path_follower
             x, y = self.path_xy
-            pf = path_follower(x, y, method=spec.method, closed=spec.closed, params=spec.params())
+            pf = path_follower(x, y, method=spec.method, closed=spec.closed,
+                               params=self._follower_params("path", spec))
         d = Driver(self.profiles, speed=sf, path=pf)
         d.controller = self.mapping
         return d
+
+    def _follower_params(self, which: str, spec):
+        """A follower's parameters (frozen, range-checked when made: 0.3 ms), made once per scenario."""
+        made = self._params.get(which)
+        if made is None:
+            made = self._params[which] = spec.params()
+        return made
 
 
 def load_scenario(path: str | Path, check_files: bool = False) -> Scenario:
