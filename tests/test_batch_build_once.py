@@ -57,6 +57,7 @@ def test_build_once_rows_equal_fresh_builds_bit_for_bit(worker):
     fresh = [run.run_one(s, {**job, "build_once": False}) for s in specs]
     assert worker.built == 4 and worker.reused == 4          # 2 cars x 2 masses, each built once
     assert worker.rebuilt == 2                               # the second mass of each on the first's model
+    assert len(worker.scenarios) == 2                        # the 2 steering steps, each read once
     for a, b in zip(kept, fresh):
         assert a["status"] == "ok", a["error"]
         ia, ib = _identity(a), _identity(b)
@@ -67,6 +68,29 @@ def test_build_once_rows_equal_fresh_builds_bit_for_bit(worker):
                 assert math.isnan(va) and math.isnan(vb) or va.hex() == vb.hex(), (a["run_id"], k, va, vb)
             else:
                 assert va == vb, (a["run_id"], k)
+
+
+def test_a_scenario_is_read_once_per_file_and_overrides(worker, monkeypatch):
+    """The worker reads a scenario once for each distinct scenario overrides; the vehicle's overrides do not
+    make it another scenario (the runs' rows are the fresh reads' bit for bit: the test above)."""
+    import drivers.scenario as scenario
+
+    reads = []
+    load = scenario.load_scenario
+    monkeypatch.setattr(scenario, "load_scenario", lambda *a, **k: reads.append(a[0]) or load(*a, **k))
+    scen = ROOT / "configs" / "scenarios" / "step_steer_80kph.toml"
+    car = ROOT / "configs" / "vehicles" / "xbw.toml"
+    short = {"scenario.duration": DURATION}
+    a, _ = worker.open_run(scen, car, short)
+    b, _ = worker.open_run(scen, car, {**short, "vehicle.chassis.mass_kg": 1000.0})
+    c, _ = worker.open_run(scen, car, {**short, "scenario.inputs.steering_wheel_angle_cmd.after": 0.2})
+    assert b is a and c is not a and len(reads) == 2
+    assert c.spec.inputs.steering_wheel_angle_cmd.after == 0.2 and a.spec.inputs.steering_wheel_angle_cmd.after != 0.2
+    with pytest.raises(Exception, match="duration"):       # a bad value is read (and refused) every time
+        worker.open_run(scen, car, {"scenario.duration": -1.0})
+    with pytest.raises(Exception, match="duration"):
+        worker.open_run(scen, car, {"scenario.duration": -1.0})
+    assert len(reads) == 4 and len(worker.scenarios) == 2
 
 
 def test_another_vehicle_override_builds_afresh_a_scenario_override_does_not(worker):
@@ -138,7 +162,9 @@ def test_the_time_between_runs_is_counted_from_the_previous_row(worker):
 ])
 def test_the_compiled_offline_loop_logs_the_python_loops_rows(scenario, vehicle, extra):
     """The car's loop in one kernel (a run without progress reports) against the Python loop (a run
-    with them): the same rows, bit for bit, noise and closed-loop drivers included."""
+    with them): the same rows, bit for bit, noise and closed-loop drivers included; and the vehicle's
+    offline run (one driver for the start's brake command and the run, reset in between) against a
+    fresh driver for each."""
     from rtsim.batch.inputs import open_run
     from rtsim.vehicle.offline import run as run_offline, sim_for
 
@@ -150,6 +176,8 @@ def test_the_compiled_offline_loop_logs_the_python_loops_rows(scenario, vehicle,
     assert compiled.data.shape == python.data.shape and compiled.data.shape[0] > 40
     assert compiled.data.tobytes() == python.data.tobytes()
     assert 0.0 < compiled.step_s <= compiled.wall_s
+    one_driver = opened.run_offline(sc, seed=3)
+    assert one_driver.data.tobytes() == compiled.data.tobytes()
 
 
 def test_the_compiled_offline_loop_fails_where_the_python_loop_does(monkeypatch):
