@@ -27,6 +27,7 @@ from typing import Callable, Iterable, Iterator
 #: prints "kernels compiled in ... s"; 322 s and 386 s in two such runs)
 FIRST_COMPILE_S = 330
 
+
 def _duration(s: float) -> str:
     """A duration as people say it: seconds below two minutes, else whole minutes ("5 min")."""
     return f"{s:.0f} s" if s < 120 else f"{s / 60:.0f} min"
