@@ -19,7 +19,6 @@ import pytest
 from bridge import payloads
 from bridge.can_bus import LoopbackHub
 from bridge.mcap_recorder import read_recording
-from rtsim.service import loop as loop_module
 from rtsim.service.resim import resim
 from rtsim.service.server import ServeOptions, Service
 from service_harness import send_lockstep_cycle
@@ -45,12 +44,12 @@ class _Ecu:
         raise AssertionError(f"no SIM_STEP_ACK within {EVENT:g} s")
 
 
-def test_a_session_driven_by_the_user_resimulates_bit_for_bit(tmp_path, monkeypatch):
-    monkeypatch.setattr(loop_module, "USER_HOLD", 3600.0)   # no lapse on its own, however slow the machine
+def test_a_session_driven_by_the_user_resimulates_bit_for_bit(tmp_path):
     rec = tmp_path / "driven.mcap"
     hub = LoopbackHub(0, start_timeout=HUB_START)
+    # user_hold: the user's commands never lapse on their own, however slow the machine
     svc = Service(ServeOptions(mode="lockstep", can_interface="remote", can_channel=hub.channel, start_hub=False,
-                               zenoh=False, record=rec), out=lambda *a: None)
+                               zenoh=False, record=rec, user_hold=3600.0), out=lambda *a: None)
     th = threading.Thread(target=svc.run, daemon=True)
     th.start()
     ecu_cmd = (0.05, 0.0, -0.4)                              # a light throttle, steering right

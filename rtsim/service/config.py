@@ -15,6 +15,8 @@ from pydantic import BaseModel, ConfigDict, Field, create_model
 
 from rtsim.configfile import Range, Strict, load_toml, validate
 
+from .user_input import USER_HOLD
+
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_SCENARIO = ROOT / "configs" / "scenarios" / "hil_flat.toml"
 TWO_WHEELER_SCENARIO = ROOT / "configs" / "scenarios" / "motorcycle_hil.toml"
@@ -26,6 +28,7 @@ StatusRate = Range(1.0, 10.0, "Hz")
 Spin = Range(0.0, 0.01, "s")
 WallTime = Range(0.0, 1e9, "s", lo_open=True)
 Port = Range(1, 65535, "TCP port", integer=True)
+Hold = Range(0.1, 3600.0, "s")
 
 
 def setting(default: Any, help: str, key: str | None, flag: str | None = None, **kw):
@@ -93,6 +96,9 @@ class ServeOptions(BaseModel):
                                "default a user's commands replace the in-loop driver's, and the bus ECU's where it "
                                "has no valid command or the user takes over)", "simulation.user_input",
                                "--no-user-input")
+    user_hold: Hold = setting(USER_HOLD, f"s of wall time a user's command is held without a new request, then "
+                              f"handed back (default {USER_HOLD:g}: a page that went away stops driving; longer for "
+                              f"a page on a slow link or a loaded machine)", "simulation.user_hold")
     record: Optional[Path] = setting(None, "record the session to MCAP (FILE.mcap)", "record.path")
     foxglove_port: Optional[Range(0, 65535, "TCP port (0: a free one)", integer=True)] = setting(None, "serve a Foxglove WebSocket on this port (ws://HOST:PORT: the "
                                            "topics, 3D scene and road; 0: a free port; default off)",
@@ -186,6 +192,7 @@ METAVARS = {
     "scenario": "FILE|NAME", "vehicle": "FILE|NAME", "dt": "S", "max_catch_up": "N", "loop_cpu": "CPU",
     "loop_priority": "P", "hold_pressure": "KPA", "can_interface": "INTERFACE", "can_channel": "CHANNEL",
     "can_hub_port": "PORT", "vehicle_id": "ID", "state_rate": "HZ", "status_rate": "HZ", "record": "FILE.mcap",
+    "user_hold": "S",
     "foxglove_port": "PORT", "foxglove_host": "ADDRESS", "spin": "S", "duration": "S", "dbc": "FILE",
 }
 

@@ -116,8 +116,9 @@ class HilLoop:
                  state_rate: float = 100.0, hold_pressure: float | None = None, inbox=None,
                  health: LoopHealth | None = None, scenario_name: str | None = None, on_chunk=None,
                  driver: Driver | None = None, user_input: bool = True, test_fault_at: float | None = None,
-                 faults=(), fault_where=None):
+                 faults=(), fault_where=None, user_hold: float = USER_HOLD):
         self.codec = codec
+        self.user_hold = user_hold       # s of wall time a user's command is held without a new request
         #: the session's faults (rtsim.faults.FaultSpec), armed at every start of the session (a reset too);
         #: ``fault_where``: per fault (file, key) where it was read (errors name them)
         self.fault_specs: list[FaultSpec] = list(faults)
@@ -588,7 +589,7 @@ class HilLoop:
                 usr[u] = v
             if takeover is not None:
                 self.ls.usr_mode[0] = int(takeover)
-            self._usr_deadline = self.user_clock() + USER_HOLD if not np.all(np.isnan(usr)) else None
+            self._usr_deadline = self.user_clock() + self.user_hold if not np.all(np.isnan(usr)) else None
         self._usr_requests += 1
         self._usr_seq = args.get("seq") if isinstance(args.get("seq"), int) else self._usr_seq
         self._user_changed("release" if args.get("release") else "drive")

@@ -135,7 +135,8 @@ class Service:
         self.loop = HilLoop(self.sim, self.codec, self.rings, mode=o.mode, state_rate=o.state_rate,
                             hold_pressure=o.hold_pressure, inbox=self.inbox, health=self.health,
                             scenario_name=self.sc.name, driver=self._driver(self.sc), user_input=o.user_input,
-                            test_fault_at=self.test_fault_at, faults=self.fault_specs, fault_where=self.fault_where)
+                            test_fault_at=self.test_fault_at, faults=self.fault_specs, fault_where=self.fault_where,
+                            user_hold=o.user_hold)
         self.loop.port = self.port
         self.loop.on_model_fault = self._on_model_fault
         if o.record is not None:         # (after the loop: a fault that does not fit the vehicle leaves no file)
