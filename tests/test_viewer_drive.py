@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from bridge.can_codec import Codec
-from rtsim.service import loop as loop_module
 from rtsim.service.loop import HilLoop
 from rtsim.service.server import build_sim
 
@@ -77,7 +76,7 @@ def test_a_bus_ecu_keeps_priority_unless_the_user_takes_over():
     assert _state(loop, "throttle_angle") == pytest.approx(0.6, abs=1e-3) and _state(loop, "brake_pressure") < 50.0
 
 
-def test_bad_requests_are_refused_and_the_commands_lapse(monkeypatch):
+def test_bad_requests_are_refused_and_the_commands_lapse():
     loop = _loop()
     r = loop._control("drive", {"throttle_angle_cmd": 9.0})
     assert not r["ok"] and "throttle_angle_cmd = 9.0: outside 0 .. 1.5708 rad" in r["error"]
@@ -86,7 +85,7 @@ def test_bad_requests_are_refused_and_the_commands_lapse(monkeypatch):
     assert not loop._control("drive", {"brake_pressure_cmd": "lots"})["ok"]
     assert not loop._control("drive", {"takeover": "yes"})["ok"]
     assert loop.user_status()["channels"] == {}                  # nothing of a refused request applied
-    monkeypatch.setattr(loop_module, "USER_HOLD", 0.0)           # the page went away: the hold time passes
+    loop.user_hold = 0.0                                         # the page went away: the hold time passes
     assert loop._control("drive", {"throttle_angle_cmd": 0.3})["ok"]
     loop.advance(loop.status_every + 1)
     assert loop.user_status()["channels"] == {} and loop.drivers()["throttle_angle_cmd"] == "safe"
