@@ -85,3 +85,34 @@ def test_a_killed_first_compile_resumes_with_only_the_unfinished_kernel(tmp_path
     third = _start(tmp_path, cache, "run")
     out, err = third.communicate(timeout=240)
     assert third.returncode == 0 and err == "", err                 # all cached: nothing printed
+
+
+STALE_CHILD = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    import caller
+    print(caller.outer(2.0), flush=True)
+""")
+
+
+def test_numba_keeps_a_caller_compiled_against_a_callee_that_changed(tmp_path):
+    """Why a numba cache that outlives a checkout is keyed by the content of every source (tools/setup
+    drops the cache beside the sources, tools/vcan_vm keeps one folder per sources' digest): numba keys
+    a cached kernel on its own file's text only, so a caller whose file did not change keeps the code of
+    its callee as it was when the caller was compiled."""
+    (tmp_path / "callee.py").write_text("from rtsim.jit import kernel\n\n@kernel\ndef inner(x):\n    return 3.0 * x\n")
+    (tmp_path / "caller.py").write_text("from rtsim.jit import kernel\nfrom callee import inner\n\n"
+                                        "@kernel\ndef outer(x):\n    return inner(x) + 1.0\n")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+
+    def outer_of_two():
+        r = subprocess.run([sys.executable, "-c", STALE_CHILD, str(tmp_path)], cwd=ROOT, env=env,
+                           capture_output=True, text=True, timeout=240)
+        assert r.returncode == 0, r.stderr
+        return float(r.stdout)
+
+    assert outer_of_two() == 7.0
+    (tmp_path / "callee.py").write_text((tmp_path / "callee.py").read_text().replace("3.0 * x", "5.0 * x"))
+    assert outer_of_two() == 7.0                    # stale: 5 * 2 + 1 = 11 from fresh code
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "fresh")
+    assert outer_of_two() == 11.0

@@ -93,6 +93,35 @@ def test_vm_default_set_names_can_e2e_tests():
         assert "pytest.mark.can_e2e" in marks, f"{node_id}: not marked can_e2e ({sorted(marks)})"
 
 
+def test_generic_cache_folder_is_keyed_by_the_sources(tmp_path):
+    """The guest's kernel cache outlives a checkout, so it is one folder per content of the kernels'
+    sources (a kernel whose file is unchanged would otherwise load code built against older callees:
+    tests/test_compile_resume.py shows numba doing so); other contents' folders unused for
+    GENERIC_KEEP_DAYS days, and anything else in there (the old flat layout), are removed."""
+    vm = _vcan_vm()
+    tree = tmp_path / "tree"
+    for rel in ("rtsim/a.py", "drivers/b.py", "tests/c.py"):
+        (tree / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tree / rel).write_text("x = 1\n")
+    d0 = vm.sources_digest(tree)
+    (tree / "tests/c.py").write_text("x = 2\n")
+    assert vm.sources_digest(tree) == d0                       # not a source of kernels the guest runs
+    (tree / "drivers/b.py").write_text("x = 2\n")
+    assert vm.sources_digest(tree) != d0
+
+    base = tmp_path / "cache" / "numba-generic"
+    old, recent = base / "0123456789abcdef", base / "fedcba9876543210"
+    for d in (old, recent, base / "rtsim_0a1b"):               # a kernel folder of the flat layout
+        d.mkdir(parents=True)
+    (base / "index.nbi").write_text("")
+    stale = time.time() - (vm.GENERIC_KEEP_DAYS + 1) * 86400
+    os.utime(old, (stale, stale))
+    env = vm.numba_env(tmp_path / "cache")
+    assert env["NUMBA_CPU_NAME"] == "generic"
+    assert Path(env["NUMBA_CACHE_DIR"]) == base / vm.sources_digest()
+    assert sorted(p.name for p in base.iterdir()) == sorted([vm.sources_digest(), recent.name])
+
+
 _COUNT = re.compile(r"(\d+) (passed|failed|errors?|skipped|xfailed|xpassed|deselected|warnings?)")
 
 

@@ -30,10 +30,10 @@ Numba in the guest: the host's caches beside the sources are compiled for the ho
 AVX-512 here), which TCG cannot emulate and numba's cache index keys on, so they never load in the
 guest (measured: ``rtsim bench --problem pendulum --t-end 0.01`` took 11.4 min in the guest with
 them, as long as with no cache at all). The guest therefore uses ``NUMBA_CPU_NAME=generic`` and a
-cache folder shared read-write with the host, ``<cache_root>/vcan-vm/numba-generic``. :func:`numba_env` gives that
-environment: run the same command on the host with it first (:func:`warm_numba_cache`) and the guest
-loads the kernels instead of compiling them (same bench: 75 s instead of 11.3 min; the guest also
-saves what it compiles there, for the next run).
+cache folder shared read-write with the host, ``<cache_root>/vcan-vm/numba-generic/<digest of the
+sources>``. :func:`numba_env` gives that environment: run the same command on the host with it first
+(:func:`warm_numba_cache`) and the guest loads the kernels instead of compiling them (same bench: 75 s
+instead of 11.3 min; the guest also saves what it compiles there, for the next run).
 
 API: :func:`available` (cheap check, no boot), :func:`prepare` (fetch/unpack, idempotent),
 :func:`run` (boot, run, return :class:`VMResult`), :func:`numba_env`, :func:`warm_numba_cache`.
@@ -47,6 +47,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import fcntl
+import hashlib
 import io
 import os
 import platform
@@ -71,6 +72,7 @@ except ImportError:  # pragma: no cover
     _Base = Exception
 
 CACHE_ENV = "RTSIM_CACHE"
+REPO_ROOT = Path(__file__).resolve().parent.parent
 DISABLE_ENV = "RTSIM_VCAN_VM"  # "0" disables the VM (available() says so)
 IMAGE_VERSION = "2"            # bump when the image layout or the init script changes
 QEMU_PACKAGES = ("qemu-system-x86", "qemu-system-common", "qemu-system-data", "seabios")
@@ -502,11 +504,42 @@ def prepare(cache: Path | None = None, *, log: Callable[[str], None] = print, ti
 # --------------------------------------------------------------------------------------------------
 # numba in the guest
 
+#: the source trees whose kernels the guest runs; any change to their files gives a new cache folder
+KERNEL_TREES = ("rtsim", "bridge", "drivers")
+GENERIC_KEEP_DAYS = 2.0        # another sources' folder unused this long is removed
+
+
+def sources_digest(root: Path = REPO_ROOT) -> str:
+    """16 hex digits of SHA-256 over every .py file of ``KERNEL_TREES`` under ``root`` (path and text)."""
+    h = hashlib.sha256()
+    for tree in KERNEL_TREES:
+        for p in sorted((root / tree).rglob("*.py")):
+            h.update(str(p.relative_to(root)).encode() + b"\0" + p.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
 def numba_env(cache: Path | None = None) -> dict[str, str]:
     """Environment that makes numba compile for a CPU the emulator runs (``generic`` x86-64) into a
-    cache folder shared by host and guest, so the host can compile what the guest will load."""
-    d = (cache or cache_dir()) / "numba-generic"
+    cache folder shared by host and guest, so the host can compile what the guest will load.
+
+    The folder is ``numba-generic/<sources_digest()>``: numba keys a cached kernel on the text of its
+    own file only, so a kernel whose file did not change would load machine code built against an
+    older version of the kernels it calls and the slot layouts it imports (stale code that can read and
+    write the model's arrays out of their bounds). This cache outlives a checkout (it lies under the
+    cache root, not beside the sources that ``tools/setup`` cleans), so it is one folder per content of
+    the sources; other contents' folders unused for ``GENERIC_KEEP_DAYS`` days are removed."""
+    base = (cache or cache_dir()) / "numba-generic"
+    d = base / sources_digest()
     d.mkdir(parents=True, exist_ok=True)
+    os.utime(d)                                             # its last use, for the pruning below
+    unused = time.time() - GENERIC_KEEP_DAYS * 86400
+    for old in base.iterdir():
+        try:
+            if old != d and (not old.is_dir() or not re.fullmatch(r"[0-9a-f]{16}", old.name)
+                             or old.stat().st_mtime < unused):
+                shutil.rmtree(old) if old.is_dir() else old.unlink()
+        except OSError:                                     # a concurrent run removed it first
+            pass
     return {"NUMBA_CPU_NAME": "generic", "NUMBA_CACHE_DIR": str(d)}
 
 
