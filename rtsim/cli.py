@@ -430,10 +430,27 @@ def _delegate(module: str):
     return lambda args: _import(module).main(args)
 
 
+def _report_faults() -> None:
+    """A crash (a segmentation fault in compiled code, an abort) prints every thread's Python stack on
+    stderr before the process dies, and SIGUSR1 prints them without stopping it: ``kill -USR1 <pid>``
+    shows where a service that does not answer or does not exit is waiting."""
+    import faulthandler
+    import signal
+
+    try:
+        if not faulthandler.is_enabled():               # (pytest, for one, enables its own)
+            faulthandler.enable(all_threads=True)
+        if hasattr(signal, "SIGUSR1"):
+            faulthandler.register(signal.SIGUSR1, all_threads=True, chain=False)
+    except (RuntimeError, ValueError, AttributeError, OSError):   # no usable stderr (closed, or None)
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     from rtsim.compile_status import COMPILING_COMMANDS, command_progress
 
     args = build_parser().parse_args(argv)
+    _report_faults()
     try:
         if args.command in COMPILING_COMMANDS:
             with command_progress(args.command):

@@ -70,7 +70,11 @@ class ServiceProcess:
                 self._progress.clear()
                 last = time.monotonic()
         if not self._ready.is_set() or self.proc.poll() is not None:
-            why = "its output ended" if not self._reader.is_alive() else f"no progress for {stall:g} s"
+            if self._reader.is_alive():
+                why = f"no progress for {stall:g} s"
+                self.dump_stacks()
+            else:
+                why = f"its output ended; {_exit_text(self._wait(EVENT))}"
             self.close()
             out = "\n".join(self.lines)
             raise RuntimeError(f"rtsim serve did not start ({why}):\n{out}")
@@ -91,13 +95,26 @@ class ServiceProcess:
         until the process ended: for printing, not a criterion)."""
         t0 = time.monotonic()
         self.proc.send_signal(sig)
-        try:
-            rc = self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            rc = None
+        rc = self._wait(timeout)
         dt = time.monotonic() - t0
+        if rc is None:
+            self.dump_stacks()
+            self.lines.append(f"[test harness] the service had not ended {timeout:g} s after signal {sig}")
         self._reader.join(EVENT)
         return rc, dt
+
+    def dump_stacks(self, settle: float = 5.0) -> None:
+        """Ask the running service for every thread's Python stack (SIGUSR1: rtsim prints them on its
+        stderr, which ``lines`` collects) and give it ``settle`` s to print them."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGUSR1)
+            time.sleep(settle)
+
+    def _wait(self, timeout: float) -> int | None:
+        try:
+            return self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            return None
 
     def close(self) -> None:
         if self.proc.poll() is None:
@@ -107,6 +124,17 @@ class ServiceProcess:
     @property
     def output(self) -> str:
         return "\n".join(self.lines)
+
+
+def _exit_text(rc: int | None) -> str:
+    if rc is None:
+        return "still running"
+    if rc < 0:
+        try:
+            return f"killed by signal {signal.Signals(-rc).name}"
+        except ValueError:
+            return f"killed by signal {-rc}"
+    return f"exit {rc}"
 
 
 class Listener:
