@@ -21,5 +21,5 @@ def test_sigusr1_prints_every_threads_stack_and_the_service_goes_on():
     assert rc == 0, svc.output                              # it went on, then stopped on its signal
     assert "(most recent call first)" in dump, svc.output
     assert dump.count("Thread 0x") >= 3, dump              # the loop and the CAN port's reader and writer
-    assert "rtsim/service/server.py" in dump, dump          # the main thread: the loop (or its start)
+    assert "rtsim/service/server.py" in dump, dump          # the main thread: the service (its loop)
     assert "_read_loop" in dump and "_write_loop" in dump, dump

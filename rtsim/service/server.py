@@ -324,9 +324,9 @@ class Service:
         return lines
 
     def run(self) -> dict:
-        """Run until stopped (signal, ``stop()``, or ``duration``); returns the closing summary."""
-        for line in self.describe():
-            self.out(line)
+        """Run until stopped (signal, ``stop()``, or ``duration``); returns the closing summary. The
+        description, whose last line says the service is ready, is printed once the signals are handled
+        and the heap is frozen: a SIGTERM sent on reading it stops the service cleanly."""
         restore = self._install_signals()
         # The cyclic garbage collector would run on whichever thread allocates, the loop included,
         # for milliseconds at a time. Move everything built so far out of its reach and switch the
@@ -334,6 +334,8 @@ class Service:
         gc.collect()
         gc.freeze()
         gc.disable()
+        for line in self.describe():
+            self.out(line)
         unpin = self._pin_loop_thread()
         t0 = time.monotonic()
         try:
