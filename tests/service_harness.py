@@ -127,6 +127,7 @@ class ServiceProcess:
 
 
 def _exit_text(rc: int | None) -> str:
+    """How a process ended, from its return code (None: it had not)."""
     if rc is None:
         return "still running"
     if rc < 0:
