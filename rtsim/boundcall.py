@@ -59,8 +59,8 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 from numba.np.arrayobj import make_array, populate_array
 
-ROOT = Path(__file__).resolve().parents[1]
-SOURCE_TREES = ("rtsim", "bridge", "drivers")       # hashed into every generated file's name
+from rtsim.sources import ROOT, SOURCE_TREES, sources_digest    # hashed into every generated file's name
+
 PRUNE_DAYS = 30                                      # generated files unused this long are removed
 
 _DTYPES = {np.dtype(n): n for n in ("bool_", "int8", "int16", "int32", "int64", "uint8", "uint16",
@@ -209,14 +209,9 @@ def _source(kernel_mod: str, kernel_name: str, n_free: int, lay: _Layout, exprs:
 
 # -- the generated module and its cache ------------------------------------------------------------
 
-@functools.cache
 def _sources_digest() -> bytes:
-    """SHA-256 of every .py file of the source trees (once per process: the kernels are loaded once)."""
-    h = hashlib.sha256()
-    for tree in SOURCE_TREES:
-        for p in sorted((ROOT / tree).rglob("*.py")):
-            h.update(str(p.relative_to(ROOT)).encode() + b"\0" + p.read_bytes() + b"\0")
-    return h.digest()
+    """SHA-256 of every .py file of the source trees (rtsim.sources; once per process)."""
+    return sources_digest()
 
 
 def _module_files(mods) -> bytes:

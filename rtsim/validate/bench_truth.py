@@ -68,6 +68,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rtsim.sources import sources_digest
+
 from .fieldbench import generate, scatter
 
 RATIO = 2.0
@@ -319,9 +321,10 @@ def truth(case: dict, car: dict, replayer, tyre_params) -> dict:
 
 
 def cached_truth(case: dict, car: dict, replayer, tyre_params, root: Path | None = None) -> dict:
-    """`truth`, cached on disk beside the generated runs (keyed by the case and the car)."""
+    """`truth`, cached on disk beside the generated runs (keyed by the case, the car and all of rtsim's code:
+    the truth replays the runs through the validation's model, rtsim.sources)."""
     root = Path(root or generate.cache_root())
-    path = root / f"{case['id']}_{generate.key(case, car, 'truth-v5')}.json"
+    path = root / f"{case['id']}_{generate.key(case, car, 'truth-v5-' + sources_digest().hex())}.json"
     if path.exists():
         return json.loads(path.read_text())
     out = truth(case, car, replayer, tyre_params)

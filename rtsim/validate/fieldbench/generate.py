@@ -9,8 +9,9 @@ driven straight. Longitudinal: standing on the brake (2500 kPa), released, a dri
 case's amplitude (nodes `TORQUE_T`), coasting, braking to a stop at the case's pressure, 12 s logged
 after 1 s standing.
 
-Generated runs are cached on disk under `cache_root()` by the sha256 of the case, the car's numbers and
-`VERSION`.
+Generated runs are cached on disk under `cache_root()` by the sha256 of the case, the car's numbers,
+`VERSION` and the generator's code (every source file of this package: an edited simulator or scatter
+gives new runs without a VERSION bump).
 """
 from __future__ import annotations
 
@@ -156,8 +157,25 @@ def cache_root() -> Path:
     return Path(os.environ.get("RTSIM_FIELDBENCH_CACHE") or Path(tempfile.gettempdir()) / "rtsim_fieldbench")
 
 
+_CODE: list[str] = []
+
+
+def code_digest() -> str:
+    """SHA-256 of this package's source files (names and bytes; once per process). The package imports
+    nothing of rtsim (tests/test_validate_benchmark.py), so it hashes itself rather than use rtsim.sources."""
+    if not _CODE:
+        h = hashlib.sha256()
+        for p in sorted(Path(__file__).resolve().parent.glob("*.py")):
+            h.update(p.name.encode() + b"\0" + p.read_bytes() + b"\0")
+        _CODE.append(h.hexdigest())
+    return _CODE[0]
+
+
 def key(case: dict, car: dict, extra: str = "") -> str:
-    blob = json.dumps({"case": case, "car": car, "version": VERSION, "extra": extra}, sort_keys=True)
+    """20 hex digits naming what the case's runs are made of: the case, the car, VERSION, the generator's
+    code (code_digest) and `extra` (what else a caller's product depends on)."""
+    code = code_digest()
+    blob = json.dumps({"case": case, "car": car, "version": VERSION, "code": code, "extra": extra}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
 
