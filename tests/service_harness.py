@@ -105,8 +105,10 @@ class ServiceProcess:
 
     def dump_stacks(self, settle: float = 5.0) -> None:
         """Ask the running service for every thread's Python stack (SIGUSR1: rtsim prints them on its
-        stderr, which ``lines`` collects) and give it ``settle`` s to print them."""
+        stderr, which ``lines`` collects) and give it ``settle`` s to print them; first, each thread's
+        signal state as the kernel has it (``signal_state``)."""
         if self.proc.poll() is None:
+            self.lines.append(f"[test harness] signal state of pid {self.proc.pid}:\n{signal_state(self.proc.pid)}")
             self.proc.send_signal(signal.SIGUSR1)
             time.sleep(settle)
 
@@ -124,6 +126,21 @@ class ServiceProcess:
     @property
     def output(self) -> str:
         return "\n".join(self.lines)
+
+
+def signal_state(pid: int) -> str:
+    """One line per thread of ``pid`` from /proc (Linux): name, state, and the signal masks as hex
+    (SigPnd pending for the thread, ShdPnd for the process, SigBlk blocked, SigIgn ignored, SigCgt
+    caught; bit n-1 is signal n: SIGTERM 0x4000, SIGINT 0x2); '' where /proc cannot tell."""
+    out = []
+    for f in sorted(Path(f"/proc/{pid}/task").glob("*/status")):
+        try:
+            d = dict(line.split(":", 1) for line in f.read_text().splitlines() if ":" in line)
+        except OSError:
+            continue
+        out.append(f"  {f.parent.name} {d.get('Name', '').strip()} {d.get('State', '').strip()} " + " ".join(
+            f"{k} {d.get(k, '').strip()}" for k in ("SigPnd", "ShdPnd", "SigBlk", "SigIgn", "SigCgt")))
+    return "\n".join(out)
 
 
 def _exit_text(rc: int | None) -> str:
