@@ -84,6 +84,15 @@ def test_crossings_count_once_per_passage():
     assert up == [pytest.approx(3.5)] and down == [pytest.approx(6.5)]
 
 
+def test_steady_window_of_a_run_held_straight_is_the_whole_run():
+    # an angle that varies by round-off only (a run that ends before its steering input) crosses its
+    # mid-range at random: those crossings are no cycles
+    t = np.arange(0.0, 0.3, 0.002)
+    noise = 1e-22 * np.random.default_rng(1).standard_normal(len(t))
+    assert steady_window(t, noise) == (t[0], t[-1])
+    assert steady_window(t, np.zeros(len(t))) == (t[0], t[-1])
+
+
 def test_steady_window_skips_the_fade_in():
     """A sine fading in over its first cycle, then three full ones: the window is the full cycles."""
     t, th = _theta(cycles=4.3)

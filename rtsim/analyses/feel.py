@@ -59,6 +59,7 @@ MIN_POINTS = 5             # samples a local fit needs
 STILL = 0.02               # share of the largest angle rate below which the angle is still
 DEAD_BAND = 0.05           # share of the largest |value| a crossing must pass through
 STEADY = 0.95              # share of the largest cycle amplitude a steady cycle has
+ANGLE_FLOOR = 1e-4         # rad (0.006 deg): a steering-wheel angle that varies less has no cycles
 
 
 # --------------------------------------------------------------------------------------------- parts
@@ -126,8 +127,11 @@ def hysteresis(x: np.ndarray, y: np.ndarray) -> float | None:
 def steady_window(t: np.ndarray, angle: np.ndarray) -> tuple[float, float]:
     """(start, end): from the first to the last complete cycle of the angle (between upward crossings of
     its mid-range, with the dead band) whose amplitude is >= STEADY of the largest; the whole run with
-    fewer than two cycles."""
-    mid = 0.5 * (angle.max() + angle.min()) if len(angle) else 0.0
+    fewer than two cycles, or an angle whose range is below ANGLE_FLOOR (a run held straight: its angle
+    varies by round-off, whose crossings are no cycles)."""
+    if len(angle) == 0 or float(np.ptp(angle)) < ANGLE_FLOOR:
+        return (float(t[0]), float(t[-1])) if len(t) else (0.0, 0.0)
+    mid = 0.5 * (angle.max() + angle.min())
     ups = _up_indices(angle - mid)
     if len(ups) < 2:
         return float(t[0]), float(t[-1])
