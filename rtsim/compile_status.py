@@ -34,7 +34,7 @@ def _duration(s: float) -> str:
 
 
 #: the kernels the service calls from Python, "module:name"; the largest compile (~90 % of the time)
-SERVICE_KERNELS = ("rtsim.service.kernel:loop_run", "rtsim.vehicle.car.step:vehicle_mbs_step",
+SERVICE_KERNELS = ("rtsim.service.kernel:loop_run", "rtsim.vehicle.car.step:vehicle_step",
                    "rtsim.vehicle.kit.powertrain:powertrain_step")
 
 

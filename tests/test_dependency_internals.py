@@ -32,7 +32,7 @@ import pytest
 from numba.core.errors import TypingError
 
 from bridge.can_bus import LoopbackHub
-from rtsim.jit import inline_kernel, kernel
+from rtsim.jit import inline_kernel, kernel, stage_kernel
 from waits import EVENT, HUB_START
 
 
@@ -65,6 +65,38 @@ def test_numba_nrt_false_turns_the_runtime_off_and_forbids_allocation():
     assert on.overloads[on.signatures[0]].target_context.enable_nrt is True   # the switch is what differs
     with pytest.raises(TypingError):
         nb.njit(_nrt=False)(_allocates)(3)
+
+
+def _first(a):
+    return a[0]
+
+
+def _second(a):
+    return a[1]
+
+
+def _always_inline(dispatcher) -> bool:
+    """True when the compiled function carries LLVM's alwaysinline attribute."""
+    return "alwaysinline" in dispatcher.inspect_llvm(dispatcher.signatures[0])
+
+
+def test_stage_kernels_are_always_inlined_and_kernels_do_not_inherit_it():
+    # the step's stages rely on numba's forceinline (LLVM's alwaysinline on the function) and on the
+    # option not reaching the kernels they call: numba passes it on to a callee that does not set it.
+    # The options as the decorators set them (decorating compiles nothing) ...
+    assert stage_kernel(_sum).targetoptions.get("forceinline") is True
+    assert kernel(_sum).targetoptions.get("forceinline") is False
+    # ... and what they do, with the same options uncached (nothing written beside the tests)
+    unset = nb.njit(_nrt=False)(_first)
+    off = nb.njit(_nrt=False, forceinline=False)(_second)
+
+    def both(a):
+        return unset(a) + off(a)
+    stage = nb.njit(_nrt=False, forceinline=True)(both)
+    assert stage(np.arange(3.0)) == 1.0
+    assert _always_inline(stage)
+    assert _always_inline(unset)            # inherited from the stage that compiled it
+    assert not _always_inline(off)          # as rtsim's kernels: set off, not inherited
 
 
 # --------------------------------------------------------------------------------------------------

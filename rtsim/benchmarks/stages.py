@@ -68,9 +68,9 @@ def _car_forces_staged(m, d, a, tangent, bq, hc):
 @kernel
 def car_forces_staged(m, d, veh, vd, road, parts, states, cyc, tangent, bq, hc):
     """rtsim.vehicle.car.forces.vehicle_forces stage by stage, with the cycles of each stage added to
-    cyc. A compiled function of its own, called from the Newton iteration and the finish, as the plain
-    step calls vehicle_forces (rtsim.vehicle.car.step._car_forces): inlined, its body was compiled into
-    the staged loop twice, and the loop's first compile took more than twice as long."""
+    cyc. A compiled function of its own, called from the Newton iteration and the finish (the plain step
+    inlines the forces' body into its Newton iteration, rtsim.vehicle.car.step._car_forces): inlined, it
+    was compiled into the staged loop twice, and the loop's first compile took more than twice as long."""
     c = read_cycles()
     c_all = c
     fx = parts.effects
@@ -125,9 +125,20 @@ def _two_wheeler_forces_staged(m, d, a, tangent, bq, hc):
     return bad
 
 
-# The split stages of rtsim.mbs.integrator's newton_update and finish_project (inline kernels there) as
-# compiled functions of their own, as newton_update and finish_project are in the plain step: inlined,
-# they were compiled again into each vehicle's staged loop; so they are compiled once, for every vehicle.
+# The stages of rtsim.mbs.integrator's step (inline or stage kernels there, compiled into the plain step)
+# as compiled functions of their own: inlined, they were compiled again into each vehicle's staged loop; so
+# they are compiled once, for every vehicle. Each call costs the staged loop a little (it passes the
+# model and the state), which the plain step does not pay.
+@kernel
+def _newton_prepare(m, d, h):
+    return newton_prepare(m, d, h)
+
+
+@kernel
+def _finish_prepare(m, d, h):
+    return finish_prepare(m, d, h)
+
+
 @kernel
 def _newton_residual(m, d, h):
     newton_residual(m, d, h)
@@ -164,7 +175,7 @@ def _mbs_step_staged(m, d, h, add_forces, args, cyc):
     c = _lap(cyc, S_PREDICT, c)
     converged = False
     for _ in range(m.iset[IS_MAX_ITER]):
-        status = newton_prepare(m, d, h)
+        status = _newton_prepare(m, d, h)
         if status != OK:
             return status
         c = _lap(cyc, S_PREPARE, c)
@@ -187,7 +198,7 @@ def _mbs_step_staged(m, d, h, add_forces, args, cyc):
             return status
     if not converged:
         return newton_failed(m, d)
-    status = finish_prepare(m, d, h)
+    status = _finish_prepare(m, d, h)
     if status != OK:
         return status
     c = _lap(cyc, S_FINISH, c)

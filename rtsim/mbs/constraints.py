@@ -11,7 +11,7 @@ velocity rows (the contact point's material velocity is zero: no slip); see `_di
 from __future__ import annotations
 
 import numpy as np
-from rtsim.jit import inline_kernel, kernel, uidx
+from rtsim.jit import inline_kernel, kernel, stage_kernel, uidx
 
 from .model import (CON_ANGLE2D, CON_CRANK_ROD, CON_DISC_CONTACT, CON_DISC_ROLL, CON_DOT, CON_LINEAR, CON_POLY_POINT,
                     DRV_POLY, DRV_SINE, NSLOT, SCALAR, SCALAR2)
@@ -192,7 +192,7 @@ def eval_drivers(m, d, t):
             d.drv[k, 2] = d.drv_ext[k, 2]
 
 
-@kernel
+@stage_kernel
 def eval_constraints(m, d, q):
     """Phi, Jacobian values (d.jac, positions m.con_idx), Phi_t and Phi_tt at q and the drivers
     already evaluated in d.drv."""

@@ -7,7 +7,7 @@ onto the coordinates), precomputed in the model as `q_grav`.
 from __future__ import annotations
 
 import numpy as np
-from rtsim.jit import kernel
+from rtsim.jit import kernel, stage_kernel
 
 from .constraints import ref, refd
 from .envelope import add_entry
@@ -41,7 +41,7 @@ def _add_block(m, w, row, ia_slot, ib_slot, kk, cc, e0, e1, e2, cK, cC, geo):
             add_entry(w, m.first, m.ptr, m.pinv, ia, ib, val)
 
 
-@kernel
+@stage_kernel
 def eval_forces(m, d, q, qd, want_tangent, cK, cC):
     """d.force = Q(q, qd, t); if want_tangent, d.w_env = M + cC C + cK K. Returns the index of the
     first non-finite generalized force, or -1."""

@@ -24,7 +24,7 @@ rtsim.mbs.simulation.penalty_factors). Kernels return a status code; they never 
 from __future__ import annotations
 
 import numpy as np
-from rtsim.jit import inline_kernel, kernel, uidx
+from rtsim.jit import inline_kernel, kernel, stage_kernel, uidx
 
 from .constraints import eval_constraints, eval_drivers, hqd_rows, jac_matvec, jac_t_matvec_add
 from .envelope import matvec_add
@@ -56,7 +56,7 @@ def factorize(m, d, bq):
     return cholesky(a, m.fcolptr, m.frowidx, m.fuptr, m.fupos, m.fuend, d.l_env, d.work)
 
 
-@kernel
+@stage_kernel
 def refresh_factor(m, d, bq):
     """Factorize the tangent at the current Jacobian and W; ERR_FACTOR (row in stats) if not SPD."""
     row = factorize(m, d, bq)
@@ -88,7 +88,7 @@ def _dot_alpha(d, a, b, nc):
     return s
 
 
-@kernel
+@stage_kernel
 def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
     """x = A^-1 (b - bq Phi_q^T (alpha c + mu)) with the multipliers mu chosen so that
     g = Phi_q x + c = 0 (mu is left in d.mu).
@@ -157,7 +157,7 @@ def solve_constrained(m, d, b, c, bq, x, tol, tol_fail):
     return -1, gmax
 
 
-@kernel
+@stage_kernel
 def project(m, d, x, c, bq, tol, tol_fail):
     """Projection of x (in place) onto Phi_q x + c = 0 in the metric W, minimising
     (x - x*)^T W (x - x*) / 2 with the factor of A = W + bq Phi_q^T alpha Phi_q: the penalty projection
@@ -245,7 +245,7 @@ def _can_extrapolate(m, d, h):
     return True
 
 
-@kernel
+@stage_kernel
 def step_begin(m, d, h):
     """Stage 1: drivers at t + h, predictor, reset of the Newton bookkeeping.
 
@@ -309,7 +309,7 @@ def step_begin(m, d, h):
     d.newton[NW_YMAX] = 0.0
 
 
-@kernel
+@stage_kernel
 def newton_prepare(m, d, h):
     """Stage 2 (each iteration): velocities and accelerations from q, constraints, the multiplier
     update lambda* += alpha Phi, and the model's own forces (into d.force; with wants_tangent also
@@ -330,7 +330,7 @@ def newton_prepare(m, d, h):
     return OK
 
 
-@kernel
+@stage_kernel
 def newton_update(m, d, h):
     """Stage 3 (each iteration): the Newton increment and its convergence test. Returns CONVERGED,
     CONTINUE or an error status (negative codes are never used: errors are > 1)."""
@@ -471,7 +471,7 @@ def newton_failed(m, d):
     return ERR_NEWTON
 
 
-@kernel
+@stage_kernel
 def finish_prepare(m, d, h):
     """Stage 4: the converged step's velocities, accelerations, constraints, multipliers, and the
     model's forces, with their tangent when the projections refactor (finish_refactors: W for their
@@ -514,7 +514,7 @@ def finish_refactors(m, d):
     return m.iset[IS_PROJECTION_FACTOR] == 1 or d.flags[HAVE_FACTOR] == 0
 
 
-@kernel
+@stage_kernel
 def finish_project(m, d, h):
     """Stage 5: refactor at the converged q, project velocities and accelerations, advance time."""
     if finish_factor(m, d, h) != OK:
@@ -583,6 +583,19 @@ def step_with(m, d, h, add_forces, args):
     `tangent`, their stiffness scaled by bq = h^2/4 and damping by hc = h/2 to d.w_env), and returns
     the index of a non-finite force or -1. `add_forces` is a compiled function fixed at compile time
     (an assembly's force kernel), `args` a tuple of its arrays. Returns a status code (model.OK)."""
+    return step_with_forces(m, d, h, add_forces, add_forces, args)
+
+
+@inline_kernel
+def step_with_forces(m, d, h, newton_forces, finish_forces, args):
+    """step_with with one force function for the Newton iterations and another for the evaluation at the
+    converged q (the same forces: `finish_forces` is a call of the compiled force kernel where
+    `newton_forces` may be its body inlined, so that the body is compiled once per step).
+
+    The step's stages (newton_prepare, newton_update, finish_prepare, finish_project) and the kernels
+    they call with the model and the state are stage kernels (rtsim.jit.stage_kernel): compiled into the
+    step, so that it passes the model's and the state's arrays from call to call only where a kernel is
+    large and called rarely."""
     bq = 0.25 * h * h
     hc = 0.5 * h
     step_begin(m, d, h)
@@ -590,7 +603,7 @@ def step_with(m, d, h, add_forces, args):
         status = newton_prepare(m, d, h)
         if status != OK:
             return status
-        bad = add_forces(m, d, args, wants_tangent(m, d), bq, hc)
+        bad = newton_forces(m, d, args, wants_tangent(m, d), bq, hc)
         if bad >= 0:
             d.stats[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE
@@ -605,7 +618,7 @@ def step_with(m, d, h, add_forces, args):
     if status != OK:
         return status
     if finish_evaluates(m, d):
-        bad = add_forces(m, d, args, finish_refactors(m, d), bq, hc)
+        bad = finish_forces(m, d, args, finish_refactors(m, d), bq, hc)
         if bad >= 0:
             d.stats[ST_FAIL_INDEX] = bad
             return ERR_NONFINITE_FORCE

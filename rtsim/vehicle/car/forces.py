@@ -42,7 +42,7 @@ from math import atan, sqrt, tan
 
 import numpy as np
 
-from rtsim.jit import inline_kernel, kernel
+from rtsim.jit import inline_kernel, kernel, stage_kernel
 from rtsim.mbs.constraints import poly_eval
 from rtsim.mbs.envelope import add_entry
 from rtsim.road.query import CT_D, CT_EX, CT_GAMMA, CT_MU, CT_NX, CT_PX, CT_RR, wheel_contact
@@ -509,6 +509,13 @@ def effects_stage(m, d, veh, vd, fx, rec, tangent):
 
 @kernel
 def vehicle_forces(m, d, veh, vd, road, parts, states, tangent, bq, hc):
+    """add_vehicle_forces as a function of its own, for calls outside the step's Newton iteration (the
+    evaluation at a step's converged q, benchmarks, tests), so that the step compiles its body once."""
+    return add_vehicle_forces(m, d, veh, vd, road, parts, states, tangent, bq, hc)
+
+
+@stage_kernel
+def add_vehicle_forces(m, d, veh, vd, road, parts, states, tangent, bq, hc):
     """Add the car's forces to d.force (and with `tangent` their K, C to d.w_env, scaled by bq = h^2/4
     and hc = h/2), stage by stage; while the power audit is on (vd.audit) each stage's force record goes
     to its rows of vd.pf, else vd.pf is left as it is. parts, states:

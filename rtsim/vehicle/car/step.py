@@ -8,7 +8,7 @@ from math import sqrt
 import numpy as np
 
 from rtsim.jit import inline_kernel, kernel
-from rtsim.mbs.integrator import step_with
+from rtsim.mbs.integrator import step_with_forces
 from rtsim.mbs.model import OK
 from rtsim.road.query import NCONTACT
 
@@ -26,7 +26,7 @@ from ..kit.eps import (EO_CURRENT, EO_MOTOR_ANGLE, EO_MOTOR_SPEED, EO_SIZE, EO_S
                        EP_K_TB, EP_N, EP_RP, ES_EXT, ES_STAGE, ES_T_DRIVER, DRIVER_TORQUE, eps_commit, eps_control,
                        eps_outputs, external_command, hands_step)
 from .energy_kernels import audit_commit
-from .forces import NTO, vehicle_forces, TyreOut
+from .forces import NTO, add_vehicle_forces, vehicle_forces, TyreOut
 from .layout import CI_PHI, STEER_COLUMN, STEER_EPS, STEER_RACK, NPORT, Susp
 from ..kit.tyre.magic_formula import advance_deflections, advance_deflections_relaxed
 
@@ -60,13 +60,21 @@ def make_vehicle_data(nq: int = 1) -> VehicleData:
 
 @inline_kernel
 def _car_forces(m, d, a, tangent, bq, hc):
+    """The car's forces in the Newton iteration: a stage kernel, compiled into the step."""
+    return add_vehicle_forces(m, d, a[0], a[1], a[2], a[3], a[4], tangent, bq, hc)
+
+
+@inline_kernel
+def _car_forces_call(m, d, a, tangent, bq, hc):
+    """The car's forces at the converged q (only where the projections refactor): a call."""
     return vehicle_forces(m, d, a[0], a[1], a[2], a[3], a[4], tangent, bq, hc)
 
 
-@kernel
+@inline_kernel
 def vehicle_mbs_step(m, d, veh, vd, road, parts, states, h):
-    """One ALI3-P step of the vehicle: the multibody stages with the vehicle's forces added."""
-    return step_with(m, d, h, _car_forces, (veh, vd, road, parts, states))
+    """One ALI3-P step of the vehicle: the multibody stages with the vehicle's forces added (all of it
+    compiled into vehicle_step: see rtsim.mbs.integrator.step_with_forces)."""
+    return step_with_forces(m, d, h, _car_forces, _car_forces_call, (veh, vd, road, parts, states))
 
 
 # parameter arrays; effects: rtsim.vehicle.car.effect_kernels FX_* (neutral_params() for the nominal model);
