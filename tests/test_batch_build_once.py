@@ -219,6 +219,28 @@ def test_a_worker_builds_the_plans_vehicles_before_its_first_run(worker):
     assert worker.built == built and all(r["status"] == "ok" for r in rows)
 
 
+def test_a_worker_reads_the_plans_scenarios_before_its_first_run(worker, monkeypatch):
+    """scenario_specs: one spec per scenario file and scenario overrides (each steering step of the sweep
+    is a scenario of its own), in plan order; after keep_scenarios no run of the reduced sweep reads its
+    scenario, and a scenario that cannot be read is left for its run to report."""
+    import drivers.scenario
+    from rtsim.batch.executors import keep_scenarios, scenario_specs
+
+    plan, base = load_plan(SWEEP)
+    chosen = scenario_specs(expand(plan, base))
+    steps = plan.grid["scenario.inputs.steering_wheel_angle_cmd.after"]
+    assert [s["params"]["scenario.inputs.steering_wheel_angle_cmd.after"] for s in chosen] == steps
+    reduced, job = _reduced()
+    bad = {**reduced[0], "overrides": {**reduced[0]["overrides"], "scenario.duration": -1.0}}
+    keep_scenarios(scenario_specs(reduced) + [bad])
+    reads = []
+    real = drivers.scenario.load_scenario
+    monkeypatch.setattr(drivers.scenario, "load_scenario", lambda *a, **k: reads.append(a) or real(*a, **k))
+    rows = [run.run_one(s, job) for s in reduced]
+    assert reads == [] and all(r["status"] == "ok" for r in rows)
+    assert run.run_one(bad, job)["status"] == "config_error" and len(reads) == 1
+
+
 def test_the_workers_readiness_is_what_their_first_rows_leave():
     """ready_after: a worker's first row arriving at 5 s after 1 s of run and 0.5 s before it was ready
     at 3.5 s; the summary gives the last worker's; Ray's rows (no readiness) leave it out."""

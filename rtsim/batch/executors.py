@@ -52,9 +52,11 @@ def die_with_parent(parent: int) -> None:
     threading.Thread(target=watch, name="rtsim-parent-watch", daemon=True).start()
 
 
-def _init(warm_specs: list[dict], job: dict, turn=None, lock_dir: str | None = None, parent: int | None = None) -> None:
+def _init(warm_specs: list[dict], job: dict, turn=None, lock_dir: str | None = None, parent: int | None = None,
+          scenario_specs: list[dict] = ()) -> None:
     """Die with the batch process (`parent`, first thing), then load (or compile) the kernels of every
-    kind of vehicle in the plan, and build the plan's other vehicles (``warm_specs``). Worker k starts with warm
+    kind of vehicle in the plan, build the plan's other vehicles (``warm_specs``) and read its scenarios
+    (``scenario_specs``: one run of each, rtsim.batch.models keeps them). Worker k starts with warm
     spec k (``turn``: a shared counter) and warms each spec holding that spec's file lock in
     ``lock_dir``: on an empty numba cache the workers compile different vehicles side by side instead
     of the same ones twice, and a worker that reaches a spec another one is compiling waits for it
@@ -68,6 +70,7 @@ def _init(warm_specs: list[dict], job: dict, turn=None, lock_dir: str | None = N
         _warm_all(warm_specs[:KERNEL_SPECS], job, turn, lock_dir)
         for spec in warm_specs[KERNEL_SPECS:]:           # the kernels are loaded: builds only, no locks
             warm(spec, job)
+        keep_scenarios(scenario_specs)
     # what the warm-up made (the kernels, the config schemas, the kept vehicles and roads) lives as long
     # as the worker: out of the collector's full passes, which otherwise traverse it all in one run
     # (about 0.1 s measured: a run's share outside its steps jumped to 60-70 %)
@@ -131,6 +134,35 @@ def warm_specs(specs: list[dict]) -> list[dict]:
     return kernels + vehicles
 
 
+def scenario_specs(specs: list[dict]) -> list[dict]:
+    """One spec per distinct scenario of the plan (its file and scenario overrides), in plan order, at most
+    as many as a worker keeps (rtsim.batch.models.KEEP_SCENARIOS)."""
+    from .inputs import split_overrides
+    from .models import KEEP_SCENARIOS, overrides_key
+
+    seen, out = set(), []
+    for s in specs:
+        key = (s["scenario"], overrides_key(split_overrides(s["overrides"])[1]))
+        if key not in seen and len(out) < KEEP_SCENARIOS:
+            seen.add(key)
+            out.append(s)
+    return out
+
+
+def keep_scenarios(specs: list[dict]) -> None:
+    """Read each spec's scenario into this worker's kept ones (rtsim.batch.models.WORKER), as its run would
+    read it: in the sweeps of a steering input every run has a scenario of its own, and reading one is
+    about 0.6 ms of a run of 15 ms in its steps."""
+    from rtsim.configfile import keeping_tables
+
+    from . import run
+    from .inputs import keep_scenario
+
+    with keeping_tables(run.WORKER.tables):
+        for spec in specs:
+            keep_scenario(spec["scenario"], spec["overrides"], run.WORKER)
+
+
 def local_pool(specs: list[dict], job: dict, on_row: Callable[[dict], None], workers: int | None = None,
                retries: int = 2) -> None:
     import multiprocessing as mp
@@ -145,7 +177,7 @@ def local_pool(specs: list[dict], job: dict, on_row: Callable[[dict], None], wor
                 return
             pool = ProcessPoolExecutor(max_workers=min(workers, len(pending)), mp_context=ctx, initializer=_init,
                                        initargs=(warm_specs(list(pending.values())), job, ctx.Value("i", 0), lock_dir,
-                                                 os.getpid()))
+                                                 os.getpid(), scenario_specs(list(pending.values()))))
             try:
                 futures = {pool.submit(run_one, s, job): rid for rid, s in pending.items()}
                 while futures:

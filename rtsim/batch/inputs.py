@@ -40,7 +40,6 @@ def open_run(scenario: str | Path, vehicle: str | Path | None, overrides: dict, 
     (rtsim.batch.models.OpenedVehicles), asked for the scenario and the vehicle first, else for a built
     vehicle of the same file whose overrides differ in plain parameters only (the model is then built on
     it), and given the ones opened."""
-    from drivers.scenario import load_scenario
     from rtsim.configfile import overrides as with_overrides
     from rtsim.vehicle.registry import DEFAULT_VEHICLE, open_vehicle
 
@@ -48,12 +47,7 @@ def open_run(scenario: str | Path, vehicle: str | Path | None, overrides: dict, 
     veh_over, scen_over = split_overrides(overrides)
     files = {}                                  # read at each load: filled before the file it names is read
     with with_overrides(files):
-        sc = None if kept is None else kept.scenario(scen, scen_over)
-        if sc is None:
-            files[scen.resolve()] = scen_over
-            sc = load_scenario(scen, check_files=True)
-            if kept is not None:
-                kept.keep_scenario(scen, scen_over, sc)
+        sc = _scenario(scen, scen_over, files, kept)
         vpath = Path(vehicle) if vehicle else (sc.vehicle_path or DEFAULT_VEHICLE)
         opened = None if kept is None else kept.get(vpath, veh_over)
         if opened is not None:
@@ -71,6 +65,34 @@ def open_run(scenario: str | Path, vehicle: str | Path | None, overrides: dict, 
         if kept is not None:
             kept.put(vpath, veh_over, opened)
     return sc, opened
+
+
+def _scenario(scen: Path, scen_over: dict, files: dict, kept):
+    """The run's scenario: the kept one of this file and overrides, else read (under ``files``, the
+    overrides of the loads in progress) and kept."""
+    from drivers.scenario import load_scenario
+
+    sc = None if kept is None else kept.scenario(scen, scen_over)
+    if sc is None:
+        files[scen.resolve()] = scen_over
+        sc = load_scenario(scen, check_files=True)
+        if kept is not None:
+            kept.keep_scenario(scen, scen_over, sc)
+    return sc
+
+
+def keep_scenario(scenario: str | Path, overrides: dict, kept) -> None:
+    """Read a run's scenario as open_run reads it and keep it in ``kept`` (a worker's opened vehicles),
+    so that the run finds it; a scenario that cannot be read is left for the run to report."""
+    from rtsim.configfile import overrides as with_overrides
+    from rtsim.errors import RtsimError
+
+    files = {}
+    with with_overrides(files):
+        try:
+            _scenario(Path(scenario), split_overrides(overrides)[1], files, kept)
+        except RtsimError:
+            pass
 
 
 def digest(path: Path) -> str:

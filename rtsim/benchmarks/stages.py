@@ -125,20 +125,10 @@ def _two_wheeler_forces_staged(m, d, a, tangent, bq, hc):
     return bad
 
 
-# The stages of rtsim.mbs.integrator's step (inline or stage kernels there, compiled into the plain step)
-# as compiled functions of their own: inlined, they were compiled again into each vehicle's staged loop; so
+# The split stages of rtsim.mbs.integrator's newton_update and finish_project (inline kernels there) as
+# compiled functions of their own: inlined, they were compiled again into each vehicle's staged loop; so
 # they are compiled once, for every vehicle. Each call costs the staged loop a little (it passes the
-# model and the state), which the plain step does not pay.
-@kernel
-def _newton_prepare(m, d, h):
-    return newton_prepare(m, d, h)
-
-
-@kernel
-def _finish_prepare(m, d, h):
-    return finish_prepare(m, d, h)
-
-
+# model and the state), which the plain step, where they are compiled in, does not pay.
 @kernel
 def _newton_residual(m, d, h):
     newton_residual(m, d, h)
@@ -175,7 +165,7 @@ def _mbs_step_staged(m, d, h, add_forces, args, cyc):
     c = _lap(cyc, S_PREDICT, c)
     converged = False
     for _ in range(m.iset[IS_MAX_ITER]):
-        status = _newton_prepare(m, d, h)
+        status = newton_prepare(m, d, h)
         if status != OK:
             return status
         c = _lap(cyc, S_PREPARE, c)
@@ -198,7 +188,7 @@ def _mbs_step_staged(m, d, h, add_forces, args, cyc):
             return status
     if not converged:
         return newton_failed(m, d)
-    status = _finish_prepare(m, d, h)
+    status = finish_prepare(m, d, h)
     if status != OK:
         return status
     c = _lap(cyc, S_FINISH, c)
