@@ -592,10 +592,11 @@ def step_with_forces(m, d, h, newton_forces, finish_forces, args):
     converged q (the same forces: `finish_forces` is a call of the compiled force kernel where
     `newton_forces` may be its body inlined, so that the body is compiled once per step).
 
-    The step's stages (newton_prepare, newton_update, finish_prepare, finish_project) and the kernels
-    they call with the model and the state are stage kernels (rtsim.jit.stage_kernel): compiled into the
-    step, so that it passes the model's and the state's arrays from call to call only where a kernel is
-    large and called rarely."""
+    The step's stages (newton_prepare, newton_update, finish_prepare, finish_project) and most kernels
+    they call with the model and the state (step_begin, eval_constraints, eval_forces, refresh_factor,
+    solve_constrained, project) are stage kernels (rtsim.jit.stage_kernel), compiled into the step: a call
+    copies every array of its tuples into its arguments (rtsim.jit says what that cost). The factorisation
+    itself and the substitutions, the Jacobian products and the drivers stay calls."""
     bq = 0.25 * h * h
     hc = 0.5 * h
     step_begin(m, d, h)

@@ -66,7 +66,8 @@ def _car_forces(m, d, a, tangent, bq, hc):
 
 @inline_kernel
 def _car_forces_call(m, d, a, tangent, bq, hc):
-    """The car's forces at the converged q (only where the projections refactor): a call."""
+    """The car's forces at the converged q, where the step evaluates them there (rtsim.mbs.integrator
+    finish_evaluates: the cars only when the projections make a factor of their own): a call."""
     return vehicle_forces(m, d, a[0], a[1], a[2], a[3], a[4], tangent, bq, hc)
 
 
