@@ -83,14 +83,15 @@ def _scenario(scen: Path, scen_over: dict, files: dict, kept):
 
 def keep_scenario(scenario: str | Path, overrides: dict, kept) -> None:
     """Read a run's scenario as open_run reads it and keep it in ``kept`` (a worker's opened vehicles),
-    so that the run finds it; a scenario that cannot be read is left for the run to report."""
+    with what its runs' drivers share made (the followers' parameters, range-checked when made), so
+    that the run finds it ready; a scenario that cannot be read is left for the run to report."""
     from rtsim.configfile import overrides as with_overrides
     from rtsim.errors import RtsimError
 
     files = {}
     with with_overrides(files):
         try:
-            _scenario(Path(scenario), split_overrides(overrides)[1], files, kept)
+            _scenario(Path(scenario), split_overrides(overrides)[1], files, kept).driver()
         except RtsimError:
             pass
 
