@@ -170,26 +170,3 @@ def test_a_missing_ray_is_one_line_saying_how_to_install_it(argv, tmp_path):
     lines = r.stderr.strip().splitlines()
     assert lines == ["rtsim: error: Ray is not installed; it is an optional extra of rtsim: pip install 'rtsim[ray]'"]
     assert not (tmp_path / "out").exists()
-
-
-def test_the_journal_flushes_each_row_and_syncs_at_most_once_a_second(tmp_path, monkeypatch):
-    """Each appended row is in the file at once (a batch killed after it keeps it); the file is synced to
-    the disk when SYNC_S has passed since the last sync and on close, not at every row (a sync a row cost
-    the batch process 0.4-1.5 ms while the next run was under way)."""
-    import rtsim.batch.results as results
-
-    synced = []
-    monkeypatch.setattr(results.os, "fsync", lambda fd: synced.append(fd))
-    clock = [100.0]
-    monkeypatch.setattr(Journal, "clock", staticmethod(lambda: clock[0]))
-    j = Journal(tmp_path / "journal.jsonl", ["run_id", "x"])
-    for k in range(5):
-        j.append({"run_id": f"r{k}", "x": k})
-        assert len((tmp_path / "journal.jsonl").read_text().splitlines()) == k + 2   # header + rows
-    assert synced == []
-    clock[0] += Journal.SYNC_S
-    j.append({"run_id": "r5", "x": 5})
-    assert len(synced) == 1
-    j.close()
-    assert len(synced) == 2
-    assert set(Journal(tmp_path / "journal.jsonl", ["run_id", "x"]).rows) == {f"r{k}" for k in range(6)}

@@ -13,7 +13,6 @@ import csv
 import json
 import math
 import os
-import time
 from pathlib import Path
 
 from rtsim.errors import ConfigError
@@ -56,19 +55,11 @@ def _json(v):
 
 
 class Journal:
-    """Append-only JSON lines of result rows with a fixed set of columns (the plan's). Each row is flushed
-    as it is appended (a batch killed at any point keeps every row appended), and synced to the disk at
-    most every SYNC_S seconds and on close (a crash of the machine loses at most the rows of the last
-    SYNC_S, which a restart runs again). A sync at every row cost the batch process 0.4-1.5 ms a row, with
-    the kernel's journal writes beside it while the next run was under way."""
-
-    SYNC_S = 1.0
-    clock = staticmethod(time.monotonic)     # s
+    """Append-only JSON lines of result rows with a fixed set of columns (the plan's)."""
 
     def __init__(self, path: Path, columns: list[str]):
         self.path, self.columns = Path(path), list(columns)
         self.rows: dict[str, dict] = {}
-        self._synced = self.clock()
         if self.path.exists() and self.path.stat().st_size > 0:
             self._read()
         else:
@@ -106,15 +97,10 @@ class Journal:
         stored = {c: _json(row.get(c)) for c in self.columns}
         self._fh.write(json.dumps(stored) + "\n")
         self._fh.flush()
-        now = self.clock()
-        if now - self._synced >= self.SYNC_S:
-            os.fsync(self._fh.fileno())
-            self._synced = now
+        os.fsync(self._fh.fileno())
         self.rows[stored["run_id"]] = json.loads(json.dumps(stored))
 
     def close(self) -> None:
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
         self._fh.close()
 
 
