@@ -57,12 +57,11 @@ def _init(warm_specs: list[dict], job: dict, turn=None, lock_dir: str | None = N
     """Die with the batch process (`parent`, first thing), then load (or compile) the kernels of every
     kind of vehicle in the plan, build the plan's other vehicles (``warm_specs``), read its scenarios
     (``scenario_specs``: one run of each, rtsim.batch.models keeps them) and make one whole run of the
-    first warm spec. Worker k starts with warm
-    spec k (``turn``: a shared counter) and warms each spec holding that spec's file lock in
-    ``lock_dir``: on an empty numba cache the workers compile different vehicles side by side instead
-    of the same ones twice, and a worker that reaches a spec another one is compiling waits for it
-    and loads the result from the cache (measured in one process: the car's kernels about 82 s of
-    CPU, the motorcycle's 20 s more)."""
+    first warm spec. Worker k starts with warm spec k (``turn``: a shared counter) and warms each spec
+    holding that spec's file lock in ``lock_dir``: on an empty numba cache the workers compile different
+    vehicles side by side instead of the same ones twice, and a worker that reaches a spec another one is
+    compiling waits for it and loads the result from the cache (measured in one process: the car's
+    kernels about 82 s of CPU, the motorcycle's 20 s more)."""
     if parent is not None:
         die_with_parent(parent)
     from rtsim.compile_status import worker_progress
